@@ -1,1 +1,17 @@
+//! # sil-host — software-in-the-loop for the flight-control core
+//!
+//! The nonlinear plant in `f64` built from the core's own equations, the
+//! scenarios and disturbances of the study, the metrics, CSV/JSON output, and
+//! the `sil-host` command line.
+#![deny(missing_docs)]
 
+pub mod disturbance;
+pub mod metrics;
+pub mod openloop;
+pub mod plant;
+pub mod record;
+pub mod scenario;
+
+pub use disturbance::DisturbanceSet;
+pub use plant::{ModelKind, Plant, PlantConfig};
+pub use scenario::{Reference, Scenario, ScenarioKind};

@@ -52,7 +52,7 @@ pub fn quat_conj<T: RealField + Copy>(q: &Quat<T>) -> Quat<T> {
 pub fn quat_normalize<T: RealField + Copy>(q: &Quat<T>) -> Quat<T> {
     let n = q.norm();
     if n.is_finite() && n > T::default_epsilon() {
-        q / n
+        q * (T::one() / n)
     } else {
         Vector4::new(T::one(), T::zero(), T::zero(), T::zero())
     }

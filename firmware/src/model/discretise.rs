@@ -43,7 +43,7 @@ pub fn expm_with_integral<T: RealField + Copy, const N: usize>(
     a: &SMatrix<T, N, N>,
     t: T,
 ) -> Result<(SMatrix<T, N, N>, SMatrix<T, N, N>), DiscretiseError> {
-    if !(t.is_finite() && t > T::zero()) || !a.iter().all(|v| v.is_finite()) {
+    if !(t.is_finite() && t > T::zero() && a.iter().all(|v| v.is_finite())) {
         return Err(DiscretiseError::NonFinite);
     }
     // Infinity norm (max row sum) of A·t.

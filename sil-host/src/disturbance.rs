@@ -1,0 +1,104 @@
+//! Disturbances of SPEC §9: `wind` (earth-frame force and body moment) and
+//! `mismatch` (the plant differs from the controller's model).
+
+use firmware::{Disturbance, VehicleParams};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Time at which the wind steps on, s.
+pub const WIND_ONSET_S: f64 = 5.0;
+
+/// Which disturbances act on a flight. Parsed from `none`, `wind`,
+/// `mismatch` or `wind,mismatch`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct DisturbanceSet {
+    /// Wind force and moment steps from t = 5 s plus a 0.5 Hz gust on x.
+    pub wind: bool,
+    /// Mass +15 %, inertia +10 %, drag ×1.5, rotor lag on.
+    pub mismatch: bool,
+}
+
+impl DisturbanceSet {
+    /// No disturbance.
+    pub const NONE: Self = Self {
+        wind: false,
+        mismatch: false,
+    };
+
+    /// The four combinations, in report order.
+    pub const ALL: [Self; 4] = [
+        Self::NONE,
+        Self {
+            wind: true,
+            mismatch: false,
+        },
+        Self {
+            wind: false,
+            mismatch: true,
+        },
+        Self {
+            wind: true,
+            mismatch: true,
+        },
+    ];
+
+    /// Force (NED, N) and moment (body FRD, N·m) acting at time `t` (s).
+    /// Step `(0.5, −0.3, 0.2) N` and `(0.005, −0.005, 0.002) N·m` from 5 s, plus
+    /// `0.2 N · sin(2π·0.5 Hz·(t − 5 s))` on x from 5 s.
+    #[inline]
+    pub fn at(&self, t: f64) -> Disturbance<f64> {
+        if !self.wind || t < WIND_ONSET_S {
+            return Disturbance::none();
+        }
+        let gust = 0.2 * (2.0 * std::f64::consts::PI * 0.5 * (t - WIND_ONSET_S)).sin();
+        Disturbance {
+            force_ned_n: Vector3::new(0.5 + gust, -0.3, 0.2),
+            moment_body_nm: Vector3::new(0.005, -0.005, 0.002),
+        }
+    }
+
+    /// The true vehicle under `mismatch`: mass +15 %, inertia +10 %,
+    /// translational and rotational drag ×1.5 (rotor lag is switched on by
+    /// the plant configuration).
+    pub fn mismatched(p: &VehicleParams<f64>) -> VehicleParams<f64> {
+        let mut q = *p;
+        q.mass_kg *= 1.15;
+        q.inertia_kgm2 = p.inertia_kgm2.map(|i| i * 1.10);
+        q.kt_nspm = p.kt_nspm.map(|k| k * 1.5);
+        q.kr_nms = p.kr_nms.map(|k| k * 1.5);
+        q
+    }
+}
+
+impl fmt::Display for DisturbanceSet {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match (self.wind, self.mismatch) {
+            (false, false) => write!(f, "none"),
+            (true, false) => write!(f, "wind"),
+            (false, true) => write!(f, "mismatch"),
+            (true, true) => write!(f, "wind,mismatch"),
+        }
+    }
+}
+
+impl FromStr for DisturbanceSet {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let mut d = Self::NONE;
+        for part in s.split([',', '+']).map(str::trim) {
+            match part {
+                "none" | "" => {}
+                "wind" => d.wind = true,
+                "mismatch" => d.mismatch = true,
+                other => {
+                    return Err(format!(
+                        "unknown disturbance '{other}': use none, wind, mismatch or wind,mismatch"
+                    ))
+                }
+            }
+        }
+        Ok(d)
+    }
+}

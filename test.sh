@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Every test of the project, as CI runs it: formatting, lints (host and
+# thumbv7em), the firmware image build, and all unit, property and
+# end-to-end tests. Installs what a fresh machine lacks (the thumbv7em target).
+set -euo pipefail
+cd "$(dirname "$0")"
+
+# rust-toolchain.toml pins stable + thumbv7em-none-eabihf; make sure both are present.
+rustup show active-toolchain >/dev/null
+rustup target list --installed | grep -qx thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
+
+echo "== format"
+cargo fmt --all -- --check
+echo "== clippy (host, all targets)"
+cargo clippy --workspace --all-targets -- -D warnings
+echo "== clippy + build (firmware for thumbv7em-none-eabihf)"
+cargo clippy -p firmware --target thumbv7em-none-eabihf -- -D warnings
+cargo build -p firmware --release --target thumbv7em-none-eabihf
+echo "== tests"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+cargo test --workspace 2>&1 | tee "$log"
+# One closing line over every test binary (cargo's last line is often a
+# doc-test run with 0 tests).
+awk '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
