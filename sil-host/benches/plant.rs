@@ -55,6 +55,14 @@ fn bench_parts(c: &mut Criterion) {
     c.bench_function("plant_10ms_10substeps", |b| {
         b.iter(|| plant.step(black_box(&u), 1e-2))
     });
+    let mut p1 = Plant::new(PlantConfig::nominal(ModelKind::Quaternion), &x0);
+    let mut p2 = Plant::new(PlantConfig::nominal(ModelKind::Quaternion), &x0);
+    c.bench_function("two_plants_1ms", |b| {
+        b.iter(|| {
+            p1.step(black_box(&u), 1e-3);
+            p2.step(black_box(&u), 1e-3);
+        })
+    });
     let p = firmware::VehicleParams::OS4;
     c.bench_function("rotor_speeds", |b| {
         b.iter(|| firmware::rotor_speeds(&p, black_box(&u)))
