@@ -18,6 +18,8 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod control;
+pub mod linalg;
 pub mod model;
 
 pub use model::*;

@@ -6,10 +6,12 @@
 #![deny(missing_docs)]
 
 pub mod disturbance;
+pub mod flight;
 pub mod metrics;
 pub mod openloop;
 pub mod plant;
 pub mod record;
+pub mod report;
 pub mod scenario;
 
 pub use disturbance::DisturbanceSet;

@@ -8,9 +8,11 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use sil_host::disturbance::DisturbanceSet;
+use sil_host::flight::{fly, ControllerFamily, FlightConfig, GainSet, RefMode};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::{ModelKind, PlantConfig};
-use sil_host::record::STATE_COLUMNS;
+use sil_host::record::{REFERENCE_COLUMNS, STATE_COLUMNS};
+use sil_host::scenario::{Scenario, ScenarioKind};
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::PathBuf;
@@ -33,6 +35,91 @@ struct Cli {
 enum Command {
     /// Fly constant inputs from hover (thesis §3.5.3) and write the trajectory as CSV.
     OpenLoop(OpenLoopArgs),
+    /// Fly a scenario in closed loop with a controller of the core; print metrics, write CSV/JSON.
+    Fly(FlyArgs),
+    /// Print a controller design (the linear model, the weights and the gain) as JSON.
+    Design(DesignArgs),
+}
+
+#[derive(Args, Debug)]
+struct FlyArgs {
+    /// Controller: `pd` (thesis gains, Tables 4.1-4.4) or `lqr` (thesis weights, Tables 4.5/4.7).
+    #[arg(long, value_enum)]
+    controller: ControllerFamily,
+    /// Form of the controller and of the plant: `euler` or `quaternion`.
+    #[arg(long, value_enum, default_value = "quaternion")]
+    model: ModelKind,
+    /// Scenario (SPEC §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s).
+    #[arg(long, value_enum, default_value = "setpoint")]
+    scenario: ScenarioKind,
+    /// Disturbances on the plant: none, wind, mismatch or wind,mismatch (SPEC §9).
+    #[arg(long, default_value = "none", value_name = "SET")]
+    disturbance: DisturbanceSet,
+    /// Circle/helix radius, m (default 2).
+    #[arg(long, value_name = "M")]
+    radius: Option<f64>,
+    /// Circle/helix period of one revolution, s (default 20).
+    #[arg(long, value_name = "S")]
+    period: Option<f64>,
+    /// Helix climb rate, m/s of altitude gained (default 0.05).
+    #[arg(long, value_name = "M_PER_S", allow_hyphen_values = true)]
+    climb_rate: Option<f64>,
+    /// Set-point target X,Y,Z (NED m) and heading in degrees (default 3,2,-5,15).
+    #[arg(long, value_name = "X,Y,Z,YAW_DEG", value_parser = parse_list::<4>, allow_hyphen_values = true)]
+    target: Option<[f64; 4]>,
+    /// Flight length, s (default 20 for setpoint, 100 for circle and helix).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// Reference handling: `feedforward` (reference velocity, and the attitude and thrust its
+    /// acceleration implies) or `thesis` (reference position and velocity only, as the thesis).
+    #[arg(long, value_enum, default_value = "feedforward")]
+    reference: RefMode,
+    /// PD gains: `tuned` (the thesis gains with the roll/pitch and quaternion z corrections
+    /// explained in the README) or `thesis` (Tables 4.1-4.4 as printed). LQR ignores it.
+    #[arg(long, value_enum, default_value = "tuned")]
+    gains: GainSet,
+    /// Controller rate, Hz.
+    #[arg(long, default_value_t = 500.0, value_name = "HZ")]
+    control_hz: f64,
+    /// Plant RK4 rate, Hz (sub-steps within each control period).
+    #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
+    integration_hz: f64,
+    /// Write the flight as CSV (one row per 10 ms, state columns then x_ref,y_ref,z_ref,psi_ref).
+    #[arg(long, value_name = "PATH")]
+    csv: Option<PathBuf>,
+    /// Write the metrics as JSON (`-` for standard output).
+    #[arg(long, value_name = "PATH")]
+    json: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct DesignArgs {
+    #[command(subcommand)]
+    what: DesignWhat,
+}
+
+#[derive(Subcommand, Debug)]
+enum DesignWhat {
+    /// Continuous-time LQR about hover at a heading: prints {"A","B","Q","R","K"} (row-major) with U = Uss - K dX.
+    Lqr(DesignLqrArgs),
+}
+
+#[derive(Args, Debug)]
+struct DesignLqrArgs {
+    /// Form: `euler` (12 states, weights Table 4.5) or `quaternion` (reduced 12 states, Q = I, R = I).
+    #[arg(long, value_enum)]
+    model: ModelKind,
+    /// Hover heading psi_T the model is linearised about, degrees.
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        value_name = "DEG",
+        allow_hyphen_values = true
+    )]
+    yaw_deg: f64,
+    /// Print JSON (the only output format; accepted for clarity).
+    #[arg(long)]
+    json: bool,
 }
 
 /// Options shared by every command that builds a plant.
@@ -145,9 +232,88 @@ fn open_loop(a: &OpenLoopArgs) -> Result<()> {
     Ok(())
 }
 
+fn scenario_from(a: &FlyArgs) -> Result<Scenario> {
+    let mut sc = Scenario::default_for(a.scenario);
+    if let Some(r) = a.radius {
+        sc.radius_m = r;
+    }
+    if let Some(p) = a.period {
+        sc.period_s = p;
+    }
+    if let Some(v) = a.climb_rate {
+        sc.climb_rate_mps = v;
+    }
+    if let Some([x, y, z, yaw]) = a.target {
+        sc.target_ned_m = [x, y, z];
+        sc.target_yaw_rad = yaw.to_radians();
+    }
+    if let Some(d) = a.duration {
+        sc.duration_s = d;
+    }
+    sc.validate().map_err(anyhow::Error::msg)?;
+    Ok(sc)
+}
+
+fn write_json(path: &PathBuf, value: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    if path.as_os_str() == "-" {
+        println!("{text}");
+    } else {
+        std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn fly_cmd(a: &FlyArgs) -> Result<()> {
+    let mut cfg = FlightConfig::new(a.controller, a.model, scenario_from(a)?);
+    cfg.disturbance = a.disturbance;
+    cfg.reference = a.reference;
+    cfg.gains = a.gains;
+    cfg.control_hz = a.control_hz;
+    if !(a.integration_hz.is_finite() && a.integration_hz >= 1.0) {
+        bail!("--integration-hz must be at least 1 Hz");
+    }
+    cfg.integration_hz = a.integration_hz;
+    let res = fly(&cfg)?;
+    if let Some(path) = &a.csv {
+        let f = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut w = csv::Writer::from_writer(BufWriter::new(f));
+        let mut header: Vec<&str> = STATE_COLUMNS.to_vec();
+        header.extend_from_slice(&REFERENCE_COLUMNS);
+        w.write_record(&header)?;
+        for (row, r) in res.rows.iter().zip(&res.reference) {
+            w.write_record(row.iter().chain(r.iter()).map(|v| v.to_string()))?;
+        }
+        w.flush()?;
+    }
+    let json = sil_host::report::flight_json(&cfg, &res);
+    if let Some(path) = &a.json {
+        write_json(path, &json)?;
+    }
+    if a.json.as_ref().is_none_or(|p| p.as_os_str() != "-") {
+        println!("{}", sil_host::report::flight_summary(&cfg, &res));
+    }
+    Ok(())
+}
+
+fn design_cmd(a: &DesignArgs) -> Result<()> {
+    match &a.what {
+        DesignWhat::Lqr(d) => {
+            if !d.yaw_deg.is_finite() {
+                bail!("--yaw-deg must be finite");
+            }
+            let v = sil_host::report::lqr_design_json(d.model, d.yaw_deg.to_radians())?;
+            println!("{}", serde_json::to_string_pretty(&v)?);
+            Ok(())
+        }
+    }
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match &cli.command {
         Command::OpenLoop(a) => open_loop(a),
+        Command::Fly(a) => fly_cmd(a),
+        Command::Design(a) => design_cmd(a),
     }
 }

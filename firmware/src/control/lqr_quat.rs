@@ -1,0 +1,138 @@
+//! LQR about hover, reduced quaternion form `[x y z ẋ ẏ ż q1 q2 q3 p q r]`
+//! (q0 eliminated through the unit norm with q0 > 0; thesis 3.95–3.100,
+//! weights Table 4.7: Q = I12, R = I4), scheduled on the current heading ψ.
+//!
+//! The reduced coordinates about `(cos ψT/2, 0, 0, sin ψT/2)` are singular at
+//! ψT = ±180° (q0 = 0: roll rate no longer moves q1). This controller
+//! therefore works in the frame of the current heading: position and velocity
+//! errors rotated by −ψ, attitude as `q_h⁻¹ ⊗ q` with `q_h` the heading
+//! quaternion. In that frame the model is the reduced model at ψT = 0 for
+//! every heading, exactly (the dynamics are symmetric in yaw and Q weights x
+//! and y equally), so one gain serves all headings with no singularity.
+
+use super::lqr_table::{design_discrete, Gain};
+use super::{
+    reference::tilt_and_thrust, saturate, validate, ControlError, ControlOutput, Controller,
+    ReferenceMode, Setpoint, StateEstimate,
+};
+use crate::lit;
+use crate::model::{
+    euler_to_quat, quat_conj, quat_hover_model, quat_mul, quat_to_euler, InputBox, VehicleParams,
+};
+use nalgebra::{RealField, SMatrix, SVector, Vector3, Vector4};
+
+/// Thesis Table 4.7: `Q = I12`, `R = I4`.
+pub fn quat_weights() -> (SMatrix<f64, 12, 12>, SMatrix<f64, 4, 4>) {
+    (SMatrix::identity(), SMatrix::identity())
+}
+
+/// The quaternion LQR.
+#[derive(Debug, Clone)]
+pub struct LqrQuat<T: RealField + Copy> {
+    params: VehicleParams<T>,
+    gain: Gain<T>,
+    mode: ReferenceMode,
+    bx: InputBox<T>,
+}
+
+impl<T: RealField + Copy> LqrQuat<T> {
+    /// Designs the discrete gain at sample time `ts` (s) for the model
+    /// `params` with weights `q`, `r` (continuous-time, per second). The x and
+    /// y weights (and those of ẋ, ẏ) must be equal for the heading symmetry.
+    pub fn new(
+        params: VehicleParams<T>,
+        q: &SMatrix<f64, 12, 12>,
+        r: &SMatrix<f64, 4, 4>,
+        ts: f64,
+        mode: ReferenceMode,
+    ) -> Result<Self, ControlError> {
+        let p64: VehicleParams<f64> = params.cast();
+        if !p64.is_valid() || q[(0, 0)] != q[(1, 1)] || q[(3, 3)] != q[(4, 4)] {
+            return Err(ControlError::InvalidParameter);
+        }
+        let k = design_discrete(&quat_hover_model(&p64, 0.0), q, r, ts)?.k;
+        Ok(Self {
+            bx: params.input_box(),
+            params,
+            gain: k.map(|v| lit::<T>(v)),
+            mode,
+        })
+    }
+
+    /// The thesis weights (Table 4.7).
+    pub fn thesis(
+        params: VehicleParams<T>,
+        ts: f64,
+        mode: ReferenceMode,
+    ) -> Result<Self, ControlError> {
+        let (q, r) = quat_weights();
+        Self::new(params, &q, &r, ts, mode)
+    }
+
+    /// The gain (in heading-frame coordinates).
+    pub fn gain(&self) -> &Gain<T> {
+        &self.gain
+    }
+}
+
+/// Rotates an NED vector into the frame of heading ψ (by −ψ about z).
+fn to_heading_frame<T: RealField + Copy>(v: &Vector3<T>, s: T, c: T) -> Vector3<T> {
+    Vector3::new(c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2])
+}
+
+impl<T: RealField + Copy> Controller<T> for LqrQuat<T> {
+    fn update(
+        &mut self,
+        est: &StateEstimate<T>,
+        sp: &Setpoint<T>,
+    ) -> Result<ControlOutput<T>, ControlError> {
+        validate(est, sp)?;
+        let (roll_ref, pitch_ref, u1_ref, yaw_rate_ref) = match self.mode {
+            ReferenceMode::Thesis => (
+                T::zero(),
+                T::zero(),
+                self.params.hover_thrust_n(),
+                T::zero(),
+            ),
+            ReferenceMode::Feedforward => {
+                let tt =
+                    tilt_and_thrust(&self.params, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
+                (tt.roll_rad, tt.pitch_rad, tt.thrust_n, sp.yaw_rate_radps)
+            }
+        };
+        let yaw = quat_to_euler(&est.att)[2];
+        let half = lit::<T>(0.5);
+        let qh = Vector4::new((yaw * half).cos(), T::zero(), T::zero(), (yaw * half).sin());
+        let qhc = quat_conj(&qh);
+        let mut qa = quat_mul(&qhc, &est.att);
+        if qa[0] < T::zero() {
+            qa = -qa;
+        }
+        let mut qr = quat_mul(&qhc, &euler_to_quat(roll_ref, pitch_ref, sp.yaw_rad));
+        if qr[0] < T::zero() {
+            qr = -qr;
+        }
+        let (s, c) = yaw.sin_cos();
+        let mut dx = SVector::<T, 12>::zeros();
+        dx.fixed_rows_mut::<3>(0).copy_from(&to_heading_frame(
+            &(est.pos_ned_m - sp.pos_ned_m),
+            s,
+            c,
+        ));
+        dx.fixed_rows_mut::<3>(3).copy_from(&to_heading_frame(
+            &(est.vel_ned_mps - sp.vel_ned_mps),
+            s,
+            c,
+        ));
+        for i in 0..3 {
+            dx[6 + i] = qa[1 + i] - qr[1 + i];
+        }
+        dx.fixed_rows_mut::<3>(9).copy_from(&est.rates_frd_radps);
+        dx[11] -= yaw_rate_ref;
+        let u_ref = Vector4::new(u1_ref, T::zero(), T::zero(), T::zero());
+        let raw = u_ref - self.gain * dx;
+        Ok(saturate(&self.bx, &raw))
+    }
+
+    fn reset(&mut self) {}
+}

@@ -1,0 +1,128 @@
+//! JSON and text output of flights and designs.
+
+use crate::flight::{FlightConfig, FlightResult};
+use crate::metrics::AxisMetrics;
+use crate::plant::ModelKind;
+use firmware::control::lqr_euler::euler_weights;
+use firmware::control::lqr_quat::quat_weights;
+use firmware::control::lqr_table::design_continuous;
+use firmware::{euler_hover_model, quat_hover_model, VehicleParams};
+use nalgebra::{Dim, Matrix, RawStorage};
+use serde_json::{json, Value};
+
+/// A matrix as row-major nested arrays.
+pub fn rows<R: Dim, C: Dim, S: RawStorage<f64, R, C>>(m: &Matrix<f64, R, C, S>) -> Value {
+    Value::Array(
+        (0..m.nrows())
+            .map(|i| Value::Array((0..m.ncols()).map(|j| json!(m[(i, j)])).collect()))
+            .collect(),
+    )
+}
+
+fn axis(a: &AxisMetrics, unit: &str) -> Value {
+    json!({
+        "rmse_m": a.rmse_m,
+        "rmse_pct": a.rmse_pct,
+        "settling_s": a.settling_s,
+        "overshoot_pct": a.overshoot_pct,
+        "unit": unit,
+    })
+}
+
+/// The `fly` JSON: configuration, per-axis metrics (yaw values in rad),
+/// effort, constraint record, final error and controller time per step.
+pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
+    let m = &res.metrics;
+    json!({
+        "controller": cfg.controller.name(),
+        "model": cfg.model.name(),
+        "scenario": cfg.scenario.kind.name(),
+        "disturbance": cfg.disturbance.to_string(),
+        "reference": format!("{:?}", cfg.reference).to_lowercase(),
+        "gains": format!("{:?}", cfg.gains).to_lowercase(),
+        "control_hz": cfg.control_hz,
+        "integration_hz": cfg.integration_hz,
+        "duration_s": cfg.scenario.duration_s,
+        "axes": {
+            "x": axis(&m.x, "m"),
+            "y": axis(&m.y, "m"),
+            "z": axis(&m.z, "m"),
+            "yaw": axis(&m.yaw, "rad"),
+        },
+        "u_norm": m.u_norm,
+        "max_box_violation": m.max_box_violation,
+        "final_error_m": m.final_error_m,
+        "saturated_steps": res.saturated_steps,
+        "steps": res.steps,
+        "diverged": res.diverged,
+        "step_time_ns": { "mean": res.step_time_ns.mean, "max": res.step_time_ns.max },
+    })
+}
+
+/// One line per flight for the terminal.
+pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
+    let m = &res.metrics;
+    let st = |a: &AxisMetrics| match (a.settling_s, a.overshoot_pct) {
+        (Some(s), Some(o)) => format!("{s:.2} s/{o:.2} %"),
+        _ => "-".into(),
+    };
+    format!(
+        "{} {} {} [{}]: RMSE x {:.3} y {:.3} z {:.3} m, yaw {:.2}°; settle/overshoot x {} y {} z {} yaw {}; \
+         final error {:.3} m; u_norm {:.4}; saturated {}/{} steps; controller {:.0} ns/step (max {:.0}){}",
+        cfg.controller.name(),
+        cfg.model.name(),
+        cfg.scenario.kind.name(),
+        cfg.disturbance,
+        m.x.rmse_m,
+        m.y.rmse_m,
+        m.z.rmse_m,
+        m.yaw.rmse_m.to_degrees(),
+        st(&m.x),
+        st(&m.y),
+        st(&m.z),
+        st(&m.yaw),
+        m.final_error_m,
+        m.u_norm,
+        res.saturated_steps,
+        res.steps,
+        res.step_time_ns.mean,
+        res.step_time_ns.max,
+        if res.diverged { " DIVERGED" } else { "" }
+    )
+}
+
+/// `design lqr`: the hover model at heading `yaw` (rad), the thesis weights and
+/// the continuous-time gain (`U = Uss − K δX`), all row-major.
+pub fn lqr_design_json(model: ModelKind, yaw: f64) -> anyhow::Result<Value> {
+    let p = VehicleParams::OS4;
+    let (lm, (q, r), states) = match model {
+        ModelKind::Euler => (
+            euler_hover_model(&p, yaw),
+            euler_weights(),
+            [
+                "x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "p", "q", "r",
+            ],
+        ),
+        ModelKind::Quaternion => (
+            quat_hover_model(&p, yaw),
+            quat_weights(),
+            [
+                "x", "y", "z", "vx", "vy", "vz", "q1", "q2", "q3", "p", "q", "r",
+            ],
+        ),
+    };
+    let sol = design_continuous(&lm, &q, &r)
+        .map_err(|e| anyhow::anyhow!("Riccati solve failed: {e:?}"))?;
+    Ok(json!({
+        "model": model.name(),
+        "yaw_deg": yaw.to_degrees(),
+        "states": states,
+        "inputs": ["U1", "U2", "U3", "U4"],
+        "A": rows(&lm.a),
+        "B": rows(&lm.b),
+        "Q": rows(&q),
+        "R": rows(&r),
+        "K": rows(&sol.k),
+        "riccati_iterations": sol.iterations,
+    }))
+}
