@@ -12,12 +12,7 @@ fn bench_plant(c: &mut Criterion) {
     let x0 = hover_quat_state(&Vector3::new(0.0, 0.0, -1.0), 0.0);
     let mut g = c.benchmark_group("plant_1khz_step");
     for (name, model, lag, dist) in [
-        (
-            "quaternion",
-            ModelKind::Quaternion,
-            false,
-            DisturbanceSet::NONE,
-        ),
+        ("quaternion", ModelKind::Quaternion, false, DisturbanceSet::NONE),
         ("euler", ModelKind::Euler, false, DisturbanceSet::NONE),
         (
             "quaternion_lag_wind",
@@ -52,9 +47,7 @@ fn bench_parts(c: &mut Criterion) {
         b.iter(|| v.quat_derivative(black_box(&x0), black_box(&u), 0.1, &d))
     });
     let mut plant = Plant::new(PlantConfig::nominal(ModelKind::Quaternion), &x0);
-    c.bench_function("plant_10ms_10substeps", |b| {
-        b.iter(|| plant.step(black_box(&u), 1e-2))
-    });
+    c.bench_function("plant_10ms_10substeps", |b| b.iter(|| plant.step(black_box(&u), 1e-2)));
     let mut p1 = Plant::new(PlantConfig::nominal(ModelKind::Quaternion), &x0);
     let mut p2 = Plant::new(PlantConfig::nominal(ModelKind::Quaternion), &x0);
     c.bench_function("two_plants_1ms", |b| {
@@ -64,9 +57,7 @@ fn bench_parts(c: &mut Criterion) {
         })
     });
     let p = firmware::VehicleParams::OS4;
-    c.bench_function("rotor_speeds", |b| {
-        b.iter(|| firmware::rotor_speeds(&p, black_box(&u)))
-    });
+    c.bench_function("rotor_speeds", |b| b.iter(|| firmware::rotor_speeds(&p, black_box(&u))));
 }
 criterion_group!(parts, bench_parts);
 criterion_main!(benches, parts);

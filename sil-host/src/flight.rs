@@ -7,8 +7,8 @@ use crate::plant::{ModelKind, Plant, PlantConfig};
 use crate::record::{state_row, RECORD_DT_S};
 use crate::scenario::{Reference, Scenario};
 use firmware::control::{
-    wrap_pi, AnyController, ControlError, Controller, LqrEuler, LqrQuat, PdEuler, PdEulerGains,
-    PdQuat, PdQuatGains, ReferenceMode, Setpoint, StateEstimate,
+    wrap_pi, AnyController, ControlError, Controller, LqrEuler, LqrQuat, PdEuler, PdEulerGains, PdQuat, PdQuatGains,
+    ReferenceMode, Setpoint, StateEstimate,
 };
 use firmware::{hover_quat_state, VehicleParams};
 use nalgebra::{Vector3, Vector4};
@@ -155,12 +155,8 @@ pub fn build_controller(
             };
             AnyController::PdQuat(PdQuat::new(p, g, mode))
         }
-        (ControllerFamily::Lqr, ModelKind::Euler) => {
-            AnyController::LqrEuler(LqrEuler::thesis(p, ts, mode)?)
-        }
-        (ControllerFamily::Lqr, ModelKind::Quaternion) => {
-            AnyController::LqrQuat(LqrQuat::thesis(p, ts, mode)?)
-        }
+        (ControllerFamily::Lqr, ModelKind::Euler) => AnyController::LqrEuler(LqrEuler::thesis(p, ts, mode)?),
+        (ControllerFamily::Lqr, ModelKind::Quaternion) => AnyController::LqrQuat(LqrQuat::thesis(p, ts, mode)?),
     })
 }
 
@@ -169,6 +165,7 @@ fn setpoint(r: &Reference) -> Setpoint<f32> {
         pos_ned_m: r.pos.cast(),
         vel_ned_mps: r.vel.cast(),
         acc_ned_mps2: r.acc.cast(),
+        jerk_ned_mps3: r.jerk.cast(),
         yaw_rad: r.yaw as f32,
         yaw_rate_radps: r.yaw_rate as f32,
     }
@@ -181,14 +178,8 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
         anyhow::bail!("control rate must be at least 1 Hz");
     }
     let ts = 1.0 / cfg.control_hz;
-    let mut ctrl = build_controller(
-        cfg.controller,
-        cfg.model,
-        cfg.gains,
-        cfg.reference.into(),
-        ts,
-    )
-    .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
+    let mut ctrl = build_controller(cfg.controller, cfg.model, cfg.gains, cfg.reference.into(), ts)
+        .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
     let mut pc = PlantConfig::nominal(cfg.model).with_disturbance(cfg.disturbance);
     pc.integration_hz = cfg.integration_hz;
     let sc = &cfg.scenario;
@@ -202,10 +193,7 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
         reference: Vec::new(),
         trace: Trace::default(),
         metrics: flight_metrics(&Trace::default(), &nominal),
-        step_time_ns: StepTime {
-            mean: 0.0,
-            max: 0.0,
-        },
+        step_time_ns: StepTime { mean: 0.0, max: 0.0 },
         saturated_steps: 0,
         steps: 0,
         diverged: false,
@@ -247,9 +235,7 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
             let yaw_unwrapped = r.yaw + wrap_pi(yaw - r.yaw);
             let rref = [r.pos[0], r.pos[1], r.pos[2], r.yaw];
             res.trace.t.push(t);
-            res.trace
-                .actual
-                .push([row[1], row[2], row[3], yaw_unwrapped]);
+            res.trace.actual.push([row[1], row[2], row[3], yaw_unwrapped]);
             res.trace.reference.push(rref);
             res.trace.u_cmd.push([u[0], u[1], u[2], u[3]]);
             res.rows.push(row);

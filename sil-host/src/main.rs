@@ -110,12 +110,7 @@ struct DesignLqrArgs {
     #[arg(long, value_enum)]
     model: ModelKind,
     /// Hover heading psi_T the model is linearised about, degrees.
-    #[arg(
-        long,
-        default_value_t = 0.0,
-        value_name = "DEG",
-        allow_hyphen_values = true
-    )]
+    #[arg(long, default_value_t = 0.0, value_name = "DEG", allow_hyphen_values = true)]
     yaw_deg: f64,
     /// Print JSON (the only output format; accepted for clarity).
     #[arg(long)]
@@ -142,10 +137,7 @@ struct PlantArgs {
 impl PlantArgs {
     fn config(&self) -> Result<PlantConfig> {
         if !(self.integration_hz.is_finite() && self.integration_hz >= 1.0) {
-            bail!(
-                "--integration-hz must be at least 1 Hz, got {}",
-                self.integration_hz
-            );
+            bail!("--integration-hz must be at least 1 Hz, got {}", self.integration_hz);
         }
         let mut cfg = PlantConfig::nominal(self.model);
         cfg.integration_hz = self.integration_hz;
@@ -169,12 +161,7 @@ struct OpenLoopArgs {
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_list::<3>, allow_hyphen_values = true, default_value = "0,0,-1")]
     start: [f64; 3],
     /// Start heading, degrees.
-    #[arg(
-        long,
-        default_value_t = 0.0,
-        value_name = "DEG",
-        allow_negative_numbers = true
-    )]
+    #[arg(long, default_value_t = 0.0, value_name = "DEG", allow_negative_numbers = true)]
     yaw_deg: f64,
     /// Output CSV, one row per 10 ms: t,x,y,z,vx,vy,vz,q0,q1,q2,q3,phi,theta,psi,p,q,r,u1,u2,u3,u4.
     /// Without it the last row is printed.
@@ -186,10 +173,7 @@ struct OpenLoopArgs {
 fn parse_list<const N: usize>(s: &str) -> Result<[f64; N], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if parts.len() != N {
-        return Err(format!(
-            "expected {N} comma-separated numbers, got {}",
-            parts.len()
-        ));
+        return Err(format!("expected {N} comma-separated numbers, got {}", parts.len()));
     }
     let mut out = [0.0; N];
     for (o, p) in out.iter_mut().zip(parts) {

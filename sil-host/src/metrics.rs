@@ -69,9 +69,7 @@ pub fn axis_metrics(t: &[f64], y: &[f64], r: &[f64], y0: f64) -> AxisMetrics {
     let rmse = mse.sqrt();
     let (rmin, rmax) = r[..n]
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(*v), b.max(*v))
-        });
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
     let range = rmax - rmin;
     let constant = range <= 1e-12;
     // Reference range, or the step from the start where the reference is constant.
@@ -128,9 +126,7 @@ pub fn flight_metrics(trace: &Trace, p: &VehicleParams<f64>) -> FlightMetrics {
         (acc / trace.u_cmd.len() as f64).sqrt()
     };
     let final_error_m = match (trace.actual.last(), trace.reference.last()) {
-        (Some(a), Some(r)) => {
-            ((a[0] - r[0]).powi(2) + (a[1] - r[1]).powi(2) + (a[2] - r[2]).powi(2)).sqrt()
-        }
+        (Some(a), Some(r)) => ((a[0] - r[0]).powi(2) + (a[1] - r[1]).powi(2) + (a[2] - r[2]).powi(2)).sqrt(),
         _ => f64::NAN,
     };
     FlightMetrics {
@@ -178,19 +174,13 @@ mod tests {
         let y: Vec<f64> = t
             .iter()
             .map(|t| {
-                1.0 + step
-                    * (1.0
-                        - (-z * wn * t).exp()
-                            * ((wd * t).cos() + z / (1.0 - z * z).sqrt() * (wd * t).sin()))
+                1.0 + step * (1.0 - (-z * wn * t).exp() * ((wd * t).cos() + z / (1.0 - z * z).sqrt() * (wd * t).sin()))
             })
             .collect();
         let r = vec![1.0 + step; t.len()];
         let m = axis_metrics(&t, &y, &r, 1.0);
         let want = 100.0 * (-std::f64::consts::PI * z / (1.0 - z * z).sqrt()).exp();
-        assert!(
-            (m.overshoot_pct.unwrap() - want).abs() < 0.05,
-            "{m:?} vs {want}"
-        );
+        assert!((m.overshoot_pct.unwrap() - want).abs() < 0.05, "{m:?} vs {want}");
         assert!(m.settling_s.unwrap() > 3.0 && m.settling_s.unwrap() < 5.0);
     }
 
@@ -201,8 +191,7 @@ mod tests {
         let y: Vec<f64> = r.iter().map(|v| v + 0.1).collect();
         let m = axis_metrics(&t, &y, &r, 0.0);
         assert!((m.rmse_m - 0.1).abs() < 1e-12);
-        let range =
-            r.iter().cloned().fold(f64::MIN, f64::max) - r.iter().cloned().fold(f64::MAX, f64::min);
+        let range = r.iter().cloned().fold(f64::MIN, f64::max) - r.iter().cloned().fold(f64::MAX, f64::min);
         assert!((m.rmse_pct - 10.0 / range).abs() < 1e-9);
         assert_eq!(m.settling_s, None);
     }

@@ -4,9 +4,8 @@
 
 use crate::disturbance::DisturbanceSet;
 use firmware::{
-    clamp_speed, euler_state_to_quat, gyro_speed, quat_normalize, quat_state_to_euler,
-    realised_inputs, rotor_speeds, Disturbance, EulerState, Input, QuatState, Vehicle,
-    VehicleParams,
+    clamp_speed, euler_state_to_quat, gyro_speed, quat_normalize, quat_state_to_euler, realised_inputs, rotor_speeds,
+    Disturbance, EulerState, Input, QuatState, Vehicle, VehicleParams,
 };
 use nalgebra::{SVector, Vector3, Vector4};
 use serde::{Deserialize, Serialize};

@@ -12,8 +12,8 @@ pub const RECORD_DT_S: f64 = 0.01;
 
 /// Column names of the state part of a row.
 pub const STATE_COLUMNS: [&str; 21] = [
-    "t", "x", "y", "z", "vx", "vy", "vz", "q0", "q1", "q2", "q3", "phi", "theta", "psi", "p", "q",
-    "r", "u1", "u2", "u3", "u4",
+    "t", "x", "y", "z", "vx", "vy", "vz", "q0", "q1", "q2", "q3", "phi", "theta", "psi", "p", "q", "r", "u1", "u2",
+    "u3", "u4",
 ];
 /// Extra columns of closed-loop flights.
 pub const REFERENCE_COLUMNS: [&str; 4] = ["x_ref", "y_ref", "z_ref", "psi_ref"];
@@ -58,13 +58,8 @@ impl<W: Write> CsvRecorder<W> {
     pub fn row(&mut self, plant: &Plant, reference: Option<&Reference>) -> anyhow::Result<()> {
         let mut fields: Vec<String> = state_row(plant).iter().map(|v| v.to_string()).collect();
         if self.with_reference {
-            let r =
-                reference.ok_or_else(|| anyhow::anyhow!("closed-loop row without a reference"))?;
-            fields.extend(
-                [r.pos[0], r.pos[1], r.pos[2], r.yaw]
-                    .iter()
-                    .map(|v| v.to_string()),
-            );
+            let r = reference.ok_or_else(|| anyhow::anyhow!("closed-loop row without a reference"))?;
+            fields.extend([r.pos[0], r.pos[1], r.pos[2], r.yaw].iter().map(|v| v.to_string()));
         }
         self.w.write_record(&fields)?;
         Ok(())

@@ -99,20 +99,15 @@ pub fn lqr_design_json(model: ModelKind, yaw: f64) -> anyhow::Result<Value> {
         ModelKind::Euler => (
             euler_hover_model(&p, yaw),
             euler_weights(),
-            [
-                "x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "p", "q", "r",
-            ],
+            ["x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "p", "q", "r"],
         ),
         ModelKind::Quaternion => (
             quat_hover_model(&p, yaw),
             quat_weights(),
-            [
-                "x", "y", "z", "vx", "vy", "vz", "q1", "q2", "q3", "p", "q", "r",
-            ],
+            ["x", "y", "z", "vx", "vy", "vz", "q1", "q2", "q3", "p", "q", "r"],
         ),
     };
-    let sol = design_continuous(&lm, &q, &r)
-        .map_err(|e| anyhow::anyhow!("Riccati solve failed: {e:?}"))?;
+    let sol = design_continuous(&lm, &q, &r).map_err(|e| anyhow::anyhow!("Riccati solve failed: {e:?}"))?;
     Ok(json!({
         "model": model.name(),
         "yaw_deg": yaw.to_degrees(),

@@ -58,6 +58,8 @@ pub struct Reference {
     pub vel: Vector3<f64>,
     /// NED acceleration, m/s².
     pub acc: Vector3<f64>,
+    /// NED jerk, m/s³.
+    pub jerk: Vector3<f64>,
     /// Heading ψ, rad.
     pub yaw: f64,
     /// Heading rate, rad/s.
@@ -91,6 +93,7 @@ impl Scenario {
                 pos: Vector3::from(self.target_ned_m),
                 vel: Vector3::zeros(),
                 acc: Vector3::zeros(),
+                jerk: Vector3::zeros(),
                 yaw: self.target_yaw_rad,
                 yaw_rate: 0.0,
             },
@@ -107,6 +110,7 @@ impl Scenario {
                     pos: s0 + Vector3::new(r * s, r * (1.0 - c), -v * t),
                     vel: Vector3::new(r * w * c, r * w * s, -v),
                     acc: Vector3::new(-r * w * w * s, r * w * w * c, 0.0),
+                    jerk: Vector3::new(-r * w * w * w * c, -r * w * w * w * s, 0.0),
                     yaw: self.start_yaw_rad,
                     yaw_rate: 0.0,
                 }

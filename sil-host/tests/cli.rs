@@ -25,11 +25,7 @@ fn open_loop_writes_the_documented_csv() {
         .arg(&csv)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
     assert_eq!(
@@ -39,11 +35,7 @@ fn open_loop_writes_the_documented_csv() {
     let rows: Vec<Vec<f64>> = lines
         .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
         .collect();
-    assert_eq!(
-        rows.len(),
-        301,
-        "one row per 10 ms including t = 0 and t = 3 s"
-    );
+    assert_eq!(rows.len(), 301, "one row per 10 ms including t = 0 and t = 3 s");
     for (k, r) in rows.iter().enumerate() {
         assert_eq!(r.len(), 21);
         assert!((r[0] - k as f64 * 0.01).abs() < 1e-9);

@@ -2,8 +2,7 @@
 //! agreement of the two state forms, the 90° pitch case, RK4's order.
 
 use firmware::{
-    hover_input, hover_quat_state, quat_to_rotation, realised_inputs, rotor_speeds, QuatState,
-    VehicleParams,
+    hover_input, hover_quat_state, quat_to_rotation, realised_inputs, rotor_speeds, QuatState, VehicleParams,
 };
 use nalgebra::{Matrix3, Vector3, Vector4};
 use sil_host::{DisturbanceSet, ModelKind, Plant, PlantConfig};
@@ -64,10 +63,7 @@ fn free_fall_reaches_terminal_speed() {
             let want = vt * (1.0 - (-t / tau).exp());
             assert!((vz - want).abs() < 1e-9 * vt, "{m:?} t={t}: {vz} vs {want}");
             z_expected = -1.0 + vt * (t - tau * (1.0 - (-t / tau).exp()));
-            assert!(
-                (pl.position()[2] - z_expected).abs() < 1e-7,
-                "{m:?} z at {t}"
-            );
+            assert!((pl.position()[2] - z_expected).abs() < 1e-7, "{m:?} z at {t}");
         }
         // After 60 s (≈14 τ) the speed is the terminal one, mg/ktz = 42.51 m/s.
         assert!((pl.quat_state()[5] - vt).abs() < 1e-4 * vt);
@@ -107,10 +103,7 @@ fn euler_and_quaternion_plants_agree() {
     let u = Vector4::new(6.6, 0.004, -0.003, 0.02);
     for (lag, wind) in [(false, false), (true, false), (false, true)] {
         let run = |m| {
-            let mut cfg = PlantConfig::nominal(m).with_disturbance(DisturbanceSet {
-                wind,
-                mismatch: false,
-            });
+            let mut cfg = PlantConfig::nominal(m).with_disturbance(DisturbanceSet { wind, mismatch: false });
             cfg.rotor_lag = lag;
             let mut pl = Plant::new(cfg, &start());
             let mut worst = 0.0f64;
@@ -122,17 +115,10 @@ fn euler_and_quaternion_plants_agree() {
             (path, pl.euler_state(), &mut worst).0.clone()
         };
         let (pe, pq) = (run(ModelKind::Euler), run(ModelKind::Quaternion));
-        let worst = pe
-            .iter()
-            .zip(&pq)
-            .map(|(a, b)| (a - b).norm())
-            .fold(0.0, f64::max);
+        let worst = pe.iter().zip(&pq).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
         // The manoeuvre is real: it moves the vehicle by decimetres.
         assert!((pe.last().unwrap() - Vector3::new(0.0, 0.0, -1.0)).norm() > 0.1);
-        assert!(
-            worst < 1e-6,
-            "lag={lag} wind={wind}: max |Δpos| = {worst:e} m"
-        );
+        assert!(worst < 1e-6, "lag={lag} wind={wind}: max |Δpos| = {worst:e} m");
     }
 }
 
@@ -148,8 +134,7 @@ fn quaternion_plant_flies_through_ninety_degrees_pitch() {
     let u = Vector4::new(4.0, 0.0, 0.6, 0.01);
     let ur = realised_inputs(&p, &rotor_speeds(&p, &u));
     let mut pl = Plant::new(cfg, &start());
-    let skew =
-        |w: &Vector3<f64>| Matrix3::new(0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0);
+    let skew = |w: &Vector3<f64>| Matrix3::new(0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0);
     let fr = |r: &Matrix3<f64>, w: &Vector3<f64>| {
         let [ix, iy, iz] = p.inertia_kgm2;
         let [kx, ky, kz] = p.kr_nms;
@@ -236,10 +221,7 @@ fn rotor_lag_is_first_order_with_gain() {
         let t = k as f64 * 0.01;
         let want = p.rotor_gain * wc + (w0 - p.rotor_gain * wc) * (-t / p.rotor_tau_s).exp();
         let got = pl.rotor_speeds();
-        assert!(
-            got.iter().all(|w| (w - want).abs() < 1e-9),
-            "t={t}: {got} vs {want}"
-        );
+        assert!(got.iter().all(|w| (w - want).abs() < 1e-9), "t={t}: {got} vs {want}");
     }
 }
 

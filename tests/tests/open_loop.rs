@@ -84,13 +84,7 @@ fn euler_rhs(x: &[f64; 13], u: [f64; 4], wr: f64) -> [f64; 13] {
 }
 
 /// Adaptive Dormand–Prince 5(4) from 0 to `t_end`, returning samples every `dt_out`.
-fn dopri(
-    f: impl Fn(&[f64; 13]) -> [f64; 13],
-    x0: [f64; 13],
-    t_end: f64,
-    dt_out: f64,
-    tol: f64,
-) -> Vec<[f64; 13]> {
+fn dopri(f: impl Fn(&[f64; 13]) -> [f64; 13], x0: [f64; 13], t_end: f64, dt_out: f64, tol: f64) -> Vec<[f64; 13]> {
     const C: [[f64; 6]; 6] = [
         [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
         [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
@@ -191,8 +185,7 @@ fn open_loop_matches_independent_integration() {
         assert_eq!(rows.len(), reference.len());
         let mut worst = 0.0f64;
         for (row, r) in rows.iter().zip(&reference) {
-            let d = ((row[1] - r[0]).powi(2) + (row[2] - r[1]).powi(2) + (row[3] - r[2]).powi(2))
-                .sqrt();
+            let d = ((row[1] - r[0]).powi(2) + (row[2] - r[1]).powi(2) + (row[3] - r[2]).powi(2)).sqrt();
             worst = worst.max(d);
         }
         // The flight really moves: ~0.56 m up, ~9 cm sideways.

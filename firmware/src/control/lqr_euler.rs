@@ -3,17 +3,15 @@
 
 use super::lqr_table::{design_discrete, GainTable};
 use super::{
-    reference::tilt_and_thrust, saturate, validate, wrap_pi, ControlError, ControlOutput,
-    Controller, ReferenceMode, Setpoint, StateEstimate,
+    saturate, validate, wrap_pi, AttitudeRef, ControlError, ControlOutput, Controller, ReferenceMode, Setpoint,
+    StateEstimate,
 };
 use crate::model::{euler_hover_model, InputBox, VehicleParams};
 use nalgebra::{RealField, SMatrix, SVector, Vector4};
 
 /// Thesis Table 4.5: `Q = diag(10 20 90 5 5 15 10 20 35 85 5 1)`, `R = diag(1 .1 .1 .1)`.
 pub fn euler_weights() -> (SMatrix<f64, 12, 12>, SMatrix<f64, 4, 4>) {
-    let q = SVector::<f64, 12>::from([
-        10.0, 20.0, 90.0, 5.0, 5.0, 15.0, 10.0, 20.0, 35.0, 85.0, 5.0, 1.0,
-    ]);
+    let q = SVector::<f64, 12>::from([10.0, 20.0, 90.0, 5.0, 5.0, 15.0, 10.0, 20.0, 35.0, 85.0, 5.0, 1.0]);
     let r = Vector4::new(1.0, 0.1, 0.1, 0.1);
     (SMatrix::from_diagonal(&q), SMatrix::from_diagonal(&r))
 }
@@ -41,10 +39,7 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
         if !p64.is_valid() {
             return Err(ControlError::InvalidParameter);
         }
-        let table =
-            GainTable::build(
-                |yaw| Ok(design_discrete(&euler_hover_model(&p64, yaw), q, r, ts)?.k),
-            )?;
+        let table = GainTable::build(|yaw| Ok(design_discrete(&euler_hover_model(&p64, yaw), q, r, ts)?.k))?;
         Ok(Self {
             bx: params.input_box(),
             params,
@@ -54,11 +49,7 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
     }
 
     /// The thesis weights (Table 4.5).
-    pub fn thesis(
-        params: VehicleParams<T>,
-        ts: f64,
-        mode: ReferenceMode,
-    ) -> Result<Self, ControlError> {
+    pub fn thesis(params: VehicleParams<T>, ts: f64, mode: ReferenceMode) -> Result<Self, ControlError> {
         let (q, r) = euler_weights();
         Self::new(params, &q, &r, ts, mode)
     }
@@ -70,37 +61,19 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
 }
 
 impl<T: RealField + Copy, const H: usize> Controller<T> for LqrEuler<T, H> {
-    fn update(
-        &mut self,
-        est: &StateEstimate<T>,
-        sp: &Setpoint<T>,
-    ) -> Result<ControlOutput<T>, ControlError> {
+    fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         let e = est.euler();
-        let (roll_ref, pitch_ref, u1_ref, yaw_rate_ref) = match self.mode {
-            ReferenceMode::Thesis => (
-                T::zero(),
-                T::zero(),
-                self.params.hover_thrust_n(),
-                T::zero(),
-            ),
-            ReferenceMode::Feedforward => {
-                let tt =
-                    tilt_and_thrust(&self.params, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
-                (tt.roll_rad, tt.pitch_rad, tt.thrust_n, sp.yaw_rate_radps)
-            }
-        };
+        let ar = AttitudeRef::for_mode(&self.params, sp, self.mode);
         let mut dx = SVector::<T, 12>::zeros();
-        dx.fixed_rows_mut::<3>(0)
-            .copy_from(&(est.pos_ned_m - sp.pos_ned_m));
-        dx.fixed_rows_mut::<3>(3)
-            .copy_from(&(est.vel_ned_mps - sp.vel_ned_mps));
-        dx[6] = e[0] - roll_ref;
-        dx[7] = e[1] - pitch_ref;
-        dx[8] = wrap_pi(e[2] - sp.yaw_rad);
-        dx.fixed_rows_mut::<3>(9).copy_from(&est.rates_frd_radps);
-        dx[11] -= yaw_rate_ref;
-        let u_ref = Vector4::new(u1_ref, T::zero(), T::zero(), T::zero());
+        dx.fixed_rows_mut::<3>(0).copy_from(&(est.pos_ned_m - sp.pos_ned_m));
+        dx.fixed_rows_mut::<3>(3).copy_from(&(est.vel_ned_mps - sp.vel_ned_mps));
+        dx[6] = e[0] - ar.roll_rad;
+        dx[7] = e[1] - ar.pitch_rad;
+        dx[8] = wrap_pi(e[2] - ar.yaw_rad);
+        dx.fixed_rows_mut::<3>(9)
+            .copy_from(&(est.rates_frd_radps - ar.rates_frd_radps));
+        let u_ref = Vector4::new(ar.thrust_n, T::zero(), T::zero(), T::zero());
         let raw = u_ref - self.table.at(e[2]) * dx;
         Ok(saturate(&self.bx, &raw))
     }

@@ -12,13 +12,10 @@
 
 use super::lqr_table::{design_discrete, Gain};
 use super::{
-    reference::tilt_and_thrust, saturate, validate, ControlError, ControlOutput, Controller,
-    ReferenceMode, Setpoint, StateEstimate,
+    saturate, validate, AttitudeRef, ControlError, ControlOutput, Controller, ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
-use crate::model::{
-    euler_to_quat, quat_conj, quat_hover_model, quat_mul, quat_to_euler, InputBox, VehicleParams,
-};
+use crate::model::{euler_to_quat, quat_conj, quat_hover_model, quat_mul, quat_to_euler, InputBox, VehicleParams};
 use nalgebra::{RealField, SMatrix, SVector, Vector3, Vector4};
 
 /// Thesis Table 4.7: `Q = I12`, `R = I4`.
@@ -60,11 +57,7 @@ impl<T: RealField + Copy> LqrQuat<T> {
     }
 
     /// The thesis weights (Table 4.7).
-    pub fn thesis(
-        params: VehicleParams<T>,
-        ts: f64,
-        mode: ReferenceMode,
-    ) -> Result<Self, ControlError> {
+    pub fn thesis(params: VehicleParams<T>, ts: f64, mode: ReferenceMode) -> Result<Self, ControlError> {
         let (q, r) = quat_weights();
         Self::new(params, &q, &r, ts, mode)
     }
@@ -81,25 +74,9 @@ fn to_heading_frame<T: RealField + Copy>(v: &Vector3<T>, s: T, c: T) -> Vector3<
 }
 
 impl<T: RealField + Copy> Controller<T> for LqrQuat<T> {
-    fn update(
-        &mut self,
-        est: &StateEstimate<T>,
-        sp: &Setpoint<T>,
-    ) -> Result<ControlOutput<T>, ControlError> {
+    fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
-        let (roll_ref, pitch_ref, u1_ref, yaw_rate_ref) = match self.mode {
-            ReferenceMode::Thesis => (
-                T::zero(),
-                T::zero(),
-                self.params.hover_thrust_n(),
-                T::zero(),
-            ),
-            ReferenceMode::Feedforward => {
-                let tt =
-                    tilt_and_thrust(&self.params, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
-                (tt.roll_rad, tt.pitch_rad, tt.thrust_n, sp.yaw_rate_radps)
-            }
-        };
+        let ar = AttitudeRef::for_mode(&self.params, sp, self.mode);
         let yaw = quat_to_euler(&est.att)[2];
         let half = lit::<T>(0.5);
         let qh = Vector4::new((yaw * half).cos(), T::zero(), T::zero(), (yaw * half).sin());
@@ -108,28 +85,22 @@ impl<T: RealField + Copy> Controller<T> for LqrQuat<T> {
         if qa[0] < T::zero() {
             qa = -qa;
         }
-        let mut qr = quat_mul(&qhc, &euler_to_quat(roll_ref, pitch_ref, sp.yaw_rad));
+        let mut qr = quat_mul(&qhc, &euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad));
         if qr[0] < T::zero() {
             qr = -qr;
         }
         let (s, c) = yaw.sin_cos();
         let mut dx = SVector::<T, 12>::zeros();
-        dx.fixed_rows_mut::<3>(0).copy_from(&to_heading_frame(
-            &(est.pos_ned_m - sp.pos_ned_m),
-            s,
-            c,
-        ));
-        dx.fixed_rows_mut::<3>(3).copy_from(&to_heading_frame(
-            &(est.vel_ned_mps - sp.vel_ned_mps),
-            s,
-            c,
-        ));
+        dx.fixed_rows_mut::<3>(0)
+            .copy_from(&to_heading_frame(&(est.pos_ned_m - sp.pos_ned_m), s, c));
+        dx.fixed_rows_mut::<3>(3)
+            .copy_from(&to_heading_frame(&(est.vel_ned_mps - sp.vel_ned_mps), s, c));
         for i in 0..3 {
             dx[6 + i] = qa[1 + i] - qr[1 + i];
         }
-        dx.fixed_rows_mut::<3>(9).copy_from(&est.rates_frd_radps);
-        dx[11] -= yaw_rate_ref;
-        let u_ref = Vector4::new(u1_ref, T::zero(), T::zero(), T::zero());
+        dx.fixed_rows_mut::<3>(9)
+            .copy_from(&(est.rates_frd_radps - ar.rates_frd_radps));
+        let u_ref = Vector4::new(ar.thrust_n, T::zero(), T::zero(), T::zero());
         let raw = u_ref - self.gain * dx;
         Ok(saturate(&self.bx, &raw))
     }

@@ -26,9 +26,7 @@ impl<T: RealField + Copy, const H: usize> GainTable<T, H> {
     pub const LEN: usize = H;
 
     /// Designs every entry with `design(heading_rad)`; fails on the first error.
-    pub fn build(
-        mut design: impl FnMut(f64) -> Result<Gain<f64>, ControlError>,
-    ) -> Result<Self, ControlError> {
+    pub fn build(mut design: impl FnMut(f64) -> Result<Gain<f64>, ControlError>) -> Result<Self, ControlError> {
         if H == 0 {
             return Err(ControlError::InvalidParameter);
         }

@@ -18,7 +18,7 @@ pub use lqr_quat::LqrQuat;
 pub use lqr_table::GainTable;
 pub use pd_euler::{PdEuler, PdEulerGains};
 pub use pd_quat::{PdQuat, PdQuatGains};
-pub use reference::{tilt_and_thrust, ReferenceMode, TiltThrust};
+pub use reference::{tilt_and_thrust, AttitudeRef, ReferenceMode, TiltThrust};
 
 use crate::linalg::RiccatiError;
 use crate::model::{quat_to_euler, DiscretiseError, Input, Quat, QuatState};
@@ -73,6 +73,8 @@ pub struct Setpoint<T: RealField + Copy> {
     pub vel_ned_mps: Vector3<T>,
     /// Acceleration, NED, m/s² (feed-forward; zero for a fixed target).
     pub acc_ned_mps2: Vector3<T>,
+    /// Jerk, NED, m/s³ (gives the feed-forward body rates; zero for a fixed target).
+    pub jerk_ned_mps3: Vector3<T>,
     /// Heading ψ, rad.
     pub yaw_rad: T,
     /// Heading rate, rad/s.
@@ -86,6 +88,7 @@ impl<T: RealField + Copy> Setpoint<T> {
             pos_ned_m,
             vel_ned_mps: Vector3::zeros(),
             acc_ned_mps2: Vector3::zeros(),
+            jerk_ned_mps3: Vector3::zeros(),
             yaw_rad,
             yaw_rate_radps: T::zero(),
         }
@@ -96,6 +99,7 @@ impl<T: RealField + Copy> Setpoint<T> {
         self.pos_ned_m.iter().all(|v| v.is_finite())
             && self.vel_ned_mps.iter().all(|v| v.is_finite())
             && self.acc_ned_mps2.iter().all(|v| v.is_finite())
+            && self.jerk_ned_mps3.iter().all(|v| v.is_finite())
             && self.yaw_rad.is_finite()
             && self.yaw_rate_radps.is_finite()
     }
@@ -151,20 +155,13 @@ impl From<DiscretiseError> for ControlError {
 /// The interface every controller implements.
 pub trait Controller<T: RealField + Copy> {
     /// One control step: inputs for the current estimate and setpoint.
-    fn update(
-        &mut self,
-        est: &StateEstimate<T>,
-        sp: &Setpoint<T>,
-    ) -> Result<ControlOutput<T>, ControlError>;
+    fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError>;
     /// Forgets internal state (warm starts, estimates) before a new flight.
     fn reset(&mut self);
 }
 
 /// Checks both inputs of a step.
-pub(crate) fn validate<T: RealField + Copy>(
-    est: &StateEstimate<T>,
-    sp: &Setpoint<T>,
-) -> Result<(), ControlError> {
+pub(crate) fn validate<T: RealField + Copy>(est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<(), ControlError> {
     if !est.is_valid() {
         return Err(ControlError::InvalidEstimate);
     }
@@ -175,10 +172,7 @@ pub(crate) fn validate<T: RealField + Copy>(
 }
 
 /// Clamps the raw law into the box and fills the status.
-pub(crate) fn saturate<T: RealField + Copy>(
-    bx: &crate::model::InputBox<T>,
-    raw: &Input<T>,
-) -> ControlOutput<T> {
+pub(crate) fn saturate<T: RealField + Copy>(bx: &crate::model::InputBox<T>, raw: &Input<T>) -> ControlOutput<T> {
     let u = bx.clamp(raw);
     let exc = bx.violation(raw);
     let excursion = nalgebra::try_convert::<T, f64>(exc).unwrap_or(f64::INFINITY) as f32;
@@ -232,11 +226,7 @@ pub enum AnyController<T: RealField + Copy> {
 }
 
 impl<T: RealField + Copy> Controller<T> for AnyController<T> {
-    fn update(
-        &mut self,
-        est: &StateEstimate<T>,
-        sp: &Setpoint<T>,
-    ) -> Result<ControlOutput<T>, ControlError> {
+    fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         match self {
             AnyController::PdEuler(c) => c.update(est, sp),
             AnyController::PdQuat(c) => c.update(est, sp),

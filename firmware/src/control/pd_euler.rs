@@ -2,8 +2,8 @@
 //! attitude mode (3.75–3.79). Gains: thesis Tables 4.1–4.2.
 
 use super::{
-    reference::tilt_and_thrust, saturate, validate, wrap_pi, ControlError, ControlOutput,
-    Controller, ReferenceMode, Setpoint, StateEstimate,
+    reference::tilt_and_thrust, saturate, validate, wrap_pi, AttitudeRef, ControlError, ControlOutput, Controller,
+    ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
 use crate::model::{InputBox, VehicleParams};
@@ -118,11 +118,7 @@ pub(crate) fn desired_accel<T: RealField + Copy>(
 ) -> Vector3<T> {
     let e = sp.pos_ned_m - est.pos_ned_m;
     let ed = sp.vel_ned_mps - est.vel_ned_mps;
-    let fb = Vector3::new(
-        gx.law(e[0], ed[0]),
-        gy.law(e[1], ed[1]),
-        gz.law(e[2], ed[2]),
-    );
+    let fb = Vector3::new(gx.law(e[0], ed[0]), gy.law(e[1], ed[1]), gz.law(e[2], ed[2]));
     match mode {
         ReferenceMode::Thesis => fb,
         ReferenceMode::Feedforward => fb + sp.acc_ned_mps2,
@@ -130,11 +126,7 @@ pub(crate) fn desired_accel<T: RealField + Copy>(
 }
 
 impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
-    fn update(
-        &mut self,
-        est: &StateEstimate<T>,
-        sp: &Setpoint<T>,
-    ) -> Result<ControlOutput<T>, ControlError> {
+    fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         let g = &self.gains;
         let acc = desired_accel(&g.x, &g.y, &g.z, est, sp, self.mode);
@@ -150,18 +142,20 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
         let phi_dot = w[0] + (w[1] * sphi + w[2] * cphi) * tth;
         let theta_dot = w[1] * cphi - w[2] * sphi;
         let psi_dot = (w[1] * sphi + w[2] * cphi) / cth;
-        let yaw_rate_d = match self.mode {
-            ReferenceMode::Thesis => T::zero(),
-            ReferenceMode::Feedforward => sp.yaw_rate_radps,
+        // Desired Euler rates: the feed-forward attitude's (body rates ≈ Euler
+        // rates at the small tilts where the feed-forward matters).
+        let wd = match self.mode {
+            ReferenceMode::Thesis => Vector3::zeros(),
+            ReferenceMode::Feedforward => AttitudeRef::feedforward(&self.params, sp).rates_frd_radps,
         };
         // Thrust with tilt and drag compensation at the actual attitude (3.79).
         let tilt_cos = (cphi * theta.cos()).max(lit(0.5));
         let lift = tt.thrust_n * tt.roll_rad.cos() * tt.pitch_rad.cos();
         let raw = Vector4::new(
             lift / tilt_cos,
-            g.roll.law(tt.roll_rad - phi, -phi_dot),
-            g.pitch.law(tt.pitch_rad - theta, -theta_dot),
-            g.yaw.law(wrap_pi(sp.yaw_rad - psi), yaw_rate_d - psi_dot),
+            g.roll.law(tt.roll_rad - phi, wd[0] - phi_dot),
+            g.pitch.law(tt.pitch_rad - theta, wd[1] - theta_dot),
+            g.yaw.law(wrap_pi(sp.yaw_rad - psi), wd[2] - psi_dot),
         );
         Ok(saturate(&self.bx, &raw))
     }

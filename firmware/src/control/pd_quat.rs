@@ -10,7 +10,7 @@
 
 use super::pd_euler::{desired_accel, PdAxis};
 use super::{
-    reference::tilt_and_thrust, saturate, validate, ControlError, ControlOutput, Controller,
+    reference::tilt_and_thrust, saturate, validate, AttitudeRef, ControlError, ControlOutput, Controller,
     ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
@@ -93,11 +93,7 @@ impl<T: RealField + Copy> PdQuat<T> {
 }
 
 impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
-    fn update(
-        &mut self,
-        est: &StateEstimate<T>,
-        sp: &Setpoint<T>,
-    ) -> Result<ControlOutput<T>, ControlError> {
+    fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         let g = &self.gains;
         let acc = desired_accel(&g.x, &g.y, &g.z, est, sp, self.mode);
@@ -112,7 +108,7 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
         let w = est.rates_frd_radps;
         let wd = match self.mode {
             ReferenceMode::Thesis => Vector3::zeros(),
-            ReferenceMode::Feedforward => Vector3::new(T::zero(), T::zero(), sp.yaw_rate_radps),
+            ReferenceMode::Feedforward => AttitudeRef::feedforward(&self.params, sp).rates_frd_radps,
         };
         // Thrust: vertical component from the desired lift, over the actual R33.
         let r33 = quat_to_rotation(&qa)[(2, 2)].max(lit(0.5));

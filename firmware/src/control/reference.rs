@@ -2,6 +2,7 @@
 //! (thesis 3.79, 3.85, 3.86 — an exact inversion of the translational
 //! dynamics of SPEC §4), and the reference feed-forward modes.
 
+use super::Setpoint;
 use crate::lit;
 use crate::model::VehicleParams;
 use nalgebra::{RealField, Vector3};
@@ -53,10 +54,7 @@ pub fn tilt_and_thrust<T: RealField + Copy>(
     let lift = (g - az).max(lit::<T>(0.2) * g);
     let (s, c) = yaw.sin_cos();
     let max_tilt = lit::<T>(MAX_TILT_RAD);
-    let pitch = ((-c * ax - s * ay) / lift)
-        .atan()
-        .max(-max_tilt)
-        .min(max_tilt);
+    let pitch = ((-c * ax - s * ay) / lift).atan().max(-max_tilt).min(max_tilt);
     let roll = ((-s * ax + c * ay) * pitch.cos() / lift)
         .atan()
         .max(-max_tilt)
@@ -65,6 +63,82 @@ pub fn tilt_and_thrust<T: RealField + Copy>(
         roll_rad: roll,
         pitch_rad: pitch,
         thrust_n: m * lift / (roll.cos() * pitch.cos()),
+    }
+}
+
+/// The attitude, thrust and body rates a reference implies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeRef<T: RealField + Copy> {
+    /// Roll φ, rad.
+    pub roll_rad: T,
+    /// Pitch θ, rad.
+    pub pitch_rad: T,
+    /// Heading ψ, rad.
+    pub yaw_rad: T,
+    /// Thrust, N.
+    pub thrust_n: T,
+    /// Body rates (p, q, r) of the reference attitude, FRD, rad/s.
+    pub rates_frd_radps: Vector3<T>,
+}
+
+/// Time step of the central difference that gives the reference attitude's rates, s.
+const RATE_DIFF_S: f64 = 0.005;
+
+impl<T: RealField + Copy> AttitudeRef<T> {
+    /// Level at the setpoint's heading, hover thrust, no rates (what the
+    /// thesis' LQR regulates to).
+    pub fn level(p: &VehicleParams<T>, sp: &Setpoint<T>) -> Self {
+        Self {
+            roll_rad: T::zero(),
+            pitch_rad: T::zero(),
+            yaw_rad: sp.yaw_rad,
+            thrust_n: p.hover_thrust_n(),
+            rates_frd_radps: Vector3::zeros(),
+        }
+    }
+
+    /// What the reference's acceleration implies ([`tilt_and_thrust`] at the
+    /// reference velocity and heading), with body rates from a central
+    /// difference of that map along the reference's jerk and yaw rate.
+    pub fn feedforward(p: &VehicleParams<T>, sp: &Setpoint<T>) -> Self {
+        let tt = tilt_and_thrust(p, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
+        let h = lit::<T>(RATE_DIFF_S);
+        let at = |sgn: T| {
+            tilt_and_thrust(
+                p,
+                &(sp.acc_ned_mps2 + sp.jerk_ned_mps3 * (sgn * h)),
+                &(sp.vel_ned_mps + sp.acc_ned_mps2 * (sgn * h)),
+                sp.yaw_rad + sp.yaw_rate_radps * sgn * h,
+            )
+        };
+        let (fwd, back) = (at(T::one()), at(-T::one()));
+        let two_h = h + h;
+        let phi_dot = (fwd.roll_rad - back.roll_rad) / two_h;
+        let theta_dot = (fwd.pitch_rad - back.pitch_rad) / two_h;
+        let psi_dot = sp.yaw_rate_radps;
+        // Euler rates → body rates (ZYX).
+        let (sphi, cphi) = tt.roll_rad.sin_cos();
+        let (sth, cth) = tt.pitch_rad.sin_cos();
+        let rates = Vector3::new(
+            phi_dot - psi_dot * sth,
+            theta_dot * cphi + psi_dot * sphi * cth,
+            -theta_dot * sphi + psi_dot * cphi * cth,
+        );
+        Self {
+            roll_rad: tt.roll_rad,
+            pitch_rad: tt.pitch_rad,
+            yaw_rad: sp.yaw_rad,
+            thrust_n: tt.thrust_n,
+            rates_frd_radps: rates,
+        }
+    }
+
+    /// [`Self::level`] or [`Self::feedforward`] by mode.
+    pub fn for_mode(p: &VehicleParams<T>, sp: &Setpoint<T>, mode: ReferenceMode) -> Self {
+        match mode {
+            ReferenceMode::Thesis => Self::level(p, sp),
+            ReferenceMode::Feedforward => Self::feedforward(p, sp),
+        }
     }
 }
 
@@ -80,16 +154,8 @@ mod tests {
         // returned thrust and evaluate the nonlinear dynamics.
         let p = VehicleParams::<f64>::os4();
         for (acc, vel, yaw) in [
-            (
-                Vector3::new(1.0, -0.5, -0.8),
-                Vector3::new(0.3, 0.2, -0.1),
-                0.3,
-            ),
-            (
-                Vector3::new(-2.0, 1.5, 0.5),
-                Vector3::new(-1.0, 0.0, 0.4),
-                -2.4,
-            ),
+            (Vector3::new(1.0, -0.5, -0.8), Vector3::new(0.3, 0.2, -0.1), 0.3),
+            (Vector3::new(-2.0, 1.5, 0.5), Vector3::new(-1.0, 0.0, 0.4), -2.4),
             (Vector3::zeros(), Vector3::zeros(), 1.0),
         ] {
             let tt = tilt_and_thrust(&p, &acc, &vel, yaw);
@@ -107,17 +173,47 @@ mod tests {
     }
 
     #[test]
+    fn feedforward_rates_match_the_attitude_derivative() {
+        // A circle's reference: the body rates of the implied attitude must equal
+        // the finite-difference derivative of that attitude along the reference.
+        let p = VehicleParams::<f64>::os4();
+        let (r, w) = (2.0, 2.0 * core::f64::consts::PI / 6.0);
+        let sp_at = |t: f64| {
+            let (s, c) = (w * t).sin_cos();
+            Setpoint {
+                pos_ned_m: Vector3::new(r * s, r * (1.0 - c), -1.0),
+                vel_ned_mps: Vector3::new(r * w * c, r * w * s, 0.0),
+                acc_ned_mps2: Vector3::new(-r * w * w * s, r * w * w * c, 0.0),
+                jerk_ned_mps3: Vector3::new(-r * w * w * w * c, -r * w * w * w * s, 0.0),
+                yaw_rad: 0.3 + 0.2 * t,
+                yaw_rate_radps: 0.2,
+            }
+        };
+        let t = 1.3;
+        let a = AttitudeRef::feedforward(&p, &sp_at(t));
+        let h = 1e-5;
+        let (ap, am) = (
+            AttitudeRef::feedforward(&p, &sp_at(t + h)),
+            AttitudeRef::feedforward(&p, &sp_at(t - h)),
+        );
+        let q = |x: &AttitudeRef<f64>| crate::model::euler_to_quat(x.roll_rad, x.pitch_rad, x.yaw_rad);
+        // ω = 2 q* ⊗ q̇ (body rates of a body→earth quaternion).
+        let qd = (q(&ap) - q(&am)) / (2.0 * h);
+        let w_fd = crate::model::quat_mul(&crate::model::quat_conj(&q(&a)), &qd) * 2.0;
+        let want = Vector3::new(w_fd[1], w_fd[2], w_fd[3]);
+        assert!(
+            (a.rates_frd_radps - want).norm() < 1e-4,
+            "{} vs {want}",
+            a.rates_frd_radps
+        );
+        assert!(a.rates_frd_radps.norm() > 0.1);
+    }
+
+    #[test]
     fn limits_hold_for_extreme_requests() {
         let p = VehicleParams::<f64>::os4();
-        let tt = tilt_and_thrust(
-            &p,
-            &Vector3::new(100.0, -100.0, 50.0),
-            &Vector3::zeros(),
-            0.0,
-        );
-        assert!(
-            tt.roll_rad.abs() <= MAX_TILT_RAD + 1e-12 && tt.pitch_rad.abs() <= MAX_TILT_RAD + 1e-12
-        );
+        let tt = tilt_and_thrust(&p, &Vector3::new(100.0, -100.0, 50.0), &Vector3::zeros(), 0.0);
+        assert!(tt.roll_rad.abs() <= MAX_TILT_RAD + 1e-12 && tt.pitch_rad.abs() <= MAX_TILT_RAD + 1e-12);
         assert!(tt.thrust_n > 0.0 && tt.thrust_n.is_finite());
     }
 }

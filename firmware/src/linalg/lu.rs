@@ -70,9 +70,7 @@ pub fn lu_solve<T: RealField + Copy, const N: usize, const C: usize>(
 }
 
 /// Inverse of a square matrix via [`lu_solve`]; `None` when singular.
-pub fn inverse<T: RealField + Copy, const N: usize>(
-    a: &SMatrix<T, N, N>,
-) -> Option<SMatrix<T, N, N>> {
+pub fn inverse<T: RealField + Copy, const N: usize>(a: &SMatrix<T, N, N>) -> Option<SMatrix<T, N, N>> {
     lu_solve(a, &SMatrix::<T, N, N>::identity())
 }
 

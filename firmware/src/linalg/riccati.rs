@@ -44,9 +44,7 @@ fn finite<T: RealField + Copy, const R: usize, const C: usize>(m: &SMatrix<T, R,
     m.iter().all(|v| v.is_finite())
 }
 
-fn inv<T: RealField + Copy, const N: usize>(
-    m: &SMatrix<T, N, N>,
-) -> Result<SMatrix<T, N, N>, RiccatiError> {
+fn inv<T: RealField + Copy, const N: usize>(m: &SMatrix<T, N, N>) -> Result<SMatrix<T, N, N>, RiccatiError> {
     inverse(m).ok_or(RiccatiError::Singular)
 }
 
@@ -61,10 +59,7 @@ fn tolerance<T: RealField + Copy>() -> T {
 
 /// Accepts a solution whose Riccati residual is small against the size of the
 /// equation's terms (√ε relative: f64 ≈ 1.5e-8, f32 ≈ 3.5e-4).
-fn check_residual<T: RealField + Copy, const N: usize>(
-    res: &SMatrix<T, N, N>,
-    size: T,
-) -> Result<(), RiccatiError> {
+fn check_residual<T: RealField + Copy, const N: usize>(res: &SMatrix<T, N, N>, size: T) -> Result<(), RiccatiError> {
     let r = res.amax();
     if r.is_finite() && size.is_finite() && r <= T::default_epsilon().sqrt() * size.max(T::one()) {
         Ok(())
@@ -173,18 +168,8 @@ mod tests {
     #[test]
     fn scalar_care_matches_closed_form() {
         // ẋ = a x + b u: X = (a + sqrt(a² + b²q/r)) r / b².
-        for &(a, b, q, r) in &[
-            (1.0f64, 1.0, 1.0, 1.0),
-            (-2.0, 0.5, 3.0, 0.1),
-            (0.0, 2.0, 5.0, 2.0),
-        ] {
-            let s = solve_care(
-                &Matrix1::new(a),
-                &Matrix1::new(b),
-                &Matrix1::new(q),
-                &Matrix1::new(r),
-            )
-            .unwrap();
+        for &(a, b, q, r) in &[(1.0f64, 1.0, 1.0, 1.0), (-2.0, 0.5, 3.0, 0.1), (0.0, 2.0, 5.0, 2.0)] {
+            let s = solve_care(&Matrix1::new(a), &Matrix1::new(b), &Matrix1::new(q), &Matrix1::new(r)).unwrap();
             let want = (a + (a * a + b * b * q / r).sqrt()) * r / (b * b);
             assert!(
                 (s.x[0] - want).abs() < 1e-12 * want.abs().max(1.0),
@@ -202,11 +187,7 @@ mod tests {
         let b = Vector2::new(0.0, 1.0);
         let s = solve_care(&a, &b, &Matrix2::identity(), &Matrix1::new(1.0)).unwrap();
         let r3 = 3f64.sqrt();
-        assert!(
-            (s.x - Matrix2::new(r3, 1.0, 1.0, r3)).amax() < 1e-12,
-            "{}",
-            s.x
-        );
+        assert!((s.x - Matrix2::new(r3, 1.0, 1.0, r3)).amax() < 1e-12, "{}", s.x);
         assert!((s.k - SMatrix::<f64, 1, 2>::new(1.0, r3)).amax() < 1e-12);
     }
 
@@ -214,13 +195,7 @@ mod tests {
     fn scalar_dare_matches_closed_form() {
         // x⁺ = a x + b u: b²X² + (r(1 − a²) − b²q) X − q r = 0.
         let (a, b, q, r) = (1.2f64, 0.7, 2.0, 0.5);
-        let s = solve_dare(
-            &Matrix1::new(a),
-            &Matrix1::new(b),
-            &Matrix1::new(q),
-            &Matrix1::new(r),
-        )
-        .unwrap();
+        let s = solve_dare(&Matrix1::new(a), &Matrix1::new(b), &Matrix1::new(q), &Matrix1::new(r)).unwrap();
         let (qa, qb, qc) = (b * b, r * (1.0 - a * a) - b * b * q, -q * r);
         let want = (-qb + (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa);
         assert!((s.x[0] - want).abs() < 1e-12 * want, "{} vs {want}", s.x[0]);

@@ -124,45 +124,28 @@ impl<T: RealField + Copy> Vehicle<T> {
     /// Translational acceleration (NED, m/s²) from velocity, the body z axis in
     /// NED `(R13, R23, R33)`, thrust `U1` and the disturbance force.
     #[inline(always)]
-    fn accel(
-        &self,
-        vel: &Vector3<T>,
-        r_col3: &Vector3<T>,
-        u1: T,
-        d: &Disturbance<T>,
-    ) -> Vector3<T> {
+    fn accel(&self, vel: &Vector3<T>, r_col3: &Vector3<T>, u1: T, d: &Disturbance<T>) -> Vector3<T> {
         let p = &self.params;
         Vector3::new(
             -(p.kt_nspm[0] * vel[0] + u1 * r_col3[0] - d.force_ned_n[0]) * self.inv_mass,
             -(p.kt_nspm[1] * vel[1] + u1 * r_col3[1] - d.force_ned_n[1]) * self.inv_mass,
-            -(p.kt_nspm[2] * vel[2] - self.weight_n + u1 * r_col3[2] - d.force_ned_n[2])
-                * self.inv_mass,
+            -(p.kt_nspm[2] * vel[2] - self.weight_n + u1 * r_col3[2] - d.force_ned_n[2]) * self.inv_mass,
         )
     }
 
     /// Body angular acceleration (rad/s²) from rates `ω = (p, q, r)`, inputs,
     /// relative rotor speed `ωr` (rad/s) and the disturbance moment (SPEC §4).
     #[inline(always)]
-    pub fn rate_derivative(
-        &self,
-        w: &Vector3<T>,
-        u: &Input<T>,
-        omega_r: T,
-        d: &Disturbance<T>,
-    ) -> Vector3<T> {
+    pub fn rate_derivative(&self, w: &Vector3<T>, u: &Input<T>, omega_r: T, d: &Disturbance<T>) -> Vector3<T> {
         let p = &self.params;
         let [ix, iy, iz] = p.inertia_kgm2;
         let [krx, kry, krz] = p.kr_nms;
         let (pr, qr, rr) = (w[0], w[1], w[2]);
         let jr = p.rotor_inertia_kgm2;
         Vector3::new(
-            (p.arm_m * u[1] - krx * pr + (iy - iz) * qr * rr - jr * qr * omega_r
-                + d.moment_body_nm[0])
+            (p.arm_m * u[1] - krx * pr + (iy - iz) * qr * rr - jr * qr * omega_r + d.moment_body_nm[0])
                 * self.inv_inertia[0],
-            (p.arm_m * u[2] - kry * qr
-                + (iz - ix) * pr * rr
-                + jr * pr * omega_r
-                + d.moment_body_nm[1])
+            (p.arm_m * u[2] - kry * qr + (iz - ix) * pr * rr + jr * pr * omega_r + d.moment_body_nm[1])
                 * self.inv_inertia[1],
             (u[3] - krz * rr + (ix - iy) * pr * qr + d.moment_body_nm[2]) * self.inv_inertia[2],
         )
@@ -170,13 +153,7 @@ impl<T: RealField + Copy> Vehicle<T> {
 
     /// Time derivative of the Euler-form state (SPEC §4). Singular at |θ| = 90°
     /// (the result is then non-finite); use the quaternion form for aerobatics.
-    pub fn euler_derivative(
-        &self,
-        x: &EulerState<T>,
-        u: &Input<T>,
-        omega_r: T,
-        d: &Disturbance<T>,
-    ) -> EulerState<T> {
+    pub fn euler_derivative(&self, x: &EulerState<T>, u: &Input<T>, omega_r: T, d: &Disturbance<T>) -> EulerState<T> {
         let (phi, theta, psi) = (x[6], x[7], x[8]);
         let (sphi, cphi) = phi.sin_cos();
         let (sth, cth) = theta.sin_cos();
@@ -206,13 +183,7 @@ impl<T: RealField + Copy> Vehicle<T> {
 
     /// Time derivative of the quaternion-form state (SPEC §5). The quaternion
     /// is used as given (callers renormalise after each integration step).
-    pub fn quat_derivative(
-        &self,
-        x: &QuatState<T>,
-        u: &Input<T>,
-        omega_r: T,
-        d: &Disturbance<T>,
-    ) -> QuatState<T> {
+    pub fn quat_derivative(&self, x: &QuatState<T>, u: &Input<T>, omega_r: T, d: &Disturbance<T>) -> QuatState<T> {
         let two = lit::<T>(2.0);
         let half = lit::<T>(0.5);
         let (q0, q1, q2, q3) = (x[6], x[7], x[8], x[9]);

@@ -80,11 +80,7 @@ pub fn quat_hover_model<T: RealField + Copy>(p: &VehicleParams<T>, yaw: T) -> Li
 /// Drops `q0` from a quaternion state, flipping the sign of the whole
 /// quaternion first so that `q0 ≥ 0` (same rotation, shortest way round).
 pub fn reduce_quat_state<T: RealField + Copy>(x: &QuatState<T>) -> ReducedQuatState<T> {
-    let sign = if x[6] < T::zero() {
-        -T::one()
-    } else {
-        T::one()
-    };
+    let sign = if x[6] < T::zero() { -T::one() } else { T::one() };
     let mut r = ReducedQuatState::zeros();
     r.fixed_rows_mut::<6>(0).copy_from(&x.fixed_rows::<6>(0));
     for i in 0..3 {

@@ -47,10 +47,7 @@ pub fn clamp_speed<T: RealField + Copy>(p: &VehicleParams<T>, w: T) -> T {
 }
 
 /// Inputs realised by rotors spinning at `omega` (rad/s).
-pub fn realised_inputs<T: RealField + Copy>(
-    p: &VehicleParams<T>,
-    omega: &Vector4<T>,
-) -> Vector4<T> {
+pub fn realised_inputs<T: RealField + Copy>(p: &VehicleParams<T>, omega: &Vector4<T>) -> Vector4<T> {
     mix(p, &omega.component_mul(omega))
 }
 

@@ -122,8 +122,7 @@ impl<T: RealField + Copy> VehicleParams<T> {
             self.kr_nms[1],
             self.kr_nms[2],
         ];
-        pos.iter().all(|x| x.is_finite() && *x > T::zero())
-            && nonneg.iter().all(|x| x.is_finite() && *x >= T::zero())
+        pos.iter().all(|x| x.is_finite() && *x > T::zero()) && nonneg.iter().all(|x| x.is_finite() && *x >= T::zero())
     }
 }
 

@@ -30,10 +30,7 @@ fn mixer_round_trip() {
         let w2 = unmix(&p, &u);
         assert!(w2.iter().all(|v| *v > 0.0));
         let back = mix(&p, &w2);
-        assert!(
-            (back - u).norm() < 1e-12 * u.norm().max(1.0),
-            "{back} vs {u}"
-        );
+        assert!((back - u).norm() < 1e-12 * u.norm().max(1.0), "{back} vs {u}");
         // Through actual speeds too.
         let w = rotor_speeds(&p, &u);
         assert!((realised_inputs(&p, &w) - u).norm() < 1e-10);
@@ -52,23 +49,15 @@ fn rotor_clamping_gives_input_bounds() {
     // and reaches the SPEC §2 corners.
     let full = realised_inputs(&p, &rotor_speeds(&p, &Vector4::new(1e6, 0.0, 0.0, 0.0)));
     assert!((full[0] - 45.072).abs() < 1e-9);
-    let roll = realised_inputs(
-        &p,
-        &rotor_speeds(&p, &Vector4::new(b.hi[0] / 2.0, 1e6, 0.0, 0.0)),
-    );
+    let roll = realised_inputs(&p, &rotor_speeds(&p, &Vector4::new(b.hi[0] / 2.0, 1e6, 0.0, 0.0)));
     assert!((roll[1] - 11.268).abs() < 1e-9, "{roll}");
-    let yaw = realised_inputs(
-        &p,
-        &rotor_speeds(&p, &Vector4::new(b.hi[0] / 2.0, 0.0, 0.0, -1e6)),
-    );
+    let yaw = realised_inputs(&p, &rotor_speeds(&p, &Vector4::new(b.hi[0] / 2.0, 0.0, 0.0, -1e6)));
     assert!((yaw[3] + 0.54).abs() < 1e-12, "{yaw}");
     let mut rng = 12345u64;
     for _ in 0..2000 {
         let mut u = Vector4::zeros();
         for i in 0..4 {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             let r = (rng >> 11) as f64 / (1u64 << 53) as f64;
             u[i] = (r - 0.5) * 4.0 * (b.hi[i] - b.lo[i]);
         }
@@ -99,11 +88,7 @@ fn hover_is_an_equilibrium() {
 
 #[test]
 fn euler_quaternion_conversions_round_trip() {
-    for &(r, pch, y) in &[
-        (0.1f64, -0.2f64, 0.3f64),
-        (-1.0, 1.2, 3.0),
-        (0.0, 0.0, -3.1),
-    ] {
+    for &(r, pch, y) in &[(0.1f64, -0.2f64, 0.3f64), (-1.0, 1.2, 3.0), (0.0, 0.0, -3.1)] {
         let q = euler_to_quat(r, pch, y);
         assert!((q.norm() - 1.0).abs() < 1e-15);
         let e = quat_to_euler(&q);
@@ -199,13 +184,7 @@ fn quaternion_jacobians_match_finite_differences() {
         );
         let fu = |u: &Vector4<f64>| {
             let w = rotor_speeds(&p, u);
-            let d = quat_derivative(
-                &p,
-                &expand_quat_state(&x0),
-                u,
-                gyro_speed(&w),
-                &Disturbance::none(),
-            );
+            let d = quat_derivative(&p, &expand_quat_state(&x0), u, gyro_speed(&w), &Disturbance::none());
             let mut out = ReducedQuatState::zeros();
             out.fixed_rows_mut::<6>(0).copy_from(&d.fixed_rows::<6>(0));
             out.fixed_rows_mut::<6>(6).copy_from(&d.fixed_rows::<6>(7));
@@ -303,15 +282,9 @@ fn zoh_of_hover_model_matches_fine_integration() {
 #[test]
 fn zoh_rejects_bad_input() {
     let a = Matrix2::new(f64::NAN, 0.0, 0.0, 0.0);
-    assert_eq!(
-        zoh(&a, &Vector2::new(0.0, 1.0), 0.1),
-        Err(DiscretiseError::NonFinite)
-    );
+    assert_eq!(zoh(&a, &Vector2::new(0.0, 1.0), 0.1), Err(DiscretiseError::NonFinite));
     let a = Matrix2::identity();
-    assert_eq!(
-        zoh(&a, &Vector2::new(0.0, 1.0), -0.1),
-        Err(DiscretiseError::NonFinite)
-    );
+    assert_eq!(zoh(&a, &Vector2::new(0.0, 1.0), -0.1), Err(DiscretiseError::NonFinite));
     assert_eq!(
         zoh(&(a * 1e300), &Vector2::new(0.0, 1.0), 1.0),
         Err(DiscretiseError::TooStiff)
