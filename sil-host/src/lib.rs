@@ -13,6 +13,7 @@ pub mod plant;
 pub mod record;
 pub mod report;
 pub mod scenario;
+pub mod study;
 
 pub use disturbance::DisturbanceSet;
 pub use plant::{ModelKind, Plant, PlantConfig};

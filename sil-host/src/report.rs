@@ -95,6 +95,13 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
 /// the continuous-time gain (`U = Uss − K δX`), all row-major.
 pub fn lqr_design_json(model: ModelKind, yaw: f64) -> anyhow::Result<Value> {
     let p = VehicleParams::OS4;
+    if model == ModelKind::Quaternion && (yaw / 2.0).cos().abs() < 1e-3 {
+        anyhow::bail!(
+            "the reduced quaternion form is singular at a heading of ±180° (q0 = cos(ψT/2) = 0, so roll and pitch \
+             rates no longer reach q1, q2): no stabilising LQR exists there. Use another heading or --model euler; \
+             the flight controller avoids this by working in the current heading's frame."
+        );
+    }
     let (lm, (q, r), states) = match model {
         ModelKind::Euler => (
             euler_hover_model(&p, yaw),

@@ -87,11 +87,13 @@ impl<T: RealField + Copy> VehicleParams<T> {
     }
 
     /// The input box implied by Ωmax (SPEC §2): `0 ≤ U1 ≤ 4kfΩ²max`,
-    /// `|U2|,|U3| ≤ kfΩ²max`, `|U4| ≤ 2kMΩ²max`.
+    /// `|U2|,|U3| ≤ kfΩ²max`, `|U4| ≤ 2kMΩ²max`, shrunk by 8 ulp of `T` so that
+    /// a value inside stays inside the exact (`f64`) box after conversion.
     pub fn input_box(&self) -> InputBox<T> {
         let w2 = self.omega_max_radps * self.omega_max_radps;
-        let f = self.kf_ns2 * w2;
-        let m = lit::<T>(2.0) * self.km_nms2 * w2;
+        let shrink = T::one() - lit::<T>(8.0) * T::default_epsilon();
+        let f = self.kf_ns2 * w2 * shrink;
+        let m = lit::<T>(2.0) * self.km_nms2 * w2 * shrink;
         InputBox {
             lo: Vector4::new(T::zero(), -f, -f, -m),
             hi: Vector4::new(lit::<T>(4.0) * f, f, f, m),

@@ -1,0 +1,50 @@
+//! One controller step of each f32 controller on the host (what the SIL
+//! reports as `step_time_ns`), at a mid-circle state with feed-forward.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use firmware::control::{Controller, Setpoint, StateEstimate};
+use firmware::euler_to_quat;
+use nalgebra::Vector3;
+use sil_host::flight::{build_controller, ControllerFamily, GainSet};
+use sil_host::ModelKind;
+use std::hint::black_box;
+
+fn bench(c: &mut Criterion) {
+    let est = StateEstimate {
+        pos_ned_m: Vector3::new(1.2, 0.3, -1.1f32),
+        vel_ned_mps: Vector3::new(0.4, 0.5, -0.05),
+        att: euler_to_quat(0.05, -0.03, 0.2),
+        rates_frd_radps: Vector3::new(0.1, -0.05, 0.02),
+    };
+    let sp = Setpoint {
+        pos_ned_m: Vector3::new(1.25, 0.35, -1.0f32),
+        vel_ned_mps: Vector3::new(0.45, 0.5, 0.0),
+        acc_ned_mps2: Vector3::new(-0.1, 0.15, 0.0),
+        jerk_ned_mps3: Vector3::new(-0.05, -0.03, 0.0),
+        yaw_rad: 0.26,
+        yaw_rate_radps: 0.0,
+    };
+    let mut g = c.benchmark_group("controller_step_f32");
+    for (fam, model, name) in [
+        (ControllerFamily::Pd, ModelKind::Euler, "pd_euler"),
+        (ControllerFamily::Pd, ModelKind::Quaternion, "pd_quaternion"),
+        (ControllerFamily::Lqr, ModelKind::Euler, "lqr_euler"),
+        (ControllerFamily::Lqr, ModelKind::Quaternion, "lqr_quaternion"),
+    ] {
+        let mut ctrl = build_controller(
+            fam,
+            model,
+            GainSet::Tuned,
+            firmware::control::ReferenceMode::Feedforward,
+            0.002,
+        )
+        .unwrap();
+        g.bench_function(name, |b| {
+            b.iter(|| ctrl.update(black_box(&est), black_box(&sp)).unwrap())
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
