@@ -21,5 +21,6 @@
 pub mod control;
 pub mod linalg;
 pub mod model;
+pub mod qp;
 
 pub use model::*;

@@ -2,8 +2,10 @@
 //! LU solves for const-generic sizes and the algebraic Riccati equations
 //! (continuous and discrete).
 
+pub mod eigen;
 pub mod lu;
 pub mod riccati;
 
+pub use eigen::*;
 pub use lu::*;
 pub use riccati::*;
