@@ -159,7 +159,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             d2 += w * w;
         }
         let start = (self.l + self.mu) * lit::<T>(0.5) * d2;
-        if eps.is_nan() || eps <= T::zero() || start <= eps {
+        if !eps.is_finite() || eps <= T::zero() || start <= eps {
             return 1;
         }
         let rate = T::one() - (self.mu / self.l).sqrt();
