@@ -167,7 +167,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             return 1;
         }
         let i = (eps / start).ln() / rate.ln();
-        let i = nalgebra::try_convert::<T, f64>(i).unwrap_or(f64::INFINITY).ceil();
+        let i = libm::ceil(nalgebra::try_convert::<T, f64>(i).unwrap_or(f64::INFINITY));
         // +1 for the first projected-gradient step the bound assumes.
         if i.is_finite() && i < (u32::MAX - 1) as f64 {
             i as u32 + 1

@@ -76,7 +76,7 @@ fn spd<const N: usize>(seed: u64, cond: f64) -> SMatrix<f64, N, N> {
     let qd = a.qr().q();
     let q = SMatrix::<f64, N, N>::from_fn(|i, j| qd[(i, j)]);
     let d = SVector::<f64, N>::from_fn(|i, _| cond.powf(i as f64 / (N.max(2) - 1) as f64));
-    let scale = SVector::<f64, N>::from_fn(|i, _| 10f64.powf(2.0 * rnd()));
+    let scale = SVector::<f64, N>::from_fn(|_, _| 10f64.powf(2.0 * rnd()));
     // Badly scaled too: D Q Λ Qᵀ D.
     let m = q * SMatrix::from_diagonal(&d) * q.transpose();
     SMatrix::from_fn(|i, j| scale[i] * m[(i, j)] * scale[j])
