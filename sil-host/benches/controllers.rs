@@ -5,7 +5,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use firmware::control::{Controller, Setpoint, StateEstimate};
 use firmware::euler_to_quat;
 use nalgebra::Vector3;
-use sil_host::flight::{build_controller, ControllerFamily, GainSet};
+use sil_host::flight::{build_controller, ControllerFamily, GainSet, MpcPreset};
 use sil_host::ModelKind;
 use std::hint::black_box;
 

@@ -7,8 +7,8 @@ use crate::plant::{ModelKind, Plant, PlantConfig};
 use crate::record::{state_row, RECORD_DT_S};
 use crate::scenario::{Reference, Scenario};
 use firmware::control::{
-    wrap_pi, AnyController, ControlError, Controller, LqrEuler, LqrQuat, PdEuler, PdEulerGains, PdQuat, PdQuatGains,
-    ReferenceMode, Setpoint, StateEstimate,
+    wrap_pi, AnyController, ControlError, Controller, LqrEuler, LqrQuat, MpcConfig, MpcFast, MpcForm, MpcThesis,
+    PdEuler, PdEulerGains, PdQuat, PdQuatGains, ReferenceMode, Setpoint, StateEstimate,
 };
 use firmware::{hover_quat_state, VehicleParams};
 use nalgebra::{Vector3, Vector4};
@@ -23,6 +23,8 @@ pub enum ControllerFamily {
     Pd,
     /// LQR about hover (thesis weights), heading-scheduled.
     Lqr,
+    /// Linear MPC with the core's QP solver (`--preset thesis|fast`).
+    Mpc,
 }
 
 impl ControllerFamily {
@@ -31,6 +33,27 @@ impl ControllerFamily {
         match self {
             ControllerFamily::Pd => "pd",
             ControllerFamily::Lqr => "lqr",
+            ControllerFamily::Mpc => "mpc",
+        }
+    }
+}
+
+/// MPC preset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum MpcPreset {
+    /// Thesis: Ts = 0.25 s (4 Hz), N = 20, M = 2, thesis weights.
+    Thesis,
+    /// Project: 50 ms prediction over 1 s, re-solved at 200 Hz, M = 4.
+    Fast,
+}
+
+impl MpcPreset {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            MpcPreset::Thesis => "thesis",
+            MpcPreset::Fast => "fast",
         }
     }
 }
@@ -75,6 +98,10 @@ pub struct FlightConfig {
     pub reference: RefMode,
     /// PD gain set (LQR always uses the thesis weights).
     pub gains: GainSet,
+    /// MPC preset (MPC only).
+    pub preset: MpcPreset,
+    /// Replaces the preset's MPC configuration (sweeps, tuning); sizes stay the preset's.
+    pub mpc_override: Option<MpcConfig>,
     /// What to fly.
     pub scenario: Scenario,
     /// Disturbances on the plant.
@@ -93,6 +120,8 @@ impl FlightConfig {
             model,
             reference: RefMode::Feedforward,
             gains: GainSet::Tuned,
+            preset: MpcPreset::Fast,
+            mpc_override: None,
             scenario,
             disturbance: DisturbanceSet::NONE,
             control_hz: 500.0,
@@ -125,6 +154,10 @@ pub struct FlightResult {
     pub step_time_ns: StepTime,
     /// Control steps in which the unconstrained law was clamped into the box.
     pub saturated_steps: usize,
+    /// QP iterations per step (MPC): mean and max; zeros otherwise.
+    pub qp_iterations: (f64, u32),
+    /// The MPC's a-priori QP iteration bound (0 for other controllers).
+    pub qp_iteration_bound: u32,
     /// Control steps flown.
     pub steps: usize,
     /// The flight was stopped because the state left any sane range.
@@ -136,11 +169,37 @@ pub fn build_controller(
     family: ControllerFamily,
     model: ModelKind,
     gains: GainSet,
+    preset: MpcPreset,
+    mode: ReferenceMode,
+    ts: f64,
+) -> Result<AnyController<f32>, ControlError> {
+    build_controller_with(family, model, gains, preset, None, mode, ts)
+}
+
+/// [`build_controller`] with an optional MPC configuration replacing the preset's.
+pub fn build_controller_with(
+    family: ControllerFamily,
+    model: ModelKind,
+    gains: GainSet,
+    preset: MpcPreset,
+    mpc: Option<MpcConfig>,
     mode: ReferenceMode,
     ts: f64,
 ) -> Result<AnyController<f32>, ControlError> {
     let p = VehicleParams::<f32>::os4();
     Ok(match (family, model) {
+        (ControllerFamily::Mpc, _) => {
+            let form = match model {
+                ModelKind::Euler => MpcForm::Euler,
+                ModelKind::Quaternion => MpcForm::Quaternion,
+            };
+            match preset {
+                MpcPreset::Thesis => {
+                    AnyController::MpcThesis(MpcThesis::new(p, mpc.unwrap_or(MpcConfig::thesis(form)))?)
+                }
+                MpcPreset::Fast => AnyController::MpcFast(MpcFast::new(p, mpc.unwrap_or(MpcConfig::fast(form)))?),
+            }
+        }
         (ControllerFamily::Pd, ModelKind::Euler) => {
             let g = match gains {
                 GainSet::Thesis => PdEulerGains::thesis(),
@@ -173,21 +232,67 @@ fn setpoint(r: &Reference) -> Setpoint<f32> {
 
 /// Flies one scenario in-process.
 pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
-    cfg.scenario.validate().map_err(anyhow::Error::msg)?;
-    if !(cfg.control_hz.is_finite() && cfg.control_hz >= 1.0) {
-        anyhow::bail!("control rate must be at least 1 Hz");
+    fly_until(cfg, None, |_, _| {}).map(|(r, _)| r)
+}
+
+/// The MPC's a-priori QP bound, or 0.
+fn qp_bound(c: &AnyController<f32>) -> u32 {
+    match c {
+        AnyController::MpcThesis(m) => m.iteration_bound(),
+        AnyController::MpcFast(m) => m.iteration_bound(),
+        _ => 0,
     }
-    let ts = 1.0 / cfg.control_hz;
-    let mut ctrl = build_controller(cfg.controller, cfg.model, cfg.gains, cfg.reference.into(), ts)
-        .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
+}
+
+/// Flies `cfg` up to `stop_at` seconds (the whole scenario when `None`),
+/// calling `inspect(t, controller)` after every control step; returns the
+/// result and the controller as it was at the end.
+pub fn fly_until(
+    cfg: &FlightConfig,
+    stop_at: Option<f64>,
+    mut inspect: impl FnMut(f64, &AnyController<f32>),
+) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
+    cfg.scenario.validate().map_err(anyhow::Error::msg)?;
+    if !(cfg.integration_hz.is_finite() && cfg.integration_hz >= 1.0) {
+        anyhow::bail!("integration rate must be at least 1 Hz");
+    }
+    // The MPC presets fix their own execution period; PD/LQR run at control_hz.
+    let probe_ts = 1.0 / cfg.control_hz;
+    let mut ctrl = build_controller_with(
+        cfg.controller,
+        cfg.model,
+        cfg.gains,
+        cfg.preset,
+        cfg.mpc_override,
+        cfg.reference.into(),
+        probe_ts,
+    )
+    .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
+    let ts = ctrl.period_s().unwrap_or(probe_ts);
+    if !(ts.is_finite() && ts > 0.0) {
+        anyhow::bail!("control rate must be positive");
+    }
+    // Everything advances in plant ticks; control and recording fall on ticks.
+    let tick = 1.0 / cfg.integration_hz;
+    let per = |period: f64, what: &str| -> anyhow::Result<usize> {
+        let n = (period / tick).round();
+        if n < 1.0 || (n * tick - period).abs() > 1e-9 {
+            anyhow::bail!("the {what} period {period} s is not a whole number of plant steps of {tick} s");
+        }
+        Ok(n as usize)
+    };
+    let ctrl_every = per(ts, "control")?;
+    let rec_every = per(RECORD_DT_S, "recording")?;
     let mut pc = PlantConfig::nominal(cfg.model).with_disturbance(cfg.disturbance);
     pc.integration_hz = cfg.integration_hz;
     let sc = &cfg.scenario;
     let x0 = hover_quat_state(&Vector3::from(sc.start_ned_m), sc.start_yaw_rad);
     let mut plant = Plant::new(pc, &x0);
     let nominal = VehicleParams::OS4;
+    let end = stop_at.unwrap_or(sc.duration_s).min(sc.duration_s);
+    let ticks = (end / tick).round() as usize;
+    let preview = ctrl.preview_request();
 
-    let steps = (sc.duration_s * cfg.control_hz).round() as usize;
     let mut res = FlightResult {
         rows: Vec::new(),
         reference: Vec::new(),
@@ -195,43 +300,52 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
         metrics: flight_metrics(&Trace::default(), &nominal),
         step_time_ns: StepTime { mean: 0.0, max: 0.0 },
         saturated_steps: 0,
+        qp_iterations: (0.0, 0),
+        qp_iteration_bound: qp_bound(&ctrl),
         steps: 0,
         diverged: false,
     };
-    let mut next_record = 0.0;
     let mut total_ns = 0.0;
-    let mut u_hold = Vector4::<f64>::zeros();
-    for k in 0..=steps {
-        let t = k as f64 * ts;
+    let mut total_it = 0u64;
+    let mut u = Vector4::<f64>::zeros();
+    for i in 0..=ticks {
+        let t = i as f64 * tick;
         let r = sc.reference(t);
-        let xq = plant.quat_state();
-        if !xq.iter().all(|v| v.is_finite()) || xq.fixed_rows::<3>(0).amax() > 1e4 {
-            res.diverged = true;
-            break;
-        }
-        let est = StateEstimate::from_quat_state(&xq.cast::<f32>());
-        let sp = setpoint(&r);
-        let t0 = Instant::now();
-        let out = ctrl.update(&est, &sp);
-        let dt_ns = t0.elapsed().as_nanos() as f64;
-        let u = match out {
-            Ok(o) => {
-                res.saturated_steps += usize::from(o.status.saturated);
-                o.u.cast::<f64>()
+        if i % ctrl_every == 0 {
+            let xq = plant.quat_state();
+            if !xq.iter().all(|v| v.is_finite()) || xq.fixed_rows::<3>(0).amax() > 1e4 {
+                res.diverged = true;
+                break;
             }
-            // The estimate is built from a finite state, so this does not happen
-            // in the SIL; hold the last command as the loop's fallback.
-            Err(_) => u_hold,
-        };
-        u_hold = u;
-        total_ns += dt_ns;
-        res.step_time_ns.max = res.step_time_ns.max.max(dt_ns);
-        res.steps += 1;
-        if t + 1e-9 >= next_record {
+            if let Some((n, dt)) = preview {
+                for k in 1..=n {
+                    // The scenario defines the reference; a rejected point only
+                    // means the controller extrapolates instead.
+                    let _ = ctrl.set_preview(k, &setpoint(&sc.reference(t + k as f64 * dt)));
+                }
+            }
+            let est = StateEstimate::from_quat_state(&xq.cast::<f32>());
+            let sp = setpoint(&r);
+            let t0 = Instant::now();
+            let out = ctrl.update(&est, &sp);
+            let dt_ns = t0.elapsed().as_nanos() as f64;
+            // An estimate built from a finite state is always valid: on the
+            // impossible error the loop holds the last command (its fallback).
+            if let Ok(o) = out {
+                res.saturated_steps += usize::from(o.status.saturated);
+                total_it += u64::from(o.status.iterations);
+                res.qp_iterations.1 = res.qp_iterations.1.max(u32::from(o.status.iterations));
+                u = o.u.cast::<f64>();
+            }
+            total_ns += dt_ns;
+            res.step_time_ns.max = res.step_time_ns.max.max(dt_ns);
+            res.steps += 1;
+            inspect(t, &ctrl);
+        }
+        if i % rec_every == 0 {
             let mut row = state_row(&plant);
             row[17..21].copy_from_slice(plant.inputs_realised_for(&u).as_slice());
             let yaw = row[13];
-            // Yaw relative to the reference, unwrapped.
             let yaw_unwrapped = r.yaw + wrap_pi(yaw - r.yaw);
             let rref = [r.pos[0], r.pos[1], r.pos[2], r.yaw];
             res.trace.t.push(t);
@@ -240,17 +354,15 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
             res.trace.u_cmd.push([u[0], u[1], u[2], u[3]]);
             res.rows.push(row);
             res.reference.push(rref);
-            next_record += RECORD_DT_S;
         }
-        if k < steps {
-            plant.step(&u, ts);
+        if i < ticks {
+            plant.step(&u, tick);
         }
     }
-    res.step_time_ns.mean = if res.steps > 0 {
-        total_ns / res.steps as f64
-    } else {
-        0.0
-    };
+    if res.steps > 0 {
+        res.step_time_ns.mean = total_ns / res.steps as f64;
+        res.qp_iterations.0 = total_it as f64 / res.steps as f64;
+    }
     res.metrics = flight_metrics(&res.trace, &nominal);
-    Ok(res)
+    Ok((res, ctrl))
 }

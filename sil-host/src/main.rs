@@ -8,7 +8,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use sil_host::disturbance::DisturbanceSet;
-use sil_host::flight::{fly, ControllerFamily, FlightConfig, GainSet, RefMode};
+use sil_host::flight::{fly, ControllerFamily, FlightConfig, GainSet, MpcPreset, RefMode};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::{ModelKind, PlantConfig};
 use sil_host::record::{REFERENCE_COLUMNS, STATE_COLUMNS};
@@ -59,9 +59,14 @@ struct ReportArgs {
 
 #[derive(Args, Debug)]
 struct FlyArgs {
-    /// Controller: `pd` (thesis gains, Tables 4.1-4.4) or `lqr` (thesis weights, Tables 4.5/4.7).
+    /// Controller: `pd` (thesis gains, Tables 4.1-4.4), `lqr` (thesis weights, Tables 4.5/4.7)
+    /// or `mpc` (linear MPC with the core's QP solver; see --preset).
     #[arg(long, value_enum)]
     controller: ControllerFamily,
+    /// MPC preset: `fast` (50 ms prediction steps over 1 s, re-solved at 200 Hz) or `thesis`
+    /// (Ts 0.25 s at 4 Hz, N 20, M 2, thesis weights). Other controllers ignore it.
+    #[arg(long, value_enum, default_value = "fast")]
+    preset: MpcPreset,
     /// Form of the controller and of the plant: `euler` or `quaternion`.
     #[arg(long, value_enum, default_value = "quaternion")]
     model: ModelKind,
@@ -94,7 +99,7 @@ struct FlyArgs {
     /// explained in the README) or `thesis` (Tables 4.1-4.4 as printed). LQR ignores it.
     #[arg(long, value_enum, default_value = "tuned")]
     gains: GainSet,
-    /// Controller rate, Hz.
+    /// Controller rate of PD and LQR, Hz (the MPC presets fix their own rate).
     #[arg(long, default_value_t = 500.0, value_name = "HZ")]
     control_hz: f64,
     /// Plant RK4 rate, Hz (sub-steps within each control period).
@@ -269,6 +274,7 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
     cfg.disturbance = a.disturbance;
     cfg.reference = a.reference;
     cfg.gains = a.gains;
+    cfg.preset = a.preset;
     cfg.control_hz = a.control_hz;
     if !(a.integration_hz.is_finite() && a.integration_hz >= 1.0) {
         bail!("--integration-hz must be at least 1 Hz");

@@ -33,7 +33,7 @@ fn axis(a: &AxisMetrics, unit: &str) -> Value {
 /// effort, constraint record, final error and controller time per step.
 pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
     let m = &res.metrics;
-    json!({
+    let mut v = json!({
         "controller": cfg.controller.name(),
         "model": cfg.model.name(),
         "scenario": cfg.scenario.kind.name(),
@@ -56,7 +56,13 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
         "steps": res.steps,
         "diverged": res.diverged,
         "step_time_ns": { "mean": res.step_time_ns.mean, "max": res.step_time_ns.max },
-    })
+    });
+    if cfg.controller == crate::flight::ControllerFamily::Mpc {
+        v["preset"] = json!(cfg.preset.name());
+        v["qp_iterations"] = json!({ "mean": res.qp_iterations.0, "max": res.qp_iterations.1 });
+        v["qp_iteration_bound"] = json!(res.qp_iteration_bound);
+    }
+    v
 }
 
 /// One line per flight for the terminal.
@@ -68,7 +74,8 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
     };
     format!(
         "{} {} {} [{}]: RMSE x {:.3} y {:.3} z {:.3} m, yaw {:.2}°; settle/overshoot x {} y {} z {} yaw {}; \
-         final error {:.3} m; u_norm {:.4}; saturated {}/{} steps; controller {:.0} ns/step (max {:.0}){}",
+         final error {:.3} m; u_norm {:.4}; saturated {}/{} steps; controller {:.0} ns/step (max {:.0}); \
+         QP iterations mean {:.1} max {} (bound {}){}",
         cfg.controller.name(),
         cfg.model.name(),
         cfg.scenario.kind.name(),
@@ -87,6 +94,9 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
         res.steps,
         res.step_time_ns.mean,
         res.step_time_ns.max,
+        res.qp_iterations.0,
+        res.qp_iterations.1,
+        res.qp_iteration_bound,
         if res.diverged { " DIVERGED" } else { "" }
     )
 }

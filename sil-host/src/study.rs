@@ -146,6 +146,8 @@ pub fn thesis_setpoint(fam: ControllerFamily, model: ModelKind) -> [(f64, f64); 
         (ControllerFamily::Lqr, ModelKind::Euler) => [(2.16, 0.0), (1.83, 0.0), (1.85, 0.0), (0.60, 3.04)],
         (ControllerFamily::Pd, ModelKind::Quaternion) => [(2.59, 1.74), (2.66, 13.12), (2.32, 2.79), (1.45, 4.25)],
         (ControllerFamily::Lqr, ModelKind::Quaternion) => [(4.63, 0.0), (3.99, 0.0), (4.09, 0.0), (3.54, 0.006)],
+        (ControllerFamily::Mpc, ModelKind::Euler) => [(6.93, 2.26), (8.47, 2.77), (2.82, 0.02), (0.56, 1.21)],
+        (ControllerFamily::Mpc, ModelKind::Quaternion) => [(4.45, 1.64), (8.12, 3.98), (4.91, 2.23), (1.90, 0.25)],
     }
 }
 
@@ -177,6 +179,14 @@ pub fn thesis_rmse_pct(
         (Quaternion, Helix, true, Lqr) => [48.9, 38.3, 2.66],
         (Quaternion, Circle, true, Pd) => [1.20, 0.91, 5.73],
         (Quaternion, Circle, true, Lqr) => [48.8, 38.5, 19.4],
+        (Euler, Helix, false, Mpc) => [1.74, 1.97, 1.35],
+        (Quaternion, Helix, false, Mpc) => [0.84, 3.90, 2.94],
+        (Euler, Circle, false, Mpc) => [1.28, 6.27, 1.00],
+        (Quaternion, Circle, false, Mpc) => [2.81, 3.84, 2.31],
+        (Euler, Helix, true, Mpc) => [1.74, 1.97, 1.35],
+        (Euler, Circle, true, Mpc) => [1.82, 6.86, 2.01],
+        (Quaternion, Helix, true, Mpc) => [0.85, 3.91, 2.94],
+        (Quaternion, Circle, true, Mpc) => [1.03, 2.97, 1.30],
         _ => return None,
     })
 }
@@ -196,6 +206,7 @@ fn fam_title(f: ControllerFamily) -> &'static str {
     match f {
         ControllerFamily::Pd => "PD",
         ControllerFamily::Lqr => "LQR",
+        ControllerFamily::Mpc => "MPC",
     }
 }
 

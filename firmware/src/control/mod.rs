@@ -9,6 +9,7 @@
 pub mod lqr_euler;
 pub mod lqr_quat;
 pub mod lqr_table;
+pub mod mpc;
 pub mod pd_euler;
 pub mod pd_quat;
 pub mod reference;
@@ -16,6 +17,7 @@ pub mod reference;
 pub use lqr_euler::LqrEuler;
 pub use lqr_quat::LqrQuat;
 pub use lqr_table::GainTable;
+pub use mpc::{Mpc, MpcConfig, MpcFast, MpcForm, MpcThesis};
 pub use pd_euler::{PdEuler, PdEulerGains};
 pub use pd_quat::{PdQuat, PdQuatGains};
 pub use reference::{tilt_and_thrust, AttitudeRef, ReferenceMode, TiltThrust};
@@ -158,6 +160,19 @@ pub trait Controller<T: RealField + Copy> {
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError>;
     /// Forgets internal state (warm starts, estimates) before a new flight.
     fn reset(&mut self);
+    /// Reference preview wanted before each update: `(steps, spacing s)`;
+    /// `None` for controllers that use only the current setpoint.
+    fn preview_request(&self) -> Option<(usize, f64)> {
+        None
+    }
+    /// Gives the setpoint `k` preview steps ahead (1-based).
+    fn set_preview(&mut self, _k: usize, _sp: &Setpoint<T>) -> Result<(), ControlError> {
+        Err(ControlError::InvalidParameter)
+    }
+    /// The period this controller is designed to run at, s (`None`: any).
+    fn period_s(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// Checks both inputs of a step.
@@ -209,6 +224,10 @@ pub enum ControllerKind {
     LqrEuler,
     /// LQR about hover, reduced quaternion form, heading-scheduled.
     LqrQuat,
+    /// Linear MPC, `thesis` preset.
+    MpcThesis,
+    /// Linear MPC, `fast` preset.
+    MpcFast,
 }
 
 /// Any controller, dispatched at run time without allocation.
@@ -223,6 +242,10 @@ pub enum AnyController<T: RealField + Copy> {
     LqrEuler(LqrEuler<T>),
     /// See [`LqrQuat`].
     LqrQuat(LqrQuat<T>),
+    /// See [`Mpc`] (`thesis` preset sizes).
+    MpcThesis(MpcThesis<T>),
+    /// See [`Mpc`] (`fast` preset sizes).
+    MpcFast(MpcFast<T>),
 }
 
 impl<T: RealField + Copy> Controller<T> for AnyController<T> {
@@ -232,6 +255,8 @@ impl<T: RealField + Copy> Controller<T> for AnyController<T> {
             AnyController::PdQuat(c) => c.update(est, sp),
             AnyController::LqrEuler(c) => c.update(est, sp),
             AnyController::LqrQuat(c) => c.update(est, sp),
+            AnyController::MpcThesis(c) => c.update(est, sp),
+            AnyController::MpcFast(c) => c.update(est, sp),
         }
     }
     fn reset(&mut self) {
@@ -240,6 +265,29 @@ impl<T: RealField + Copy> Controller<T> for AnyController<T> {
             AnyController::PdQuat(c) => c.reset(),
             AnyController::LqrEuler(c) => c.reset(),
             AnyController::LqrQuat(c) => c.reset(),
+            AnyController::MpcThesis(c) => c.reset(),
+            AnyController::MpcFast(c) => c.reset(),
+        }
+    }
+    fn preview_request(&self) -> Option<(usize, f64)> {
+        match self {
+            AnyController::MpcThesis(c) => c.preview_request(),
+            AnyController::MpcFast(c) => c.preview_request(),
+            _ => None,
+        }
+    }
+    fn set_preview(&mut self, k: usize, sp: &Setpoint<T>) -> Result<(), ControlError> {
+        match self {
+            AnyController::MpcThesis(c) => c.set_preview(k, sp),
+            AnyController::MpcFast(c) => c.set_preview(k, sp),
+            _ => Err(ControlError::InvalidParameter),
+        }
+    }
+    fn period_s(&self) -> Option<f64> {
+        match self {
+            AnyController::MpcThesis(c) => c.period_s(),
+            AnyController::MpcFast(c) => c.period_s(),
+            _ => None,
         }
     }
 }

@@ -1,0 +1,61 @@
+//! Tuning aid: flies the fast MPC on the hardest cases with the preset
+//! changed by `KEY=VALUE` arguments (tau, q0..q11, r0..r3, s0..s3, pred, exec).
+//! `cargo run --release -p sil-host --example tune_mpc -- tau=0.1 q2=80`
+
+use firmware::control::{MpcConfig, MpcForm};
+use sil_host::flight::{fly, ControllerFamily, FlightConfig};
+use sil_host::{DisturbanceSet, ModelKind, Scenario, ScenarioKind};
+
+fn main() {
+    for model in [ModelKind::Euler, ModelKind::Quaternion] {
+        let form = if model == ModelKind::Euler {
+            MpcForm::Euler
+        } else {
+            MpcForm::Quaternion
+        };
+        let mut c = MpcConfig::fast(form);
+        for arg in std::env::args().skip(1) {
+            let (k, v) = arg.split_once('=').expect("KEY=VALUE");
+            let v: f64 = v.parse().expect("number");
+            match k {
+                "tau" => c.observer_tau_s = if v > 0.0 { Some(v) } else { None },
+                "pred" => c.pred_dt_s = v,
+                "exec" => c.exec_dt_s = v,
+                _ if k.starts_with('q') => c.q[k[1..].parse::<usize>().unwrap()] = v,
+                _ if k.starts_with('r') => c.r[k[1..].parse::<usize>().unwrap()] = v,
+                _ if k.starts_with('s') => c.s[k[1..].parse::<usize>().unwrap()] = v,
+                _ => panic!("unknown key {k}"),
+            }
+        }
+        for (kind, d) in [
+            (ScenarioKind::Helix, "none"),
+            (ScenarioKind::Helix, "wind"),
+            (ScenarioKind::Setpoint, "wind"),
+            (ScenarioKind::Setpoint, "mismatch"),
+            (ScenarioKind::Helix, "wind,mismatch"),
+        ] {
+            let mut f = FlightConfig::new(ControllerFamily::Mpc, model, Scenario::default_for(kind));
+            f.disturbance = d.parse::<DisturbanceSet>().unwrap();
+            f.mpc_override = Some(c);
+            let r = fly(&f).unwrap();
+            let m = r.metrics;
+            println!(
+                "{:10} {:8} {:14} rmse {:.4} {:.4} {:.4} final {:.4} it {:.0}/{}{}",
+                model.name(),
+                kind.name(),
+                d,
+                m.x.rmse_m,
+                m.y.rmse_m,
+                m.z.rmse_m,
+                m.final_error_m,
+                r.qp_iterations.0,
+                r.qp_iterations.1,
+                if r.diverged || m.final_error_m > 1.0 {
+                    "  UNSTABLE"
+                } else {
+                    ""
+                }
+            );
+        }
+    }
+}
