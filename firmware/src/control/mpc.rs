@@ -10,8 +10,8 @@
 //! - **Prediction**: `N` steps of `pred_dt` (exact ZOH), inputs moved at the
 //!   first `M` steps and held afterwards (control horizon / move blocking),
 //!   re-solved every `exec_dt` (the two may differ).
-//! - **Cost**: `½Σ(x_k − r_k)ᵀQ(x_k − r_k) + ½Σ(u_k − u_ref,k)ᵀR(u_k − u_ref,k)
-//!   + ½ΣΔu_kᵀSΔu_k`, optional terminal weight from the DARE. In the
+//! - **Cost**: `½Σ(x_k − r_k)ᵀQ(x_k − r_k) + ½Σ(u_k − u_ref,k)ᵀR(u_k − u_ref,k) +
+//!   ½ΣΔu_kᵀSΔu_k`, optional terminal weight from the DARE. In the
 //!   quaternion form the attitude part of `x − r` is the error quaternion's
 //!   vector part; about hover in the heading frame it equals the component
 //!   difference to first order (that is what a linear MPC can carry), and the
