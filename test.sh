@@ -26,4 +26,6 @@ echo "== independent LQR design check (python-control)"
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore numpy scipy control
 cargo build -q -p sil-host
 python3 tools/check_design.py target/debug/sil-host | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^design check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+echo "== independent re-solve of MPC steps (scipy)"
+python3 tools/check_mpc_step.py target/debug/sil-host | tee -a "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

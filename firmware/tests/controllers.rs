@@ -97,3 +97,12 @@ fn quaternion_pd_turns_the_short_way() {
     let e2 = est([0.0, 0.0, -1.0], [0.0; 3], [0.0; 3], [0.0; 3]);
     assert!(c.update(&e2, &sp2).unwrap().u[3] > 0.0);
 }
+
+#[test]
+fn fast_mpc_storage_fits_32_kib() {
+    // Everything the controller keeps between steps (models, weights, the
+    // Hessian and its scaling, the preview buffer, warm start, estimates).
+    let size = core::mem::size_of::<firmware::control::MpcFast<f32>>();
+    assert!(size <= 32 * 1024, "MpcFast<f32> is {size} bytes");
+    eprintln!("size_of::<MpcFast<f32>>() = {size} bytes");
+}

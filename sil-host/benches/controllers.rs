@@ -35,6 +35,7 @@ fn bench(c: &mut Criterion) {
             fam,
             model,
             GainSet::Tuned,
+            MpcPreset::Fast,
             firmware::control::ReferenceMode::Feedforward,
             0.002,
         )

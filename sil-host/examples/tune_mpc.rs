@@ -18,6 +18,7 @@ fn main() {
             let (k, v) = arg.split_once('=').expect("KEY=VALUE");
             let v: f64 = v.parse().expect("number");
             match k {
+                "yawlim" => c.max_heading_error_rad = v,
                 "tau" => c.observer_tau_s = if v > 0.0 { Some(v) } else { None },
                 "pred" => c.pred_dt_s = v,
                 "exec" => c.exec_dt_s = v,

@@ -39,6 +39,9 @@ enum Command {
     Fly(FlyArgs),
     /// Print a controller design (the linear model, the weights and the gain) as JSON.
     Design(DesignArgs),
+    /// Fly a scenario with the MPC up to time T and print the QP of the step taken there as JSON:
+    /// {"H","g","lb","ub","solution","iterations","iteration_bound","residual","objective"}.
+    MpcStep(MpcStepArgs),
     /// Fly the whole study (every controller x model x scenario x disturbance) in parallel and write
     /// DIR/index.md: the thesis' tables with ours beside its numbers, and why they differ.
     Report(ReportArgs),
@@ -111,6 +114,28 @@ struct FlyArgs {
     /// Write the metrics as JSON (`-` for standard output).
     #[arg(long, value_name = "PATH")]
     json: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct MpcStepArgs {
+    /// Form of the MPC and the plant.
+    #[arg(long, value_enum, default_value = "quaternion")]
+    model: ModelKind,
+    /// MPC preset: `fast` or `thesis`.
+    #[arg(long, value_enum, default_value = "fast")]
+    preset: MpcPreset,
+    /// Scenario flown up to --at.
+    #[arg(long, value_enum, default_value = "setpoint")]
+    scenario: ScenarioKind,
+    /// Time of the step to explain, s (the last MPC step at or before it).
+    #[arg(long, value_name = "T")]
+    at: f64,
+    /// Disturbances on the plant: none, wind, mismatch or wind,mismatch.
+    #[arg(long, default_value = "none", value_name = "SET")]
+    disturbance: DisturbanceSet,
+    /// Print JSON (the only output format; accepted for clarity).
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args, Debug)]
@@ -315,6 +340,20 @@ fn design_cmd(a: &DesignArgs) -> Result<()> {
     }
 }
 
+fn mpc_step_cmd(a: &MpcStepArgs) -> Result<()> {
+    let sc = Scenario::default_for(a.scenario);
+    if !(a.at.is_finite() && a.at >= 0.0 && a.at <= sc.duration_s) {
+        bail!("--at must be within the scenario's 0..{} s", sc.duration_s);
+    }
+    let mut cfg = FlightConfig::new(ControllerFamily::Mpc, a.model, sc);
+    cfg.preset = a.preset;
+    cfg.disturbance = a.disturbance;
+    let (_, ctrl) = sil_host::flight::fly_until(&cfg, Some(a.at), |_, _| {})?;
+    let v = sil_host::report::mpc_step_json(&ctrl, a.at).ok_or_else(|| anyhow::anyhow!("no MPC step was taken"))?;
+    println!("{}", serde_json::to_string_pretty(&v)?);
+    Ok(())
+}
+
 fn report_cmd(a: &ReportArgs) -> Result<()> {
     use sil_host::study;
     let t0 = std::time::Instant::now();
@@ -352,5 +391,6 @@ fn main() -> Result<()> {
         Command::Fly(a) => fly_cmd(a),
         Command::Design(a) => design_cmd(a),
         Command::Report(a) => report_cmd(a),
+        Command::MpcStep(a) => mpc_step_cmd(a),
     }
 }

@@ -138,3 +138,46 @@ pub fn lqr_design_json(model: ModelKind, yaw: f64) -> anyhow::Result<Value> {
         "riccati_iterations": sol.iterations,
     }))
 }
+
+/// The QP of the MPC's last step, exactly as its solver saw it (f32 values
+/// widened to f64): `min ½zᵀHz + gᵀz, lb ≤ z ≤ ub`, z = the moves of
+/// `U − U_hover`, 4 per move. `None` for other controllers or before a step.
+pub fn mpc_step_json(ctrl: &firmware::control::AnyController<f32>, t: f64) -> Option<Value> {
+    use firmware::control::AnyController;
+    fn dump<const N: usize, const M: usize, const NZ: usize>(
+        m: &firmware::control::Mpc<f32, N, M, NZ>,
+        t: f64,
+    ) -> Option<Value> {
+        let qp = m.last_qp()?;
+        let v = |x: &nalgebra::SVector<f32, NZ>| Value::Array(x.iter().map(|v| json!(*v as f64)).collect());
+        let h = m.hessian().map(|x| x as f64);
+        let (force, moment) = m.disturbance_estimate();
+        Some(json!({
+            "t": t,
+            "horizon": N,
+            "moves": M,
+            "pred_dt_s": m.config().pred_dt_s,
+            "exec_dt_s": m.config().exec_dt_s,
+            "variables": "U - U_hover for each move, [U1 N, U2 N, U3 N, U4 N*m] per move",
+            "H": rows(&h),
+            "g": v(&qp.g),
+            "lb": v(&qp.lb),
+            "ub": v(&qp.ub),
+            "solution": v(&qp.solution.z),
+            "iterations": qp.solution.iterations,
+            "iteration_bound": m.iteration_bound(),
+            "residual": qp.solution.residual as f64,
+            "objective": qp.solution.objective as f64,
+            "status": format!("{:?}", qp.solution.status),
+            "disturbance_estimate": {
+                "accel_ned_mps2": [force[0] as f64, force[1] as f64, force[2] as f64],
+                "ang_accel_frd_radps2": [moment[0] as f64, moment[1] as f64, moment[2] as f64],
+            },
+        }))
+    }
+    match ctrl {
+        AnyController::MpcThesis(m) => dump(m, t),
+        AnyController::MpcFast(m) => dump(m, t),
+        _ => None,
+    }
+}

@@ -67,6 +67,12 @@ pub struct MpcConfig {
     pub observer_tau_s: Option<f64>,
     /// Reference feed-forward.
     pub reference: ReferenceMode,
+    /// Largest heading error the reference may ask for, rad. The prediction
+    /// holds the heading frame fixed over the horizon; a turn much faster than
+    /// the position dynamics rotates the position feedback by up to 90°+ within
+    /// one horizon and destabilises a combined turn-and-translate. Capping the
+    /// error turns at a bounded rate instead (π: no cap).
+    pub max_heading_error_rad: f64,
     /// QP early-exit tolerance (gradient mapping).
     pub qp_tolerance: f64,
     /// QP objective accuracy the iteration bound guarantees.
@@ -95,6 +101,7 @@ impl MpcConfig {
             terminal: false,
             observer_tau_s: Some(0.5),
             reference: ReferenceMode::Thesis,
+            max_heading_error_rad: core::f64::consts::PI,
             qp_tolerance: 1e-5,
             qp_accuracy: 1e-6,
             qp_max_iterations: 2000,
@@ -136,6 +143,7 @@ impl MpcConfig {
             terminal: true,
             observer_tau_s: Some(0.05),
             reference: ReferenceMode::Feedforward,
+            max_heading_error_rad: 0.35,
             qp_tolerance: 1e-4,
             qp_accuracy: 1e-5,
             qp_max_iterations: u32::MAX,
@@ -425,7 +433,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     /// Reference at prediction step `k` (1-based) as a heading-frame state and
     /// the input reference `U_ref − U_hover`.
     fn reference_state(&self, sp: &Setpoint<T>, yaw: T) -> (Vec12<T>, Vector4<T>) {
-        let ar = AttitudeRef::for_mode(&self.params, sp, self.cfg.reference);
+        let mut ar = AttitudeRef::for_mode(&self.params, sp, self.cfg.reference);
+        let lim = lit::<T>(self.cfg.max_heading_error_rad);
+        ar.yaw_rad = yaw + wrap_pi(ar.yaw_rad - yaw).max(-lim).min(lim);
         let (s, c) = yaw.sin_cos();
         let rot = |v: &Vector3<T>| Vector3::new(c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]);
         let mut r = Vec12::<T>::zeros();

@@ -69,7 +69,8 @@ pub struct QpSolution<T: RealField + Copy, const N: usize> {
 /// Solver settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QpSettings<T> {
-    /// Stop early when the optimality measure is at most this.
+    /// Stop early when the optimality measure is at most this (floored at the
+    /// float type's rounding of the gradient).
     pub tolerance: T,
     /// Objective accuracy (absolute) the a-priori bound guarantees; the
     /// iterations are capped at that bound.
@@ -236,7 +237,15 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             o
         };
         let inv_l = T::one() / self.l;
-        let tol = settings.tolerance;
+        // The optimality measure cannot go below the rounding of the gradient
+        // Hz + g in this float type: floor the tolerance there (f32 and a
+        // Hessian of 1e4 put it near 1e-3; f64 near 1e-12).
+        let mut width = T::zero();
+        for i in 0..N {
+            width = width.max(ub[i].abs().max(lb[i].abs()));
+        }
+        let floor = lit::<T>(4.0 * N as f64) * T::default_epsilon() * (self.h.amax() * width + g.amax());
+        let tol = settings.tolerance.max(floor);
         let mut x = proj(&z0.component_div(&self.d));
         let mut x_prev = x;
         let mut iterations = 0u32;

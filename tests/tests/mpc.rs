@@ -1,0 +1,107 @@
+//! The MPC in closed loop: offset-free under wind, never outside the input
+//! box, robust to the mismatch plant, the thesis preset flying too, and the
+//! QP's a-priori iteration bound never exceeded.
+
+use sil_host::flight::{fly, ControllerFamily, FlightConfig, FlightResult, MpcPreset};
+use sil_host::{DisturbanceSet, ModelKind, Scenario, ScenarioKind};
+
+const MODELS: [ModelKind; 2] = [ModelKind::Euler, ModelKind::Quaternion];
+
+fn run(model: ModelKind, preset: MpcPreset, sc: Scenario, d: &str) -> FlightResult {
+    let mut cfg = FlightConfig::new(ControllerFamily::Mpc, model, sc);
+    cfg.preset = preset;
+    cfg.disturbance = d.parse::<DisturbanceSet>().unwrap();
+    let r = fly(&cfg).unwrap();
+    assert!(!r.diverged, "{model:?} {preset:?} {:?} {d} diverged", sc.kind);
+    assert_eq!(
+        r.metrics.max_box_violation, 0.0,
+        "{model:?} {preset:?}: input outside the box"
+    );
+    assert!(
+        r.qp_iterations.1 <= r.qp_iteration_bound,
+        "iterations {} > bound {}",
+        r.qp_iterations.1,
+        r.qp_iteration_bound
+    );
+    r
+}
+
+#[test]
+fn fast_mpc_is_offset_free_under_wind() {
+    for m in MODELS {
+        let r = run(
+            m,
+            MpcPreset::Fast,
+            Scenario::default_for(ScenarioKind::Setpoint),
+            "wind",
+        );
+        assert!(
+            r.metrics.final_error_m < 0.03,
+            "{m:?}: final error {} m",
+            r.metrics.final_error_m
+        );
+    }
+}
+
+#[test]
+fn fast_mpc_tracks_the_helix_with_and_without_wind() {
+    for m in MODELS {
+        let calm = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "none");
+        let windy = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "wind");
+        for (a, b) in [
+            (calm.metrics.x, windy.metrics.x),
+            (calm.metrics.y, windy.metrics.y),
+            (calm.metrics.z, windy.metrics.z),
+        ] {
+            assert!(a.rmse_m < 0.03 && b.rmse_m < 0.05, "{m:?}: {} / {}", a.rmse_m, b.rmse_m);
+        }
+    }
+}
+
+#[test]
+fn fast_mpc_flies_unlisted_cases_with_wind_and_mismatch() {
+    let mut fast_circle = Scenario::default_for(ScenarioKind::Circle);
+    fast_circle.period_s = 6.0;
+    fast_circle.radius_m = 1.5;
+    fast_circle.duration_s = 30.0;
+    let mut target = Scenario::default_for(ScenarioKind::Setpoint);
+    target.target_ned_m = [-2.0, 4.0, -2.0];
+    target.target_yaw_rad = (-120f64).to_radians();
+    let mut climb = Scenario::default_for(ScenarioKind::Helix);
+    climb.climb_rate_mps = 0.2;
+    climb.duration_s = 40.0;
+    for m in MODELS {
+        for sc in [fast_circle, target, climb] {
+            let r = run(m, MpcPreset::Fast, sc, "wind,mismatch");
+            let worst = r.metrics.x.rmse_m.max(r.metrics.y.rmse_m).max(r.metrics.z.rmse_m);
+            if sc.kind == ScenarioKind::Setpoint {
+                assert!(
+                    r.metrics.final_error_m < 0.15,
+                    "{m:?} setpoint: final error {}",
+                    r.metrics.final_error_m
+                );
+            } else {
+                assert!(worst < 0.25, "{m:?} {:?}: worst axis RMSE {worst}", sc.kind);
+            }
+        }
+    }
+}
+
+#[test]
+fn thesis_preset_flies_the_setpoint() {
+    for m in MODELS {
+        let r = run(
+            m,
+            MpcPreset::Thesis,
+            Scenario::default_for(ScenarioKind::Setpoint),
+            "none",
+        );
+        assert!(
+            r.metrics.final_error_m < 0.05,
+            "{m:?}: final error {}",
+            r.metrics.final_error_m
+        );
+        // 4 Hz: 20 s of flight is 81 steps.
+        assert_eq!(r.steps, 81);
+    }
+}
