@@ -142,6 +142,17 @@ pub struct Sel {
     pub preset: MpcPreset,
 }
 
+impl Sel {
+    /// The project's defaults (tuned gains, feed-forward) with an MPC preset.
+    pub fn defaults(preset: MpcPreset) -> Self {
+        Self {
+            gains: GainSet::Tuned,
+            reference: RefMode::Feedforward,
+            preset,
+        }
+    }
+}
+
 /// Finds the outcome of a case.
 pub fn find(
     all: &[Outcome],
@@ -436,18 +447,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
     for (fam, preset) in VARIANTS {
         for model in MODELS {
             for d in DisturbanceSet::ALL {
-                let Some(o) = find(
-                    all,
-                    fam,
-                    model,
-                    ScenarioKind::Setpoint,
-                    d,
-                    Sel {
-                        gains: GainSet::Tuned,
-                        reference: RefMode::Feedforward,
-                        preset,
-                    },
-                ) else {
+                let Some(o) = find(all, fam, model, ScenarioKind::Setpoint, d, Sel::defaults(preset)) else {
                     continue;
                 };
                 let m = &o.res.metrics;
@@ -481,18 +481,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
     for (fam, preset) in VARIANTS {
         for model in MODELS {
             for kind in SCENARIOS {
-                let Some(o) = find(
-                    all,
-                    fam,
-                    model,
-                    kind,
-                    none,
-                    Sel {
-                        gains: GainSet::Tuned,
-                        reference: RefMode::Feedforward,
-                        preset,
-                    },
-                ) else {
+                let Some(o) = find(all, fam, model, kind, none, Sel::defaults(preset)) else {
                     continue;
                 };
                 let m = &o.res.metrics;

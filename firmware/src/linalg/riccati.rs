@@ -99,6 +99,22 @@ fn doubling<T: RealField + Copy, const N: usize>(
     Err(RiccatiError::NotConverged)
 }
 
+/// Checks the data and forms `R⁻¹` and `G = BR⁻¹Bᵀ`, shared by both equations.
+#[allow(clippy::type_complexity)]
+fn prepare<T: RealField + Copy, const N: usize, const M: usize>(
+    a: &SMatrix<T, N, N>,
+    b: &SMatrix<T, N, M>,
+    q: &SMatrix<T, N, N>,
+    r: &SMatrix<T, M, M>,
+) -> Result<(SMatrix<T, M, M>, SMatrix<T, N, N>), RiccatiError> {
+    if !(finite(a) && finite(b) && finite(q) && finite(r)) {
+        return Err(RiccatiError::NonFinite);
+    }
+    let rinv = inv(r)?;
+    let g = symmetrise(&(b * rinv * b.transpose()));
+    Ok((rinv, g))
+}
+
 /// Solves the discrete ARE for `x⁺ = A x + B u` with stage cost `xᵀQx + uᵀRu`;
 /// the gain is `K = (R + BᵀXB)⁻¹BᵀXA`.
 pub fn solve_dare<T: RealField + Copy, const N: usize, const M: usize>(
@@ -107,11 +123,7 @@ pub fn solve_dare<T: RealField + Copy, const N: usize, const M: usize>(
     q: &SMatrix<T, N, N>,
     r: &SMatrix<T, M, M>,
 ) -> Result<RiccatiSolution<T, N, M>, RiccatiError> {
-    if !(finite(a) && finite(b) && finite(q) && finite(r)) {
-        return Err(RiccatiError::NonFinite);
-    }
-    let rinv = inv(r)?;
-    let g = symmetrise(&(b * rinv * b.transpose()));
+    let (_, g) = prepare(a, b, q, r)?;
     let (x, iterations) = doubling(*a, g, symmetrise(q))?;
     let s = r + b.transpose() * x * b;
     let k = lu_solve(&s, &(b.transpose() * x * a)).ok_or(RiccatiError::Singular)?;
@@ -130,11 +142,7 @@ pub fn solve_care<T: RealField + Copy, const N: usize, const M: usize>(
     q: &SMatrix<T, N, N>,
     r: &SMatrix<T, M, M>,
 ) -> Result<RiccatiSolution<T, N, M>, RiccatiError> {
-    if !(finite(a) && finite(b) && finite(q) && finite(r)) {
-        return Err(RiccatiError::NonFinite);
-    }
-    let rinv = inv(r)?;
-    let g = symmetrise(&(b * rinv * b.transpose()));
+    let (rinv, g) = prepare(a, b, q, r)?;
     let q = symmetrise(q);
     // Shift: of the order of A's and the coupling's size, so that Aγ and Wγ are
     // well conditioned; any γ > 0 that is not an eigenvalue of A is valid.
