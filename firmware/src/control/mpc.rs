@@ -114,7 +114,7 @@ impl MpcConfig {
     ///
     /// Tuning: tight position weights for tracking; heavy roll/pitch-rate
     /// weights, because with the `mismatch` plant's 0.178 s rotor lag a lightly
-    /// damped attitude loop diverges (the rate weight 0.2 did, 50 does not).
+    /// damped attitude loop diverges (the rate weight 0.2 did, 30 does not).
     pub fn fast(form: MpcForm) -> Self {
         let a = match form {
             MpcForm::Euler => 1.0,
@@ -141,7 +141,7 @@ impl MpcConfig {
             r: [0.5, 2.0, 2.0, 20.0],
             s: [0.05, 0.5, 0.5, 5.0],
             terminal: true,
-            observer_tau_s: Some(0.05),
+            observer_tau_s: Some(0.02),
             reference: ReferenceMode::Feedforward,
             max_heading_error_rad: 0.35,
             qp_tolerance: 1e-4,
@@ -433,7 +433,23 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     /// Reference at prediction step `k` (1-based) as a heading-frame state and
     /// the input reference `U_ref − U_hover`.
     fn reference_state(&self, sp: &Setpoint<T>, yaw: T) -> (Vec12<T>, Vector4<T>) {
-        let mut ar = AttitudeRef::for_mode(&self.params, sp, self.cfg.reference);
+        // Target calculation of offset-free MPC: in feed-forward mode the
+        // attitude and thrust are those that produce the reference acceleration
+        // *given the estimated disturbance* (thrust must supply a_ref − d̂), and
+        // the torque references cancel the estimated moment. Without this the
+        // attitude weights pull against the tilt that holds off the wind.
+        let mut spd = *sp;
+        let mut torque_ref = Vector3::<T>::zeros();
+        if self.cfg.reference == ReferenceMode::Feedforward {
+            spd.acc_ned_mps2 -= self.dist.fixed_rows::<3>(0).into_owned();
+            let p = &self.params;
+            torque_ref = Vector3::new(
+                -p.inertia_kgm2[0] * self.dist[3] / p.arm_m,
+                -p.inertia_kgm2[1] * self.dist[4] / p.arm_m,
+                -p.inertia_kgm2[2] * self.dist[5],
+            );
+        }
+        let mut ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
         let lim = lit::<T>(self.cfg.max_heading_error_rad);
         ar.yaw_rad = yaw + wrap_pi(ar.yaw_rad - yaw).max(-lim).min(lim);
         let (s, c) = yaw.sin_cos();
@@ -444,7 +460,12 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let qref = crate::model::euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad);
         r.fixed_rows_mut::<3>(6).copy_from(&self.attitude_coords(&qref, yaw));
         r.fixed_rows_mut::<3>(9).copy_from(&ar.rates_frd_radps);
-        let du = Vector4::new(ar.thrust_n - self.u_hover[0], T::zero(), T::zero(), T::zero());
+        let du = Vector4::new(
+            ar.thrust_n - self.u_hover[0],
+            torque_ref[0],
+            torque_ref[1],
+            torque_ref[2],
+        );
         (r, du)
     }
 
