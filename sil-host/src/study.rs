@@ -550,8 +550,8 @@ estimate).
 thesis' 6.9–8.5 s (the thesis' MPC had no reference preview and, in MATLAB, a soft output constraint). `fast` \
 re-solves at 200 Hz over a 1 s horizon with preview, feed-forward and a disturbance estimate: offset-free under \
 `wind` (set-point ends within 2 cm), and stable under `mismatch` thanks to heavy roll/pitch-rate weights (a \
-lightly damped attitude loop diverged with the 0.178 s rotor lag). Its wind RMSE on the helix is about twice \
-the calm one: the 0.5 Hz, 0.2 N gust sits above the position loop's bandwidth, and that is the part of the wind \
+lightly damped attitude loop diverged with the 0.178 s rotor lag). Its wind RMSE on the helix is ≈ 1.5× the \
+calm one: the 0.5 Hz, 0.2 N gust sits above the position loop's bandwidth, and that is the part of the wind \
 no constant-disturbance estimate can cancel.
 - **Rotor lag under `mismatch`.** The plant's rotors then follow commands with τ = 0.178 s and gain 0.936, which \
 the controllers do not model; it costs damping but no variant loses stability.
