@@ -19,8 +19,10 @@
 #![forbid(unsafe_code)]
 
 pub mod control;
+pub mod fc;
 pub mod linalg;
 pub mod model;
+pub mod proto;
 pub mod qp;
 
 pub use model::*;
