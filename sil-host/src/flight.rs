@@ -230,9 +230,66 @@ fn setpoint(r: &Reference) -> Setpoint<f32> {
     }
 }
 
+/// Where the controller runs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Target {
+    /// Called directly in this process.
+    InProcess,
+    /// The flight-controller core in this process, reached only through the
+    /// framed wire protocol over a loopback byte link.
+    Framed,
+    /// A flight controller behind the protocol on a TCP socket (`sil-host serve`).
+    Tcp(String),
+}
+
+impl std::str::FromStr for Target {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "in-process" => Ok(Target::InProcess),
+            "framed" => Ok(Target::Framed),
+            _ => match s.strip_prefix("tcp:") {
+                Some(addr) if !addr.is_empty() => Ok(Target::Tcp(addr.to_string())),
+                _ => Err(format!("unknown target '{s}': use in-process, framed or tcp:HOST:PORT")),
+            },
+        }
+    }
+}
+
+/// The wire id of a flight's controller (PD always with the tuned gains).
+pub fn controller_id(cfg: &FlightConfig) -> firmware::proto::ControllerId {
+    use firmware::proto::ControllerId as C;
+    match (cfg.controller, cfg.model, cfg.preset) {
+        (ControllerFamily::Pd, ModelKind::Euler, _) => C::PdEuler,
+        (ControllerFamily::Pd, ModelKind::Quaternion, _) => C::PdQuat,
+        (ControllerFamily::Lqr, ModelKind::Euler, _) => C::LqrEuler,
+        (ControllerFamily::Lqr, ModelKind::Quaternion, _) => C::LqrQuat,
+        (ControllerFamily::Mpc, ModelKind::Euler, MpcPreset::Fast) => C::MpcFastEuler,
+        (ControllerFamily::Mpc, ModelKind::Quaternion, MpcPreset::Fast) => C::MpcFastQuat,
+        (ControllerFamily::Mpc, ModelKind::Euler, MpcPreset::Thesis) => C::MpcThesisEuler,
+        (ControllerFamily::Mpc, ModelKind::Quaternion, MpcPreset::Thesis) => C::MpcThesisQuat,
+    }
+}
+
 /// Flies one scenario in-process.
 pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
     fly_until(cfg, None, |_, _| {}).map(|(r, _)| r)
+}
+
+/// Flies one scenario with the controller at `target`.
+pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightResult> {
+    let remote = match target {
+        Target::InProcess => return fly(cfg),
+        Target::Framed => crate::link::FcClient::local()?,
+        Target::Tcp(addr) => crate::link::FcClient::tcp(addr)?,
+    };
+    if cfg.gains != GainSet::Tuned
+        || cfg.mpc_override.is_some()
+        || (cfg.controller != ControllerFamily::Mpc && (cfg.control_hz - 500.0).abs() > 1e-9)
+    {
+        anyhow::bail!("over the link the flight controller runs its built-in configuration: tuned PD gains, LQR at 500 Hz, MPC presets");
+    }
+    fly_inner(cfg, None, Some(remote), |_, _| {}).map(|(r, _)| r)
 }
 
 /// The MPC's a-priori QP bound, or 0.
@@ -250,6 +307,15 @@ fn qp_bound(c: &AnyController<f32>) -> u32 {
 pub fn fly_until(
     cfg: &FlightConfig,
     stop_at: Option<f64>,
+    inspect: impl FnMut(f64, &AnyController<f32>),
+) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
+    fly_inner(cfg, stop_at, None, inspect)
+}
+
+fn fly_inner(
+    cfg: &FlightConfig,
+    stop_at: Option<f64>,
+    mut remote: Option<crate::link::FcClient>,
     mut inspect: impl FnMut(f64, &AnyController<f32>),
 ) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
     cfg.scenario.validate().map_err(anyhow::Error::msg)?;
@@ -292,6 +358,10 @@ pub fn fly_until(
     let end = stop_at.unwrap_or(sc.duration_s).min(sc.duration_s);
     let ticks = (end / tick).round() as usize;
     let preview = ctrl.preview_request();
+    if let Some(r) = remote.as_mut() {
+        r.open(controller_id(cfg), cfg.reference == RefMode::Feedforward)?;
+    }
+    let mut seq = 0u32;
 
     let mut res = FlightResult {
         rows: Vec::new(),
@@ -317,25 +387,39 @@ pub fn fly_until(
                 res.diverged = true;
                 break;
             }
-            if let Some((n, dt)) = preview {
-                for k in 1..=n {
-                    // The scenario defines the reference; a rejected point only
-                    // means the controller extrapolates instead.
-                    let _ = ctrl.set_preview(k, &setpoint(&sc.reference(t + k as f64 * dt)));
-                }
-            }
             let est = StateEstimate::from_quat_state(&xq.cast::<f32>());
             let sp = setpoint(&r);
-            let t0 = Instant::now();
-            let out = ctrl.update(&est, &sp);
-            let dt_ns = t0.elapsed().as_nanos() as f64;
-            // An estimate built from a finite state is always valid: on the
-            // impossible error the loop holds the last command (its fallback).
-            if let Ok(o) = out {
-                res.saturated_steps += usize::from(o.status.saturated);
-                total_it += u64::from(o.status.iterations);
-                res.qp_iterations.1 = res.qp_iterations.1.max(u32::from(o.status.iterations));
-                u = o.u.cast::<f64>();
+            let previews: Vec<Setpoint<f32>> = match preview {
+                Some((n, dt)) => (1..=n).map(|k| setpoint(&sc.reference(t + k as f64 * dt))).collect(),
+                None => Vec::new(),
+            };
+            let dt_ns;
+            if let Some(link) = remote.as_mut() {
+                seq += 1;
+                let state: [f32; 13] = std::array::from_fn(|i| xq[i] as f32);
+                let step = link.step(seq, (t * 1e6) as u64, &state, &sp, &previews)?;
+                // The flight controller reports its own time per step (ns on the host).
+                dt_ns = step.cycles as f64;
+                total_it += u64::from(step.qp_iterations);
+                res.qp_iterations.1 = res.qp_iterations.1.max(u32::from(step.qp_iterations));
+                u = Vector4::from(step.u).cast::<f64>();
+            } else {
+                for (k, p) in previews.iter().enumerate() {
+                    // The scenario defines the reference; a rejected point only
+                    // means the controller extrapolates instead.
+                    let _ = ctrl.set_preview(k + 1, p);
+                }
+                let t0 = Instant::now();
+                let out = ctrl.update(&est, &sp);
+                dt_ns = t0.elapsed().as_nanos() as f64;
+                // An estimate built from a finite state is always valid: on the
+                // impossible error the loop holds the last command (its fallback).
+                if let Ok(o) = out {
+                    res.saturated_steps += usize::from(o.status.saturated);
+                    total_it += u64::from(o.status.iterations);
+                    res.qp_iterations.1 = res.qp_iterations.1.max(u32::from(o.status.iterations));
+                    u = o.u.cast::<f64>();
+                }
             }
             total_ns += dt_ns;
             res.step_time_ns.max = res.step_time_ns.max.max(dt_ns);

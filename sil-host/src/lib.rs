@@ -7,6 +7,7 @@
 
 pub mod disturbance;
 pub mod flight;
+pub mod link;
 pub mod metrics;
 pub mod openloop;
 pub mod plant;

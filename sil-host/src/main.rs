@@ -8,7 +8,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use sil_host::disturbance::DisturbanceSet;
-use sil_host::flight::{fly, ControllerFamily, FlightConfig, GainSet, MpcPreset, RefMode};
+use sil_host::flight::{fly_target, ControllerFamily, FlightConfig, GainSet, MpcPreset, RefMode, Target};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::{ModelKind, PlantConfig};
 use sil_host::record::{REFERENCE_COLUMNS, STATE_COLUMNS};
@@ -39,6 +39,10 @@ enum Command {
     Fly(FlyArgs),
     /// Print a controller design (the linear model, the weights and the gain) as JSON.
     Design(DesignArgs),
+    /// Serve the flight-controller core behind the framed protocol on a TCP socket: a virtual flight
+    /// controller. Clients are served one after another; garbage is dropped and counted, and a client
+    /// that hangs up or goes idle ends only its own session.
+    Serve(ServeArgs),
     /// Fly a scenario with the MPC up to time T and print the QP of the step taken there as JSON:
     /// {"H","g","lb","ub","solution","iterations","iteration_bound","residual","objective"}.
     MpcStep(MpcStepArgs),
@@ -88,9 +92,13 @@ struct FlyArgs {
     /// Helix climb rate, m/s of altitude gained (default 0.05).
     #[arg(long, value_name = "M_PER_S", allow_hyphen_values = true)]
     climb_rate: Option<f64>,
-    /// Set-point target X,Y,Z (NED m) and heading in degrees (default 3,2,-5,15).
-    #[arg(long, value_name = "X,Y,Z,YAW_DEG", value_parser = parse_list::<4>, allow_hyphen_values = true)]
-    target: Option<[f64; 4]>,
+    /// Either the set-point target X,Y,Z,YAW_DEG (NED m and heading in degrees; default 3,2,-5,15)
+    /// or where the controller runs: `in-process` (default; called directly), `framed` (the
+    /// flight-controller core in this process, reached only through the framed wire protocol) or
+    /// `tcp:HOST:PORT` (a flight controller behind the protocol, e.g. `sil-host serve`). Give it
+    /// twice for both, e.g. `--target 1,2,-3,45 --target framed`.
+    #[arg(long, value_name = "X,Y,Z,YAW_DEG|TARGET", value_parser = parse_target_arg, allow_hyphen_values = true)]
+    target: Vec<TargetArg>,
     /// Flight length, s (default 20 for setpoint, 100 for circle and helix).
     #[arg(long, value_name = "S")]
     duration: Option<f64>,
@@ -114,6 +122,19 @@ struct FlyArgs {
     /// Write the metrics as JSON (`-` for standard output).
     #[arg(long, value_name = "PATH")]
     json: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct ServeArgs {
+    /// Address to listen on, HOST:PORT (e.g. 127.0.0.1:7000).
+    #[arg(long, value_name = "HOST:PORT")]
+    listen: String,
+    /// End a session after this many seconds without a complete frame.
+    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    idle_timeout: f64,
+    /// Stop after this many client sessions (default: serve forever).
+    #[arg(long, value_name = "N")]
+    max_clients: Option<usize>,
 }
 
 #[derive(Args, Debug)]
@@ -215,6 +236,24 @@ struct OpenLoopArgs {
     csv: Option<PathBuf>,
 }
 
+/// A `--target` value of `fly`: a set-point or an execution target.
+#[derive(Debug, Clone)]
+enum TargetArg {
+    /// X, Y, Z (NED m), heading (deg).
+    Setpoint([f64; 4]),
+    /// Where the controller runs.
+    Exec(Target),
+}
+
+fn parse_target_arg(s: &str) -> Result<TargetArg, String> {
+    if let Ok(v) = parse_list::<4>(s) {
+        return Ok(TargetArg::Setpoint(v));
+    }
+    s.parse::<Target>()
+        .map(TargetArg::Exec)
+        .map_err(|e| format!("{e}, or X,Y,Z,YAW_DEG for a set-point"))
+}
+
 /// Parses `N` comma-separated finite numbers, e.g. `6.4765,0.001,0,0.01`.
 fn parse_list<const N: usize>(s: &str) -> Result<[f64; N], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
@@ -273,9 +312,11 @@ fn scenario_from(a: &FlyArgs) -> Result<Scenario> {
     if let Some(v) = a.climb_rate {
         sc.climb_rate_mps = v;
     }
-    if let Some([x, y, z, yaw]) = a.target {
-        sc.target_ned_m = [x, y, z];
-        sc.target_yaw_rad = yaw.to_radians();
+    for t in &a.target {
+        if let TargetArg::Setpoint([x, y, z, yaw]) = t {
+            sc.target_ned_m = [*x, *y, *z];
+            sc.target_yaw_rad = yaw.to_radians();
+        }
     }
     if let Some(d) = a.duration {
         sc.duration_s = d;
@@ -305,7 +346,19 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
         bail!("--integration-hz must be at least 1 Hz");
     }
     cfg.integration_hz = a.integration_hz;
-    let res = fly(&cfg)?;
+    let exec = a
+        .target
+        .iter()
+        .rev()
+        .find_map(|t| {
+            if let TargetArg::Exec(e) = t {
+                Some(e.clone())
+            } else {
+                None
+            }
+        })
+        .unwrap_or(Target::InProcess);
+    let res = fly_target(&cfg, &exec)?;
     if let Some(path) = &a.csv {
         let f = File::create(path).with_context(|| format!("creating {}", path.display()))?;
         let mut w = csv::Writer::from_writer(BufWriter::new(f));
@@ -392,5 +445,18 @@ fn main() -> Result<()> {
         Command::Design(a) => design_cmd(a),
         Command::Report(a) => report_cmd(a),
         Command::MpcStep(a) => mpc_step_cmd(a),
+        Command::Serve(a) => {
+            if !(a.idle_timeout.is_finite() && a.idle_timeout > 0.0) {
+                bail!("--idle-timeout must be positive");
+            }
+            let listener = std::net::TcpListener::bind(&a.listen).with_context(|| format!("binding {}", a.listen))?;
+            eprintln!("serve: listening on {}", listener.local_addr()?);
+            sil_host::link::serve(
+                listener,
+                std::time::Duration::from_secs_f64(a.idle_timeout),
+                a.max_clients,
+                true,
+            )
+        }
     }
 }

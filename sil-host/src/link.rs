@@ -1,0 +1,277 @@
+//! The host end of the wire protocol: a client that flies the controller
+//! behind frames — in-process over a loopback byte link (`framed`) or over TCP
+//! (`tcp:HOST:PORT`, e.g. `sil-host serve`) — and the TCP server itself.
+
+use anyhow::{bail, Context, Result};
+use firmware::control::Setpoint;
+use firmware::fc::{FcConfig, FlightCore};
+use firmware::proto::{encode, ControllerId, FrameDecoder, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
+use hal_shim::host::{LoopbackLink, MonotonicClock};
+use hal_shim::ByteLink;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::time::{Duration, Instant};
+
+/// What one remote control step returned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RemoteStep {
+    /// Inputs `[U1 N, U2 N, U3 N, U4 N·m]`.
+    pub u: [f32; 4],
+    /// Cycles (or instructions, or ns on the host) spent in the controller.
+    pub cycles: u32,
+    /// QP iterations.
+    pub qp_iterations: u16,
+    /// Failsafe active.
+    pub failsafe: bool,
+}
+
+/// A wire setpoint from the controllers' type.
+pub fn wire(sp: &Setpoint<f32>) -> WireSetpoint {
+    WireSetpoint {
+        pos: sp.pos_ned_m.into(),
+        vel: sp.vel_ned_mps.into(),
+        acc: sp.acc_ned_mps2.into(),
+        jerk: sp.jerk_ned_mps3.into(),
+        yaw: sp.yaw_rad,
+        yaw_rate: sp.yaw_rate_radps,
+    }
+}
+
+fn frame(m: &ToFc) -> Result<Vec<u8>> {
+    let mut b = [0u8; MAX_FRAME];
+    let n = encode(m, &mut b).map_err(|e| anyhow::anyhow!("encoding {m:?}: {e:?}"))?;
+    Ok(b[..n].to_vec())
+}
+
+/// Where the frames go.
+enum Transport {
+    /// The core in this process behind a loopback byte link.
+    Local {
+        fc: Box<FlightCore>,
+        link: LoopbackLink,
+        clock: MonotonicClock,
+        t0: Instant,
+    },
+    /// A TCP peer.
+    Tcp(TcpStream),
+}
+
+/// A client of the flight controller's protocol.
+pub struct FcClient {
+    transport: Transport,
+    decoder: FrameDecoder<MAX_FRAME>,
+    pending: Vec<FromFc>,
+}
+
+impl FcClient {
+    /// The core in-process, reached through frames only.
+    pub fn local() -> Result<Self> {
+        let fc = FlightCore::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        Ok(Self::with(Transport::Local {
+            fc: Box::new(fc),
+            link: LoopbackLink::default(),
+            clock: MonotonicClock::default(),
+            t0: Instant::now(),
+        }))
+    }
+
+    /// A TCP peer at `addr` (e.g. `127.0.0.1:7000`).
+    pub fn tcp(addr: &str) -> Result<Self> {
+        let s = TcpStream::connect(addr).with_context(|| format!("connecting to {addr}"))?;
+        s.set_nodelay(true)?;
+        s.set_read_timeout(Some(Duration::from_secs(5)))?;
+        Ok(Self::with(Transport::Tcp(s)))
+    }
+
+    fn with(transport: Transport) -> Self {
+        Self {
+            transport,
+            decoder: FrameDecoder::new(),
+            pending: Vec::new(),
+        }
+    }
+
+    fn send(&mut self, m: &ToFc) -> Result<()> {
+        let bytes = frame(m)?;
+        match &mut self.transport {
+            Transport::Local { fc, link, clock, t0 } => {
+                link.rx.extend(bytes);
+                let now = t0.elapsed().as_micros() as u64;
+                while !link.rx.is_empty() {
+                    fc.service(link, clock, now).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+                }
+                Ok(())
+            }
+            Transport::Tcp(s) => Ok(s.write_all(&bytes)?),
+        }
+    }
+
+    /// Waits for the next message the flight controller sends.
+    fn receive(&mut self) -> Result<FromFc> {
+        loop {
+            if !self.pending.is_empty() {
+                return Ok(self.pending.remove(0));
+            }
+            let bytes: Vec<u8> = match &mut self.transport {
+                Transport::Local { link, .. } => {
+                    if link.tx.is_empty() {
+                        bail!("the flight controller sent nothing");
+                    }
+                    std::mem::take(&mut link.tx)
+                }
+                Transport::Tcp(s) => {
+                    let mut buf = [0u8; 512];
+                    let n = s.read(&mut buf).context("reading from the flight controller")?;
+                    if n == 0 {
+                        bail!("the flight controller closed the connection");
+                    }
+                    buf[..n].to_vec()
+                }
+            };
+            for b in bytes {
+                if let Some(Ok(m)) = self.decoder.push::<FromFc>(b) {
+                    self.pending.push(m);
+                }
+            }
+        }
+    }
+
+    /// Handshake and controller selection.
+    pub fn open(&mut self, controller: ControllerId, feedforward: bool) -> Result<()> {
+        self.send(&ToFc::Hello {
+            version: PROTOCOL_VERSION,
+        })?;
+        match self.receive()? {
+            FromFc::HelloAck { accepted: true, .. } => {}
+            other => bail!("handshake refused: {other:?}"),
+        }
+        self.send(&ToFc::Select {
+            controller,
+            feedforward,
+        })
+    }
+
+    /// One lockstep control step: setpoint (and preview), the state for step
+    /// `seq`, and the flight controller's answer for that step.
+    pub fn step(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        state: &[f32; 13],
+        sp: &Setpoint<f32>,
+        preview: &[Setpoint<f32>],
+    ) -> Result<RemoteStep> {
+        self.send(&ToFc::Setpoint(wire(sp)))?;
+        for (k, p) in preview.iter().enumerate() {
+            self.send(&ToFc::Preview {
+                k: (k + 1) as u8,
+                sp: wire(p),
+            })?;
+        }
+        self.send(&ToFc::Sensor {
+            seq,
+            t_us,
+            state: *state,
+        })?;
+        let mut out = None;
+        for _ in 0..8 {
+            match self.receive()? {
+                FromFc::Actuator { seq: s, u, failsafe } if s == seq => {
+                    out = Some(RemoteStep {
+                        u,
+                        cycles: 0,
+                        qp_iterations: 0,
+                        failsafe,
+                    });
+                }
+                FromFc::Telemetry {
+                    seq: s,
+                    cycles,
+                    qp_iterations,
+                    ..
+                } if s == seq => {
+                    let mut r = out.ok_or_else(|| anyhow::anyhow!("telemetry before the actuator frame"))?;
+                    r.cycles = cycles;
+                    r.qp_iterations = qp_iterations;
+                    return Ok(r);
+                }
+                _ => {}
+            }
+        }
+        bail!("no answer for step {seq}")
+    }
+}
+
+/// A TCP stream as the flight controller's byte link (non-blocking reads).
+struct TcpLink(TcpStream);
+
+impl ByteLink for TcpLink {
+    type Error = std::io::Error;
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        match self.0.read(buf) {
+            Ok(0) => Err(std::io::Error::new(ErrorKind::UnexpectedEof, "client hung up")),
+            Ok(n) => Ok(n),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => Ok(0),
+            Err(e) => Err(e),
+        }
+    }
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.0.write_all(bytes)
+    }
+}
+
+/// Serves the flight controller on `listener`, one client after another: each
+/// client gets a fresh core; garbage is dropped and counted, a hang-up or an
+/// idle client (no byte for `idle` time) ends only that session. Stops after
+/// `max_clients` sessions when given.
+pub fn serve(listener: TcpListener, idle: Duration, max_clients: Option<usize>, log: bool) -> Result<()> {
+    let mut served = 0usize;
+    for conn in listener.incoming() {
+        let stream = match conn {
+            Ok(s) => s,
+            Err(e) => {
+                if log {
+                    eprintln!("serve: accept failed: {e}");
+                }
+                continue;
+            }
+        };
+        let peer = stream.peer_addr().map(|a| a.to_string()).unwrap_or_else(|_| "?".into());
+        let result = session(stream, idle);
+        served += 1;
+        if log {
+            match &result {
+                Ok(c) => eprintln!("serve: {peer} done: {c:?}"),
+                Err(e) => eprintln!("serve: {peer} ended: {e}"),
+            }
+        }
+        if max_clients.is_some_and(|m| served >= m) {
+            break;
+        }
+    }
+    Ok(())
+}
+
+fn session(stream: TcpStream, idle: Duration) -> Result<firmware::proto::Counters> {
+    stream.set_nodelay(true)?;
+    stream.set_read_timeout(Some(Duration::from_millis(5)))?;
+    let mut link = TcpLink(stream);
+    let mut fc = FlightCore::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let clock = MonotonicClock::default();
+    let t0 = Instant::now();
+    let mut last_byte = Instant::now();
+    loop {
+        let before = fc.counters();
+        match fc.service(&mut link, &clock, t0.elapsed().as_micros() as u64) {
+            Ok(()) => {}
+            Err(e) if e.kind() == ErrorKind::UnexpectedEof => return Ok(fc.counters()),
+            Err(e) => return Err(e.into()),
+        }
+        if fc.counters() != before {
+            last_byte = Instant::now();
+        }
+        if last_byte.elapsed() > idle {
+            bail!("idle for {idle:?}");
+        }
+    }
+}
