@@ -1,8 +1,11 @@
 //! STM32F405 image of the flight-control core (`thumbv7em-none-eabihf`).
 //!
-//! For now it boots, builds the hover model in `f32` from the core and reports
-//! it over semihosting; the control loop, link and failsafe come with the
-//! firmware issue. On the host this file compiles to an empty program so that
+//! Boots, opens USART1, and runs the flight controller's loop
+//! ([`firmware::fc::FlightCore`]): frames in, controller step, frames out,
+//! failsafe timer. Time is SysTick at 168 MHz, widened in software; under
+//! QEMU's `-icount shift=0` one instruction is one nanosecond of virtual time,
+//! so SysTick counts 0.168 per instruction. Boot messages go out through
+//! semihosting. On the host this file compiles to an empty program so that
 //! `cargo build --workspace` works everywhere.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
@@ -12,25 +15,42 @@ mod target {
     use core::panic::PanicInfo;
     use cortex_m_rt::entry;
     use cortex_m_semihosting::{debug, hprintln};
-    use firmware::{euler_hover_model, zoh, VehicleParams};
+    use firmware::fc::{FcConfig, FlightCore};
+    use firmware::proto::PROTOCOL_VERSION;
+    use hal_shim::stm32f405::{SysTickClock, Usart1};
+    use hal_shim::CycleClock;
+
+    const SYSCLK_HZ: u32 = 168_000_000;
+    const PCLK2_HZ: u32 = 84_000_000;
 
     #[entry]
     fn main() -> ! {
-        let p = VehicleParams::<f32>::os4();
-        let lm = euler_hover_model(&p, 0.0f32);
-        match zoh(&lm.a, &lm.b, 0.002f32) {
-            Ok((ad, bd)) => {
-                hprintln!(
-                    "firmware: hover model ok, Ad[0][3]={} Bd[5][0]={}",
-                    ad[(0, 3)],
-                    bd[(5, 0)]
-                );
+        let clock = SysTickClock::start(SYSCLK_HZ);
+        let mut usart = Usart1::init(PCLK2_HZ, 115_200);
+        let mut fc = match FlightCore::new(FcConfig::default()) {
+            Ok(fc) => fc,
+            Err(_) => {
+                hprintln!("firmware: controller design failed");
+                debug::exit(debug::EXIT_FAILURE);
+                loop {
+                    cortex_m::asm::wfi();
+                }
             }
-            Err(_) => hprintln!("firmware: discretisation failed"),
-        }
-        debug::exit(debug::EXIT_SUCCESS);
+        };
+        hprintln!("firmware: up, protocol v{}, waiting on USART1", PROTOCOL_VERSION);
+        // Virtual time: SysTick deltas accumulated into 64 bits (the loop polls
+        // far more often than the 24-bit counter wraps, every 0.1 s).
+        let mut last = clock.now();
+        let mut ticks: u64 = 0;
+        let mut tx_errors: u32 = 0;
         loop {
-            cortex_m::asm::wfi();
+            let now = clock.now();
+            ticks += u64::from(now.wrapping_sub(last) & 0x00FF_FFFF);
+            last = now;
+            let now_us = ticks / u64::from(SYSCLK_HZ / 1_000_000);
+            if fc.service(&mut usart, &clock, now_us).is_err() {
+                tx_errors = tx_errors.wrapping_add(1);
+            }
         }
     }
 

@@ -40,6 +40,10 @@ pub trait ActuatorOutput {
     fn disarm(&mut self);
 }
 
+/// STM32F405 implementations (built for the MCU target only).
+#[cfg(target_os = "none")]
+pub mod stm32f405;
+
 /// Host implementations for the SIL and tests.
 #[cfg(feature = "std")]
 pub mod host {

@@ -158,6 +158,8 @@ pub struct FlightResult {
     pub qp_iterations: (f64, u32),
     /// The MPC's a-priori QP iteration bound (0 for other controllers).
     pub qp_iteration_bound: u32,
+    /// Instructions per controller step under QEMU (mean, max); `None` elsewhere.
+    pub instructions_per_step: Option<(f64, f64)>,
     /// Control steps flown.
     pub steps: usize,
     /// The flight was stopped because the state left any sane range.
@@ -240,6 +242,8 @@ pub enum Target {
     Framed,
     /// A flight controller behind the protocol on a TCP socket (`sil-host serve`).
     Tcp(String),
+    /// The thumbv7em firmware image in QEMU's netduinoplus2, over the emulated USART.
+    Qemu,
 }
 
 impl std::str::FromStr for Target {
@@ -248,9 +252,12 @@ impl std::str::FromStr for Target {
         match s {
             "in-process" => Ok(Target::InProcess),
             "framed" => Ok(Target::Framed),
+            "qemu" => Ok(Target::Qemu),
             _ => match s.strip_prefix("tcp:") {
                 Some(addr) if !addr.is_empty() => Ok(Target::Tcp(addr.to_string())),
-                _ => Err(format!("unknown target '{s}': use in-process, framed or tcp:HOST:PORT")),
+                _ => Err(format!(
+                    "unknown target '{s}': use in-process, framed, qemu or tcp:HOST:PORT"
+                )),
             },
         }
     }
@@ -278,10 +285,15 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
 
 /// Flies one scenario with the controller at `target`.
 pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightResult> {
+    let mut qemu = None;
     let remote = match target {
         Target::InProcess => return fly(cfg),
         Target::Framed => crate::link::FcClient::local()?,
         Target::Tcp(addr) => crate::link::FcClient::tcp(addr)?,
+        Target::Qemu => {
+            let q = qemu.insert(crate::link::Qemu::start(&crate::link::firmware_elf()?)?);
+            q.client()?
+        }
     };
     if cfg.gains != GainSet::Tuned
         || cfg.mpc_override.is_some()
@@ -289,7 +301,14 @@ pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightR
     {
         anyhow::bail!("over the link the flight controller runs its built-in configuration: tuned PD gains, LQR at 500 Hz, MPC presets");
     }
-    fly_inner(cfg, None, Some(remote), |_, _| {}).map(|(r, _)| r)
+    let mut res = fly_inner(cfg, None, Some(remote), |_, _| {}).map(|(r, _)| r)?;
+    if qemu.is_some() {
+        // The telemetry's cycles are SysTick counts; under icount they count instructions.
+        let k = 1.0 / crate::link::SYSTICK_PER_INSTRUCTION;
+        res.instructions_per_step = Some((res.step_time_ns.mean * k, res.step_time_ns.max * k));
+    }
+    drop(qemu);
+    Ok(res)
 }
 
 /// The MPC's a-priori QP bound, or 0.
@@ -372,6 +391,7 @@ fn fly_inner(
         saturated_steps: 0,
         qp_iterations: (0.0, 0),
         qp_iteration_bound: qp_bound(&ctrl),
+        instructions_per_step: None,
         steps: 0,
         diverged: false,
     };

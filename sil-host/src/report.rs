@@ -57,6 +57,14 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
         "diverged": res.diverged,
         "step_time_ns": { "mean": res.step_time_ns.mean, "max": res.step_time_ns.max },
     });
+    if let Some((mean, max)) = res.instructions_per_step {
+        v["instructions_per_step"] = json!({
+            "mean": mean,
+            "max": max,
+            "note": "QEMU netduinoplus2 with -icount shift=0: SysTick counts 0.168 per executed instruction; \
+                     step_time_ns then holds SysTick counts, not ns",
+        });
+    }
     if cfg.controller == crate::flight::ControllerFamily::Mpc {
         v["preset"] = json!(cfg.preset.name());
         v["qp_iterations"] = json!({ "mean": res.qp_iterations.0, "max": res.qp_iterations.1 });
