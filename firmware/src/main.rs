@@ -13,7 +13,7 @@
 #[cfg(target_os = "none")]
 mod target {
     use core::panic::PanicInfo;
-    use cortex_m_rt::entry;
+    use cortex_m_rt::{entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
     use firmware::fc::{FcConfig, FlightCore};
     use firmware::proto::PROTOCOL_VERSION;
@@ -51,6 +51,24 @@ mod target {
             if fc.service(&mut usart, &clock, now_us).is_err() {
                 tx_errors = tx_errors.wrapping_add(1);
             }
+            // Idle until the next byte: with interrupts masked, check the queue
+            // and sleep; a pending USART interrupt wakes WFI, so no byte that
+            // arrives after the check is missed.
+            // Idle until the next byte. The RX interrupt sets the event register
+            // (SEV), so a byte that lands between the check and WFE makes WFE
+            // return at once: no lost wake-up. (QEMU implements WFE as a yield
+            // to its main loop, which is also what lets it deliver the bytes.)
+            if !hal_shim::stm32f405::rx_pending() {
+                cortex_m::asm::wfe();
+            }
+        }
+    }
+
+    /// Every device interrupt lands here; USART1's moves bytes into the queue.
+    #[exception]
+    unsafe fn DefaultHandler(irqn: i16) {
+        if irqn == hal_shim::stm32f405::USART1_IRQ as i16 {
+            hal_shim::stm32f405::usart1_isr();
         }
     }
 

@@ -3,7 +3,41 @@
 //! and under `-icount shift=0` SysTick advances with executed instructions).
 
 use crate::{ByteLink, CycleClock};
+use core::cell::RefCell;
 use core::ptr::{read_volatile, write_volatile};
+use critical_section::Mutex;
+
+/// Received bytes, filled by [`usart1_isr`], drained by [`Usart1::read`].
+static RX: Mutex<RefCell<heapless::Deque<u8, 1024>>> = Mutex::new(RefCell::new(heapless::Deque::new()));
+/// Bytes lost because the queue was full.
+static RX_OVERRUNS: Mutex<core::cell::Cell<u32>> = Mutex::new(core::cell::Cell::new(0));
+const CR1_RXNEIE: u32 = 1 << 5;
+/// USART1's interrupt number on the STM32F405.
+pub const USART1_IRQ: u16 = 37;
+const NVIC_ISER: usize = 0xE000_E100;
+
+/// USART1 receive interrupt: moves every received byte into the queue and
+/// signals an event (SEV) so a main loop waiting in WFE wakes. Call from the
+/// interrupt handler of [`USART1_IRQ`].
+pub fn usart1_isr() {
+    // SAFETY: reads of USART1's status and data registers; reading DR pops the byte.
+    while unsafe { read_volatile((USART1 + SR) as *const u32) } & SR_RXNE != 0 {
+        let b = unsafe { read_volatile((USART1 + DR) as *const u32) } as u8;
+        critical_section::with(|cs| {
+            if RX.borrow(cs).borrow_mut().push_back(b).is_err() {
+                let c = RX_OVERRUNS.borrow(cs);
+                c.set(c.get().wrapping_add(1));
+            }
+        });
+    }
+    // SAFETY: SEV only sets the event register.
+    unsafe { core::arch::asm!("sev", options(nomem, nostack, preserves_flags)) };
+}
+
+/// True if received bytes are waiting in the queue.
+pub fn rx_pending() -> bool {
+    critical_section::with(|cs| !RX.borrow(cs).borrow().is_empty())
+}
 
 const USART1: usize = 0x4001_1000;
 const SR: usize = 0x00;
@@ -18,9 +52,9 @@ const CR1_RE: u32 = 1 << 2;
 const RCC_APB2ENR: usize = 0x4002_3844;
 const RCC_APB2ENR_USART1EN: u32 = 1 << 4;
 
-/// USART1 (PA9/PA10 on real boards; `-serial` 0 under QEMU's netduinoplus2),
-/// polled: reads never wait, writes wait for TXE at most a bounded number of
-/// polls per byte.
+/// USART1 (PA9/PA10 on real boards; `-serial` 0 under QEMU's netduinoplus2).
+/// Reception is interrupt-driven into a 1 KiB queue ([`usart1_isr`]); reads
+/// never wait; writes wait for TXE at most a bounded number of polls per byte.
 pub struct Usart1 {
     _private: (),
 }
@@ -40,11 +74,14 @@ impl Usart1 {
             let en = read_volatile(RCC_APB2ENR as *const u32);
             write_volatile(RCC_APB2ENR as *mut u32, en | RCC_APB2ENR_USART1EN);
             write_volatile((USART1 + BRR) as *mut u32, pclk_hz / baud.max(1));
-            write_volatile((USART1 + CR1) as *mut u32, CR1_UE | CR1_TE | CR1_RE);
+            write_volatile((USART1 + CR1) as *mut u32, CR1_UE | CR1_TE | CR1_RE | CR1_RXNEIE);
+            let irq = usize::from(USART1_IRQ);
+            write_volatile((NVIC_ISER + 4 * (irq / 32)) as *mut u32, 1 << (irq % 32));
         }
         Self { _private: () }
     }
 
+    #[allow(dead_code)]
     fn sr(&self) -> u32 {
         // SAFETY: read of the USART1 status register.
         unsafe { read_volatile((USART1 + SR) as *const u32) }
@@ -57,13 +94,20 @@ const TX_SPIN: u32 = 1_000_000;
 impl ByteLink for Usart1 {
     type Error = TxTimeout;
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
-        let mut n = 0;
-        while n < buf.len() && self.sr() & SR_RXNE != 0 {
-            // SAFETY: reading DR pops the received byte.
-            buf[n] = unsafe { read_volatile((USART1 + DR) as *const u32) } as u8;
-            n += 1;
-        }
-        Ok(n)
+        critical_section::with(|cs| {
+            let mut q = RX.borrow(cs).borrow_mut();
+            let mut n = 0;
+            while n < buf.len() {
+                match q.pop_front() {
+                    Some(b) => {
+                        buf[n] = b;
+                        n += 1;
+                    }
+                    None => break,
+                }
+            }
+            Ok(n)
+        })
     }
     fn write_all(&mut self, bytes: &[u8]) -> Result<(), Self::Error> {
         for &b in bytes {

@@ -317,6 +317,7 @@ pub struct Qemu {
     child: std::process::Child,
     /// Where USART1 listens.
     pub addr: String,
+    log: std::path::PathBuf,
 }
 
 impl Qemu {
@@ -324,6 +325,7 @@ impl Qemu {
     pub fn start(elf: &std::path::Path) -> Result<Self> {
         let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
         let addr = format!("127.0.0.1:{port}");
+        let log = std::env::temp_dir().join(format!("sil-host-qemu-{port}.log"));
         let child = std::process::Command::new("qemu-system-arm")
             .args([
                 "-machine",
@@ -341,15 +343,36 @@ impl Qemu {
             .arg("-kernel")
             .arg(elf)
             .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
+            // QEMU's own messages go to a log file: an unread pipe would fill and stall it.
+            .stderr(std::fs::File::create(&log)?)
             .spawn()
             .context("starting qemu-system-arm (Debian package qemu-system-arm)")?;
-        Ok(Self { child, addr })
+        Ok(Self { child, addr, log })
     }
 
-    /// A protocol client on the emulated USART (retries while QEMU starts).
+    /// A protocol client on the emulated USART. Connects only once QEMU says
+    /// it is waiting for the connection, plus a short settle: connecting the
+    /// moment the socket opens was seen to leave the guest's link silent
+    /// (not understood yet; see the README).
     pub fn client(&mut self) -> Result<FcClient> {
         let t0 = Instant::now();
+        while !std::fs::read_to_string(&self.log)
+            .unwrap_or_default()
+            .contains("waiting for connection")
+        {
+            if let Ok(Some(st)) = self.child.try_wait() {
+                bail!("qemu exited: {st}; see {}", self.log.display());
+            }
+            if t0.elapsed() > Duration::from_secs(10) {
+                bail!(
+                    "qemu did not open {} within 10 s; see {}",
+                    self.addr,
+                    self.log.display()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(300));
         loop {
             if let Ok(s) = TcpStream::connect(&self.addr) {
                 s.set_nodelay(true)?;
@@ -371,5 +394,6 @@ impl Drop for Qemu {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+        let _ = std::fs::remove_file(&self.log);
     }
 }
