@@ -12,11 +12,12 @@
 
 use super::lqr_table::{design_discrete, Gain};
 use super::{
-    saturate, validate, AttitudeRef, ControlError, ControlOutput, Controller, ReferenceMode, Setpoint, StateEstimate,
+    saturate, validate, AttitudeRef, ControlError, ControlOutput, Controller, HeadingFrame, ReferenceMode, Setpoint,
+    StateEstimate,
 };
 use crate::lit;
-use crate::model::{euler_to_quat, quat_conj, quat_hover_model, quat_mul, quat_to_euler, InputBox, VehicleParams};
-use nalgebra::{RealField, SMatrix, SVector, Vector3, Vector4};
+use crate::model::{euler_to_quat, quat_hover_model, quat_to_euler, InputBox, VehicleParams};
+use nalgebra::{RealField, SMatrix, SVector, Vector4};
 
 /// Thesis Table 4.7: `Q = I12`, `R = I4`.
 pub fn quat_weights() -> (SMatrix<f64, 12, 12>, SMatrix<f64, 4, 4>) {
@@ -68,33 +69,18 @@ impl<T: RealField + Copy> LqrQuat<T> {
     }
 }
 
-/// Rotates an NED vector into the frame of heading ψ (by −ψ about z).
-fn to_heading_frame<T: RealField + Copy>(v: &Vector3<T>, s: T, c: T) -> Vector3<T> {
-    Vector3::new(c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2])
-}
-
 impl<T: RealField + Copy> Controller<T> for LqrQuat<T> {
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         let ar = AttitudeRef::for_mode(&self.params, sp, self.mode);
-        let yaw = quat_to_euler(&est.att)[2];
-        let half = lit::<T>(0.5);
-        let qh = Vector4::new((yaw * half).cos(), T::zero(), T::zero(), (yaw * half).sin());
-        let qhc = quat_conj(&qh);
-        let mut qa = quat_mul(&qhc, &est.att);
-        if qa[0] < T::zero() {
-            qa = -qa;
-        }
-        let mut qr = quat_mul(&qhc, &euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad));
-        if qr[0] < T::zero() {
-            qr = -qr;
-        }
-        let (s, c) = yaw.sin_cos();
+        let frame = HeadingFrame::new(quat_to_euler(&est.att)[2]);
+        let qa = frame.attitude(&est.att);
+        let qr = frame.attitude(&euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad));
         let mut dx = SVector::<T, 12>::zeros();
         dx.fixed_rows_mut::<3>(0)
-            .copy_from(&to_heading_frame(&(est.pos_ned_m - sp.pos_ned_m), s, c));
+            .copy_from(&frame.to_frame(&(est.pos_ned_m - sp.pos_ned_m)));
         dx.fixed_rows_mut::<3>(3)
-            .copy_from(&to_heading_frame(&(est.vel_ned_mps - sp.vel_ned_mps), s, c));
+            .copy_from(&frame.to_frame(&(est.vel_ned_mps - sp.vel_ned_mps)));
         for i in 0..3 {
             dx[6 + i] = qa[1 + i] - qr[1 + i];
         }

@@ -201,6 +201,49 @@ pub(crate) fn saturate<T: RealField + Copy>(bx: &crate::model::InputBox<T>, raw:
     }
 }
 
+/// The frame of a heading ψ: NED turned by ψ about down. The hover models
+/// linearised at ψT = 0 hold in it for any heading (the dynamics are
+/// yaw-symmetric), which is how the quaternion LQR and the MPC avoid
+/// heading-dependent models.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadingFrame<T: RealField + Copy> {
+    s: T,
+    c: T,
+    /// The heading quaternion `(cos ψ/2, 0, 0, sin ψ/2)`.
+    q: Quat<T>,
+}
+
+impl<T: RealField + Copy> HeadingFrame<T> {
+    /// The frame of heading `yaw` (rad).
+    pub fn new(yaw: T) -> Self {
+        let (s, c) = yaw.sin_cos();
+        let half = crate::lit::<T>(0.5);
+        let q = nalgebra::Vector4::new((yaw * half).cos(), T::zero(), T::zero(), (yaw * half).sin());
+        Self { s, c, q }
+    }
+
+    /// An NED vector in this frame (turned by −ψ).
+    pub fn to_frame(&self, v: &Vector3<T>) -> Vector3<T> {
+        Vector3::new(self.c * v[0] + self.s * v[1], -self.s * v[0] + self.c * v[1], v[2])
+    }
+
+    /// A vector of this frame back in NED (turned by +ψ).
+    pub fn to_ned(&self, v: &Vector3<T>) -> Vector3<T> {
+        Vector3::new(self.c * v[0] - self.s * v[1], self.s * v[0] + self.c * v[1], v[2])
+    }
+
+    /// The attitude `q` (body → NED) relative to this frame, `q_h⁻¹ ⊗ q`, on
+    /// the `q0 ≥ 0` hemisphere (shortest way round).
+    pub fn attitude(&self, q: &Quat<T>) -> Quat<T> {
+        let r = crate::model::quat_mul(&crate::model::quat_conj(&self.q), q);
+        if r[0] < T::zero() {
+            -r
+        } else {
+            r
+        }
+    }
+}
+
 /// Wraps an angle to (−π, π].
 pub fn wrap_pi<T: RealField + Copy>(a: T) -> T {
     let two_pi = T::two_pi();

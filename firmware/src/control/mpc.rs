@@ -27,13 +27,12 @@
 
 use super::reference::AttitudeRef;
 use super::{
-    validate, wrap_pi, ControlError, ControlOutput, ControlStatus, Controller, ReferenceMode, Setpoint, StateEstimate,
+    validate, wrap_pi, ControlError, ControlOutput, ControlStatus, Controller, HeadingFrame, ReferenceMode, Setpoint,
+    StateEstimate,
 };
 use crate::linalg::solve_dare;
 use crate::lit;
-use crate::model::{
-    euler_hover_model, quat_conj, quat_hover_model, quat_mul, quat_to_euler, zoh, InputBox, LinearModel, VehicleParams,
-};
+use crate::model::{euler_hover_model, quat_hover_model, quat_to_euler, zoh, InputBox, LinearModel, VehicleParams};
 use crate::qp::{BoxQp, QpSettings, QpSolution};
 use nalgebra::{RealField, SMatrix, SVector, Vector3, Vector4};
 
@@ -402,25 +401,19 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
 
     /// State in the frame of heading `yaw`, in the form's coordinates.
     fn heading_state(&self, est: &StateEstimate<T>, yaw: T) -> Vec12<T> {
-        let (s, c) = yaw.sin_cos();
-        let rot = |v: &Vector3<T>| Vector3::new(c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]);
+        let frame = HeadingFrame::new(yaw);
         let mut x = Vec12::<T>::zeros();
-        x.fixed_rows_mut::<3>(0).copy_from(&rot(&est.pos_ned_m));
-        x.fixed_rows_mut::<3>(3).copy_from(&rot(&est.vel_ned_mps));
-        let att = self.attitude_coords(&est.att, yaw);
+        x.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&est.pos_ned_m));
+        x.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&est.vel_ned_mps));
+        let att = self.attitude_coords(&est.att, &frame);
         x.fixed_rows_mut::<3>(6).copy_from(&att);
         x.fixed_rows_mut::<3>(9).copy_from(&est.rates_frd_radps);
         x
     }
 
-    /// Attitude `q` relative to heading `yaw` in the form's coordinates.
-    fn attitude_coords(&self, q: &Vector4<T>, yaw: T) -> Vector3<T> {
-        let half = lit::<T>(0.5);
-        let qh = Vector4::new((yaw * half).cos(), T::zero(), T::zero(), (yaw * half).sin());
-        let mut qr = quat_mul(&quat_conj(&qh), q);
-        if qr[0] < T::zero() {
-            qr = -qr;
-        }
+    /// Attitude `q` relative to a heading frame in the form's coordinates.
+    fn attitude_coords(&self, q: &Vector4<T>, frame: &HeadingFrame<T>) -> Vector3<T> {
+        let qr = frame.attitude(q);
         match self.cfg.form {
             MpcForm::Quaternion => Vector3::new(qr[1], qr[2], qr[3]),
             MpcForm::Euler => {
@@ -452,13 +445,12 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let mut ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
         let lim = lit::<T>(self.cfg.max_heading_error_rad);
         ar.yaw_rad = yaw + wrap_pi(ar.yaw_rad - yaw).max(-lim).min(lim);
-        let (s, c) = yaw.sin_cos();
-        let rot = |v: &Vector3<T>| Vector3::new(c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]);
+        let frame = HeadingFrame::new(yaw);
         let mut r = Vec12::<T>::zeros();
-        r.fixed_rows_mut::<3>(0).copy_from(&rot(&sp.pos_ned_m));
-        r.fixed_rows_mut::<3>(3).copy_from(&rot(&sp.vel_ned_mps));
+        r.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&sp.pos_ned_m));
+        r.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&sp.vel_ned_mps));
         let qref = crate::model::euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad);
-        r.fixed_rows_mut::<3>(6).copy_from(&self.attitude_coords(&qref, yaw));
+        r.fixed_rows_mut::<3>(6).copy_from(&self.attitude_coords(&qref, &frame));
         r.fixed_rows_mut::<3>(9).copy_from(&ar.rates_frd_radps);
         let du = Vector4::new(
             ar.thrust_n - self.u_hover[0],
@@ -491,16 +483,21 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         }
     }
 
+    /// The disturbance estimate with its force part in `frame`.
+    fn dist_in(&self, frame: &HeadingFrame<T>) -> SVector<T, 6> {
+        let mut d = self.dist;
+        d.fixed_rows_mut::<3>(0)
+            .copy_from(&frame.to_frame(&self.dist.fixed_rows::<3>(0).into_owned()));
+        d
+    }
+
     /// Observer update from the previous step's prediction.
     fn observe(&mut self, est: &StateEstimate<T>) {
         let Some(tau) = self.cfg.observer_tau_s else { return };
         let Some((x_prev, yaw_prev)) = self.last else { return };
-        let (s, c) = yaw_prev.sin_cos();
+        let frame = HeadingFrame::new(yaw_prev);
         // Disturbance in the previous heading frame.
-        let mut dh = self.dist;
-        let (fx, fy) = (dh[0], dh[1]);
-        dh[0] = c * fx + s * fy;
-        dh[1] = -s * fx + c * fy;
+        let mut dh = self.dist_in(&frame);
         let pred = self.ad_e * x_prev + self.bd_e * self.du_prev + self.wd_e * dh;
         let meas = self.heading_state(est, yaw_prev);
         let nu = meas - pred;
@@ -517,9 +514,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             }
         }
         // Back to NED and clamp to a physical range (±1 g, ±100 rad/s²).
-        let (hx, hy) = (dh[0], dh[1]);
-        dh[0] = c * hx - s * hy;
-        dh[1] = s * hx + c * hy;
+        let f_ned = frame.to_ned(&dh.fixed_rows::<3>(0).into_owned());
+        dh.fixed_rows_mut::<3>(0).copy_from(&f_ned);
         let g = self.params.gravity_mps2;
         for i in 0..3 {
             dh[i] = dh[i].max(-g).min(g);
@@ -538,11 +534,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         let yaw = quat_to_euler(&est.att)[2];
         let x0 = self.heading_state(est, yaw);
         // Disturbance in this heading frame.
-        let (s, c) = yaw.sin_cos();
-        let mut dh = self.dist;
-        dh[0] = c * self.dist[0] + s * self.dist[1];
-        dh[1] = -s * self.dist[0] + c * self.dist[1];
-        let w = self.wd * dh;
+        let w = self.wd * self.dist_in(&HeadingFrame::new(yaw));
         // Free response (z = 0) and references over the horizon.
         let mut xs = [Vec12::<T>::zeros(); N];
         let mut rs = [Vec12::<T>::zeros(); N];
