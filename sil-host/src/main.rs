@@ -11,10 +11,8 @@ use sil_host::disturbance::DisturbanceSet;
 use sil_host::flight::{fly_target, ControllerFamily, FlightConfig, GainSet, MpcPreset, RefMode, Target};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::{ModelKind, PlantConfig};
-use sil_host::record::{REFERENCE_COLUMNS, STATE_COLUMNS};
+use sil_host::record::{write_csv, STATE_COLUMNS};
 use sil_host::scenario::{Scenario, ScenarioKind};
-use std::fs::File;
-use std::io::BufWriter;
 use std::path::PathBuf;
 
 #[derive(Parser, Debug)]
@@ -285,13 +283,7 @@ fn open_loop(a: &OpenLoopArgs) -> Result<()> {
     };
     let rows = run.run();
     if let Some(path) = &a.csv {
-        let f = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-        let mut w = csv::Writer::from_writer(BufWriter::new(f));
-        w.write_record(STATE_COLUMNS)?;
-        for r in &rows {
-            w.write_record(r.iter().map(|v| v.to_string()))?;
-        }
-        w.flush()?;
+        write_csv(path, &rows, None)?;
         eprintln!("wrote {} rows to {}", rows.len(), path.display());
     }
     if let Some(last) = rows.last() {
@@ -362,15 +354,7 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
         .unwrap_or(Target::InProcess);
     let res = fly_target(&cfg, &exec)?;
     if let Some(path) = &a.csv {
-        let f = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-        let mut w = csv::Writer::from_writer(BufWriter::new(f));
-        let mut header: Vec<&str> = STATE_COLUMNS.to_vec();
-        header.extend_from_slice(&REFERENCE_COLUMNS);
-        w.write_record(&header)?;
-        for (row, r) in res.rows.iter().zip(&res.reference) {
-            w.write_record(row.iter().chain(r.iter()).map(|v| v.to_string()))?;
-        }
-        w.flush()?;
+        write_csv(path, &res.rows, Some(&res.reference))?;
     }
     let json = sil_host::report::flight_json(&cfg, &res);
     if let Some(path) = &a.json {

@@ -3,9 +3,11 @@
 //! realised by the plant), plus `x_ref,y_ref,z_ref,psi_ref` for closed-loop flights.
 
 use crate::plant::Plant;
-use crate::scenario::Reference;
+use anyhow::Context;
 use firmware::quat_to_euler;
-use std::io::Write;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
 
 /// Recording interval, s.
 pub const RECORD_DT_S: f64 = 0.01;
@@ -36,38 +38,21 @@ pub fn state_row(plant: &Plant) -> [f64; 21] {
     r
 }
 
-/// Writes rows to a CSV file (numbers in shortest round-trip form).
-pub struct CsvRecorder<W: Write> {
-    w: csv::Writer<W>,
-    with_reference: bool,
-}
-
-impl<W: Write> CsvRecorder<W> {
-    /// Starts a CSV with the header; `with_reference` adds the reference columns.
-    pub fn new(out: W, with_reference: bool) -> anyhow::Result<Self> {
-        let mut w = csv::Writer::from_writer(out);
-        let mut header: Vec<&str> = STATE_COLUMNS.to_vec();
-        if with_reference {
-            header.extend_from_slice(&REFERENCE_COLUMNS);
-        }
-        w.write_record(&header)?;
-        Ok(Self { w, with_reference })
+/// Writes recorded rows as CSV to `path` (numbers in shortest round-trip
+/// form): the state columns, plus the reference columns when `reference`
+/// gives one `[x, y, z, ψ]` per row (closed-loop flights).
+pub fn write_csv(path: &Path, rows: &[[f64; 21]], reference: Option<&[[f64; 4]]>) -> anyhow::Result<()> {
+    let f = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut w = csv::Writer::from_writer(BufWriter::new(f));
+    let mut header: Vec<&str> = STATE_COLUMNS.to_vec();
+    if reference.is_some() {
+        header.extend_from_slice(&REFERENCE_COLUMNS);
     }
-
-    /// Appends one row for the plant's current state (and reference).
-    pub fn row(&mut self, plant: &Plant, reference: Option<&Reference>) -> anyhow::Result<()> {
-        let mut fields: Vec<String> = state_row(plant).iter().map(|v| v.to_string()).collect();
-        if self.with_reference {
-            let r = reference.ok_or_else(|| anyhow::anyhow!("closed-loop row without a reference"))?;
-            fields.extend([r.pos[0], r.pos[1], r.pos[2], r.yaw].iter().map(|v| v.to_string()));
-        }
-        self.w.write_record(&fields)?;
-        Ok(())
+    w.write_record(&header)?;
+    for (i, row) in rows.iter().enumerate() {
+        let r: &[f64] = reference.and_then(|refs| refs.get(i)).map_or(&[], |r| r.as_slice());
+        w.write_record(row.iter().chain(r).map(|v| v.to_string()))?;
     }
-
-    /// Flushes the file.
-    pub fn finish(mut self) -> anyhow::Result<()> {
-        self.w.flush()?;
-        Ok(())
-    }
+    w.flush()?;
+    Ok(())
 }
