@@ -81,7 +81,6 @@ impl Usart1 {
         Self { _private: () }
     }
 
-    #[allow(dead_code)]
     fn sr(&self) -> u32 {
         // SAFETY: read of the USART1 status register.
         unsafe { read_volatile((USART1 + SR) as *const u32) }

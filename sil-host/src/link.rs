@@ -138,13 +138,45 @@ impl FcClient {
 
     /// Handshake and controller selection.
     pub fn open(&mut self, controller: ControllerId, feedforward: bool) -> Result<()> {
-        self.send(&ToFc::Hello {
-            version: PROTOCOL_VERSION,
-        })?;
-        match self.receive()? {
-            FromFc::HelloAck { accepted: true, .. } => {}
-            other => bail!("handshake refused: {other:?}"),
+        // Hello is repeated until answered: a flight controller that is still
+        // booting drops what arrives before its UART is up.
+        let patient = match &self.transport {
+            Transport::Tcp(s) => {
+                let t = s.read_timeout()?;
+                s.set_read_timeout(Some(Duration::from_millis(200)))?;
+                t
+            }
+            Transport::Local { .. } => None,
+        };
+        let mut answer = None;
+        for _ in 0..50 {
+            self.send(&ToFc::Hello {
+                version: PROTOCOL_VERSION,
+            })?;
+            match self.receive() {
+                Ok(m) => {
+                    answer = Some(m);
+                    break;
+                }
+                // Only a read timeout means "ask again".
+                Err(e)
+                    if e.chain().any(|c| {
+                        c.downcast_ref::<std::io::Error>()
+                            .is_some_and(|io| matches!(io.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut))
+                    }) => {}
+                Err(e) => return Err(e),
+            }
         }
+        if let Transport::Tcp(s) = &self.transport {
+            s.set_read_timeout(patient)?;
+        }
+        match answer {
+            Some(FromFc::HelloAck { accepted: true, .. }) => {}
+            Some(other) => bail!("handshake refused: {other:?}"),
+            None => bail!("no handshake answer after 50 tries"),
+        }
+        // Acknowledgements of repeated Hellos may still be queued: drop them.
+        self.pending.retain(|m| !matches!(m, FromFc::HelloAck { .. }));
         self.send(&ToFc::Select {
             controller,
             feedforward,

@@ -94,8 +94,8 @@ struct FlyArgs {
     /// or where the controller runs: `in-process` (default; called directly), `framed` (the
     /// flight-controller core in this process, reached only through the framed wire protocol) or
     /// `tcp:HOST:PORT` (a flight controller behind the protocol, e.g. `sil-host serve`) or `qemu`
-    /// (EXPERIMENTAL: the thumbv7em image in qemu-system-arm's netduinoplus2; the polled USART is
-    /// starved under -icount and most runs stall — see the README). Give it twice for both, e.g.
+    /// (EXPERIMENTAL: the thumbv7em image in qemu-system-arm's netduinoplus2; correct but slow,
+    /// about 50 ms of real time per step — see the README). Give it twice for both, e.g.
     /// `--target 1,2,-3,45 --target framed`.
     #[arg(long, value_name = "X,Y,Z,YAW_DEG|TARGET", value_parser = parse_target_arg, allow_hyphen_values = true)]
     target: Vec<TargetArg>,
