@@ -21,6 +21,7 @@
 pub mod control;
 pub mod fc;
 pub mod linalg;
+pub mod math;
 pub mod model;
 pub mod proto;
 pub mod qp;

@@ -18,7 +18,6 @@ mod target {
     use firmware::fc::{FcConfig, FlightCore};
     use firmware::proto::PROTOCOL_VERSION;
     use hal_shim::stm32f405::{SysTickClock, Usart1};
-    use hal_shim::CycleClock;
 
     const SYSCLK_HZ: u32 = 168_000_000;
     const PCLK2_HZ: u32 = 84_000_000;
@@ -38,30 +37,31 @@ mod target {
             }
         };
         hprintln!("firmware: up, protocol v{}, waiting on USART1", PROTOCOL_VERSION);
-        // Virtual time: SysTick deltas accumulated into 64 bits (the loop polls
-        // far more often than the 24-bit counter wraps, every 0.1 s).
-        let mut last = clock.now();
-        let mut ticks: u64 = 0;
         let mut tx_errors: u32 = 0;
         loop {
-            let now = clock.now();
-            ticks += u64::from(now.wrapping_sub(last) & 0x00FF_FFFF);
-            last = now;
-            let now_us = ticks / u64::from(SYSCLK_HZ / 1_000_000);
+            let now_us = clock.ticks() / u64::from(SYSCLK_HZ / 1_000_000);
             if fc.service(&mut usart, &clock, now_us).is_err() {
                 tx_errors = tx_errors.wrapping_add(1);
             }
-            // Idle until the next byte: with interrupts masked, check the queue
-            // and sleep; a pending USART interrupt wakes WFI, so no byte that
-            // arrives after the check is missed.
-            // Idle until the next byte. The RX interrupt sets the event register
-            // (SEV), so a byte that lands between the check and WFE makes WFE
-            // return at once: no lost wake-up. (QEMU implements WFE as a yield
-            // to its main loop, which is also what lets it deliver the bytes.)
-            if !hal_shim::stm32f405::rx_pending() {
-                cortex_m::asm::wfe();
-            }
+            // Idle until the next interrupt (a received byte or a SysTick wrap).
+            // Interrupts are masked across the check and WFI: a byte arriving
+            // in between leaves its interrupt pending, which makes WFI return at
+            // once, so no wake-up is lost; the handler runs when the mask lifts.
+            // Under QEMU a halted CPU lets the emulator deliver the next byte
+            // without executing guest instructions (so idle time does not
+            // count as instructions).
+            cortex_m::interrupt::free(|_| {
+                if !hal_shim::stm32f405::rx_pending() {
+                    cortex_m::asm::wfi();
+                }
+            });
         }
+    }
+
+    /// SysTick wrap: extends the 24-bit counter to 64 bits.
+    #[exception]
+    fn SysTick() {
+        hal_shim::stm32f405::systick_isr();
     }
 
     /// Every device interrupt lands here; USART1's moves bytes into the queue.

@@ -16,8 +16,8 @@ const CR1_RXNEIE: u32 = 1 << 5;
 pub const USART1_IRQ: u16 = 37;
 const NVIC_ISER: usize = 0xE000_E100;
 
-/// USART1 receive interrupt: moves every received byte into the queue and
-/// signals an event (SEV) so a main loop waiting in WFE wakes. Call from the
+/// USART1 receive interrupt: moves every received byte into the queue (the
+/// interrupt itself wakes a main loop sleeping in WFI). Call from the
 /// interrupt handler of [`USART1_IRQ`].
 pub fn usart1_isr() {
     // SAFETY: reads of USART1's status and data registers; reading DR pops the byte.
@@ -30,8 +30,6 @@ pub fn usart1_isr() {
             }
         });
     }
-    // SAFETY: SEV only sets the event register.
-    unsafe { core::arch::asm!("sev", options(nomem, nostack, preserves_flags)) };
 }
 
 /// True if received bytes are waiting in the queue.
@@ -124,42 +122,75 @@ impl ByteLink for Usart1 {
     }
 }
 
-/// SysTick as a free-running 24-bit counter, read as an up-counter.
+/// SysTick as the cycle clock: the 24-bit down-counter reloads every
+/// millisecond and its interrupt ([`systick_isr`]) counts the reloads, so
+/// [`SysTickClock::ticks`] is a 64-bit tick count and the main loop wakes at
+/// least once a millisecond (the failsafe timer needs no other timer).
 pub struct SysTickClock {
     hz: u32,
+    period: u32,
+}
+
+/// SysTick reloads counted by [`systick_isr`].
+static WRAPS: Mutex<core::cell::Cell<u64>> = Mutex::new(core::cell::Cell::new(0));
+
+/// SysTick exception body: counts one reload. Call from the `SysTick`
+/// exception handler.
+pub fn systick_isr() {
+    critical_section::with(|cs| {
+        let w = WRAPS.borrow(cs);
+        w.set(w.get().wrapping_add(1));
+    });
 }
 
 const SYST_CSR: usize = 0xE000_E010;
 const SYST_RVR: usize = 0xE000_E014;
 const SYST_CVR: usize = 0xE000_E018;
+const SCB_ICSR: usize = 0xE000_ED04;
+const ICSR_PENDSTSET: u32 = 1 << 26;
 
 impl SysTickClock {
-    /// Starts SysTick on the processor clock (`hz`), full 24-bit range.
+    /// Starts SysTick on the processor clock (`hz`, ≥ 1 kHz), reloading every
+    /// millisecond with its interrupt enabled.
     pub fn start(hz: u32) -> Self {
+        let period = (hz / 1000).clamp(2, 0x0100_0000);
         // SAFETY: the architectural SysTick registers; this is their only user.
         unsafe {
-            write_volatile(SYST_RVR as *mut u32, 0x00FF_FFFF);
+            write_volatile(SYST_RVR as *mut u32, period - 1);
             write_volatile(SYST_CVR as *mut u32, 0);
-            write_volatile(SYST_CSR as *mut u32, 0b101); // enable, processor clock, no interrupt
+            write_volatile(SYST_CSR as *mut u32, 0b111); // enable, processor clock, interrupt
         }
-        Self { hz }
+        Self { hz, period }
     }
 
-    /// Raw down-counter value.
-    pub fn raw(&self) -> u32 {
-        // SAFETY: read of the SysTick current value.
-        unsafe { read_volatile(SYST_CVR as *const u32) & 0x00FF_FFFF }
+    /// Processor-clock ticks since [`SysTickClock::start`], 64 bits wide.
+    pub fn ticks(&self) -> u64 {
+        critical_section::with(|cs| {
+            let wraps = WRAPS.borrow(cs).get();
+            // SAFETY: read of the SysTick current value.
+            let cvr = unsafe { read_volatile(SYST_CVR as *const u32) } & 0x00FF_FFFF;
+            let into = (self.period - 1).saturating_sub(cvr);
+            // A reload while interrupts are masked is pending, not yet
+            // counted: ICSR.PENDSTSET says so. If it came after the counter was
+            // read, the reading is near the period's end and needs no correction.
+            // SAFETY: read of the System Control Block's ICSR.
+            let pending = unsafe { read_volatile(SCB_ICSR as *const u32) } & ICSR_PENDSTSET != 0;
+            let wraps = if pending && into < self.period / 2 {
+                wraps + 1
+            } else {
+                wraps
+            };
+            wraps * u64::from(self.period) + u64::from(into)
+        })
     }
 }
 
 impl CycleClock for SysTickClock {
+    /// The low 32 bits of [`SysTickClock::ticks`] (wraps after 25 s at 168 MHz).
     fn now(&self) -> u32 {
-        0x00FF_FFFF - self.raw()
+        self.ticks() as u32
     }
     fn hz(&self) -> u32 {
         self.hz
-    }
-    fn since(&self, start: u32) -> u32 {
-        self.now().wrapping_sub(start) & 0x00FF_FFFF
     }
 }

@@ -162,6 +162,10 @@ pub struct FlightResult {
     pub instructions_per_step: Option<(f64, f64)>,
     /// Control steps flown.
     pub steps: usize,
+    /// Steps the flight controller answered from its failsafe (remote targets).
+    pub failsafe_steps: usize,
+    /// The flight controller's frame and error counters at the end (remote targets).
+    pub link_counters: Option<firmware::proto::Counters>,
     /// The flight was stopped because the state left any sane range.
     pub diverged: bool,
 }
@@ -393,6 +397,8 @@ fn fly_inner(
         qp_iteration_bound: qp_bound(&ctrl),
         instructions_per_step: None,
         steps: 0,
+        failsafe_steps: 0,
+        link_counters: None,
         diverged: false,
     };
     let mut total_ns = 0.0;
@@ -417,12 +423,23 @@ fn fly_inner(
             if let Some(link) = remote.as_mut() {
                 seq += 1;
                 let state: [f32; 13] = std::array::from_fn(|i| xq[i] as f32);
-                let step = link.step(seq, (t * 1e6) as u64, &state, &sp, &previews)?;
+                // A preview the setpoint's own extrapolation reproduces is not
+                // sent: the controller extrapolates to the same values, and a
+                // fixed target then costs 2 frames a step instead of 22.
+                let dt = preview.map_or(0.0, |(_, dt)| dt);
+                let redundant = previews.iter().enumerate().all(|(k, p)| {
+                    let e = sp.extrapolate(((k + 1) as f64 * dt) as f32);
+                    setpoints_equal(&e, p)
+                });
+                let sent: &[Setpoint<f32>] = if redundant { &[] } else { &previews };
+                let step = link.step(seq, (t * 1e6) as u64, &state, &sp, sent)?;
                 // The flight controller reports its own time per step (ns on the host).
                 dt_ns = step.cycles as f64;
                 total_it += u64::from(step.qp_iterations);
                 res.qp_iterations.1 = res.qp_iterations.1.max(u32::from(step.qp_iterations));
                 u = Vector4::from(step.u).cast::<f64>();
+                res.failsafe_steps += usize::from(step.failsafe);
+                res.link_counters = Some(step.counters);
             } else {
                 for (k, p) in previews.iter().enumerate() {
                     // The scenario defines the reference; a rejected point only
@@ -469,4 +486,17 @@ fn fly_inner(
     }
     res.metrics = flight_metrics(&res.trace, &nominal);
     Ok((res, ctrl))
+}
+
+/// Equal to f32 rounding (relative 1e-6, absolute 1e-6).
+fn setpoints_equal(a: &Setpoint<f32>, b: &Setpoint<f32>) -> bool {
+    let close = |x: f32, y: f32| (x - y).abs() <= 1e-6 * (1.0 + x.abs().max(y.abs()));
+    let vclose =
+        |x: &nalgebra::Vector3<f32>, y: &nalgebra::Vector3<f32>| x.iter().zip(y.iter()).all(|(p, q)| close(*p, *q));
+    vclose(&a.pos_ned_m, &b.pos_ned_m)
+        && vclose(&a.vel_ned_mps, &b.vel_ned_mps)
+        && vclose(&a.acc_ned_mps2, &b.acc_ned_mps2)
+        && vclose(&a.jerk_ned_mps3, &b.jerk_ned_mps3)
+        && close(a.yaw_rad, b.yaw_rad)
+        && close(a.yaw_rate_radps, b.yaw_rate_radps)
 }

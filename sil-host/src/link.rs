@@ -23,6 +23,8 @@ pub struct RemoteStep {
     pub qp_iterations: u16,
     /// Failsafe active.
     pub failsafe: bool,
+    /// The flight controller's frame and error counters after this step.
+    pub counters: firmware::proto::Counters,
 }
 
 /// A wire setpoint from the controllers' type.
@@ -61,6 +63,8 @@ pub struct FcClient {
     transport: Transport,
     decoder: FrameDecoder<MAX_FRAME>,
     pending: Vec<FromFc>,
+    /// The setpoint the flight controller holds (it keeps the last one sent).
+    last_setpoint: Option<WireSetpoint>,
 }
 
 impl FcClient {
@@ -88,6 +92,7 @@ impl FcClient {
             transport,
             decoder: FrameDecoder::new(),
             pending: Vec::new(),
+            last_setpoint: None,
         }
     }
 
@@ -177,10 +182,23 @@ impl FcClient {
         }
         // Acknowledgements of repeated Hellos may still be queued: drop them.
         self.pending.retain(|m| !matches!(m, FromFc::HelloAck { .. }));
+        self.last_setpoint = None;
         self.send(&ToFc::Select {
             controller,
             feedforward,
-        })
+        })?;
+        // Building a controller (an MPC's condensed QP and its iteration
+        // bound) takes the flight controller a while; bytes sent meanwhile
+        // would pile up in its receive queue. A heartbeat is answered only
+        // after the selection is processed, so waiting for it paces the host.
+        self.send(&ToFc::Heartbeat { seq: u32::MAX })?;
+        // (Late acknowledgements of repeated Hellos may come first.)
+        for _ in 0..64 {
+            if let FromFc::Heartbeat { seq: u32::MAX } = self.receive()? {
+                return Ok(());
+            }
+        }
+        bail!("the flight controller did not confirm the controller selection")
     }
 
     /// One lockstep control step: setpoint (and preview), the state for step
@@ -193,7 +211,13 @@ impl FcClient {
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
     ) -> Result<RemoteStep> {
-        self.send(&ToFc::Setpoint(wire(sp)))?;
+        // The flight controller holds its setpoint: send it only when it
+        // changes (a fixed target then costs one frame a step, not two).
+        let w = wire(sp);
+        if self.last_setpoint != Some(w) {
+            self.send(&ToFc::Setpoint(w))?;
+            self.last_setpoint = Some(w);
+        }
         for (k, p) in preview.iter().enumerate() {
             self.send(&ToFc::Preview {
                 k: (k + 1) as u8,
@@ -214,17 +238,20 @@ impl FcClient {
                         cycles: 0,
                         qp_iterations: 0,
                         failsafe,
+                        counters: Default::default(),
                     });
                 }
                 FromFc::Telemetry {
                     seq: s,
                     cycles,
                     qp_iterations,
+                    counters,
                     ..
                 } if s == seq => {
                     let mut r = out.ok_or_else(|| anyhow::anyhow!("telemetry before the actuator frame"))?;
                     r.cycles = cycles;
                     r.qp_iterations = qp_iterations;
+                    r.counters = counters;
                     return Ok(r);
                 }
                 _ => {}
@@ -371,7 +398,7 @@ impl Qemu {
             ])
             .args(["-semihosting-config", "enable=on,target=native"])
             .arg("-serial")
-            .arg(format!("tcp:{addr},server=on,wait=on"))
+            .arg(format!("tcp:{addr},server=on,wait=on,nodelay=on"))
             .arg("-kernel")
             .arg(elf)
             .stdout(std::process::Stdio::null())

@@ -57,6 +57,15 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
         "diverged": res.diverged,
         "step_time_ns": { "mean": res.step_time_ns.mean, "max": res.step_time_ns.max },
     });
+    if let Some(c) = res.link_counters {
+        v["failsafe_steps"] = json!(res.failsafe_steps);
+        v["link_counters"] = json!({
+            "ok": c.ok, "bad_cobs": c.bad_cobs, "bad_crc": c.bad_crc, "oversized": c.oversized,
+            "bad_message": c.bad_message, "out_of_order": c.out_of_order,
+            "invalid_values": c.invalid_values, "unexpected": c.unexpected,
+            "failsafe_entries": c.failsafe_entries,
+        });
+    }
     if let Some((mean, max)) = res.instructions_per_step {
         v["instructions_per_step"] = json!({
             "mean": mean,

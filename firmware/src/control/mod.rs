@@ -96,6 +96,24 @@ impl<T: RealField + Copy> Setpoint<T> {
         }
     }
 
+    /// The setpoint `t` seconds ahead along its own derivatives (constant
+    /// jerk and heading rate): what a controller assumes without a preview.
+    pub fn extrapolate(&self, t: T) -> Self {
+        let half = crate::lit::<T>(0.5);
+        let sixth = crate::lit::<T>(1.0 / 6.0);
+        Self {
+            pos_ned_m: self.pos_ned_m
+                + self.vel_ned_mps * t
+                + self.acc_ned_mps2 * (half * t * t)
+                + self.jerk_ned_mps3 * (sixth * t * t * t),
+            vel_ned_mps: self.vel_ned_mps + self.acc_ned_mps2 * t + self.jerk_ned_mps3 * (half * t * t),
+            acc_ned_mps2: self.acc_ned_mps2 + self.jerk_ned_mps3 * t,
+            jerk_ned_mps3: self.jerk_ned_mps3,
+            yaw_rad: self.yaw_rad + self.yaw_rate_radps * t,
+            yaw_rate_radps: self.yaw_rate_radps,
+        }
+    }
+
     /// True if every value is finite.
     pub fn is_valid(&self) -> bool {
         self.pos_ned_m.iter().all(|v| v.is_finite())
@@ -216,9 +234,9 @@ pub struct HeadingFrame<T: RealField + Copy> {
 impl<T: RealField + Copy> HeadingFrame<T> {
     /// The frame of heading `yaw` (rad).
     pub fn new(yaw: T) -> Self {
-        let (s, c) = yaw.sin_cos();
-        let half = crate::lit::<T>(0.5);
-        let q = nalgebra::Vector4::new((yaw * half).cos(), T::zero(), T::zero(), (yaw * half).sin());
+        let (s, c) = crate::math::sin_cos(yaw);
+        let (sh, ch) = crate::math::sin_cos(yaw * crate::lit::<T>(0.5));
+        let q = nalgebra::Vector4::new(ch, T::zero(), T::zero(), sh);
         Self { s, c, q }
     }
 

@@ -6,6 +6,7 @@ use super::{
     ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
+use crate::math as trig;
 use crate::model::{InputBox, VehicleParams};
 use nalgebra::{RealField, Vector3, Vector4};
 
@@ -136,9 +137,10 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
         let tt = tilt_and_thrust(&self.params, &acc, &est.vel_ned_mps, psi);
         // Euler angle rates from body rates.
         let w = est.rates_frd_radps;
-        let (sphi, cphi) = phi.sin_cos();
-        let cth = theta.cos().max(lit(0.1));
-        let tth = theta.sin() / cth;
+        let (sphi, cphi) = trig::sin_cos(phi);
+        let (sth, cth) = trig::sin_cos(theta);
+        let cth = cth.max(lit(0.1));
+        let tth = sth / cth;
         let phi_dot = w[0] + (w[1] * sphi + w[2] * cphi) * tth;
         let theta_dot = w[1] * cphi - w[2] * sphi;
         let psi_dot = (w[1] * sphi + w[2] * cphi) / cth;
@@ -149,8 +151,8 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
             ReferenceMode::Feedforward => AttitudeRef::feedforward(&self.params, sp).rates_frd_radps,
         };
         // Thrust with tilt and drag compensation at the actual attitude (3.79).
-        let tilt_cos = (cphi * theta.cos()).max(lit(0.5));
-        let lift = tt.thrust_n * tt.roll_rad.cos() * tt.pitch_rad.cos();
+        let tilt_cos = (cphi * trig::cos(theta)).max(lit(0.5));
+        let lift = tt.thrust_n * trig::cos(tt.roll_rad) * trig::cos(tt.pitch_rad);
         let raw = Vector4::new(
             lift / tilt_cos,
             g.roll.law(tt.roll_rad - phi, wd[0] - phi_dot),

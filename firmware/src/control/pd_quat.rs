@@ -14,6 +14,7 @@ use super::{
     ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
+use crate::math as trig;
 use crate::model::{euler_to_quat, quat_conj, quat_mul, quat_to_rotation, InputBox, VehicleParams};
 use nalgebra::{RealField, Vector3, Vector4};
 
@@ -112,7 +113,7 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
         };
         // Thrust: vertical component from the desired lift, over the actual R33.
         let r33 = quat_to_rotation(&qa)[(2, 2)].max(lit(0.5));
-        let lift = tt.thrust_n * tt.roll_rad.cos() * tt.pitch_rad.cos();
+        let lift = tt.thrust_n * trig::cos(tt.roll_rad) * trig::cos(tt.pitch_rad);
         let raw = Vector4::new(
             lift / r33,
             -g.q1.kp * qe[1] - g.q1.kd * (w[0] - wd[0]),

@@ -4,6 +4,7 @@
 
 use super::Setpoint;
 use crate::lit;
+use crate::math as trig;
 use crate::model::VehicleParams;
 use nalgebra::{RealField, Vector3};
 
@@ -52,17 +53,17 @@ pub fn tilt_and_thrust<T: RealField + Copy>(
     let ay = acc_d[1] + p.kt_nspm[1] / m * vel[1];
     let az = acc_d[2] + p.kt_nspm[2] / m * vel[2];
     let lift = (g - az).max(lit::<T>(0.2) * g);
-    let (s, c) = yaw.sin_cos();
+    let (s, c) = trig::sin_cos(yaw);
     let max_tilt = lit::<T>(MAX_TILT_RAD);
     let pitch = ((-c * ax - s * ay) / lift).atan().max(-max_tilt).min(max_tilt);
-    let roll = ((-s * ax + c * ay) * pitch.cos() / lift)
+    let roll = ((-s * ax + c * ay) * trig::cos(pitch) / lift)
         .atan()
         .max(-max_tilt)
         .min(max_tilt);
     TiltThrust {
         roll_rad: roll,
         pitch_rad: pitch,
-        thrust_n: m * lift / (roll.cos() * pitch.cos()),
+        thrust_n: m * lift / (trig::cos(roll) * trig::cos(pitch)),
     }
 }
 
@@ -117,8 +118,8 @@ impl<T: RealField + Copy> AttitudeRef<T> {
         let theta_dot = (fwd.pitch_rad - back.pitch_rad) / two_h;
         let psi_dot = sp.yaw_rate_radps;
         // Euler rates → body rates (ZYX).
-        let (sphi, cphi) = tt.roll_rad.sin_cos();
-        let (sth, cth) = tt.pitch_rad.sin_cos();
+        let (sphi, cphi) = trig::sin_cos(tt.roll_rad);
+        let (sth, cth) = trig::sin_cos(tt.pitch_rad);
         let rates = Vector3::new(
             phi_dot - psi_dot * sth,
             theta_dot * cphi + psi_dot * sphi * cth,
@@ -179,7 +180,7 @@ mod tests {
         let p = VehicleParams::<f64>::os4();
         let (r, w) = (2.0, 2.0 * core::f64::consts::PI / 6.0);
         let sp_at = |t: f64| {
-            let (s, c) = (w * t).sin_cos();
+            let (s, c) = trig::sin_cos(w * t);
             Setpoint {
                 pos_ned_m: Vector3::new(r * s, r * (1.0 - c), -1.0),
                 vel_ned_mps: Vector3::new(r * w * c, r * w * s, 0.0),

@@ -171,6 +171,7 @@ impl FlightCore {
         if let Some(t) = self.last_valid_us {
             if now_us.saturating_sub(t) > self.cfg.failsafe_timeout_us && !self.failsafe {
                 self.failsafe = true;
+                self.counters.failsafe_entries += 1;
                 self.u = Vector4::new(
                     self.cfg.descent_thrust_fraction * self.params.hover_thrust_n(),
                     0.0,

@@ -287,6 +287,8 @@ fn failsafe_after_50_ms_without_valid_sensor_and_recovery() {
     );
     rig.fc.check_timeout(51_500);
     assert!(rig.fc.failsafe());
+    rig.fc.check_timeout(52_000);
+    assert_eq!(rig.fc.counters().failsafe_entries, 1, "one entry, counted once");
     let u = rig.fc.output();
     assert!(
         (u[0] - 0.85 * 6.3765).abs() < 1e-3 && u[1] == 0.0 && u[2] == 0.0 && u[3] == 0.0,
@@ -303,6 +305,10 @@ fn failsafe_after_50_ms_without_valid_sensor_and_recovery() {
     );
     assert!(matches!(r[0], FromFc::Actuator { failsafe: false, .. }));
     assert!(!rig.fc.failsafe());
+    // The episode stays visible in the telemetry after recovery.
+    assert!(r
+        .iter()
+        .any(|m| matches!(m, FromFc::Telemetry { counters, .. } if counters.failsafe_entries == 1)));
 }
 
 #[test]

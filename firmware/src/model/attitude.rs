@@ -2,6 +2,7 @@
 //! (scalar first, body FRD → earth NED), and between the two state forms.
 
 use super::{lit, EulerState, QuatState};
+use crate::math as trig;
 use nalgebra::{RealField, Vector3, Vector4};
 
 /// A quaternion `[q0 q1 q2 q3]`, scalar first.
@@ -10,9 +11,9 @@ pub type Quat<T> = Vector4<T>;
 /// Quaternion of the ZYX rotation with roll φ, pitch θ, yaw ψ (rad).
 pub fn euler_to_quat<T: RealField + Copy>(phi: T, theta: T, psi: T) -> Quat<T> {
     let h = lit::<T>(0.5);
-    let (sr, cr) = (phi * h).sin_cos();
-    let (sp, cp) = (theta * h).sin_cos();
-    let (sy, cy) = (psi * h).sin_cos();
+    let (sr, cr) = trig::sin_cos(phi * h);
+    let (sp, cp) = trig::sin_cos(theta * h);
+    let (sy, cy) = trig::sin_cos(psi * h);
     Vector4::new(
         cr * cp * cy + sr * sp * sy,
         sr * cp * cy - cr * sp * sy,

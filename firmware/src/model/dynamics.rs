@@ -3,6 +3,7 @@
 //! external disturbances.
 
 use super::{lit, VehicleParams};
+use crate::math as trig;
 use nalgebra::{RealField, SVector, Vector3, Vector4};
 
 /// Euler-form state `[x y z ẋ ẏ ż φ θ ψ p q r]`: NED position (m), NED velocity
@@ -155,9 +156,9 @@ impl<T: RealField + Copy> Vehicle<T> {
     /// (the result is then non-finite); use the quaternion form for aerobatics.
     pub fn euler_derivative(&self, x: &EulerState<T>, u: &Input<T>, omega_r: T, d: &Disturbance<T>) -> EulerState<T> {
         let (phi, theta, psi) = (x[6], x[7], x[8]);
-        let (sphi, cphi) = phi.sin_cos();
-        let (sth, cth) = theta.sin_cos();
-        let (spsi, cpsi) = psi.sin_cos();
+        let (sphi, cphi) = trig::sin_cos(phi);
+        let (sth, cth) = trig::sin_cos(theta);
+        let (spsi, cpsi) = trig::sin_cos(psi);
         let inv_cth = T::one() / cth;
         let tth = sth * inv_cth;
         let vel = Vector3::new(x[3], x[4], x[5]);

@@ -5,6 +5,7 @@
 //! eliminated (q0 is uncontrollable, thesis §3.6).
 
 use super::{lit, QuatState, VehicleParams};
+use crate::math as trig;
 use nalgebra::{RealField, SMatrix, SVector};
 
 /// Continuous-time linear model `δẋ = A δx + B δU` (12 states, 4 inputs).
@@ -42,7 +43,7 @@ fn common_blocks<T: RealField + Copy>(p: &VehicleParams<T>) -> LinearModel<T> {
 pub fn euler_hover_model<T: RealField + Copy>(p: &VehicleParams<T>, yaw: T) -> LinearModel<T> {
     let mut lm = common_blocks(p);
     let g = p.gravity_mps2;
-    let (s, c) = yaw.sin_cos();
+    let (s, c) = trig::sin_cos(yaw);
     let a = &mut lm.a;
     a[(3, 6)] = -g * s;
     a[(3, 7)] = -g * c;
@@ -61,7 +62,7 @@ pub fn quat_hover_model<T: RealField + Copy>(p: &VehicleParams<T>, yaw: T) -> Li
     let g = p.gravity_mps2;
     let two = lit::<T>(2.0);
     let half = lit::<T>(0.5);
-    let (s, c) = (yaw * half).sin_cos();
+    let (s, c) = trig::sin_cos(yaw * half);
     let a = &mut lm.a;
     // Thrust direction terms 2(q0q2 + q1q3), 2(q2q3 − q0q1) with q0(q1,q2,q3).
     a[(3, 6)] = -two * g * s;

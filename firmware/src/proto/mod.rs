@@ -14,7 +14,7 @@ pub use frame::{encode, FrameDecoder, FrameError, MAX_FRAME};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version; both ends must agree in the handshake.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Which controller the flight controller runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -116,6 +116,9 @@ pub struct Counters {
     pub invalid_values: u32,
     /// Messages that arrived in a state that does not accept them.
     pub unexpected: u32,
+    /// Times the failsafe took over (no valid sensor frame in time). A
+    /// failsafe that starts and ends between two sensor frames shows only here.
+    pub failsafe_entries: u32,
 }
 
 /// Flight controller → host.

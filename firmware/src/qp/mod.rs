@@ -23,6 +23,7 @@
 
 use crate::linalg::{lu_solve, symmetric_eigenvalues};
 use crate::lit;
+use crate::math::{clamp, max as fmax};
 use nalgebra::{RealField, SMatrix, SVector};
 
 /// Why a QP could not be set up.
@@ -70,7 +71,9 @@ pub struct QpSolution<T: RealField + Copy, const N: usize> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QpSettings<T> {
     /// Stop early when the optimality measure is at most this (floored at the
-    /// float type's rounding of the gradient).
+    /// float type's rounding of the gradient). Zero or less: never stop early,
+    /// run `min(max_iterations, bound)` iterations — a fixed-time solve, and
+    /// how the worst case is measured.
     pub tolerance: T,
     /// Objective accuracy (absolute) the a-priori bound guarantees; the
     /// iterations are capped at that bound.
@@ -105,6 +108,8 @@ pub struct BoxQp<T: RealField + Copy, const N: usize> {
     l: T,
     mu: T,
     beta: T,
+    /// `L / dᵢ`: turns a scaled step into the gradient mapping in original units.
+    l_over_d: SVector<T, N>,
 }
 
 impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
@@ -136,6 +141,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             l,
             mu,
             beta: (sl - smu) / (sl + smu),
+            l_over_d: d.map(|di| l / di),
         })
     }
 
@@ -187,8 +193,8 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
         let grad = self.h * z + g;
         let mut r = T::zero();
         for i in 0..N {
-            let p = (z[i] - grad[i]).max(lb[i]).min(ub[i]);
-            r = r.max((z[i] - p).abs());
+            let p = clamp(z[i] - grad[i], lb[i], ub[i]);
+            r = fmax(r, (z[i] - p).abs());
         }
         r
     }
@@ -232,7 +238,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
         let proj = |v: &SVector<T, N>| {
             let mut o = *v;
             for i in 0..N {
-                o[i] = v[i].max(lbs[i]).min(ubs[i]);
+                o[i] = clamp(v[i], lbs[i], ubs[i]);
             }
             o
         };
@@ -245,7 +251,11 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             width = width.max(ub[i].abs().max(lb[i].abs()));
         }
         let floor = lit::<T>(4.0 * N as f64) * T::default_epsilon() * (self.h.amax() * width + g.amax());
-        let tol = settings.tolerance.max(floor);
+        let tol = if settings.tolerance > T::zero() {
+            settings.tolerance.max(floor)
+        } else {
+            -T::one()
+        };
         let mut x = proj(&z0.component_div(&self.d));
         let mut x_prev = x;
         let mut iterations = 0u32;
@@ -260,7 +270,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             // Gradient mapping back in original units (interior: exactly ‖∇f‖).
             let mut gm = T::zero();
             for i in 0..N {
-                gm = gm.max(((y[i] - x_new[i]) * self.l / self.d[i]).abs());
+                gm = fmax(gm, ((y[i] - x_new[i]) * self.l_over_d[i]).abs());
             }
             x_prev = x;
             x = x_new;

@@ -227,3 +227,30 @@ fn early_stop_is_still_feasible() {
     assert!((0..6).all(|i| sol.z[i] >= lb[i] && sol.z[i] <= ub[i]));
     assert!(sol.residual > 0.0);
 }
+
+#[test]
+fn zero_tolerance_runs_exactly_to_the_bound() {
+    // Fixed-time mode: an easy problem (solution interior, reached in a few
+    // iterations with a tolerance) still runs all min(max_iterations, bound).
+    let h = spd::<4>(3, 50.0);
+    let qp = BoxQp::new(&h).unwrap();
+    let lb = SVector::<f64, 4>::repeat(-10.0);
+    let ub = SVector::<f64, 4>::repeat(10.0);
+    let g = SVector::<f64, 4>::new(0.1, -0.2, 0.05, 0.0);
+    let mut s = QpSettings {
+        tolerance: 1e-6,
+        accuracy: 1e-9,
+        max_iterations: u32::MAX,
+        polish: false,
+    };
+    let early = qp.solve(&g, &lb, &ub, &SVector::zeros(), &s);
+    assert_eq!(early.status, QpStatus::Converged);
+    s.tolerance = 0.0;
+    let fixed = qp.solve(&g, &lb, &ub, &SVector::zeros(), &s);
+    assert!(early.iterations < fixed.iterations);
+    assert_eq!(fixed.iterations, fixed.iteration_bound);
+    s.max_iterations = 7;
+    assert_eq!(qp.solve(&g, &lb, &ub, &SVector::zeros(), &s).iterations, 7);
+    // Running on never makes the answer worse than the converged one.
+    assert!(fixed.objective <= early.objective + 1e-12);
+}
