@@ -8,18 +8,30 @@ cd "$(dirname "$0")"
 # rust-toolchain.toml pins stable + thumbv7em-none-eabihf; make sure both are present.
 rustup show active-toolchain >/dev/null
 rustup target list --installed | grep -qx thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
+# QEMU (Debian's qemu-system-arm) for the processor-in-the-loop tests.
+if ! command -v qemu-system-arm >/dev/null; then
+    echo "== installing qemu-system-arm (apt)"
+    if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends qemu-system-arm >/dev/null
+fi
 
 echo "== format"
 cargo fmt --all -- --check
 echo "== clippy (host, all targets)"
 cargo clippy --workspace --all-targets -- -D warnings
 echo "== clippy + build (firmware for thumbv7em-none-eabihf)"
-cargo clippy -p firmware --target thumbv7em-none-eabihf -- -D warnings
+cargo clippy -p firmware -p hal-shim --target thumbv7em-none-eabihf --bins --examples -- -D warnings
 cargo build -p firmware --release --target thumbv7em-none-eabihf
+echo "== image size (flash = text + data, static RAM = data + bss)"
+size_tool="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size"
+if [ -x "$size_tool" ]; then "$size_tool" target/thumbv7em-none-eabihf/release/firmware; fi
 echo "== tests"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
-cargo test --workspace 2>&1 | tee "$log"
+# --include-ignored: the QEMU (processor-in-the-loop) tests, ignored by a
+# plain `cargo test` on machines without QEMU.
+cargo test --workspace -- --include-ignored 2>&1 | tee "$log"
 # One closing line over every test binary (cargo's last line is often a
 # doc-test run with 0 tests).
 echo "== independent LQR design check (python-control)"

@@ -340,31 +340,30 @@ fn session(stream: TcpStream, idle: Duration) -> Result<firmware::proto::Counter
 /// the 168 MHz system clock (calibrated: 200 000 instructions → 33 601 counts).
 pub const SYSTICK_PER_INSTRUCTION: f64 = 0.168;
 
-/// The firmware image: `$SIL_FIRMWARE_ELF`, else the workspace's release build
-/// (built with cargo when missing).
+/// The firmware image: `$SIL_FIRMWARE_ELF`, else the workspace's release
+/// build, brought up to date with cargo first (a no-op when it is current,
+/// and never a stale image).
 pub fn firmware_elf() -> Result<std::path::PathBuf> {
     if let Some(p) = std::env::var_os("SIL_FIRMWARE_ELF") {
         return Ok(p.into());
     }
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let elf = root.join("target/thumbv7em-none-eabihf/release/firmware");
-    if !elf.exists() {
-        let st = std::process::Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
-            .args([
-                "build",
-                "-q",
-                "-p",
-                "firmware",
-                "--release",
-                "--target",
-                "thumbv7em-none-eabihf",
-            ])
-            .current_dir(&root)
-            .status()
-            .context("running cargo to build the firmware image")?;
-        if !st.success() {
-            bail!("building the firmware image failed");
-        }
+    let st = std::process::Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+        .args([
+            "build",
+            "-q",
+            "-p",
+            "firmware",
+            "--release",
+            "--target",
+            "thumbv7em-none-eabihf",
+        ])
+        .current_dir(&root)
+        .status()
+        .context("running cargo to build the firmware image")?;
+    if !st.success() {
+        bail!("building the firmware image failed");
     }
     Ok(elf)
 }

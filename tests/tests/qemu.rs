@@ -1,0 +1,156 @@
+//! Processor-in-the-loop: the thumbv7em image in QEMU's netduinoplus2
+//! (emulated STM32F405, `-icount shift=0`).
+//!
+//! These need `qemu-system-arm` (Debian package of that name), so they are
+//! `#[ignore]`d for a plain `cargo test`; `./test.sh` installs QEMU and runs
+//! them with `--include-ignored`. They fail, not skip, when QEMU is missing.
+
+use serde_json::Value;
+use sil_host::flight::{fly, fly_target, ControllerFamily, FlightConfig, MpcPreset, Target};
+use sil_host::{ModelKind, Scenario, ScenarioKind};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const NEEDS_QEMU: &str = "needs qemu-system-arm; ./test.sh installs it and runs these";
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn cargo() -> Command {
+    let mut c = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    c.current_dir(root());
+    c
+}
+
+/// Builds (if needed) and runs a firmware example in QEMU; returns its
+/// semihosting output and whether it exited with success.
+fn run_example_in_qemu(name: &str) -> (String, bool) {
+    let st = cargo()
+        .args(["build", "-q", "--release", "-p", "firmware", "--example", name])
+        .args(["--target", "thumbv7em-none-eabihf"])
+        .status()
+        .expect("cargo");
+    assert!(st.success(), "building example {name} for thumbv7em failed");
+    let elf = root().join(format!("target/thumbv7em-none-eabihf/release/examples/{name}"));
+    let out = Command::new("qemu-system-arm")
+        .args(["-machine", "netduinoplus2", "-display", "none", "-monitor", "none"])
+        .args(["-serial", "null", "-icount", "shift=0"])
+        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(&elf)
+        .output()
+        .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
+    (String::from_utf8_lossy(&out.stdout).into_owned(), out.status.success())
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn every_controller_fits_its_cycle_budget() {
+    let _ = NEEDS_QEMU;
+    let (out, ok) = run_example_in_qemu("budget");
+    // Rows: | controller | form | rate | measured | instructions | budget | load | verdict | stack |
+    let rows: Vec<Vec<&str>> = out
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| controller"))
+        .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
+        .collect();
+    // 4 PD/LQR variants × (control, loop) + 4 MPC variants × (control, guaranteed, loop).
+    assert_eq!(rows.len(), 20, "{out}");
+    for r in &rows {
+        let instr: f64 = r[4].parse().unwrap_or_else(|_| panic!("row {r:?}"));
+        let budget: f64 = r[5].parse().unwrap();
+        assert!(instr > 1000.0, "implausibly cheap: {r:?}");
+        if r[3] != "loop" {
+            // The enforced rule: worst × CPI 1.5 × margin 1.5 within the budget.
+            assert!(instr * 2.25 <= budget, "over budget: {r:?}");
+            assert_eq!(r[7], "fits", "{r:?}");
+        }
+    }
+    // PD and LQR at 1 kHz, the fast MPC at 200 Hz are all present.
+    for (c, hz) in [
+        ("pd", "1000"),
+        ("lqr", "1000"),
+        ("mpc-fast", "200"),
+        ("mpc-thesis", "4"),
+    ] {
+        assert!(rows.iter().any(|r| r[0] == c && r[2] == hz), "{c} at {hz} Hz missing");
+    }
+    let stack: usize = out
+        .lines()
+        .find_map(|l| l.strip_prefix("budget: stack high-water "))
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .expect("stack line");
+    assert!(stack > 1024 && stack < 128 * 1024, "stack high-water {stack} B");
+    assert!(out.contains("budget: all fit"), "{out}");
+    assert!(ok, "budget example exited with failure");
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn mcu_and_host_compute_the_same_closed_loop() {
+    let host = cargo()
+        .args(["run", "-q", "--release", "-p", "firmware", "--example", "equivalence"])
+        .output()
+        .expect("cargo");
+    assert!(host.status.success());
+    let host = String::from_utf8_lossy(&host.stdout).into_owned();
+    let (mcu, ok) = run_example_in_qemu("equivalence");
+    assert!(ok);
+    let parse = |s: &str| -> Vec<Vec<f64>> {
+        s.lines()
+            .map(|l| l.split_whitespace().map(|v| v.parse().unwrap()).collect())
+            .collect()
+    };
+    let (h, m) = (parse(&host), parse(&mcu));
+    assert_eq!(h.len(), 40);
+    assert_eq!(h.len(), m.len());
+    for (a, b) in h.iter().zip(&m) {
+        assert_eq!(a[0], b[0]);
+        // QP iterations within one; inputs to f32 math-library rounding.
+        assert!((a[1] - b[1]).abs() <= 1.0, "{a:?} vs {b:?}");
+        for i in 2..6 {
+            assert!((a[i] - b[i]).abs() <= 1e-4 * (1.0 + a[i].abs()), "{a:?} vs {b:?}");
+        }
+    }
+}
+
+fn setpoint(family: ControllerFamily, seconds: f64) -> FlightConfig {
+    let mut c = FlightConfig::new(
+        family,
+        ModelKind::Quaternion,
+        Scenario::default_for(ScenarioKind::Setpoint),
+    );
+    c.preset = MpcPreset::Fast;
+    c.scenario.duration_s = seconds;
+    c
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn qemu_flight_matches_in_process_and_counts_instructions() {
+    for family in [ControllerFamily::Lqr, ControllerFamily::Mpc] {
+        let cfg = setpoint(family, 2.0);
+        let local = fly(&cfg).unwrap();
+        let pil = fly_target(&cfg, &Target::Qemu).unwrap();
+        assert_eq!(local.steps, pil.steps);
+        for (a, b) in [
+            (local.metrics.x.rmse_m, pil.metrics.x.rmse_m),
+            (local.metrics.y.rmse_m, pil.metrics.y.rmse_m),
+            (local.metrics.z.rmse_m, pil.metrics.z.rmse_m),
+        ] {
+            assert!(
+                (a - b).abs() <= 0.02 * a,
+                "{family:?}: RMSE {a} in-process vs {b} in QEMU"
+            );
+        }
+        let (mean, max) = pil.instructions_per_step.expect("instructions per step");
+        assert!(mean > 1000.0 && max >= mean, "{mean} {max}");
+        let c = pil.link_counters.expect("counters");
+        assert_eq!(c.failsafe_entries, 0);
+        assert_eq!(c.bad_crc + c.bad_cobs + c.bad_message + c.oversized + c.out_of_order, 0);
+        assert_eq!(pil.failsafe_steps, 0);
+        let j: Value = sil_host::report::flight_json(&cfg, &pil);
+        assert!(j["instructions_per_step"]["max"].as_f64().unwrap() > 0.0);
+    }
+}
