@@ -110,6 +110,41 @@ pub struct FlightConfig {
     pub control_hz: f64,
     /// Plant RK4 rate, Hz.
     pub integration_hz: f64,
+    /// The vehicle: what the controllers are designed for and what the plant
+    /// is (before `disturbance` and `uncertainty`). Default: the OS4 (SPEC §2).
+    pub vehicle: VehicleParams<f64>,
+    /// How the true vehicle differs from `vehicle` (robustness sweeps).
+    pub uncertainty: Option<Uncertainty>,
+}
+
+/// A true vehicle that differs from the one the controller was designed for.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Uncertainty {
+    /// Mass multiplier.
+    pub mass_scale: f64,
+    /// Multipliers of Ix, Iy, Iz.
+    pub inertia_scale: [f64; 3],
+    /// Multiplier of every translational and rotational drag coefficient.
+    pub drag_scale: f64,
+    /// Rotor lag time constant, s (the plant's rotor lag is on); `None`: no lag.
+    pub rotor_tau_s: Option<f64>,
+}
+
+impl Uncertainty {
+    /// `p` with this uncertainty applied.
+    pub fn apply(&self, p: &VehicleParams<f64>) -> VehicleParams<f64> {
+        let mut q = *p;
+        q.mass_kg *= self.mass_scale;
+        for i in 0..3 {
+            q.inertia_kgm2[i] *= self.inertia_scale[i];
+            q.kt_nspm[i] *= self.drag_scale;
+            q.kr_nms[i] *= self.drag_scale;
+        }
+        if let Some(t) = self.rotor_tau_s {
+            q.rotor_tau_s = t;
+        }
+        q
+    }
 }
 
 impl FlightConfig {
@@ -126,6 +161,8 @@ impl FlightConfig {
             disturbance: DisturbanceSet::NONE,
             control_hz: 500.0,
             integration_hz: 1000.0,
+            vehicle: VehicleParams::OS4,
+            uncertainty: None,
         }
     }
 }
@@ -179,7 +216,7 @@ pub fn build_controller(
     mode: ReferenceMode,
     ts: f64,
 ) -> Result<AnyController<f32>, ControlError> {
-    build_controller_with(family, model, gains, preset, None, mode, ts)
+    build_controller_with(family, model, gains, preset, None, mode, ts, &VehicleParams::OS4)
 }
 
 /// [`build_controller`] with an optional MPC configuration replacing the preset's.
@@ -191,8 +228,9 @@ pub fn build_controller_with(
     mpc: Option<MpcConfig>,
     mode: ReferenceMode,
     ts: f64,
+    vehicle: &VehicleParams<f64>,
 ) -> Result<AnyController<f32>, ControlError> {
-    let p = VehicleParams::<f32>::os4();
+    let p: VehicleParams<f32> = vehicle.cast();
     Ok(match (family, model) {
         (ControllerFamily::Mpc, _) => {
             let form = match model {
@@ -299,13 +337,29 @@ pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightR
             q.client()?
         }
     };
+    if cfg.vehicle != VehicleParams::OS4 {
+        anyhow::bail!(
+            "over the link the flight controller flies its built-in vehicle (the OS4); --vehicle works in-process only"
+        );
+    }
     if cfg.gains != GainSet::Tuned
         || cfg.mpc_override.is_some()
         || (cfg.controller != ControllerFamily::Mpc && (cfg.control_hz - 500.0).abs() > 1e-9)
     {
         anyhow::bail!("over the link the flight controller runs its built-in configuration: tuned PD gains, LQR at 500 Hz, MPC presets");
     }
-    let mut res = fly_inner(cfg, None, Some(remote), |_, _| {}).map(|(r, _)| r)?;
+    // The local controller only paces the flight (period, preview size); the
+    // remote one flies it.
+    let pace = build_controller(
+        cfg.controller,
+        cfg.model,
+        cfg.gains,
+        cfg.preset,
+        cfg.reference.into(),
+        1.0 / cfg.control_hz,
+    )
+    .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
+    let mut res = fly_inner(cfg, pace, None, Some(remote), |_, _| {}).map(|(r, _)| r)?;
     if qemu.is_some() {
         // The telemetry's cycles are SysTick counts; under icount they count instructions.
         let k = 1.0 / crate::link::SYSTICK_PER_INSTRUCTION;
@@ -313,15 +367,6 @@ pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightR
     }
     drop(qemu);
     Ok(res)
-}
-
-/// The MPC's a-priori QP bound, or 0.
-fn qp_bound(c: &AnyController<f32>) -> u32 {
-    match c {
-        AnyController::MpcThesis(m) => m.iteration_bound(),
-        AnyController::MpcFast(m) => m.iteration_bound(),
-        _ => 0,
-    }
 }
 
 /// Flies `cfg` up to `stop_at` seconds (the whole scenario when `None`),
@@ -332,31 +377,39 @@ pub fn fly_until(
     stop_at: Option<f64>,
     inspect: impl FnMut(f64, &AnyController<f32>),
 ) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
-    fly_inner(cfg, stop_at, None, inspect)
-}
-
-fn fly_inner(
-    cfg: &FlightConfig,
-    stop_at: Option<f64>,
-    mut remote: Option<crate::link::FcClient>,
-    mut inspect: impl FnMut(f64, &AnyController<f32>),
-) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
-    cfg.scenario.validate().map_err(anyhow::Error::msg)?;
-    if !(cfg.integration_hz.is_finite() && cfg.integration_hz >= 1.0) {
-        anyhow::bail!("integration rate must be at least 1 Hz");
-    }
-    // The MPC presets fix their own execution period; PD/LQR run at control_hz.
-    let probe_ts = 1.0 / cfg.control_hz;
-    let mut ctrl = build_controller_with(
+    let ctrl = build_controller_with(
         cfg.controller,
         cfg.model,
         cfg.gains,
         cfg.preset,
         cfg.mpc_override,
         cfg.reference.into(),
-        probe_ts,
+        1.0 / cfg.control_hz,
+        &cfg.vehicle,
     )
     .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
+    fly_inner(cfg, ctrl, stop_at, None, inspect)
+}
+
+/// Flies `cfg` with a controller built by the caller (e.g. an MPC with a
+/// horizon no preset has); `cfg`'s controller fields then only label it.
+pub fn fly_with<C: Controller<f32>>(cfg: &FlightConfig, ctrl: C) -> anyhow::Result<FlightResult> {
+    fly_inner(cfg, ctrl, None, None, |_, _| {}).map(|(r, _)| r)
+}
+
+fn fly_inner<C: Controller<f32>>(
+    cfg: &FlightConfig,
+    mut ctrl: C,
+    stop_at: Option<f64>,
+    mut remote: Option<crate::link::FcClient>,
+    mut inspect: impl FnMut(f64, &C),
+) -> anyhow::Result<(FlightResult, C)> {
+    cfg.scenario.validate().map_err(anyhow::Error::msg)?;
+    if !(cfg.integration_hz.is_finite() && cfg.integration_hz >= 1.0) {
+        anyhow::bail!("integration rate must be at least 1 Hz");
+    }
+    // The MPC presets fix their own execution period; PD/LQR run at control_hz.
+    let probe_ts = 1.0 / cfg.control_hz;
     let ts = ctrl.period_s().unwrap_or(probe_ts);
     if !(ts.is_finite() && ts > 0.0) {
         anyhow::bail!("control rate must be positive");
@@ -372,12 +425,20 @@ fn fly_inner(
     };
     let ctrl_every = per(ts, "control")?;
     let rec_every = per(RECORD_DT_S, "recording")?;
-    let mut pc = PlantConfig::nominal(cfg.model).with_disturbance(cfg.disturbance);
+    let mut pc = PlantConfig {
+        params: cfg.vehicle,
+        ..PlantConfig::nominal(cfg.model)
+    }
+    .with_disturbance(cfg.disturbance);
+    if let Some(u) = cfg.uncertainty {
+        pc.params = u.apply(&pc.params);
+        pc.rotor_lag |= u.rotor_tau_s.is_some();
+    }
     pc.integration_hz = cfg.integration_hz;
     let sc = &cfg.scenario;
     let x0 = hover_quat_state(&Vector3::from(sc.start_ned_m), sc.start_yaw_rad);
     let mut plant = Plant::new(pc, &x0);
-    let nominal = VehicleParams::OS4;
+    let nominal = cfg.vehicle;
     let end = stop_at.unwrap_or(sc.duration_s).min(sc.duration_s);
     let ticks = (end / tick).round() as usize;
     let preview = ctrl.preview_request();
@@ -394,7 +455,7 @@ fn fly_inner(
         step_time_ns: StepTime { mean: 0.0, max: 0.0 },
         saturated_steps: 0,
         qp_iterations: (0.0, 0),
-        qp_iteration_bound: qp_bound(&ctrl),
+        qp_iteration_bound: ctrl.iteration_bound(),
         instructions_per_step: None,
         steps: 0,
         failsafe_steps: 0,

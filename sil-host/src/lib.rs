@@ -5,6 +5,7 @@
 //! the `sil-host` command line.
 #![deny(missing_docs)]
 
+pub mod config;
 pub mod disturbance;
 pub mod flight;
 pub mod link;

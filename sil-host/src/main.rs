@@ -94,9 +94,9 @@ struct FlyArgs {
     /// or where the controller runs: `in-process` (default; called directly), `framed` (the
     /// flight-controller core in this process, reached only through the framed wire protocol) or
     /// `tcp:HOST:PORT` (a flight controller behind the protocol, e.g. `sil-host serve`) or `qemu`
-    /// (EXPERIMENTAL: the thumbv7em image in qemu-system-arm's netduinoplus2; correct but slow,
-    /// about 50 ms of real time per step — see the README). Give it twice for both, e.g.
-    /// `--target 1,2,-3,45 --target framed`.
+    /// (the thumbv7em image in qemu-system-arm's netduinoplus2 over the emulated USART; the JSON
+    /// then adds instructions per step; ≈ 4-9 ms of real time per step). Give it twice for both,
+    /// e.g. `--target 1,2,-3,45 --target framed`.
     #[arg(long, value_name = "X,Y,Z,YAW_DEG|TARGET", value_parser = parse_target_arg, allow_hyphen_values = true)]
     target: Vec<TargetArg>,
     /// Flight length, s (default 20 for setpoint, 100 for circle and helix).
@@ -116,6 +116,17 @@ struct FlyArgs {
     /// Plant RK4 rate, Hz (sub-steps within each control period).
     #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
     integration_hz: f64,
+    /// Vehicle parameters from a TOML file (any subset of mass_kg, gravity_mps2, inertia_kgm2,
+    /// arm_m, rotor_inertia_kgm2, kf_ns2, km_nms2, kt_nspm, kr_nms, omega_max_radps, rotor_tau_s,
+    /// rotor_gain; the rest stay OS4). Controllers are designed for it and the plant is it.
+    #[arg(long, value_name = "FILE")]
+    vehicle: Option<PathBuf>,
+    /// Scenario from a TOML file (any subset of kind, start_ned_m, start_yaw_deg, target_ned_m,
+    /// target_yaw_deg, radius_m, period_s, climb_rate_mps, duration_s; the rest are the SPEC §9
+    /// defaults of its kind, --scenario when it names none). Other scenario options then apply
+    /// on top of it.
+    #[arg(long, value_name = "FILE")]
+    scenario_file: Option<PathBuf>,
     /// Write the flight as CSV (one row per 10 ms, state columns then x_ref,y_ref,z_ref,psi_ref).
     #[arg(long, value_name = "PATH")]
     csv: Option<PathBuf>,
@@ -296,7 +307,10 @@ fn open_loop(a: &OpenLoopArgs) -> Result<()> {
 }
 
 fn scenario_from(a: &FlyArgs) -> Result<Scenario> {
-    let mut sc = Scenario::default_for(a.scenario);
+    let mut sc = match &a.scenario_file {
+        Some(f) => sil_host::config::load_scenario(f, a.scenario)?,
+        None => Scenario::default_for(a.scenario),
+    };
     if let Some(r) = a.radius {
         sc.radius_m = r;
     }
@@ -336,6 +350,9 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
     cfg.gains = a.gains;
     cfg.preset = a.preset;
     cfg.control_hz = a.control_hz;
+    if let Some(f) = &a.vehicle {
+        cfg.vehicle = sil_host::config::load_vehicle(f)?;
+    }
     if !(a.integration_hz.is_finite() && a.integration_hz >= 1.0) {
         bail!("--integration-hz must be at least 1 Hz");
     }

@@ -191,6 +191,11 @@ pub trait Controller<T: RealField + Copy> {
     fn period_s(&self) -> Option<f64> {
         None
     }
+    /// The a-priori cap on iterative work per step (QP iterations for an
+    /// MPC); 0 for controllers without iterations.
+    fn iteration_bound(&self) -> u32 {
+        0
+    }
 }
 
 /// Checks both inputs of a step.
@@ -349,6 +354,13 @@ impl<T: RealField + Copy> Controller<T> for AnyController<T> {
             AnyController::MpcThesis(c) => c.period_s(),
             AnyController::MpcFast(c) => c.period_s(),
             _ => None,
+        }
+    }
+    fn iteration_bound(&self) -> u32 {
+        match self {
+            AnyController::MpcThesis(c) => Controller::iteration_bound(c),
+            AnyController::MpcFast(c) => Controller::iteration_bound(c),
+            _ => 0,
         }
     }
 }

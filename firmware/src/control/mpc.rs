@@ -599,6 +599,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         Some(self.cfg.exec_dt_s)
     }
 
+    fn iteration_bound(&self) -> u32 {
+        Mpc::iteration_bound(self)
+    }
+
     fn reset(&mut self) {
         self.z = SVector::zeros();
         self.du_prev = Vector4::zeros();
