@@ -216,15 +216,23 @@ pub fn build_controller(
     mode: ReferenceMode,
     ts: f64,
 ) -> Result<AnyController<f32>, ControlError> {
-    build_controller_with(family, model, gains, preset, None, mode, ts, &VehicleParams::OS4)
+    build_parts((family, model, gains, preset), None, mode, ts, &VehicleParams::OS4)
 }
 
-/// [`build_controller`] with an optional MPC configuration replacing the preset's.
-pub fn build_controller_with(
-    family: ControllerFamily,
-    model: ModelKind,
-    gains: GainSet,
-    preset: MpcPreset,
+/// The controller of a flight as `cfg` describes it (its vehicle, and its
+/// MPC configuration override if any) at PD/LQR sample time `ts` (s).
+pub fn build_for(cfg: &FlightConfig, ts: f64) -> Result<AnyController<f32>, ControlError> {
+    build_parts(
+        (cfg.controller, cfg.model, cfg.gains, cfg.preset),
+        cfg.mpc_override,
+        cfg.reference.into(),
+        ts,
+        &cfg.vehicle,
+    )
+}
+
+fn build_parts(
+    (family, model, gains, preset): (ControllerFamily, ModelKind, GainSet, MpcPreset),
     mpc: Option<MpcConfig>,
     mode: ReferenceMode,
     ts: f64,
@@ -377,17 +385,7 @@ pub fn fly_until(
     stop_at: Option<f64>,
     inspect: impl FnMut(f64, &AnyController<f32>),
 ) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
-    let ctrl = build_controller_with(
-        cfg.controller,
-        cfg.model,
-        cfg.gains,
-        cfg.preset,
-        cfg.mpc_override,
-        cfg.reference.into(),
-        1.0 / cfg.control_hz,
-        &cfg.vehicle,
-    )
-    .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
+    let ctrl = build_for(cfg, 1.0 / cfg.control_hz).map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
     fly_inner(cfg, ctrl, stop_at, None, inspect)
 }
 
