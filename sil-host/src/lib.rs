@@ -7,7 +7,10 @@
 
 pub mod config;
 pub mod disturbance;
+pub mod figures;
 pub mod flight;
+pub mod full_report;
+pub mod html;
 pub mod link;
 pub mod metrics;
 pub mod openloop;
@@ -16,6 +19,8 @@ pub mod record;
 pub mod report;
 pub mod scenario;
 pub mod study;
+pub mod study_plots;
+pub mod sweep;
 
 pub use disturbance::DisturbanceSet;
 pub use plant::{ModelKind, Plant, PlantConfig};

@@ -1,0 +1,385 @@
+//! `sil-host report`: the whole study written to a directory — `index.md`,
+//! the same page as a self-contained `index.html`, and `figures/*.svg|png`.
+
+use crate::disturbance::DisturbanceSet;
+use crate::figures::{self, Figure};
+use crate::flight::{fly, fly_target, ControllerFamily, FlightConfig, MpcPreset, Target};
+use crate::plant::ModelKind;
+use crate::scenario::{Scenario, ScenarioKind};
+use crate::study::{self, find, Outcome, Sel, VARIANTS};
+use crate::study_plots::{self, HorizonPoint};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use std::fmt::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What `report` does.
+#[derive(Debug, Clone)]
+pub struct ReportOptions {
+    /// Output directory.
+    pub out: PathBuf,
+    /// Reduced lengths (circle/helix 30 s, short QEMU flights).
+    pub quick: bool,
+    /// Show progress bars.
+    pub progress: bool,
+    /// Fly the QEMU instruction-count table when QEMU is present.
+    pub qemu: bool,
+}
+
+/// What was written.
+#[derive(Debug, Clone)]
+pub struct Written {
+    /// `DIR/index.md`.
+    pub index_md: PathBuf,
+    /// `DIR/index.html`.
+    pub index_html: PathBuf,
+    /// Every figure file (SVG and PNG).
+    pub figures: Vec<PathBuf>,
+    /// Flights of the study matrix.
+    pub flights: usize,
+    /// Wall-clock time, s.
+    pub seconds: f64,
+    /// The study's outcomes (for tests that compare them with single flights).
+    pub outcomes: Vec<Outcome>,
+}
+
+fn bar(len: usize, what: &str, show: bool) -> ProgressBar {
+    let b = if show {
+        ProgressBar::new(len as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    b.set_style(
+        ProgressStyle::with_template(&format!(
+            "{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {what}  {{wide_msg}}"
+        ))
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    b
+}
+
+/// One row of the QEMU table.
+#[derive(Debug, Clone)]
+pub struct QemuRow {
+    /// Controller label.
+    pub label: String,
+    /// Instructions per step (mean, max).
+    pub instructions: (f64, f64),
+    /// RMSE x, y, z in QEMU and in-process, m.
+    pub rmse: ([f64; 3], [f64; 3]),
+    /// Steps flown.
+    pub steps: usize,
+}
+
+/// Is `qemu-system-arm` on the PATH?
+pub fn qemu_available() -> bool {
+    std::process::Command::new("qemu-system-arm")
+        .arg("--version")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// Every controller on a short set-point in QEMU and in-process.
+fn qemu_table(quick: bool, progress: bool) -> Result<Vec<QemuRow>> {
+    // Build the image once up front (the flights then find it current).
+    crate::link::firmware_elf()?;
+    let mut cases = Vec::new();
+    for (fam, preset) in VARIANTS {
+        for model in [ModelKind::Euler, ModelKind::Quaternion] {
+            let mut sc = Scenario::default_for(ScenarioKind::Setpoint);
+            sc.duration_s = match (fam, preset, quick) {
+                (ControllerFamily::Mpc, MpcPreset::Thesis, _) => 10.0, // 4 Hz: 41 steps
+                (_, _, true) => 0.5,
+                (_, _, false) => 2.0,
+            };
+            let mut cfg = FlightConfig::new(fam, model, sc);
+            cfg.preset = preset;
+            cases.push(cfg);
+        }
+    }
+    let b = bar(cases.len(), "QEMU flights", progress);
+    let rows = cases
+        .par_iter()
+        .map(|cfg| {
+            b.set_message(study::label(cfg));
+            let pil = fly_target(cfg, &Target::Qemu).with_context(|| format!("QEMU: {}", study::label(cfg)))?;
+            let local = fly(cfg)?;
+            b.inc(1);
+            let r =
+                |res: &crate::flight::FlightResult| [res.metrics.x.rmse_m, res.metrics.y.rmse_m, res.metrics.z.rmse_m];
+            Ok(QemuRow {
+                label: study::label(cfg),
+                instructions: pil.instructions_per_step.unwrap_or((0.0, 0.0)),
+                rmse: (r(&pil), r(&local)),
+                steps: pil.steps,
+            })
+        })
+        .collect::<Result<Vec<_>>>();
+    b.finish_and_clear();
+    rows
+}
+
+fn headline(all: &[Outcome]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| controller (quaternion) | set-point settling x / z s | overshoot x % | helix RMSE m, calm | \
+         helix RMSE m, wind+mismatch | u_norm (set-point) | host µs/step |\n|---|---|---|---|---|---|---|"
+    );
+    let worst = |o: Option<&Outcome>| {
+        o.map_or("—".to_string(), |o| {
+            let m = &o.res.metrics;
+            if o.res.diverged {
+                "diverged".into()
+            } else {
+                format!("{:.3}", m.x.rmse_m.max(m.y.rmse_m).max(m.z.rmse_m))
+            }
+        })
+    };
+    for (fam, preset) in VARIANTS {
+        let sel = Sel::defaults(preset);
+        let q = ModelKind::Quaternion;
+        let sp = find(all, fam, q, ScenarioKind::Setpoint, DisturbanceSet::NONE, sel);
+        let calm = find(all, fam, q, ScenarioKind::Helix, DisturbanceSet::NONE, sel);
+        let both = DisturbanceSet {
+            wind: true,
+            mismatch: true,
+        };
+        let hard = find(all, fam, q, ScenarioKind::Helix, both, sel);
+        let opt = |v: Option<f64>| v.map_or("—".into(), |v| format!("{v:.2}"));
+        let name = match fam {
+            ControllerFamily::Pd => "PD".to_string(),
+            ControllerFamily::Lqr => "LQR".to_string(),
+            ControllerFamily::Mpc => format!("MPC {}", preset.name()),
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} / {} | {} | {} | {} | {} | {} |",
+            name,
+            opt(sp.and_then(|o| o.res.metrics.x.settling_s)),
+            opt(sp.and_then(|o| o.res.metrics.z.settling_s)),
+            opt(sp.and_then(|o| o.res.metrics.x.overshoot_pct)),
+            worst(calm),
+            worst(hard),
+            sp.map_or("—".into(), |o| format!("{:.4}", o.res.metrics.u_norm)),
+            sp.map_or("—".into(), |o| format!("{:.1}", o.res.step_time_ns.mean / 1000.0)),
+        );
+    }
+    s
+}
+
+fn horizon_table(points: &[HorizonPoint]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| N | horizon s | settling x / y / z / ψ s | overshoot x / y / z / ψ % | u_norm | QP iterations mean / max (bound) |\n\
+         |---|---|---|---|---|---|"
+    );
+    let opt = |v: Option<f64>| v.map_or("—".into(), |v| format!("{v:.2}"));
+    for p in points {
+        let st: Vec<String> = p.axes.iter().map(|a| opt(a.settling_s)).collect();
+        let ov: Vec<String> = p.axes.iter().map(|a| opt(a.overshoot_pct)).collect();
+        let _ = writeln!(
+            s,
+            "| {}{} | {:.2} | {} | {} | {:.4} | {:.1} / {} ({}) |",
+            p.n,
+            if p.settled { "" } else { " (does not settle)" },
+            p.n as f64 * 0.25,
+            st.join(" / "),
+            ov.join(" / "),
+            p.u_norm,
+            p.qp.0,
+            p.qp.1,
+            p.qp.2
+        );
+    }
+    s
+}
+
+fn figure_markdown(f: &Figure) -> String {
+    format!(
+        "![{}](figures/{}.svg)\n\n[PNG](figures/{}.png) · [SVG](figures/{}.svg)\n\n",
+        f.title, f.stem, f.stem, f.stem
+    )
+}
+
+/// Flies the study and writes the report.
+pub fn write_report(o: &ReportOptions) -> Result<Written> {
+    let t0 = Instant::now();
+    let cfgs = study::matrix(o.quick);
+    let all = study::run_all(&cfgs, o.progress)?;
+    let horizon = study_plots::horizon_sweep(ModelKind::Quaternion, o.quick)?;
+    // A small robustness sweep (the `sweep` command does larger ones).
+    let sweep_opts = crate::sweep::SweepOptions {
+        samples: if o.quick { 8 } else { 40 },
+        seed: 1,
+        mass_frac: 0.2,
+        inertia_frac: 0.3,
+        drag_frac: 0.5,
+        lag_max_s: 0.1,
+        tube_m: 1.0,
+        base: {
+            let mut b = Scenario::default_for(ScenarioKind::Helix);
+            b.duration_s = 30.0;
+            b
+        },
+        vehicle: firmware::VehicleParams::OS4,
+        out: o.out.join("sweep"),
+        progress: o.progress,
+    };
+    let sweep_rows = crate::sweep::run(&sweep_opts)?;
+    crate::sweep::write(&sweep_opts, &sweep_rows)?;
+    let qemu = if !o.qemu {
+        Err("not requested (--no-qemu)".to_string())
+    } else if !qemu_available() {
+        Err("skipped: qemu-system-arm not found (Debian package qemu-system-arm; ./test.sh installs it)".to_string())
+    } else {
+        qemu_table(o.quick, o.progress).map_err(|e| format!("skipped: {e:#}"))
+    };
+
+    let fig_dir = o.out.join("figures");
+    std::fs::create_dir_all(&fig_dir).with_context(|| format!("creating {}", fig_dir.display()))?;
+    let mut figs = study_plots::study_figures(&all);
+    figs.push(study_plots::horizon_figure(&horizon));
+    let b = bar(figs.len(), "figures", o.progress);
+    figs.par_iter()
+        .map(|f| {
+            b.set_message(f.stem.clone());
+            let r = figures::write(&fig_dir, f).with_context(|| format!("figure {}", f.stem));
+            b.inc(1);
+            r
+        })
+        .collect::<Result<Vec<_>>>()?;
+    b.finish_and_clear();
+
+    let elapsed = t0.elapsed().as_secs_f64();
+    let mut md = String::new();
+    md.push_str("# The thesis' study, redone by the firmware core\n\n");
+    let _ = writeln!(
+        md,
+        "Generated by `sil-host report{}`: {} flights of the f32 core (PD and LQR at 500 Hz, MPC at its preset's \
+         rate) against the f64 plant at 1 kHz, {} horizon-sweep flights and {} QEMU flights, in {:.1} s on {} \
+         threads. Regenerate rather than edit. Figures are SVG (PNG beside them).\n",
+        if o.quick { " --quick" } else { "" },
+        all.len(),
+        horizon.len(),
+        qemu.as_ref().map_or(0, |r| r.len()),
+        elapsed,
+        rayon::current_num_threads()
+    );
+    md.push_str("## Headline\n\n");
+    md.push_str(&headline(&all));
+    md.push_str(
+        "\nSettling: 2 % band of the step. Helix RMSE: the worst axis. The fast MPC holds its tracking under wind \
+         and a 15 % heavier vehicle with rotor lag; PD and LQR have no integral action.\n\n",
+    );
+    md.push_str("## Figures\n\n");
+    for f in &figs {
+        md.push_str(&figure_markdown(f));
+    }
+    md.push_str(&study::tables_markdown(&all));
+    md.push_str("\n## Prediction horizon (thesis Figs 4.9–4.10, swept)\n\n");
+    md.push_str(
+        "The `thesis` preset (Ts 0.25 s, M 2, Appendix C weights, 4 Hz) on the set-point, quaternion form, with the \
+         prediction horizon N varied. The thesis showed a few horizons; here every N is flown by the same core \
+         (the horizon is a const generic, so each N is its own monomorphised controller).\n\n",
+    );
+    md.push_str(&horizon_table(&horizon));
+    let _ = writeln!(
+        md,
+        "\n## Robustness (Monte Carlo)\n\n{} true vehicles (seed 1): mass ±20 %, each inertia ±30 %, drag ±50 %, rotor \
+         lag τ in [0, 0.1] s; the helix for 30 s; success = no divergence and never more than 1 m from the \
+         reference. `sil-host sweep --samples N --seed S` runs larger sweeps with other ranges. \
+         [Details and every flight](sweep/sweep.md).\n",
+        sweep_opts.samples
+    );
+    let _ = writeln!(
+        md,
+        "| controller | success % | RMSE p50 m | RMSE p90 m | RMSE max m |\n|---|---|---|---|---|"
+    );
+    for r in &sweep_rows {
+        let p = r.rmse_percentiles_m;
+        let _ = writeln!(
+            md,
+            "| {} | {:.1} | {:.3} | {:.3} | {:.3} |",
+            r.controller, r.success_pct, p[0], p[1], p[3]
+        );
+    }
+    md.push_str(
+        "\n![Robustness: RMSE distribution per controller](sweep/sweep_rmse.svg)\n\n[PNG](sweep/sweep_rmse.png)\n",
+    );
+    md.push_str("\n## Instructions per step on the STM32F405 (QEMU)\n\n");
+    match &qemu {
+        Ok(rows) => {
+            md.push_str(
+                "The thumbv7em image in QEMU's netduinoplus2 (`-icount shift=0`: SysTick counts 0.168 per executed \
+                 instruction), flown in lockstep over the emulated USART on a short set-point, beside the same \
+                 flight in-process. Worst-case budgets: README, `firmware/examples/budget.rs`.\n\n\
+                 | controller | steps | instructions mean | instructions max | RMSE x/y/z m, QEMU | RMSE x/y/z m, in-process |\n\
+                 |---|---|---|---|---|---|\n",
+            );
+            for r in rows {
+                let f = |v: [f64; 3]| format!("{:.4} / {:.4} / {:.4}", v[0], v[1], v[2]);
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {:.0} | {:.0} | {} | {} |",
+                    r.label,
+                    r.steps,
+                    r.instructions.0,
+                    r.instructions.1,
+                    f(r.rmse.0),
+                    f(r.rmse.1)
+                );
+            }
+        }
+        Err(why) => {
+            let _ = writeln!(md, "{why}.");
+        }
+    }
+    md.push('\n');
+    md.push_str(study::EXPLANATIONS);
+
+    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let index_md = o.out.join("index.md");
+    std::fs::write(&index_md, &md).with_context(|| format!("writing {}", index_md.display()))?;
+    let html = crate::html::markdown_to_html(&md, "The thesis' study, redone by the firmware core", &o.out);
+    let index_html = o.out.join("index.html");
+    std::fs::write(&index_html, html).with_context(|| format!("writing {}", index_html.display()))?;
+    let mut figures: Vec<PathBuf> = figs
+        .iter()
+        .flat_map(|f| ["svg", "png"].map(|e| fig_dir.join(format!("{}.{e}", f.stem))))
+        .collect();
+    figures.extend(["svg", "png"].map(|e| o.out.join(format!("sweep/sweep_rmse.{e}"))));
+    Ok(Written {
+        index_md,
+        index_html,
+        figures,
+        flights: all.len(),
+        seconds: t0.elapsed().as_secs_f64(),
+        outcomes: all,
+    })
+}
+
+/// Every relative link target (`](target)`) in a Markdown file that does not
+/// exist on disk.
+pub fn missing_links(index_md: &Path) -> Result<Vec<String>> {
+    let md = std::fs::read_to_string(index_md)?;
+    let dir = index_md.parent().unwrap_or(Path::new("."));
+    let mut missing = Vec::new();
+    for part in md.split("](").skip(1) {
+        let Some(end) = part.find(')') else { continue };
+        let target = &part[..end];
+        if target.contains("://") || target.starts_with('#') {
+            continue;
+        }
+        if !dir.join(target).exists() {
+            missing.push(target.to_string());
+        }
+    }
+    Ok(missing)
+}

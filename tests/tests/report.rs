@@ -1,0 +1,121 @@
+//! The main job: `sil-host report --quick` writes its index (Markdown and
+//! self-contained HTML) and every figure it links, and its numbers are the
+//! metrics of the same flights flown alone.
+
+use sil_host::disturbance::DisturbanceSet;
+use sil_host::flight::{fly, ControllerFamily, MpcPreset};
+use sil_host::full_report::{missing_links, write_report, ReportOptions};
+use sil_host::study::{find, Sel};
+use sil_host::{ModelKind, ScenarioKind};
+
+#[test]
+fn quick_report_is_complete_and_its_numbers_are_single_flights() {
+    let dir = std::env::temp_dir().join(format!("sil-report-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let w = write_report(&ReportOptions {
+        out: dir.clone(),
+        quick: true,
+        progress: false,
+        qemu: false,
+    })
+    .unwrap();
+
+    // Index, HTML and every linked file exist; figures are real SVG/PNG.
+    let md = std::fs::read_to_string(&w.index_md).unwrap();
+    let html = std::fs::read_to_string(&w.index_html).unwrap();
+    assert!(md.contains("## Headline") && md.contains("Table") && md.contains("## Figures"));
+    assert_eq!(missing_links(&w.index_md).unwrap(), Vec::<String>::new());
+    assert!(w.figures.len() >= 28, "{} figure files", w.figures.len());
+    for f in &w.figures {
+        let bytes = std::fs::read(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        match f.extension().and_then(|e| e.to_str()) {
+            Some("png") => assert_eq!(&bytes[1..4], b"PNG", "{}", f.display()),
+            _ => assert!(String::from_utf8_lossy(&bytes).contains("<svg"), "{}", f.display()),
+        }
+        // Linked from the index.
+        let name = f.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(md.contains(&name), "{name} is not linked from index.md");
+    }
+    // The HTML stands alone: figures inlined, no external images.
+    assert!(html.matches("<svg").count() >= 14);
+    assert!(!html.contains("<img"));
+    // QEMU was not requested: the table says so instead of silently vanishing.
+    assert!(md.contains("not requested"));
+
+    // Numbers in the tables are the metrics of the same flight flown alone.
+    let cases = [
+        (
+            ControllerFamily::Pd,
+            MpcPreset::Fast,
+            ModelKind::Euler,
+            ScenarioKind::Setpoint,
+            DisturbanceSet::NONE,
+        ),
+        (
+            ControllerFamily::Mpc,
+            MpcPreset::Fast,
+            ModelKind::Quaternion,
+            ScenarioKind::Helix,
+            DisturbanceSet {
+                wind: true,
+                mismatch: true,
+            },
+        ),
+        (
+            ControllerFamily::Lqr,
+            MpcPreset::Fast,
+            ModelKind::Quaternion,
+            ScenarioKind::Circle,
+            DisturbanceSet::NONE,
+        ),
+    ];
+    for (fam, preset, model, kind, d) in cases {
+        let o = find(&w.outcomes, fam, model, kind, d, Sel::defaults(preset)).expect("case in the study");
+        let alone = fly(&o.cfg).unwrap();
+        assert_eq!(o.res.metrics, alone.metrics, "{fam:?} {model:?} {kind:?} {d}");
+    }
+    // And the printed cells carry them: the PD Euler set-point block.
+    let pd = find(
+        &w.outcomes,
+        ControllerFamily::Pd,
+        ModelKind::Euler,
+        ScenarioKind::Setpoint,
+        DisturbanceSet::NONE,
+        Sel::defaults(MpcPreset::Fast),
+    )
+    .unwrap();
+    let alone = fly(&pd.cfg).unwrap();
+    let x = format!("| x | 3 m | **{:.2}** (4.09) |", alone.metrics.x.settling_s.unwrap());
+    let z = format!("| z | −5 m | **{:.2}** (1.77) |", alone.metrics.z.settling_s.unwrap());
+    assert!(md.contains(&x), "{x}");
+    assert!(md.contains(&z), "{z}");
+    // The headline's helix numbers for the fast MPC, recomputed from single flights.
+    let helix = |d| {
+        let o = find(
+            &w.outcomes,
+            ControllerFamily::Mpc,
+            ModelKind::Quaternion,
+            ScenarioKind::Helix,
+            d,
+            Sel::defaults(MpcPreset::Fast),
+        )
+        .unwrap();
+        let m = fly(&o.cfg).unwrap().metrics;
+        format!("{:.3}", m.x.rmse_m.max(m.y.rmse_m).max(m.z.rmse_m))
+    };
+    let row = md
+        .lines()
+        .find(|l| l.starts_with("| MPC fast |"))
+        .expect("headline row");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!(cells[4], helix(DisturbanceSet::NONE), "{row}");
+    assert_eq!(
+        cells[5],
+        helix(DisturbanceSet {
+            wind: true,
+            mismatch: true
+        }),
+        "{row}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
