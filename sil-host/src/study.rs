@@ -553,6 +553,11 @@ re-solves at 200 Hz over a 1 s horizon with preview, feed-forward and a disturba
 lightly damped attitude loop diverged with the 0.178 s rotor lag). Its wind RMSE on the helix is ≈ 1.5× the \
 calm one: the 0.5 Hz, 0.2 N gust sits above the position loop's bandwidth, and that is the part of the wind \
 no constant-disturbance estimate can cancel.
+- **The `thesis` MPC is unstable under `mismatch`.** It re-plans every 0.25 s and holds \
+each input for that long (zero-order hold), so the 0.178 s rotor lag and the 15 % heavier vehicle of `mismatch` \
+act on an open loop for a quarter of a second at a time; the attitude oscillation grows and the flight leaves the \
+reference by hundreds of metres to kilometres, on every scenario. The thesis ran its \
+MPC without rotor dynamics in the loop; our `fast` preset (200 Hz) holds the same plant to centimetres.
 - **Rotor lag under `mismatch`.** The plant's rotors then follow commands with τ = 0.178 s and gain 0.936, which \
-the controllers do not model; it costs damping but no variant loses stability.
+the controllers do not model; it costs damping, and every controller that runs at 200 Hz or faster stays stable.
 ";

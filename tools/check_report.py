@@ -1,0 +1,44 @@
+#!/usr/bin/env python3
+"""Checks a `sil-host report` directory as a reader would meet it: index.md
+and index.html exist, every relative link in index.md (figures, PNG/SVG,
+sweep pages) resolves to a non-empty file, PNGs are PNGs and SVGs are SVG,
+and the HTML carries its figures inline. Prints `report check: N passed, M
+failed` and exits non-zero on any failure."""
+import re
+import sys
+from pathlib import Path
+
+d = Path(sys.argv[1])
+passed = failed = 0
+
+
+def check(ok, what):
+    global passed, failed
+    if ok:
+        passed += 1
+    else:
+        failed += 1
+        print(f"FAIL: {what}")
+
+
+md_path, html_path = d / "index.md", d / "index.html"
+check(md_path.is_file(), "index.md exists")
+check(html_path.is_file(), "index.html exists")
+md = md_path.read_text() if md_path.is_file() else ""
+html = html_path.read_text() if html_path.is_file() else ""
+links = sorted(set(re.findall(r"\]\(([^)#][^)]*)\)", md)))
+links = [l for l in links if "://" not in l]
+check(len(links) >= 28, f"index.md links at least 28 files (found {len(links)})")
+for link in links:
+    f = d / link
+    ok = f.is_file() and f.stat().st_size > 0
+    check(ok, f"linked file {link} exists")
+    if ok and f.suffix == ".png":
+        check(f.read_bytes()[1:4] == b"PNG", f"{link} is a PNG")
+    if ok and f.suffix == ".svg":
+        check("<svg" in f.read_text(errors="replace"), f"{link} is an SVG")
+for section in ["## Headline", "## Figures", "Table 4.", "## Prediction horizon", "## Robustness", "## Instructions per step"]:
+    check(section in md, f"index.md has {section!r}")
+check(html.count("<svg") >= 14 and "<img" not in html, "index.html inlines its figures")
+print(f"report check: {passed} passed, {failed} failed")
+sys.exit(1 if failed else 0)
