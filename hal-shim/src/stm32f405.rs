@@ -128,11 +128,12 @@ impl ByteLink for Usart1 {
 /// least once a millisecond (the failsafe timer needs no other timer).
 pub struct SysTickClock {
     hz: u32,
-    period: u32,
 }
 
 /// SysTick reloads counted by [`systick_isr`].
 static WRAPS: Mutex<core::cell::Cell<u64>> = Mutex::new(core::cell::Cell::new(0));
+/// SysTick's reload period in ticks, set by [`SysTickClock::start`].
+static PERIOD: Mutex<core::cell::Cell<u32>> = Mutex::new(core::cell::Cell::new(1));
 
 /// SysTick exception body: counts one reload. Call from the `SysTick`
 /// exception handler.
@@ -154,35 +155,40 @@ impl SysTickClock {
     /// millisecond with its interrupt enabled.
     pub fn start(hz: u32) -> Self {
         let period = (hz / 1000).clamp(2, 0x0100_0000);
+        critical_section::with(|cs| PERIOD.borrow(cs).set(period));
         // SAFETY: the architectural SysTick registers; this is their only user.
         unsafe {
             write_volatile(SYST_RVR as *mut u32, period - 1);
             write_volatile(SYST_CVR as *mut u32, 0);
             write_volatile(SYST_CSR as *mut u32, 0b111); // enable, processor clock, interrupt
         }
-        Self { hz, period }
+        Self { hz }
     }
 
     /// Processor-clock ticks since [`SysTickClock::start`], 64 bits wide.
     pub fn ticks(&self) -> u64 {
-        critical_section::with(|cs| {
-            let wraps = WRAPS.borrow(cs).get();
-            // SAFETY: read of the SysTick current value.
-            let cvr = unsafe { read_volatile(SYST_CVR as *const u32) } & 0x00FF_FFFF;
-            let into = (self.period - 1).saturating_sub(cvr);
-            // A reload while interrupts are masked is pending, not yet
-            // counted: ICSR.PENDSTSET says so. If it came after the counter was
-            // read, the reading is near the period's end and needs no correction.
-            // SAFETY: read of the System Control Block's ICSR.
-            let pending = unsafe { read_volatile(SCB_ICSR as *const u32) } & ICSR_PENDSTSET != 0;
-            let wraps = if pending && into < self.period / 2 {
-                wraps + 1
-            } else {
-                wraps
-            };
-            wraps * u64::from(self.period) + u64::from(into)
-        })
+        ticks_now()
     }
+}
+
+/// Processor-clock ticks since SysTick was started ([`SysTickClock::start`];
+/// 0 before): the reload count joined with the counter. Usable anywhere,
+/// e.g. for log timestamps.
+pub fn ticks_now() -> u64 {
+    critical_section::with(|cs| {
+        let wraps = WRAPS.borrow(cs).get();
+        let period = PERIOD.borrow(cs).get();
+        // SAFETY: read of the SysTick current value.
+        let cvr = unsafe { read_volatile(SYST_CVR as *const u32) } & 0x00FF_FFFF;
+        let into = (period - 1).saturating_sub(cvr);
+        // A reload while interrupts are masked is pending, not yet counted:
+        // ICSR.PENDSTSET says so. If it came after the counter was read, the
+        // reading is near the period's end and needs no correction.
+        // SAFETY: read of the System Control Block's ICSR.
+        let pending = unsafe { read_volatile(SCB_ICSR as *const u32) } & ICSR_PENDSTSET != 0;
+        let wraps = if pending && into < period / 2 { wraps + 1 } else { wraps };
+        wraps * u64::from(period) + u64::from(into)
+    })
 }
 
 impl CycleClock for SysTickClock {

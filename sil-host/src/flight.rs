@@ -203,6 +203,8 @@ pub struct FlightResult {
     pub failsafe_steps: usize,
     /// The flight controller's frame and error counters at the end (remote targets).
     pub link_counters: Option<firmware::proto::Counters>,
+    /// The firmware's own log (defmt, decoded), QEMU target only.
+    pub firmware_log: Vec<String>,
     /// The flight was stopped because the state left any sane range.
     pub diverged: bool,
 }
@@ -368,12 +370,12 @@ pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightR
     )
     .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
     let mut res = fly_inner(cfg, pace, None, Some(remote), |_, _| {}).map(|(r, _)| r)?;
-    if qemu.is_some() {
+    if let Some(q) = qemu {
         // The telemetry's cycles are SysTick counts; under icount they count instructions.
         let k = 1.0 / crate::link::SYSTICK_PER_INSTRUCTION;
         res.instructions_per_step = Some((res.step_time_ns.mean * k, res.step_time_ns.max * k));
+        res.firmware_log = q.finish()?;
     }
-    drop(qemu);
     Ok(res)
 }
 
@@ -458,6 +460,7 @@ fn fly_inner<C: Controller<f32>>(
         steps: 0,
         failsafe_steps: 0,
         link_counters: None,
+        firmware_log: Vec::new(),
         diverged: false,
     };
     let mut total_ns = 0.0;

@@ -376,6 +376,34 @@ pub struct Qemu {
     /// Where USART1 listens.
     pub addr: String,
     log: std::path::PathBuf,
+    /// The guest's semihosting output (its defmt log frames).
+    out: std::path::PathBuf,
+    elf: std::path::PathBuf,
+}
+
+/// Decodes defmt log frames (`bytes`) with the format table of `elf`; one
+/// line per frame, `timestamp level message`.
+pub fn decode_defmt(elf: &std::path::Path, bytes: &[u8]) -> Result<Vec<String>> {
+    let image = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let table =
+        defmt_decoder::Table::parse(&image)?.ok_or_else(|| anyhow::anyhow!("{} has no defmt table", elf.display()))?;
+    let mut dec = table.new_stream_decoder();
+    dec.received(bytes);
+    let mut lines = Vec::new();
+    loop {
+        match dec.decode() {
+            Ok(frame) => lines.push(frame.display(false).to_string()),
+            Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
+            Err(defmt_decoder::DecodeError::Malformed) => {
+                if table.encoding().can_recover() {
+                    lines.push("(malformed defmt frame skipped)".into());
+                } else {
+                    bail!("malformed defmt frame");
+                }
+            }
+        }
+    }
+    Ok(lines)
 }
 
 impl Qemu {
@@ -384,6 +412,7 @@ impl Qemu {
         let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
         let addr = format!("127.0.0.1:{port}");
         let log = std::env::temp_dir().join(format!("sil-host-qemu-{port}.log"));
+        let out = std::env::temp_dir().join(format!("sil-host-qemu-{port}.defmt"));
         let child = std::process::Command::new("qemu-system-arm")
             .args([
                 "-machine",
@@ -400,12 +429,19 @@ impl Qemu {
             .arg(format!("tcp:{addr},server=on,wait=on,nodelay=on"))
             .arg("-kernel")
             .arg(elf)
-            .stdout(std::process::Stdio::null())
+            // Semihosting output: the firmware's defmt log.
+            .stdout(std::fs::File::create(&out)?)
             // QEMU's own messages go to a log file: an unread pipe would fill and stall it.
             .stderr(std::fs::File::create(&log)?)
             .spawn()
             .context("starting qemu-system-arm (Debian package qemu-system-arm)")?;
-        Ok(Self { child, addr, log })
+        Ok(Self {
+            child,
+            addr,
+            log,
+            out,
+            elf: elf.to_path_buf(),
+        })
     }
 
     /// A protocol client on the emulated USART. Connects only once QEMU says
@@ -448,10 +484,35 @@ impl Qemu {
     }
 }
 
-impl Drop for Qemu {
-    fn drop(&mut self) {
+impl Qemu {
+    /// Stops QEMU the way Ctrl-C does (so it flushes the guest's output),
+    /// killing it after a second if it lingers.
+    fn stop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = std::process::Command::new("kill")
+                .args(["-INT", &self.child.id().to_string()])
+                .status();
+            let t0 = Instant::now();
+            while matches!(self.child.try_wait(), Ok(None)) && t0.elapsed() < Duration::from_secs(1) {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+
+    /// Stops QEMU and returns the firmware's defmt log, decoded.
+    pub fn finish(mut self) -> Result<Vec<String>> {
+        self.stop();
+        let bytes = std::fs::read(&self.out).unwrap_or_default();
+        decode_defmt(&self.elf, &bytes)
+    }
+}
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        self.stop();
         let _ = std::fs::remove_file(&self.log);
+        let _ = std::fs::remove_file(&self.out);
     }
 }

@@ -187,6 +187,10 @@ struct FlyArgs {
     /// Write the metrics as JSON (`-` for standard output).
     #[arg(long, value_name = "PATH")]
     json: Option<PathBuf>,
+    /// With `--target qemu`: print the firmware's own log (defmt over semihosting, decoded with
+    /// the image's format table) to standard error after the flight.
+    #[arg(long)]
+    firmware_log: bool,
 }
 
 #[derive(Args, Debug)]
@@ -426,6 +430,11 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
     let res = fly_target(&cfg, &exec)?;
     if let Some(path) = &a.csv {
         write_csv(path, &res.rows, Some(&res.reference))?;
+    }
+    if a.firmware_log {
+        for l in &res.firmware_log {
+            eprintln!("firmware: {l}");
+        }
     }
     let json = sil_host::report::flight_json(&cfg, &res);
     if let Some(path) = &a.json {

@@ -150,6 +150,12 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
         assert_eq!(c.failsafe_entries, 0);
         assert_eq!(c.bad_crc + c.bad_cobs + c.bad_message + c.oversized + c.out_of_order, 0);
         assert_eq!(pil.failsafe_steps, 0);
+        // The firmware's own defmt log, decoded from QEMU's semihosting output.
+        let log = pil.firmware_log.join("\n");
+        for line in ["INFO up: protocol v2", "INFO session open", "INFO controller selected"] {
+            assert!(log.contains(line), "{line:?} missing from the firmware log:\n{log}");
+        }
+        assert!(!log.contains("WARN") && !log.contains("ERROR"), "{log}");
         let j: Value = sil_host::report::flight_json(&cfg, &pil);
         assert!(j["instructions_per_step"]["max"].as_f64().unwrap() > 0.0);
     }

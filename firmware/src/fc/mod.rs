@@ -99,6 +99,7 @@ pub struct FlightCore {
     last_valid_us: Option<u64>,
     failsafe: bool,
     u: Input<f32>,
+    selections: u32,
 }
 
 impl FlightCore {
@@ -119,6 +120,7 @@ impl FlightCore {
             last_valid_us: None,
             failsafe: false,
             u: Vector4::zeros(),
+            selections: 0,
         })
     }
 
@@ -135,6 +137,11 @@ impl FlightCore {
     /// Frame and error counters.
     pub fn counters(&self) -> Counters {
         self.counters
+    }
+
+    /// Controller selections that succeeded since boot.
+    pub fn selections(&self) -> u32 {
+        self.selections
     }
 
     /// The handshake has completed.
@@ -236,7 +243,10 @@ impl FlightCore {
                 feedforward,
             } => {
                 match build_controller(controller, feedforward, self.params, self.cfg.control_period_s) {
-                    Ok(c) => self.ctrl = c,
+                    Ok(c) => {
+                        self.ctrl = c;
+                        self.selections = self.selections.wrapping_add(1);
+                    }
                     Err(_) => self.counters.invalid_values += 1,
                 }
                 Ok(())
