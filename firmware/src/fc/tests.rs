@@ -350,7 +350,10 @@ fn every_controller_can_be_selected_over_the_link() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(2000))]
+    // 2 000 cases per test run; `FUZZ_CASES=N` for a long run.
+    #![proptest_config(ProptestConfig::with_cases(
+        std::env::var("FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(2000)
+    ))]
 
     /// Random bytes, random cuts of valid frames, random bit flips: the
     /// decoder and the core never panic, and a valid frame after any of it
