@@ -200,3 +200,149 @@ impl CycleClock for SysTickClock {
         self.hz
     }
 }
+
+/// The Cortex-M4 cycle counter (DWT CYCCNT) as the cycle clock: what the
+/// firmware uses on silicon. QEMU does not model it (it reads 0 there; use
+/// [`SysTickClock`] under QEMU).
+pub struct DwtClock {
+    hz: u32,
+}
+
+const DEMCR: usize = 0xE000_EDFC;
+const DEMCR_TRCENA: u32 = 1 << 24;
+const DWT_CTRL: usize = 0xE000_1000;
+const DWT_CYCCNT: usize = 0xE000_1004;
+
+impl DwtClock {
+    /// Enables the trace block and starts CYCCNT; `hz` is the core clock.
+    pub fn start(hz: u32) -> Self {
+        // SAFETY: architectural debug registers; this is their only user.
+        unsafe {
+            write_volatile(DEMCR as *mut u32, read_volatile(DEMCR as *const u32) | DEMCR_TRCENA);
+            write_volatile(DWT_CYCCNT as *mut u32, 0);
+            write_volatile(DWT_CTRL as *mut u32, read_volatile(DWT_CTRL as *const u32) | 1);
+        }
+        Self { hz }
+    }
+}
+
+impl CycleClock for DwtClock {
+    fn now(&self) -> u32 {
+        // SAFETY: read of the cycle counter.
+        unsafe { read_volatile(DWT_CYCCNT as *const u32) }
+    }
+    fn hz(&self) -> u32 {
+        self.hz
+    }
+}
+
+const RCC_APB1ENR: usize = 0x4002_3840;
+const TIM2: usize = 0x4000_0000;
+const TIM3: usize = 0x4000_0400;
+const TIM_CR1: usize = 0x00;
+const TIM_DIER: usize = 0x0C;
+const TIM_SR: usize = 0x10;
+const TIM_EGR: usize = 0x14;
+const TIM_CCMR1: usize = 0x18;
+const TIM_CCMR2: usize = 0x1C;
+const TIM_CCER: usize = 0x20;
+const TIM_PSC: usize = 0x28;
+const TIM_ARR: usize = 0x2C;
+const TIM_CCR1: usize = 0x34;
+
+/// TIM2 as the control-loop period: an update flag every `1/rate` s.
+pub struct LoopTimer {
+    _private: (),
+}
+
+impl LoopTimer {
+    /// Starts TIM2 (clocked at `tim_clk_hz`, 84 MHz on an F405 at 168 MHz) to
+    /// overflow at `rate_hz` (1 µs resolution).
+    pub fn start(tim_clk_hz: u32, rate_hz: u32) -> Self {
+        let psc = (tim_clk_hz / 1_000_000).max(1) - 1; // 1 MHz tick
+        let arr = (1_000_000 / rate_hz.max(1)).max(2) - 1;
+        // SAFETY: RCC enable bit and TIM2 registers; this driver owns TIM2.
+        unsafe {
+            let en = read_volatile(RCC_APB1ENR as *const u32);
+            write_volatile(RCC_APB1ENR as *mut u32, en | 1); // TIM2EN
+            write_volatile((TIM2 + TIM_PSC) as *mut u32, psc);
+            write_volatile((TIM2 + TIM_ARR) as *mut u32, arr);
+            write_volatile((TIM2 + TIM_EGR) as *mut u32, 1); // load PSC/ARR
+            write_volatile((TIM2 + TIM_SR) as *mut u32, 0);
+            // Update interrupt enabled in the timer (not in the NVIC: nothing
+            // is taken); QEMU's timer model sets UIF only with UIE on.
+            write_volatile((TIM2 + TIM_DIER) as *mut u32, 1);
+            write_volatile((TIM2 + TIM_CR1) as *mut u32, 1); // CEN
+        }
+        Self { _private: () }
+    }
+
+    /// True once per period: the update flag, cleared when seen. Never blocks.
+    pub fn expired(&mut self) -> bool {
+        // SAFETY: TIM2 status register; writing 0 to UIF clears it.
+        unsafe {
+            if read_volatile((TIM2 + TIM_SR) as *const u32) & 1 != 0 {
+                write_volatile((TIM2 + TIM_SR) as *mut u32, 0);
+                true
+            } else {
+                false
+            }
+        }
+    }
+}
+
+/// Four ESC outputs on TIM3 channels 1–4 (PA6, PA7, PB0, PB1 on most F4
+/// boards; pin muxing is the board's job): PWM at `pwm_hz`, duty from the
+/// rotor commands that `to_duty` derives from `U` (the firmware passes its
+/// mixer inverse: `U` → rotor speeds → duty in [0, 1]).
+pub struct PwmActuators {
+    arr: u32,
+    to_duty: fn(&[f32; 4]) -> [f32; 4],
+}
+
+impl PwmActuators {
+    /// Starts TIM3 PWM mode 1 on all four channels, outputs at 0.
+    pub fn start(tim_clk_hz: u32, pwm_hz: u32, to_duty: fn(&[f32; 4]) -> [f32; 4]) -> Self {
+        // TIM3 is 16-bit: prescale so the period fits.
+        let counts = tim_clk_hz / pwm_hz.max(1);
+        let psc = counts.div_ceil(0x1_0000).max(1) - 1;
+        let arr = (counts / (psc + 1)).clamp(2, 0x1_0000) - 1;
+        // SAFETY: RCC enable bit and TIM3 registers; this driver owns TIM3.
+        unsafe {
+            let en = read_volatile(RCC_APB1ENR as *const u32);
+            write_volatile(RCC_APB1ENR as *mut u32, en | 2); // TIM3EN
+            write_volatile((TIM3 + TIM_PSC) as *mut u32, psc);
+            write_volatile((TIM3 + TIM_ARR) as *mut u32, arr);
+            // PWM mode 1 with preload on channels 1-4.
+            write_volatile((TIM3 + TIM_CCMR1) as *mut u32, 0x6868);
+            write_volatile((TIM3 + TIM_CCMR2) as *mut u32, 0x6868);
+            write_volatile((TIM3 + TIM_CCER) as *mut u32, 0x1111);
+            for ch in 0..4 {
+                write_volatile((TIM3 + TIM_CCR1 + 4 * ch) as *mut u32, 0);
+            }
+            write_volatile((TIM3 + TIM_EGR) as *mut u32, 1);
+            write_volatile((TIM3 + TIM_CR1) as *mut u32, 1 | (1 << 7)); // CEN, ARPE
+        }
+        Self { arr, to_duty }
+    }
+
+    fn set(&mut self, duty: [f32; 4]) {
+        for (ch, d) in duty.iter().enumerate() {
+            // NaN or out of range → the nearest safe value (NaN → 0: motor off).
+            let d = if d.is_nan() { 0.0 } else { d.clamp(0.0, 1.0) };
+            let ccr = (d * self.arr as f32) as u32;
+            // SAFETY: TIM3 compare registers.
+            unsafe { write_volatile((TIM3 + TIM_CCR1 + 4 * ch) as *mut u32, ccr) };
+        }
+    }
+}
+
+impl crate::ActuatorOutput for PwmActuators {
+    fn apply(&mut self, u: [f32; 4]) {
+        let duty = (self.to_duty)(&u);
+        self.set(duty);
+    }
+    fn disarm(&mut self) {
+        self.set([0.0; 4]);
+    }
+}

@@ -160,3 +160,30 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
         assert!(j["instructions_per_step"]["max"].as_f64().unwrap() > 0.0);
     }
 }
+
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn stm32_drivers_behave_in_qemu() {
+    let (out, ok) = run_example_in_qemu("drivers");
+    assert!(ok, "{out}");
+    let nums = |prefix: &str| -> Vec<u64> {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(prefix))
+            .unwrap_or_else(|| panic!("{prefix}: {out}"));
+        line[prefix.len()..]
+            .split(|c: char| !c.is_ascii_digit())
+            .filter(|s| !s.is_empty())
+            .map(|s| s.parse().unwrap())
+            .collect()
+    };
+    // TIM2 fires periodically (QEMU's timer model has its own clock, so the
+    // count is not the silicon's 20; it must not be 0 or run away).
+    let periods = nums("drivers: loop timer 1000 Hz: ")[0];
+    assert!((10..=100).contains(&periods), "{periods}");
+    // PWM: 400 Hz from 84 MHz needs prescaler 4 → ARR 52 499; duties 0.5, 0.25,
+    // 2.0 (clamped to 1) and NaN (motor off).
+    let v = nums("drivers: pwm arr ");
+    assert_eq!(v, vec![52_499, 26_249, 13_124, 52_499, 0]);
+    assert_eq!(nums("drivers: pwm disarmed ccr "), vec![0, 0, 0, 0]);
+}
