@@ -337,6 +337,12 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
 
 /// Flies one scenario with the controller at `target`.
 pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightResult> {
+    fly_target_with_progress(cfg, target, false)
+}
+
+/// [`fly_target`], with a progress bar on standard error for remote targets
+/// when `progress`.
+pub fn fly_target_with_progress(cfg: &FlightConfig, target: &Target, progress: bool) -> anyhow::Result<FlightResult> {
     let mut qemu = None;
     let remote = match target {
         Target::InProcess => return fly(cfg),
@@ -369,7 +375,21 @@ pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightR
         1.0 / cfg.control_hz,
     )
     .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
-    let mut res = fly_inner(cfg, pace, None, Some(remote), |_, _| {}).map(|(r, _)| r)?;
+    // Remote flights take real time (QEMU: milliseconds a step): show progress.
+    let bar = if progress {
+        indicatif::ProgressBar::new((cfg.scenario.duration_s * 10.0).round() as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} × 0.1 s flown  {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_message(format!("{target:?}"));
+    let tick = |t: f64, _: &AnyController<f32>| bar.set_position((t * 10.0) as u64);
+    let mut res = fly_inner(cfg, pace, None, Some(remote), tick).map(|(r, _)| r)?;
+    bar.finish_and_clear();
     if let Some(q) = qemu {
         // The telemetry's cycles are SysTick counts; under icount they count instructions.
         let k = 1.0 / crate::link::SYSTICK_PER_INSTRUCTION;

@@ -8,11 +8,12 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use sil_host::disturbance::DisturbanceSet;
-use sil_host::flight::{fly_target, ControllerFamily, FlightConfig, GainSet, MpcPreset, RefMode, Target};
+use sil_host::flight::{ControllerFamily, FlightConfig, GainSet, MpcPreset, RefMode, Target};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::{ModelKind, PlantConfig};
 use sil_host::record::{write_csv, STATE_COLUMNS};
 use sil_host::scenario::{Scenario, ScenarioKind};
+use std::io::IsTerminal;
 use std::path::PathBuf;
 
 #[derive(Parser, Debug)]
@@ -427,7 +428,7 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
             }
         })
         .unwrap_or(Target::InProcess);
-    let res = fly_target(&cfg, &exec)?;
+    let res = sil_host::flight::fly_target_with_progress(&cfg, &exec, std::io::stderr().is_terminal())?;
     if let Some(path) = &a.csv {
         write_csv(path, &res.rows, Some(&res.reference))?;
     }
