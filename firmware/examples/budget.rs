@@ -37,8 +37,8 @@ mod target {
     use cortex_m_rt::{entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
     use firmware::control::{Controller, MpcConfig, MpcFast, MpcForm, MpcThesis, Setpoint, StateEstimate};
-    use firmware::fc::{build_controller, FcConfig, FlightCore};
-    use firmware::proto::{encode, ControllerId, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
+    use firmware::fc::{build_controller, setpoint_to_wire, FcConfig, FlightCore};
+    use firmware::proto::{encode, ControllerId, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use firmware::{euler_to_quat, VehicleParams};
     use hal_shim::stm32f405::SysTickClock;
     use hal_shim::{ByteLink, CycleClock};
@@ -188,17 +188,6 @@ mod target {
         }
     }
 
-    fn wire(sp: &Setpoint<f32>) -> WireSetpoint {
-        WireSetpoint {
-            pos: sp.pos_ned_m.into(),
-            vel: sp.vel_ned_mps.into(),
-            acc: sp.acc_ned_mps2.into(),
-            jerk: sp.jerk_ned_mps3.into(),
-            yaw: sp.yaw_rad,
-            yaw_rate: sp.yaw_rate_radps,
-        }
-    }
-
     /// Worst instructions per step of the whole firmware loop (frames in,
     /// controller, frames out) for controller `id` at period `dt`.
     fn loop_worst(id: ControllerId, dt: f32, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<u32> {
@@ -232,7 +221,7 @@ mod target {
         for k in 0..STEPS {
             let t = k as f32 * dt;
             let sp = reference(t);
-            push(&mut link, &ToFc::Setpoint(wire(&sp)));
+            push(&mut link, &ToFc::Setpoint(setpoint_to_wire(&sp)));
             if let Some((n, pdt)) = preview {
                 for i in 1..=n {
                     let p = reference(t + i as f32 * pdt as f32);
@@ -240,7 +229,7 @@ mod target {
                         &mut link,
                         &ToFc::Preview {
                             k: i as u8,
-                            sp: wire(&p),
+                            sp: setpoint_to_wire(&p),
                         },
                     );
                 }

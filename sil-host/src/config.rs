@@ -139,17 +139,17 @@ pub fn scenario_from_str(path: &Path, text: &str, default_kind: ScenarioKind) ->
             bail!("{}: field `{f}` = {v} is not finite", path.display())
         }
     };
-    if let Some(a) = t.start_ned_m {
+    let finite3 = |f: &str, a: [f64; 3]| -> Result<[f64; 3]> {
         for (i, x) in a.iter().enumerate() {
-            finite(&format!("start_ned_m[{i}]"), *x)?;
+            finite(&format!("{f}[{i}]"), *x)?;
         }
-        s.start_ned_m = a;
+        Ok(a)
+    };
+    if let Some(a) = t.start_ned_m {
+        s.start_ned_m = finite3("start_ned_m", a)?;
     }
     if let Some(a) = t.target_ned_m {
-        for (i, x) in a.iter().enumerate() {
-            finite(&format!("target_ned_m[{i}]"), *x)?;
-        }
-        s.target_ned_m = a;
+        s.target_ned_m = finite3("target_ned_m", a)?;
     }
     if let Some(v) = t.start_yaw_deg {
         s.start_yaw_rad = finite("start_yaw_deg", v)?.to_radians();

@@ -116,6 +116,20 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(227, 119, 194),
 ];
 
+/// Draws a chart's legend box at a corner (2-D and 3-D charts alike).
+macro_rules! legend {
+    ($chart:expr, $pos:ident) => {
+        $chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::$pos)
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(180, 180, 180))
+            .label_font(("sans-serif", 13))
+            .draw()
+            .map_err(err)?
+    };
+}
+
 fn color(c: Option<usize>) -> RGBColor {
     c.map_or(BLACK, |i| PALETTE[i % PALETTE.len()])
 }
@@ -247,14 +261,7 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> R
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
     }
     if p.series.len() + p.bounds.len() > 1 {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(180, 180, 180))
-            .label_font(("sans-serif", 13))
-            .draw()
-            .map_err(err)?;
+        legend!(chart, UpperRight);
     }
     Ok(())
 }
@@ -303,14 +310,7 @@ fn draw_bars<DB: DrawingBackend>(
             .label(name.as_str())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(180, 180, 180))
-        .label_font(("sans-serif", 13))
-        .draw()
-        .map_err(err)?;
+    legend!(chart, UpperLeft);
     Ok(())
 }
 
@@ -349,14 +349,7 @@ fn draw_3d<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &[Path3], 
             .label(name.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(180, 180, 180))
-        .label_font(("sans-serif", 13))
-        .draw()
-        .map_err(err)?;
+    legend!(chart, UpperRight);
     // Axis names (plotters' 3-D axes carry numbers only).
     area.draw(&Text::new(
         format!("axes: {} (front), {} (right), {} (up)", labels[0], labels[1], labels[2]),

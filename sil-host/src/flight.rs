@@ -376,15 +376,10 @@ pub fn fly_target_with_progress(cfg: &FlightConfig, target: &Target, progress: b
     )
     .map_err(|e| anyhow::anyhow!("controller design failed: {e:?}"))?;
     // Remote flights take real time (QEMU: milliseconds a step): show progress.
-    let bar = if progress {
-        indicatif::ProgressBar::new((cfg.scenario.duration_s * 10.0).round() as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} × 0.1 s flown  {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = crate::study::progress_bar(
+        (cfg.scenario.duration_s * 10.0).round() as usize,
+        "× 0.1 s flown",
+        progress,
     );
     bar.set_message(format!("{target:?}"));
     let tick = |t: f64, _: &AnyController<f32>| bar.set_position((t * 10.0) as u64);

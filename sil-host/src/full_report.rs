@@ -9,7 +9,6 @@ use crate::scenario::{Scenario, ScenarioKind};
 use crate::study::{self, find, Outcome, Sel, VARIANTS};
 use crate::study_plots::{self, HorizonPoint};
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -43,22 +42,6 @@ pub struct Written {
     pub seconds: f64,
     /// The study's outcomes (for tests that compare them with single flights).
     pub outcomes: Vec<Outcome>,
-}
-
-fn bar(len: usize, what: &str, show: bool) -> ProgressBar {
-    let b = if show {
-        ProgressBar::new(len as u64)
-    } else {
-        ProgressBar::hidden()
-    };
-    b.set_style(
-        ProgressStyle::with_template(&format!(
-            "{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {what}  {{wide_msg}}"
-        ))
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> "),
-    );
-    b
 }
 
 /// One row of the QEMU table.
@@ -102,7 +85,7 @@ fn qemu_table(quick: bool, progress: bool) -> Result<Vec<QemuRow>> {
             cases.push(cfg);
         }
     }
-    let b = bar(cases.len(), "QEMU flights", progress);
+    let b = study::progress_bar(cases.len(), "QEMU flights", progress);
     let rows = cases
         .par_iter()
         .map(|cfg| {
@@ -247,7 +230,7 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
     std::fs::create_dir_all(&fig_dir).with_context(|| format!("creating {}", fig_dir.display()))?;
     let mut figs = study_plots::study_figures(&all);
     figs.push(study_plots::horizon_figure(&horizon));
-    let b = bar(figs.len(), "figures", o.progress);
+    let b = study::progress_bar(figs.len(), "figures", o.progress);
     figs.par_iter()
         .map(|f| {
             b.set_message(f.stem.clone());

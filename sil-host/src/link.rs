@@ -29,14 +29,7 @@ pub struct RemoteStep {
 
 /// A wire setpoint from the controllers' type.
 pub fn wire(sp: &Setpoint<f32>) -> WireSetpoint {
-    WireSetpoint {
-        pos: sp.pos_ned_m.into(),
-        vel: sp.vel_ned_mps.into(),
-        acc: sp.acc_ned_mps2.into(),
-        jerk: sp.jerk_ned_mps3.into(),
-        yaw: sp.yaw_rad,
-        yaw_rate: sp.yaw_rate_radps,
-    }
+    firmware::fc::setpoint_to_wire(sp)
 }
 
 fn frame(m: &ToFc) -> Result<Vec<u8>> {

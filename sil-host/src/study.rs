@@ -106,18 +106,27 @@ pub fn label(cfg: &FlightConfig) -> String {
     }
 }
 
-/// Flies every case on all cores, with a progress bar when `progress`.
-pub fn run_all(cfgs: &[FlightConfig], progress: bool) -> anyhow::Result<Vec<Outcome>> {
-    let bar = if progress {
-        ProgressBar::new(cfgs.len() as u64)
+/// A progress bar over `len` items of `what` that shows the current item
+/// (hidden when `show` is false).
+pub fn progress_bar(len: usize, what: &str, show: bool) -> ProgressBar {
+    let b = if show {
+        ProgressBar::new(len as u64)
     } else {
         ProgressBar::hidden()
     };
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} flights  {wide_msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    b.set_style(
+        ProgressStyle::with_template(&format!(
+            "{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {what}  {{wide_msg}}"
+        ))
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
+    b
+}
+
+/// Flies every case on all cores, with a progress bar when `progress`.
+pub fn run_all(cfgs: &[FlightConfig], progress: bool) -> anyhow::Result<Vec<Outcome>> {
+    let bar = progress_bar(cfgs.len(), "flights", progress);
     let out: anyhow::Result<Vec<Outcome>> = cfgs
         .par_iter()
         .map(|cfg| {

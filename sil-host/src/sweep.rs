@@ -11,7 +11,6 @@ use crate::plant::ModelKind;
 use crate::scenario::Scenario;
 use crate::study::{label, VARIANTS};
 use anyhow::{bail, Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write;
@@ -165,16 +164,7 @@ pub fn run(o: &SweepOptions) -> Result<Vec<SweepRow>> {
     let jobs: Vec<(usize, usize)> = (0..ctrls.len())
         .flat_map(|c| (0..vehicles.len()).map(move |s| (c, s)))
         .collect();
-    let bar = if o.progress {
-        ProgressBar::new(jobs.len() as u64)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} flights  {wide_msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
+    let bar = crate::study::progress_bar(jobs.len(), "flights", o.progress);
     let flights: Vec<(usize, SweepFlight)> = jobs
         .par_iter()
         .map(|&(c, s)| {

@@ -72,6 +72,18 @@ pub fn build_controller(
     })
 }
 
+/// A controllers' setpoint as sent on the wire.
+pub fn setpoint_to_wire(sp: &Setpoint<f32>) -> WireSetpoint {
+    WireSetpoint {
+        pos: sp.pos_ned_m.into(),
+        vel: sp.vel_ned_mps.into(),
+        acc: sp.acc_ned_mps2.into(),
+        jerk: sp.jerk_ned_mps3.into(),
+        yaw: sp.yaw_rad,
+        yaw_rate: sp.yaw_rate_radps,
+    }
+}
+
 /// A wire setpoint as the controllers' type; `None` if any value is not finite.
 pub fn setpoint_from_wire(w: &WireSetpoint) -> Option<Setpoint<f32>> {
     let sp = Setpoint {
