@@ -34,8 +34,19 @@ fn main() {
             (ScenarioKind::Setpoint, "wind"),
             (ScenarioKind::Setpoint, "mismatch"),
             (ScenarioKind::Helix, "wind,mismatch"),
+            // The hardest unlisted case of tests/tests/mpc.rs: a far target at −120°.
+            (ScenarioKind::Setpoint, "turn: wind,mismatch"),
         ] {
-            let mut f = FlightConfig::new(ControllerFamily::Mpc, model, Scenario::default_for(kind));
+            let mut sc = Scenario::default_for(kind);
+            let d = match d.strip_prefix("turn: ") {
+                Some(rest) => {
+                    sc.target_ned_m = [-2.0, 4.0, -2.0];
+                    sc.target_yaw_rad = (-120f64).to_radians();
+                    rest
+                }
+                None => d,
+            };
+            let mut f = FlightConfig::new(ControllerFamily::Mpc, model, sc);
             f.disturbance = d.parse::<DisturbanceSet>().unwrap();
             f.mpc_override = Some(c);
             let r = fly(&f).unwrap();
