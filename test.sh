@@ -24,8 +24,7 @@ echo "== clippy + build (firmware for thumbv7em-none-eabihf)"
 cargo clippy -p firmware -p hal-shim --target thumbv7em-none-eabihf --bins --examples -- -D warnings
 cargo build -p firmware --release --target thumbv7em-none-eabihf
 echo "== image size (flash = text + data, static RAM = data + bss)"
-size_tool="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size"
-if [ -x "$size_tool" ]; then "$size_tool" target/thumbv7em-none-eabihf/release/firmware; fi
+size target/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
 echo "== tests"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
