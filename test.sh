@@ -39,8 +39,10 @@ cargo build -q -p sil-host
 python3 tools/check_design.py target/debug/sil-host | tee -a "$log"
 echo "== independent re-solve of MPC steps (scipy)"
 python3 tools/check_mpc_step.py target/debug/sil-host | tee -a "$log"
+echo "== a client written from the README's wire format, against sil-host serve"
+python3 tools/check_wire.py target/debug/sil-host | tee -a "$log"
 echo "== the main job, quick: sil-host report --quick (index, HTML and every linked figure)"
 rm -rf target/report-quick
 cargo run -q --release -p sil-host -- report --quick --no-progress --out target/report-quick
 python3 tools/check_report.py target/report-quick | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
