@@ -148,7 +148,7 @@ impl MpcConfig {
             // The Richter–Jones–Morari bound for this accuracy (≈ 750
             // iterations) does not fit a 5 ms step on a 168 MHz Cortex-M4;
             // 150 does with margin (examples/budget.rs), and flights stay
-            // well below it (the report counts solves that reach the cap).
+            // below it (max 97 in the study; the report's QP column shows each flight's max).
             qp_max_iterations: 150,
         }
     }
