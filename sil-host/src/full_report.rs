@@ -136,15 +136,10 @@ fn headline(all: &[Outcome]) -> String {
         };
         let hard = find(all, fam, q, ScenarioKind::Helix, both, sel);
         let opt = |v: Option<f64>| v.map_or("—".into(), |v| format!("{v:.2}"));
-        let name = match fam {
-            ControllerFamily::Pd => "PD".to_string(),
-            ControllerFamily::Lqr => "LQR".to_string(),
-            ControllerFamily::Mpc => format!("MPC {}", preset.name()),
-        };
         let _ = writeln!(
             s,
             "| {} | {} / {} | {} | {} | {} | {} | {} |",
-            name,
+            study::variant_title(fam, preset),
             opt(sp.and_then(|o| o.res.metrics.x.settling_s)),
             opt(sp.and_then(|o| o.res.metrics.z.settling_s)),
             opt(sp.and_then(|o| o.res.metrics.x.overshoot_pct)),

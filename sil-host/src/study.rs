@@ -259,7 +259,8 @@ fn fam_title(f: ControllerFamily) -> &'static str {
     }
 }
 
-fn variant_title(f: ControllerFamily, preset: MpcPreset) -> String {
+/// How tables, figures and sweeps name a controller: `PD`, `LQR`, `MPC fast`, `MPC thesis`.
+pub fn variant_title(f: ControllerFamily, preset: MpcPreset) -> String {
     match f {
         ControllerFamily::Mpc => format!("MPC {}", preset.name()),
         _ => fam_title(f).to_string(),

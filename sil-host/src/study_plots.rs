@@ -7,20 +7,12 @@ use crate::flight::{fly_with, ControllerFamily, FlightConfig, FlightResult, MpcP
 use crate::metrics::AxisMetrics;
 use crate::plant::ModelKind;
 use crate::scenario::{Scenario, ScenarioKind};
-use crate::study::{find, Outcome, Sel, VARIANTS};
+use crate::study::{find, variant_title, Outcome, Sel, VARIANTS};
 use firmware::control::{Mpc, MpcConfig, MpcForm};
 use firmware::VehicleParams;
 
 /// Points per line: plenty for a 960-pixel figure.
 const POINTS: usize = 800;
-
-fn variant_name(fam: ControllerFamily, preset: MpcPreset) -> String {
-    match fam {
-        ControllerFamily::Pd => "PD".into(),
-        ControllerFamily::Lqr => "LQR".into(),
-        ControllerFamily::Mpc => format!("MPC {}", preset.name()),
-    }
-}
 
 /// `(t, value)` of trace column `k` (0 x, 1 y, 2 z, 3 ψ); z is shown as
 /// altitude (−z) so "up" is up.
@@ -53,7 +45,7 @@ fn undisturbed(all: &[Outcome], model: ModelKind, kind: ScenarioKind) -> Vec<(St
         .enumerate()
         .filter_map(|(i, (fam, preset))| {
             find(all, *fam, model, kind, DisturbanceSet::NONE, Sel::defaults(*preset))
-                .map(|o| (variant_name(*fam, *preset), i, o))
+                .map(|o| (variant_title(*fam, *preset), i, o))
         })
         .collect()
 }
@@ -159,18 +151,18 @@ fn inputs(all: &[Outcome], fam: ControllerFamily, preset: MpcPreset, color: usiz
             let mut p = Panel::new(
                 "t (s)",
                 names[k],
-                vec![Series::line(variant_name(fam, preset), decimate(&pts, POINTS), color)],
+                vec![Series::line(variant_title(fam, preset), decimate(&pts, POINTS), color)],
             );
             p.bounds = vec![(bx.lo[k], "lower bound".into()), (bx.hi[k], "upper bound".into())];
             p
         })
         .collect();
-    let stem = variant_name(fam, preset).to_lowercase().replace(' ', "_");
+    let stem = variant_title(fam, preset).to_lowercase().replace(' ', "_");
     Some(Figure {
         stem: format!("inputs_{stem}_setpoint"),
         title: format!(
             "{}: commanded inputs on the set-point step, with the input box",
-            variant_name(fam, preset)
+            variant_title(fam, preset)
         ),
         plot: Plot::Panels(panels),
     })
@@ -189,7 +181,7 @@ fn u_norm(all: &[Outcome]) -> Figure {
                         .map_or(0.0, |o| o.res.metrics.u_norm)
                 })
                 .collect();
-            groups.push((format!("{} {}", variant_name(fam, preset), model.name()), v));
+            groups.push((format!("{} {}", variant_title(fam, preset), model.name()), v));
         }
     }
     Figure {
@@ -236,7 +228,7 @@ fn disturbances(all: &[Outcome]) -> Option<Figure> {
         }
         panels.push(Panel::new(
             "t (s)",
-            format!("{}: |p − p_ref| (m)", variant_name(fam, preset)),
+            format!("{}: |p − p_ref| (m)", variant_title(fam, preset)),
             series,
         ));
     }

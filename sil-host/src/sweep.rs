@@ -6,10 +6,10 @@
 //! position-RMSE percentiles, with a figure of the RMSE distributions.
 
 use crate::figures::{self, Figure, Panel, Plot, Series};
-use crate::flight::{fly, ControllerFamily, FlightConfig, MpcPreset, Uncertainty};
+use crate::flight::{fly, FlightConfig, Uncertainty};
 use crate::plant::ModelKind;
 use crate::scenario::Scenario;
-use crate::study::{label, VARIANTS};
+use crate::study::{label, variant_title, VARIANTS};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -219,18 +219,7 @@ pub fn run(o: &SweepOptions) -> Result<Vec<SweepRow>> {
 }
 
 fn label_short(cfg: &FlightConfig) -> String {
-    let fam = match cfg.controller {
-        ControllerFamily::Pd => "PD".to_string(),
-        ControllerFamily::Lqr => "LQR".to_string(),
-        ControllerFamily::Mpc => format!(
-            "MPC {}",
-            match cfg.preset {
-                MpcPreset::Fast => "fast",
-                MpcPreset::Thesis => "thesis",
-            }
-        ),
-    };
-    format!("{fam} {}", cfg.model.name())
+    format!("{} {}", variant_title(cfg.controller, cfg.preset), cfg.model.name())
 }
 
 /// Writes `DIR/sweep.md`, `DIR/sweep.json` and the RMSE-distribution figure.
