@@ -8,11 +8,7 @@ use sil_host::{DisturbanceSet, ModelKind, Scenario, ScenarioKind};
 
 fn main() {
     for model in [ModelKind::Euler, ModelKind::Quaternion] {
-        let form = if model == ModelKind::Euler {
-            MpcForm::Euler
-        } else {
-            MpcForm::Quaternion
-        };
+        let form = MpcForm::from(model);
         let mut c = MpcConfig::fast(form);
         for arg in std::env::args().skip(1) {
             let (k, v) = arg.split_once('=').expect("KEY=VALUE");

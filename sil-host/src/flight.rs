@@ -243,10 +243,7 @@ fn build_parts(
     let p: VehicleParams<f32> = vehicle.cast();
     Ok(match (family, model) {
         (ControllerFamily::Mpc, _) => {
-            let form = match model {
-                ModelKind::Euler => MpcForm::Euler,
-                ModelKind::Quaternion => MpcForm::Quaternion,
-            };
+            let form = MpcForm::from(model);
             match preset {
                 MpcPreset::Thesis => {
                     AnyController::MpcThesis(MpcThesis::new(p, mpc.unwrap_or(MpcConfig::thesis(form)))?)

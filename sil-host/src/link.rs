@@ -4,7 +4,7 @@
 
 use anyhow::{bail, Context, Result};
 use firmware::control::Setpoint;
-use firmware::fc::{FcConfig, FlightCore};
+use firmware::fc::{setpoint_to_wire, FcConfig, FlightCore};
 use firmware::proto::{encode, ControllerId, FrameDecoder, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
 use hal_shim::host::{LoopbackLink, MonotonicClock};
 use hal_shim::ByteLink;
@@ -25,11 +25,6 @@ pub struct RemoteStep {
     pub failsafe: bool,
     /// The flight controller's frame and error counters after this step.
     pub counters: firmware::proto::Counters,
-}
-
-/// A wire setpoint from the controllers' type.
-pub fn wire(sp: &Setpoint<f32>) -> WireSetpoint {
-    firmware::fc::setpoint_to_wire(sp)
 }
 
 fn frame(m: &ToFc) -> Result<Vec<u8>> {
@@ -206,7 +201,7 @@ impl FcClient {
     ) -> Result<RemoteStep> {
         // The flight controller holds its setpoint: send it only when it
         // changes (a fixed target then costs one frame a step, not two).
-        let w = wire(sp);
+        let w = setpoint_to_wire(sp);
         if self.last_setpoint != Some(w) {
             self.send(&ToFc::Setpoint(w))?;
             self.last_setpoint = Some(w);
@@ -214,7 +209,7 @@ impl FcClient {
         for (k, p) in preview.iter().enumerate() {
             self.send(&ToFc::Preview {
                 k: (k + 1) as u8,
-                sp: wire(p),
+                sp: setpoint_to_wire(p),
             })?;
         }
         self.send(&ToFc::Sensor {

@@ -30,6 +30,16 @@ impl ModelKind {
     }
 }
 
+/// The controller form that matches a plant form (MPC configurations).
+impl From<ModelKind> for firmware::control::MpcForm {
+    fn from(m: ModelKind) -> Self {
+        match m {
+            ModelKind::Euler => firmware::control::MpcForm::Euler,
+            ModelKind::Quaternion => firmware::control::MpcForm::Quaternion,
+        }
+    }
+}
+
 /// How the plant is built.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlantConfig {
