@@ -356,6 +356,23 @@ pub fn firmware_elf() -> Result<std::path::PathBuf> {
     Ok(elf)
 }
 
+/// `qemu-system-arm` set up as every run of the image here uses it:
+/// netduinoplus2 (an emulated STM32F405, FPU on), deterministic
+/// (`-icount shift=0`: one instruction per ns of virtual time), semihosting to
+/// standard output, USART1 on the chardev `serial` (e.g. `null` or
+/// `tcp:HOST:PORT,server=on`), the ELF `elf` loaded. (The cargo runner in
+/// `.cargo/config.toml` spells the same options.)
+pub fn qemu_command(serial: &str, elf: &std::path::Path) -> std::process::Command {
+    let mut c = std::process::Command::new("qemu-system-arm");
+    c.args(["-machine", "netduinoplus2", "-display", "none", "-monitor", "none"])
+        .args(["-icount", "shift=0"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(["-serial", serial])
+        .arg("-kernel")
+        .arg(elf);
+    c
+}
+
 /// QEMU's netduinoplus2 (an STM32F405, FPU on) running the firmware image,
 /// deterministic (`-icount shift=0`), USART1 on a local TCP socket. Stopped
 /// (killed and reaped) when dropped.
@@ -401,22 +418,7 @@ impl Qemu {
         let addr = format!("127.0.0.1:{port}");
         let log = std::env::temp_dir().join(format!("sil-host-qemu-{port}.log"));
         let out = std::env::temp_dir().join(format!("sil-host-qemu-{port}.defmt"));
-        let child = std::process::Command::new("qemu-system-arm")
-            .args([
-                "-machine",
-                "netduinoplus2",
-                "-display",
-                "none",
-                "-monitor",
-                "none",
-                "-icount",
-                "shift=0",
-            ])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            .arg("-serial")
-            .arg(format!("tcp:{addr},server=on,wait=on,nodelay=on"))
-            .arg("-kernel")
-            .arg(elf)
+        let child = qemu_command(&format!("tcp:{addr},server=on,wait=on,nodelay=on"), elf)
             // Semihosting output: the firmware's defmt log.
             .stdout(std::fs::File::create(&out)?)
             // QEMU's own messages go to a log file: an unread pipe would fill and stall it.

@@ -33,11 +33,7 @@ fn run_example_in_qemu(name: &str) -> (String, bool) {
         .expect("cargo");
     assert!(st.success(), "building example {name} for thumbv7em failed");
     let elf = root().join(format!("target/thumbv7em-none-eabihf/release/examples/{name}"));
-    let out = Command::new("qemu-system-arm")
-        .args(["-machine", "netduinoplus2", "-display", "none", "-monitor", "none"])
-        .args(["-serial", "null", "-icount", "shift=0"])
-        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
-        .arg(&elf)
+    let out = sil_host::link::qemu_command("null", &elf)
         .output()
         .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
     (String::from_utf8_lossy(&out.stdout).into_owned(), out.status.success())
