@@ -63,11 +63,42 @@ impl DisturbanceSet {
     /// translational and rotational drag ×1.5 (rotor lag is switched on by
     /// the plant configuration).
     pub fn mismatched(p: &VehicleParams<f64>) -> VehicleParams<f64> {
+        Uncertainty {
+            mass_scale: 1.15,
+            inertia_scale: [1.10; 3],
+            drag_scale: 1.5,
+            rotor_tau_s: None,
+        }
+        .apply(p)
+    }
+}
+
+/// A true vehicle that differs from the one the controller was designed for.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Uncertainty {
+    /// Mass multiplier.
+    pub mass_scale: f64,
+    /// Multipliers of Ix, Iy, Iz.
+    pub inertia_scale: [f64; 3],
+    /// Multiplier of every translational and rotational drag coefficient.
+    pub drag_scale: f64,
+    /// Rotor lag time constant, s (the plant's rotor lag is on); `None`: no lag.
+    pub rotor_tau_s: Option<f64>,
+}
+
+impl Uncertainty {
+    /// `p` with this uncertainty applied.
+    pub fn apply(&self, p: &VehicleParams<f64>) -> VehicleParams<f64> {
         let mut q = *p;
-        q.mass_kg *= 1.15;
-        q.inertia_kgm2 = p.inertia_kgm2.map(|i| i * 1.10);
-        q.kt_nspm = p.kt_nspm.map(|k| k * 1.5);
-        q.kr_nms = p.kr_nms.map(|k| k * 1.5);
+        q.mass_kg *= self.mass_scale;
+        for i in 0..3 {
+            q.inertia_kgm2[i] *= self.inertia_scale[i];
+            q.kt_nspm[i] *= self.drag_scale;
+            q.kr_nms[i] *= self.drag_scale;
+        }
+        if let Some(t) = self.rotor_tau_s {
+            q.rotor_tau_s = t;
+        }
         q
     }
 }

@@ -2,6 +2,7 @@
 //! in-process, with the scenario's reference, recorded every 10 ms.
 
 use crate::disturbance::DisturbanceSet;
+pub use crate::disturbance::Uncertainty;
 use crate::metrics::{flight_metrics, FlightMetrics, Trace};
 use crate::plant::{ModelKind, Plant, PlantConfig};
 use crate::record::{state_row, RECORD_DT_S};
@@ -115,36 +116,6 @@ pub struct FlightConfig {
     pub vehicle: VehicleParams<f64>,
     /// How the true vehicle differs from `vehicle` (robustness sweeps).
     pub uncertainty: Option<Uncertainty>,
-}
-
-/// A true vehicle that differs from the one the controller was designed for.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Uncertainty {
-    /// Mass multiplier.
-    pub mass_scale: f64,
-    /// Multipliers of Ix, Iy, Iz.
-    pub inertia_scale: [f64; 3],
-    /// Multiplier of every translational and rotational drag coefficient.
-    pub drag_scale: f64,
-    /// Rotor lag time constant, s (the plant's rotor lag is on); `None`: no lag.
-    pub rotor_tau_s: Option<f64>,
-}
-
-impl Uncertainty {
-    /// `p` with this uncertainty applied.
-    pub fn apply(&self, p: &VehicleParams<f64>) -> VehicleParams<f64> {
-        let mut q = *p;
-        q.mass_kg *= self.mass_scale;
-        for i in 0..3 {
-            q.inertia_kgm2[i] *= self.inertia_scale[i];
-            q.kt_nspm[i] *= self.drag_scale;
-            q.kr_nms[i] *= self.drag_scale;
-        }
-        if let Some(t) = self.rotor_tau_s {
-            q.rotor_tau_s = t;
-        }
-        q
-    }
 }
 
 impl FlightConfig {
