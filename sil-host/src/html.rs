@@ -83,7 +83,11 @@ pub fn markdown_to_html(md: &str, title: &str, dir: &Path) -> String {
             }
             body.push_str("</tr>\n");
             i += 1;
-            if i < lines.len() && lines[i].trim().starts_with("|-") || i < lines.len() && lines[i].contains("---") {
+            // The header's separator row.
+            if lines
+                .get(i)
+                .is_some_and(|l| l.trim().starts_with("|-") || l.contains("---"))
+            {
                 i += 1;
             }
             while i < lines.len() && lines[i].trim().starts_with('|') {
