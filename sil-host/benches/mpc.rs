@@ -35,7 +35,8 @@ fn x0() -> X {
 fn regulation_config() -> MpcConfig {
     let mut c = MpcConfig::fast(MpcForm::Euler);
     c.exec_dt_s = c.pred_dt_s; // one closed-loop step = one prediction step
-    c.observer_tau_s = None;
+    c.observer_tau_s = None; // a regulation problem: no disturbance, no trend
+    c.disturbance_trend_s = None;
     c.reference = ReferenceMode::Thesis;
     c.s = [1e-6; 4]; // TinyMPC has no input-rate cost
     c

@@ -15,6 +15,9 @@ fn main() {
             let v: f64 = v.parse().expect("number");
             match k {
                 "yawlim" => c.max_heading_error_rad = v,
+                "trend" => c.disturbance_trend_s = if v > 0.0 { Some(v) } else { None },
+                "trendmax" => c.disturbance_trend_max_mps2 = v,
+                "ratelp" => c.disturbance_rate_filter_s = v,
                 "tau" => c.observer_tau_s = if v > 0.0 { Some(v) } else { None },
                 "pred" => c.pred_dt_s = v,
                 "exec" => c.exec_dt_s = v,
@@ -47,14 +50,26 @@ fn main() {
             f.mpc_override = Some(c);
             let r = fly(&f).unwrap();
             let m = r.metrics;
+            // x RMS error over [0,5), [5,10) and [10,end) s: start-up, wind onset, steady gust.
+            let tr = &r.trace;
+            let win = |lo: f64, hi: f64| {
+                let e: Vec<f64> = (0..tr.t.len())
+                    .filter(|&i| tr.t[i] >= lo && tr.t[i] < hi)
+                    .map(|i| tr.actual[i][0] - tr.reference[i][0])
+                    .collect();
+                (e.iter().map(|v| v * v).sum::<f64>() / e.len().max(1) as f64).sqrt()
+            };
             println!(
-                "{:10} {:8} {:14} rmse {:.4} {:.4} {:.4} final {:.4} it {:.0}/{}{}",
+                "{:10} {:8} {:14} rmse {:.4} {:.4} {:.4} [x {:.4} {:.4} {:.4}] final {:.4} it {:.0}/{}{}",
                 model.name(),
                 kind.name(),
                 d,
                 m.x.rmse_m,
                 m.y.rmse_m,
                 m.z.rmse_m,
+                win(0.0, 5.0),
+                win(5.0, 10.0),
+                win(10.0, 1e9),
                 m.final_error_m,
                 r.qp_iterations.0,
                 r.qp_iterations.1,

@@ -43,17 +43,38 @@ fn fast_mpc_is_offset_free_under_wind() {
     }
 }
 
+/// Position RMSE over the flight, m: the three axes' RMSE combined.
+fn position_rmse(r: &FlightResult) -> f64 {
+    let m = &r.metrics;
+    (m.x.rmse_m.powi(2) + m.y.rmse_m.powi(2) + m.z.rmse_m.powi(2)).sqrt()
+}
+
 #[test]
-fn fast_mpc_tracks_the_helix_with_and_without_wind() {
+fn fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm() {
+    // Issue 4: helix RMSE with `wind` within 15 % of without. Both flights
+    // share the start-up transient (the reference starts at 0.63 m/s); the
+    // wind (force and moment steps at 5 s, 0.2 N gust at 0.5 Hz) may add
+    // little to it. x carries nearly all of the error; y and z stay within
+    // a few millimetres either way (their calm RMSE is below 1 mm, so their
+    // own ratio says nothing).
     for m in MODELS {
         let calm = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "none");
         let windy = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "wind");
-        for (a, b) in [
-            (calm.metrics.x, windy.metrics.x),
-            (calm.metrics.y, windy.metrics.y),
-            (calm.metrics.z, windy.metrics.z),
-        ] {
-            assert!(a.rmse_m < 0.03 && b.rmse_m < 0.05, "{m:?}: {} / {}", a.rmse_m, b.rmse_m);
+        let (c, w) = (position_rmse(&calm), position_rmse(&windy));
+        eprintln!(
+            "{m:?}: helix position RMSE {c:.5} m calm, {w:.5} m wind ({:.3}x)",
+            w / c
+        );
+        assert!(c < 0.03, "{m:?}: calm RMSE {c}");
+        assert!(w <= 1.15 * c, "{m:?}: wind {w} m vs calm {c} m");
+        assert!(windy.metrics.x.rmse_m <= 1.15 * calm.metrics.x.rmse_m, "{m:?}: x");
+        for (a, b) in [(calm.metrics.y, windy.metrics.y), (calm.metrics.z, windy.metrics.z)] {
+            assert!(
+                a.rmse_m < 0.003 && b.rmse_m < 0.003,
+                "{m:?}: {} / {}",
+                a.rmse_m,
+                b.rmse_m
+            );
         }
     }
 }
