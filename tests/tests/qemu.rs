@@ -10,8 +10,25 @@ use sil_host::flight::{fly, fly_target, ControllerFamily, FlightConfig, MpcPrese
 use sil_host::{ModelKind, Scenario, ScenarioKind};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 const NEEDS_QEMU: &str = "needs qemu-system-arm; ./test.sh installs it and runs these";
+
+/// The link flight runs alone. Under `-icount` QEMU's virtual clock follows
+/// real time while the guest idles, waiting for the host; on a 2-core machine
+/// with the other QEMU tests running beside it, the host or QEMU can be
+/// descheduled for more than the firmware's 50 ms sensor timeout, and the
+/// firmware then rightly enters its failsafe (seen once in `./test.sh`).
+/// The other tests have no timeout and share the lock.
+static LINK_FLIGHT: RwLock<()> = RwLock::new(());
+
+fn shared() -> RwLockReadGuard<'static, ()> {
+    LINK_FLIGHT.read().unwrap_or_else(|e| e.into_inner())
+}
+
+fn alone() -> RwLockWriteGuard<'static, ()> {
+    LINK_FLIGHT.write().unwrap_or_else(|e| e.into_inner())
+}
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -42,6 +59,7 @@ fn run_example_in_qemu(name: &str) -> (String, bool) {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn every_controller_fits_its_cycle_budget() {
+    let _lock = shared();
     let _ = NEEDS_QEMU;
     let (out, ok) = run_example_in_qemu("budget");
     // Rows: | controller | form | rate | measured | instructions | budget | load | verdict | stack |
@@ -85,6 +103,7 @@ fn every_controller_fits_its_cycle_budget() {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn mcu_and_host_compute_the_same_closed_loop() {
+    let _lock = shared();
     let host = cargo()
         .args(["run", "-q", "--release", "-p", "firmware", "--example", "equivalence"])
         .output()
@@ -125,6 +144,7 @@ fn setpoint(family: ControllerFamily, seconds: f64) -> FlightConfig {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn qemu_flight_matches_in_process_and_counts_instructions() {
+    let _lock = alone();
     for family in [ControllerFamily::Lqr, ControllerFamily::Mpc] {
         let cfg = setpoint(family, 2.0);
         let local = fly(&cfg).unwrap();
@@ -160,6 +180,7 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn stm32_drivers_behave_in_qemu() {
+    let _lock = shared();
     let (out, ok) = run_example_in_qemu("drivers");
     assert!(ok, "{out}");
     let nums = |prefix: &str| -> Vec<u64> {
