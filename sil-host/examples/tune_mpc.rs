@@ -1,19 +1,23 @@
 //! Tuning aid: flies the fast MPC on the hardest cases with the preset
-//! changed by `KEY=VALUE` arguments (tau, q0..q11, r0..r3, s0..s3, pred, exec).
+//! changed by `KEY=VALUE` arguments (tau, q0..q11, r0..r3, s0..s3, pred, exec,
+//! yawlim, trend, trendmax, ratelp; noise = scale of the typical sensor noise).
 //! `cargo run --release -p sil-host --example tune_mpc -- tau=0.1 q2=80`
 
 use firmware::control::{MpcConfig, MpcForm};
 use sil_host::flight::{fly, ControllerFamily, FlightConfig};
+use sil_host::noise::SensorNoise;
 use sil_host::{DisturbanceSet, ModelKind, Scenario, ScenarioKind};
 
 fn main() {
     for model in [ModelKind::Euler, ModelKind::Quaternion] {
         let form = MpcForm::from(model);
         let mut c = MpcConfig::fast(form);
+        let mut noise = None;
         for arg in std::env::args().skip(1) {
             let (k, v) = arg.split_once('=').expect("KEY=VALUE");
             let v: f64 = v.parse().expect("number");
             match k {
+                "noise" => noise = Some(SensorNoise::typical(v, 1).expect("noise scale")),
                 "yawlim" => c.max_heading_error_rad = v,
                 "trend" => c.disturbance_trend_s = if v > 0.0 { Some(v) } else { None },
                 "trendmax" => c.disturbance_trend_max_mps2 = v,
@@ -48,6 +52,7 @@ fn main() {
             let mut f = FlightConfig::new(ControllerFamily::Mpc, model, sc);
             f.disturbance = d.parse::<DisturbanceSet>().unwrap();
             f.mpc_override = Some(c);
+            f.noise = noise;
             let r = fly(&f).unwrap();
             let m = r.metrics;
             // x RMS error over [0,5), [5,10) and [10,end) s: start-up, wind onset, steady gust.

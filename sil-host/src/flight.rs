@@ -116,6 +116,8 @@ pub struct FlightConfig {
     pub vehicle: VehicleParams<f64>,
     /// How the true vehicle differs from `vehicle` (robustness sweeps).
     pub uncertainty: Option<Uncertainty>,
+    /// Errors on the state the controller sees (`None`: the true state).
+    pub noise: Option<crate::noise::SensorNoise>,
 }
 
 impl FlightConfig {
@@ -134,6 +136,7 @@ impl FlightConfig {
             integration_hz: 1000.0,
             vehicle: VehicleParams::OS4,
             uncertainty: None,
+            noise: None,
         }
     }
 }
@@ -429,6 +432,7 @@ fn fly_inner<C: Controller<f32>>(
         r.open(controller_id(cfg), cfg.reference == RefMode::Feedforward)?;
     }
     let mut seq = 0u32;
+    let mut sensors = cfg.noise.map(|n| n.source());
 
     let mut res = FlightResult {
         rows: Vec::new(),
@@ -458,6 +462,11 @@ fn fly_inner<C: Controller<f32>>(
                 res.diverged = true;
                 break;
             }
+            // What the controller sees: the true state, or its noisy measurement.
+            let xq = match sensors.as_mut() {
+                Some(s) => s.measure(&xq),
+                None => xq,
+            };
             let est = StateEstimate::from_quat_state(&xq.cast::<f32>());
             let sp = setpoint(&r);
             let previews: Vec<Setpoint<f32>> = match preview {

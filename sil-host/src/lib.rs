@@ -13,6 +13,7 @@ pub mod full_report;
 pub mod html;
 pub mod link;
 pub mod metrics;
+pub mod noise;
 pub mod openloop;
 pub mod plant;
 pub mod record;

@@ -136,6 +136,14 @@ struct FlyArgs {
     /// Disturbances on the plant: none, wind, mismatch or wind,mismatch (SPEC §9).
     #[arg(long, default_value = "none", value_name = "SET")]
     disturbance: DisturbanceSet,
+    /// Sensor noise on the state the controller sees: white, Gaussian, drawn every control step;
+    /// SCALE × (5 mm, 2 cm/s, 0.3°, 0.6°/s) on position, velocity, attitude and body rates (1 σ).
+    /// The metrics use the true state.
+    #[arg(long, value_name = "SCALE")]
+    noise: Option<f64>,
+    /// Seed of the sensor noise (same seed, same noise).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    noise_seed: u64,
     /// Circle/helix radius, m (default 2).
     #[arg(long, value_name = "M")]
     radius: Option<f64>,
@@ -405,6 +413,11 @@ fn write_json(path: &PathBuf, value: &serde_json::Value) -> Result<()> {
 fn fly_cmd(a: &FlyArgs) -> Result<()> {
     let mut cfg = FlightConfig::new(a.controller, a.model, scenario_from(a)?);
     cfg.disturbance = a.disturbance;
+    cfg.noise = a
+        .noise
+        .map(|k| sil_host::noise::SensorNoise::typical(k, a.noise_seed))
+        .transpose()
+        .context("--noise")?;
     cfg.reference = a.reference;
     cfg.gains = a.gains;
     cfg.preset = a.preset;

@@ -38,6 +38,7 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
         "model": cfg.model.name(),
         "scenario": cfg.scenario.kind.name(),
         "disturbance": cfg.disturbance.to_string(),
+        "sensor_noise": cfg.noise,
         "reference": format!("{:?}", cfg.reference).to_lowercase(),
         "gains": format!("{:?}", cfg.gains).to_lowercase(),
         "control_hz": cfg.control_hz,

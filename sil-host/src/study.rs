@@ -560,7 +560,7 @@ estimate).
 thesis' 6.9–8.5 s (the thesis' MPC had no reference preview and, in MATLAB, a soft output constraint). `fast` \
 re-solves at 200 Hz over a 1 s horizon with preview, feed-forward and a disturbance estimate: offset-free under \
 `wind` (set-point ends within 2 mm), and stable under `mismatch` thanks to heavy roll/pitch-rate weights (a \
-lightly damped attitude loop diverged with the 0.178 s rotor lag). Its helix RMSE with `wind` is within 8 % \
+lightly damped attitude loop diverged with the 0.178 s rotor lag). Its helix RMSE with `wind` is within 12 % \
 of the calm one: the 0.5 Hz, 0.2 N gust sits above the position loop's bandwidth, so feedback alone cannot \
 hold it off (a disturbance estimate held constant over the horizon left 1.46×); the estimate's rate is \
 extrapolated with a damped trend (T = 0.3 s), so the MPC anticipates where the gust is going rather than chasing it.

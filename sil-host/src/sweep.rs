@@ -7,6 +7,7 @@
 
 use crate::figures::{self, Figure, Panel, Plot, Series};
 use crate::flight::{fly, FlightConfig, Uncertainty};
+use crate::noise::SplitMix;
 use crate::plant::ModelKind;
 use crate::scenario::Scenario;
 use crate::study::{label, variant_title, VARIANTS};
@@ -45,23 +46,6 @@ pub struct SweepOptions {
     /// Progress bar.
     #[serde(skip)]
     pub progress: bool,
-}
-
-/// splitmix64: a small, well-known generator; enough for reproducible draws.
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [lo, hi].
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
 }
 
 /// The vehicles of a sweep, in order.

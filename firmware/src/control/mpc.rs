@@ -76,9 +76,9 @@ pub struct MpcConfig {
     /// acceleration, m/s² (bounds the trend during manoeuvres, when model
     /// error, not wind, moves the estimate).
     pub disturbance_trend_max_mps2: f64,
-    /// Time constant of the low-pass on the disturbance rate ḋ, s (the rate
-    /// is the difference of successive estimates; shorter follows a gust with
-    /// less lag, longer passes less sensor noise).
+    /// Time constant τ of the rate filter `s/(τs + 1)²` that gives ḋ from the
+    /// estimate, s (> the execution period): shorter follows a gust with less
+    /// lag, longer passes less sensor noise.
     pub disturbance_rate_filter_s: f64,
     /// Reference feed-forward.
     pub reference: ReferenceMode,
@@ -135,10 +135,12 @@ impl MpcConfig {
     /// damped attitude loop diverges (the rate weight 0.2 did, 30 does not;
     /// 8 flies the listed cases better but loses a far turn under
     /// `wind,mismatch`). The horizontal disturbance is predicted with a damped
-    /// trend (T = 0.3 s, rate filtered over 30 ms, at most 0.4 m/s² of
-    /// extrapolated change): a 0.5 Hz gust moves through half its swing within
-    /// the 1 s horizon; holding the estimate left 0.016 m of x RMS error over
-    /// the gusty part of the helix, the trend leaves 0.005 m.
+    /// trend (T = 0.3 s, rate through `s/(τs + 1)²` with τ = 50 ms, at most
+    /// 0.4 m/s² of extrapolated change): a 0.5 Hz gust moves through half its
+    /// swing within the 1 s horizon; holding the estimate left 0.016 m of x
+    /// RMS error over the gusty part of the helix, the trend leaves 0.007 m.
+    /// τ trades that against sensor noise: 30 ms left 0.006 m without noise
+    /// but lost most of the gain with it (`sil-host fly --noise 1`).
     pub fn fast(form: MpcForm) -> Self {
         let a = match form {
             MpcForm::Euler => 1.0,
@@ -168,7 +170,7 @@ impl MpcConfig {
             observer_tau_s: Some(0.02),
             disturbance_trend_s: Some(0.3),
             disturbance_trend_max_mps2: 0.4,
-            disturbance_rate_filter_s: 0.03,
+            disturbance_rate_filter_s: 0.05,
             reference: ReferenceMode::Feedforward,
             max_heading_error_rad: 0.35,
             qp_tolerance: 1e-4,
@@ -232,6 +234,8 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     dist: SVector<T, 6>,
     /// Low-passed rate of the horizontal disturbance acceleration, NED (m/s³; z stays 0).
     dist_rate: Vector3<T>,
+    /// The two cascaded low-passes of the horizontal estimate the rate comes from.
+    dist_lp: [[T; 2]; 2],
     /// Trend gain of prediction step k: `T·(1 − e^(−τ_k/T))`, s, τ_k the step's midpoint.
     trend: [T; N],
     last: Option<(Vec12<T>, T)>,
@@ -318,13 +322,15 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             du_prev: Vector4::zeros(),
             dist: SVector::zeros(),
             dist_rate: Vector3::zeros(),
+            dist_lp: [[T::zero(); 2]; 2],
             trend: [T::zero(); N],
             last: None,
             last_qp: None,
         };
         if let Some(tt) = cfg.disturbance_trend_s {
             let max = cfg.disturbance_trend_max_mps2;
-            if !ok_dt(tt) || !ok_dt(cfg.disturbance_rate_filter_s) || !max.is_finite() || max < 0.0 {
+            let filter_ok = cfg.disturbance_rate_filter_s.is_finite() && cfg.disturbance_rate_filter_s > cfg.exec_dt_s;
+            if !ok_dt(tt) || !filter_ok || !max.is_finite() || max < 0.0 {
                 return Err(ControlError::InvalidParameter);
             }
             for (k, t) in me.trend.iter_mut().enumerate() {
@@ -572,14 +578,20 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             return;
         }
         if let Some(tt) = self.cfg.disturbance_trend_s {
-            // ḋ low-passed with T, horizontal only, |ḋ|·T bounded.
-            let dt = self.cfg.exec_dt_s;
-            let a = lit::<T>((dt / self.cfg.disturbance_rate_filter_s).min(1.0));
+            // ḋ through a second-order derivative filter s/(τs + 1)²: the
+            // difference of two cascaded low-passes of the estimate, divided
+            // by τ − dt (exact for a ramp in discrete time). Differencing the
+            // estimate directly would pass its noise at a gain of 1/dt.
+            // Horizontal only; |ḋ|·T bounded.
+            let (dt, tf) = (self.cfg.exec_dt_s, self.cfg.disturbance_rate_filter_s);
+            let a = lit::<T>(dt / tf);
             let lim = lit::<T>(self.cfg.disturbance_trend_max_mps2 / tt);
             for i in 0..2 {
-                let raw = (dh[i] - self.dist[i]) / lit(dt);
-                let r = self.dist_rate[i] + a * (raw - self.dist_rate[i]);
-                self.dist_rate[i] = r.max(-lim).min(lim);
+                let l1 = self.dist_lp[0][i] + a * (dh[i] - self.dist_lp[0][i]);
+                let l2 = self.dist_lp[1][i] + a * (l1 - self.dist_lp[1][i]);
+                self.dist_lp[0][i] = l1;
+                self.dist_lp[1][i] = l2;
+                self.dist_rate[i] = ((l1 - l2) / lit(tf - dt)).max(-lim).min(lim);
             }
         }
         self.dist = dh;
@@ -681,6 +693,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         self.du_prev = Vector4::zeros();
         self.dist = SVector::zeros();
         self.dist_rate = Vector3::zeros();
+        self.dist_lp = [[T::zero(); 2]; 2];
         self.last = None;
         self.last_qp = None;
         self.preview_valid = false;
