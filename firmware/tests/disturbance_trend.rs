@@ -24,14 +24,17 @@ fn rk4(v: &Vehicle<f64>, x: &QuatState<f64>, u: &Input<f64>, d: &Disturbance<f64
     n
 }
 
-struct Run {
-    /// Largest north position error after the first second of the ramp, m.
-    max_error_m: f64,
-    /// Estimated disturbance rate (NED, m/s³) at each control step after it.
-    rates: Vec<Vector3<f64>>,
+/// One control step of a hover flight: time (s), north position (m) and the
+/// MPC's estimated disturbance rate (NED, m/s³) after its update.
+struct Sample {
+    t: f64,
+    north_m: f64,
+    rate: Vector3<f64>,
 }
 
-fn hover_under_ramp(cfg: MpcConfig) -> Run {
+/// Hovers at (0, 0, −1) m under the north/east/down force `force_at(t)` (N)
+/// for `end_s` seconds; the plant is sub-stepped 5 times per control period.
+fn hover(cfg: MpcConfig, force_at: impl Fn(f64) -> Vector3<f64>, end_s: f64) -> Vec<Sample> {
     let p = VehicleParams::<f64>::os4();
     let v = Vehicle::new(&p);
     let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
@@ -39,26 +42,37 @@ fn hover_under_ramp(cfg: MpcConfig) -> Run {
     let mut x = QuatState::<f64>::zeros();
     x[2] = -1.0;
     x[6] = 1.0;
-    let (dt, sub) = (cfg.exec_dt_s, 5);
+    let (h, sub) = (cfg.exec_dt_s / 5.0, 5);
     let mut t = 0.0;
-    let mut run = Run {
-        max_error_m: 0.0,
-        rates: Vec::new(),
-    };
-    while t < END_S {
+    let mut out = Vec::new();
+    while t < end_s {
         let u = mpc.update(&StateEstimate::from_quat_state(&x), &sp).unwrap().u;
-        if t > RAMP_START_S + 1.0 {
-            run.max_error_m = run.max_error_m.max(x[0].abs());
-            run.rates.push(mpc.disturbance_rate());
-        }
+        out.push(Sample {
+            t,
+            north_m: x[0],
+            rate: mpc.disturbance_rate(),
+        });
         for _ in 0..sub {
-            let mut d = Disturbance::none();
-            d.force_ned_n[0] = SLOPE_NPS * (t - RAMP_START_S).max(0.0);
-            x = rk4(&v, &x, &u, &d, dt / sub as f64);
-            t += dt / sub as f64;
+            let d = Disturbance {
+                force_ned_n: force_at(t),
+                moment_body_nm: Vector3::zeros(),
+            };
+            x = rk4(&v, &x, &u, &d, h);
+            t += h;
         }
     }
-    run
+    out
+}
+
+/// The ramp flight after its first second: largest north error (m) and the rates.
+fn hover_under_ramp(cfg: MpcConfig) -> (f64, Vec<Vector3<f64>>) {
+    let ramp = |t: f64| Vector3::new(SLOPE_NPS * (t - RAMP_START_S).max(0.0), 0.0, 0.0);
+    let late: Vec<Sample> = hover(cfg, ramp, END_S)
+        .into_iter()
+        .filter(|s| s.t > RAMP_START_S + 1.0)
+        .collect();
+    let worst = late.iter().map(|s| s.north_m.abs()).fold(0.0, f64::max);
+    (worst, late.iter().map(|s| s.rate).collect())
 }
 
 #[test]
@@ -66,8 +80,8 @@ fn the_trend_measures_a_force_ramp_and_cancels_its_lag() {
     let mass = VehicleParams::<f64>::os4().mass_kg;
     let truth = SLOPE_NPS / mass; // m/s³
     for form in [MpcForm::Euler, MpcForm::Quaternion] {
-        let with = hover_under_ramp(MpcConfig::fast(form));
-        for r in &with.rates {
+        let (with, rates) = hover_under_ramp(MpcConfig::fast(form));
+        for r in &rates {
             assert!(
                 (r[0] - truth).abs() < 0.05 * truth,
                 "{form:?}: rate {} vs {truth}",
@@ -77,17 +91,14 @@ fn the_trend_measures_a_force_ramp_and_cancels_its_lag() {
         }
         let mut held = MpcConfig::fast(form);
         held.disturbance_trend_s = None;
-        let without = hover_under_ramp(held);
-        assert!(without.rates.iter().all(|r| *r == Vector3::zeros()));
+        let (without, rates) = hover_under_ramp(held);
+        assert!(rates.iter().all(|r| *r == Vector3::zeros()));
         eprintln!(
-            "{form:?}: max north error under a {SLOPE_NPS} N/s ramp: {:.5} m with the trend, {:.5} m held",
-            with.max_error_m, without.max_error_m
+            "{form:?}: max north error under a {SLOPE_NPS} N/s ramp: {with:.5} m with the trend, {without:.5} m held"
         );
         assert!(
-            with.max_error_m < 0.5 * without.max_error_m,
-            "{form:?}: {} m with the trend, {} m without",
-            with.max_error_m,
-            without.max_error_m
+            with < 0.5 * without,
+            "{form:?}: {with} m with the trend, {without} m without"
         );
     }
 }
@@ -96,27 +107,16 @@ fn the_trend_measures_a_force_ramp_and_cancels_its_lag() {
 fn the_trend_is_bounded_when_the_estimate_jumps() {
     // A force step (the estimate's rate spikes): the extrapolated change
     // |ḋ|·T stays within the configured bound at every step.
-    let p = VehicleParams::<f64>::os4();
     let cfg = MpcConfig::fast(MpcForm::Quaternion);
     let bound = cfg.disturbance_trend_max_mps2 / cfg.disturbance_trend_s.unwrap();
-    let v = Vehicle::new(&p);
-    let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
-    let sp = Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0);
-    let mut x = QuatState::<f64>::zeros();
-    x[2] = -1.0;
-    x[6] = 1.0;
-    let mut peak = 0.0f64;
-    for k in 0..200 {
-        let u = mpc.update(&StateEstimate::from_quat_state(&x), &sp).unwrap().u;
-        peak = peak.max(mpc.disturbance_rate().norm());
-        let mut d = Disturbance::none();
-        if k >= 20 {
-            d.force_ned_n = Vector3::new(3.0, -3.0, 0.0);
+    let step = |t: f64| {
+        if t >= 0.1 {
+            Vector3::new(3.0, -3.0, 0.0)
+        } else {
+            Vector3::zeros()
         }
-        for _ in 0..5 {
-            x = rk4(&v, &x, &u, &d, 0.001);
-        }
-    }
+    };
+    let peak = hover(cfg, step, 1.0).iter().map(|s| s.rate.norm()).fold(0.0, f64::max);
     assert!(
         peak > 0.9 * bound,
         "the step should drive the rate to its bound: {peak}"
