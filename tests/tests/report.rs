@@ -117,5 +117,22 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
         }),
         "{row}"
     );
+
+    // The sensor-noise table: the fast MPC's cell at noise × 1 is the windy
+    // helix (20 s in --quick) flown alone with that noise.
+    let section = md.split("## Sensor noise").nth(1).expect("sensor-noise section");
+    let row = section
+        .lines()
+        .find(|l| l.starts_with("| MPC fast |"))
+        .expect("noise row");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    let mut sc = sil_host::Scenario::default_for(ScenarioKind::Helix);
+    sc.duration_s = 20.0;
+    let mut cfg = sil_host::flight::FlightConfig::new(ControllerFamily::Mpc, ModelKind::Quaternion, sc);
+    cfg.disturbance = "wind".parse().unwrap();
+    cfg.noise = Some(sil_host::noise::SensorNoise::typical(1.0, 1).unwrap());
+    let m = fly(&cfg).unwrap().metrics;
+    let rmse = (m.x.rmse_m.powi(2) + m.y.rmse_m.powi(2) + m.z.rmse_m.powi(2)).sqrt();
+    assert_eq!(cells[3], format!("{rmse:.4}"), "{row}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
