@@ -235,10 +235,7 @@ fn noise_table(quick: bool, progress: bool) -> Result<Vec<(String, Vec<f64>)>> {
         .map(|(title, c)| {
             let rmse = c
                 .iter()
-                .map(|_| {
-                    let m = &it.next().expect("one outcome per flight").res.metrics;
-                    (m.x.rmse_m.powi(2) + m.y.rmse_m.powi(2) + m.z.rmse_m.powi(2)).sqrt()
-                })
+                .map(|_| it.next().expect("one outcome per flight").res.metrics.position_rmse_m())
                 .collect();
             (title, rmse)
         })

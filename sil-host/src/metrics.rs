@@ -52,6 +52,14 @@ pub struct FlightMetrics {
     pub final_error_m: f64,
 }
 
+impl FlightMetrics {
+    /// Position RMSE over the flight, m: the three axes' RMSE combined
+    /// (the RMS of the 3-D position error).
+    pub fn position_rmse_m(&self) -> f64 {
+        (self.x.rmse_m.powi(2) + self.y.rmse_m.powi(2) + self.z.rmse_m.powi(2)).sqrt()
+    }
+}
+
 /// Axis metrics for samples `y` (actual) against `r` (reference) with the
 /// flight's initial value `y0`. A step is detected when the reference is
 /// constant and differs from `y0`.

@@ -43,12 +43,6 @@ fn fast_mpc_is_offset_free_under_wind() {
     }
 }
 
-/// Position RMSE over the flight, m: the three axes' RMSE combined.
-fn position_rmse(r: &FlightResult) -> f64 {
-    let m = &r.metrics;
-    (m.x.rmse_m.powi(2) + m.y.rmse_m.powi(2) + m.z.rmse_m.powi(2)).sqrt()
-}
-
 #[test]
 fn fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm() {
     // Issue 4: helix RMSE with `wind` within 15 % of without. Both flights
@@ -60,7 +54,7 @@ fn fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm() {
     for m in MODELS {
         let calm = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "none");
         let windy = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "wind");
-        let (c, w) = (position_rmse(&calm), position_rmse(&windy));
+        let (c, w) = (calm.metrics.position_rmse_m(), windy.metrics.position_rmse_m());
         eprintln!(
             "{m:?}: helix position RMSE {c:.5} m calm, {w:.5} m wind ({:.3}x)",
             w / c

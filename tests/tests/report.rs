@@ -131,8 +131,7 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
     let mut cfg = sil_host::flight::FlightConfig::new(ControllerFamily::Mpc, ModelKind::Quaternion, sc);
     cfg.disturbance = "wind".parse().unwrap();
     cfg.noise = Some(sil_host::noise::SensorNoise::typical(1.0, 1).unwrap());
-    let m = fly(&cfg).unwrap().metrics;
-    let rmse = (m.x.rmse_m.powi(2) + m.y.rmse_m.powi(2) + m.z.rmse_m.powi(2)).sqrt();
+    let rmse = fly(&cfg).unwrap().metrics.position_rmse_m();
     assert_eq!(cells[3], format!("{rmse:.4}"), "{row}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
