@@ -229,16 +229,11 @@ fn noise_table(quick: bool, progress: bool) -> Result<Vec<(String, Vec<f64>)>> {
     let rows = noise_flights(quick);
     let cfgs: Vec<FlightConfig> = rows.iter().flat_map(|(_, c)| c.iter().copied()).collect();
     let out = study::run_all(&cfgs, progress)?;
-    let mut it = out.iter();
+    // run_all keeps the order: each row's flights are one chunk, a flight per scale.
     Ok(rows
         .into_iter()
-        .map(|(title, c)| {
-            let rmse = c
-                .iter()
-                .map(|_| it.next().expect("one outcome per flight").res.metrics.position_rmse_m())
-                .collect();
-            (title, rmse)
-        })
+        .zip(out.chunks(NOISE_SCALES.len()))
+        .map(|((title, _), o)| (title, o.iter().map(|o| o.res.metrics.position_rmse_m()).collect()))
         .collect())
 }
 
