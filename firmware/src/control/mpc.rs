@@ -232,9 +232,8 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     du_prev: Vector4<T>,
     /// Disturbance estimate: acceleration NED (m/s²) and angular acceleration body (rad/s²).
     dist: SVector<T, 6>,
-    /// Low-passed rate of the horizontal disturbance acceleration, NED (m/s³; z stays 0).
-    dist_rate: Vector3<T>,
-    /// The two cascaded low-passes of the horizontal estimate the rate comes from.
+    /// The two cascaded low-passes of the horizontal estimate the trend's
+    /// rate comes from ([`Mpc::disturbance_rate`]).
     dist_lp: [[T; 2]; 2],
     /// Trend gain of prediction step k: `T·(1 − e^(−τ_k/T))`, s, τ_k the step's midpoint.
     trend: [T; N],
@@ -321,7 +320,6 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             z: SVector::zeros(),
             du_prev: Vector4::zeros(),
             dist: SVector::zeros(),
-            dist_rate: Vector3::zeros(),
             dist_lp: [[T::zero(); 2]; 2],
             trend: [T::zero(); N],
             last: None,
@@ -381,9 +379,19 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     }
 
     /// Current rate of the horizontal disturbance estimate used by the damped
-    /// trend, NED m/s³ (z is always 0; all zero without a trend).
+    /// trend, NED m/s³ (z is always 0; all zero without a trend): the
+    /// second-order derivative filter `s/(τs + 1)²` of the estimate, the
+    /// difference of its two cascaded low-passes over τ − dt (exact for a
+    /// ramp in discrete time), each axis bounded so that `|ḋ|·T` stays within
+    /// `disturbance_trend_max_mps2`.
     pub fn disturbance_rate(&self) -> Vector3<T> {
-        self.dist_rate
+        let Some(tt) = self.cfg.disturbance_trend_s else {
+            return Vector3::zeros();
+        };
+        let span = lit::<T>(self.cfg.disturbance_rate_filter_s - self.cfg.exec_dt_s);
+        let lim = lit::<T>(self.cfg.disturbance_trend_max_mps2 / tt);
+        let rate = |i: usize| ((self.dist_lp[0][i] - self.dist_lp[1][i]) / span).max(-lim).min(lim);
+        Vector3::new(rate(0), rate(1), T::zero())
     }
 
     /// Sets the reference for prediction step `k` (1-based: time `t + k·pred_dt`).
@@ -577,21 +585,15 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         if !dh.iter().all(|v| v.is_finite()) {
             return;
         }
-        if let Some(tt) = self.cfg.disturbance_trend_s {
-            // ḋ through a second-order derivative filter s/(τs + 1)²: the
-            // difference of two cascaded low-passes of the estimate, divided
-            // by τ − dt (exact for a ramp in discrete time). Differencing the
-            // estimate directly would pass its noise at a gain of 1/dt.
-            // Horizontal only; |ḋ|·T bounded.
-            let (dt, tf) = (self.cfg.exec_dt_s, self.cfg.disturbance_rate_filter_s);
-            let a = lit::<T>(dt / tf);
-            let lim = lit::<T>(self.cfg.disturbance_trend_max_mps2 / tt);
+        if self.cfg.disturbance_trend_s.is_some() {
+            // The trend's rate filter (see `disturbance_rate`): two cascaded
+            // low-passes of the horizontal estimate. Differencing the estimate
+            // directly would pass its noise at a gain of 1/dt.
+            let a = lit::<T>(self.cfg.exec_dt_s / self.cfg.disturbance_rate_filter_s);
             for i in 0..2 {
                 let l1 = self.dist_lp[0][i] + a * (dh[i] - self.dist_lp[0][i]);
-                let l2 = self.dist_lp[1][i] + a * (l1 - self.dist_lp[1][i]);
                 self.dist_lp[0][i] = l1;
-                self.dist_lp[1][i] = l2;
-                self.dist_rate[i] = ((l1 - l2) / lit(tf - dt)).max(-lim).min(lim);
+                self.dist_lp[1][i] += a * (l1 - self.dist_lp[1][i]);
             }
         }
         self.dist = dh;
@@ -608,7 +610,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         let frame = HeadingFrame::new(yaw);
         let w = self.wd * self.dist_in(&frame);
         let d_acc = self.dist.fixed_rows::<3>(0).into_owned();
-        let w_rate = self.wd.fixed_columns::<3>(0) * frame.to_frame(&self.dist_rate);
+        let d_rate = self.disturbance_rate();
+        let w_rate = self.wd.fixed_columns::<3>(0) * frame.to_frame(&d_rate);
         // Free response (z = 0) and references over the horizon.
         let mut xs = [Vec12::<T>::zeros(); N];
         let mut rs = [Vec12::<T>::zeros(); N];
@@ -619,7 +622,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
             xk = self.ad * xk + w + w_rate * self.trend[k];
             xs[k] = xk;
             let spk = self.horizon_setpoint(sp, k + 1);
-            let dk = d_acc + self.dist_rate * self.trend[k];
+            let dk = d_acc + d_rate * self.trend[k];
             let (rk, du_ref) = self.reference_state(&spk, &dk, yaw, &frame);
             rs[k] = rk;
             // Input magnitude reference: the input of step k is move block_of(k).
@@ -692,7 +695,6 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         self.z = SVector::zeros();
         self.du_prev = Vector4::zeros();
         self.dist = SVector::zeros();
-        self.dist_rate = Vector3::zeros();
         self.dist_lp = [[T::zero(); 2]; 2];
         self.last = None;
         self.last_qp = None;
