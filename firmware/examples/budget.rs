@@ -40,11 +40,10 @@ mod target {
     use firmware::fc::{build_controller, setpoint_to_wire, FcConfig, FlightCore};
     use firmware::proto::{encode, ControllerId, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use firmware::{euler_to_quat, VehicleParams};
-    use hal_shim::stm32f405::SysTickClock;
+    use hal_shim::stm32f405::{SysTickClock, SYSCLK_HZ};
     use hal_shim::{ByteLink, CycleClock};
     use nalgebra::Vector3;
 
-    const SYSCLK_HZ: u32 = 168_000_000;
     /// SysTick counts per executed instruction under `-icount shift=0`.
     const TICKS_PER_INSTRUCTION: f32 = 0.168;
     /// Cycles per instruction assumed on silicon.

@@ -10,17 +10,14 @@ mod target {
     use core::panic::PanicInfo;
     use cortex_m_rt::{entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
-    use hal_shim::stm32f405::{DwtClock, LoopTimer, PwmActuators, SysTickClock};
+    use hal_shim::stm32f405::{DwtClock, LoopTimer, PwmActuators, SysTickClock, APB1_TIMER_CLK_HZ, SYSCLK_HZ};
     use hal_shim::{ActuatorOutput, CycleClock};
-
-    const SYSCLK_HZ: u32 = 168_000_000;
-    const TIM_CLK_HZ: u32 = 84_000_000;
 
     #[entry]
     fn main() -> ! {
         let clock = SysTickClock::start(SYSCLK_HZ);
         // Loop timer at 1 kHz: count its periods over 20 ms of SysTick time.
-        let mut timer = LoopTimer::start(TIM_CLK_HZ, 1000);
+        let mut timer = LoopTimer::start(APB1_TIMER_CLK_HZ, 1000);
         let t0 = clock.ticks();
         let mut periods = 0u32;
         while clock.ticks() - t0 < u64::from(SYSCLK_HZ / 50) {
@@ -30,7 +27,7 @@ mod target {
         }
         hprintln!("drivers: loop timer 1000 Hz: {} periods in 20 ms", periods);
         // PWM: duty = U / 10 per channel, clamped; read the compare registers back.
-        let mut pwm = PwmActuators::start(TIM_CLK_HZ, 400, |u| {
+        let mut pwm = PwmActuators::start(APB1_TIMER_CLK_HZ, 400, |u| {
             [u[0] / 10.0, u[1] / 10.0, u[2] / 10.0, u[3] / 10.0]
         });
         pwm.apply([5.0, 2.5, 20.0, f32::NAN]);

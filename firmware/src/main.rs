@@ -22,10 +22,7 @@ mod target {
     use defmt_rtt as _;
     use firmware::fc::{FcConfig, FlightCore};
     use firmware::proto::{Counters, PROTOCOL_VERSION};
-    use hal_shim::stm32f405::{SysTickClock, Usart1};
-
-    const SYSCLK_HZ: u32 = 168_000_000;
-    const PCLK2_HZ: u32 = 84_000_000;
+    use hal_shim::stm32f405::{SysTickClock, Usart1, PCLK2_HZ, SYSCLK_HZ};
 
     // Log lines carry the SysTick time in µs.
     defmt::timestamp!("{=u64:us}", {

@@ -7,6 +7,15 @@ use core::cell::RefCell;
 use core::ptr::{read_volatile, write_volatile};
 use critical_section::Mutex;
 
+/// System clock the drivers and the firmware assume, Hz: the F405's 168 MHz
+/// maximum. QEMU's netduinoplus2 runs at it; on silicon the PLL must be set
+/// to it before these drivers start (nothing in this crate does that yet).
+pub const SYSCLK_HZ: u32 = 168_000_000;
+/// APB2 peripheral clock (USART1) at [`SYSCLK_HZ`] / 2, Hz.
+pub const PCLK2_HZ: u32 = 84_000_000;
+/// Clock of the APB1 timers (TIM2, TIM3): twice PCLK1 = [`SYSCLK_HZ`] / 4, Hz.
+pub const APB1_TIMER_CLK_HZ: u32 = 84_000_000;
+
 /// Received bytes, filled by [`usart1_isr`], drained by [`Usart1::read`].
 static RX: Mutex<RefCell<heapless::Deque<u8, 1024>>> = Mutex::new(RefCell::new(heapless::Deque::new()));
 /// Bytes lost because the queue was full.
