@@ -12,8 +12,6 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 
-const NEEDS_QEMU: &str = "needs qemu-system-arm; ./test.sh installs it and runs these";
-
 /// The link flight runs alone. Under `-icount` QEMU's virtual clock follows
 /// real time while the guest idles, waiting for the host; on a 2-core machine
 /// with the other QEMU tests running beside it, the host or QEMU can be
@@ -60,7 +58,6 @@ fn run_example_in_qemu(name: &str) -> (String, bool) {
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn every_controller_fits_its_cycle_budget() {
     let _lock = shared();
-    let _ = NEEDS_QEMU;
     let (out, ok) = run_example_in_qemu("budget");
     // Rows: | controller | form | rate | measured | instructions | budget | load | verdict | stack |
     let rows: Vec<Vec<&str>> = out
