@@ -41,7 +41,7 @@ pub trait ActuatorOutput {
 }
 
 /// STM32F405 implementations (built for the MCU target only).
-#[cfg(target_os = "none")]
+#[cfg(feature = "stm32f405")]
 pub mod stm32f405;
 
 /// Host implementations for the SIL and tests.

@@ -2,11 +2,11 @@
 //! reports as `step_time_ns`), at a mid-circle state with feed-forward.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use firmware::control::{Controller, Setpoint, StateEstimate};
-use firmware::euler_to_quat;
+use fc_core::control::{Controller, Setpoint, StateEstimate};
+use fc_core::control::{ControllerSpec, Family};
+use fc_core::euler_to_quat;
 use nalgebra::Vector3;
-use sil_host::flight::{build_controller, ControllerFamily, GainSet, MpcPreset};
-use sil_host::ModelKind;
+use sil_host::AttitudeForm;
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {
@@ -26,20 +26,14 @@ fn bench(c: &mut Criterion) {
     };
     let mut g = c.benchmark_group("controller_step_f32");
     for (fam, model, name) in [
-        (ControllerFamily::Pd, ModelKind::Euler, "pd_euler"),
-        (ControllerFamily::Pd, ModelKind::Quaternion, "pd_quaternion"),
-        (ControllerFamily::Lqr, ModelKind::Euler, "lqr_euler"),
-        (ControllerFamily::Lqr, ModelKind::Quaternion, "lqr_quaternion"),
+        (Family::Pd, AttitudeForm::Euler, "pd_euler"),
+        (Family::Pd, AttitudeForm::Quaternion, "pd_quaternion"),
+        (Family::Lqr, AttitudeForm::Euler, "lqr_euler"),
+        (Family::Lqr, AttitudeForm::Quaternion, "lqr_quaternion"),
     ] {
-        let mut ctrl = build_controller(
-            fam,
-            model,
-            GainSet::Tuned,
-            MpcPreset::Fast,
-            firmware::control::ReferenceMode::Feedforward,
-            0.002,
-        )
-        .unwrap();
+        let mut ctrl = ControllerSpec::new(fam, model)
+            .build(fc_core::VehicleParams::<f32>::os4(), 0.002)
+            .unwrap();
         g.bench_function(name, |b| {
             b.iter(|| ctrl.update(black_box(&est), black_box(&sp)).unwrap())
         });

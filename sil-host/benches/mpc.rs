@@ -6,8 +6,10 @@
 //! tracking.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use firmware::control::{Controller, MpcConfig, MpcFast, MpcForm, MpcThesis, ReferenceMode, Setpoint, StateEstimate};
-use firmware::{euler_hover_model, euler_to_quat, hover_input, zoh, VehicleParams};
+use fc_core::control::{
+    AttitudeForm, Controller, MpcConfig, MpcFast, MpcThesis, ReferenceMode, Setpoint, StateEstimate,
+};
+use fc_core::{euler_hover_model, euler_to_quat, hover_input, zoh, VehicleParams};
 use nalgebra::{SMatrix, SVector, Vector3, Vector4};
 use std::hint::black_box;
 use tinympc_rs::policy::ArrayPolicy;
@@ -33,7 +35,7 @@ fn x0() -> X {
 }
 
 fn regulation_config() -> MpcConfig {
-    let mut c = MpcConfig::fast(MpcForm::Euler);
+    let mut c = MpcConfig::fast(AttitudeForm::Euler);
     c.exec_dt_s = c.pred_dt_s; // one closed-loop step = one prediction step
     c.observer_tau_s = None; // a regulation problem: no disturbance, no trend
     c.disturbance_trend_s = None;
@@ -139,10 +141,14 @@ fn bench(c: &mut Criterion) {
     let mut sp = Setpoint::hold(Vector3::new(1.25, 0.35, -1.0f32), 0.26);
     sp.vel_ned_mps = Vector3::new(0.45, 0.5, 0.0);
     sp.acc_ned_mps2 = Vector3::new(-0.1, 0.15, 0.0);
-    for form in [MpcForm::Euler, MpcForm::Quaternion] {
+    for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
         let mut fast = MpcFast::<f32>::new(p, MpcConfig::fast(form)).unwrap();
         let mut thesis = MpcThesis::<f32>::new(p, MpcConfig::thesis(form)).unwrap();
-        let name = if form == MpcForm::Euler { "euler" } else { "quaternion" };
+        let name = if form == AttitudeForm::Euler {
+            "euler"
+        } else {
+            "quaternion"
+        };
         g.bench_function(format!("fast_{name}_step"), |bch| {
             bch.iter(|| fast.update(black_box(&est), &sp).unwrap())
         });

@@ -3,14 +3,15 @@
 //! yawlim, trend, trendmax, ratelp; noise = scale of the typical sensor noise).
 //! `cargo run --release -p sil-host --example tune_mpc -- tau=0.1 q2=80`
 
-use firmware::control::{MpcConfig, MpcForm};
-use sil_host::flight::{fly, ControllerFamily, FlightConfig};
+use fc_core::control::Family;
+use fc_core::control::{AttitudeForm, MpcConfig};
+use sil_host::flight::{fly, FlightConfig};
 use sil_host::noise::SensorNoise;
-use sil_host::{DisturbanceSet, ModelKind, Scenario, ScenarioKind};
+use sil_host::{DisturbanceSet, Scenario, ScenarioKind};
 
 fn main() {
-    for model in [ModelKind::Euler, ModelKind::Quaternion] {
-        let form = MpcForm::from(model);
+    for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+        let form = AttitudeForm::from(model);
         let mut c = MpcConfig::fast(form);
         let mut noise = None;
         for arg in std::env::args().skip(1) {
@@ -49,7 +50,7 @@ fn main() {
                 }
                 None => d,
             };
-            let mut f = FlightConfig::new(ControllerFamily::Mpc, model, sc);
+            let mut f = FlightConfig::new(Family::Mpc, model, sc);
             f.disturbance = d.parse::<DisturbanceSet>().unwrap();
             f.mpc_override = Some(c);
             f.noise = noise;

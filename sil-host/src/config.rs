@@ -21,7 +21,7 @@
 
 use crate::scenario::{Scenario, ScenarioKind};
 use anyhow::{bail, Context, Result};
-use firmware::VehicleParams;
+use fc_core::VehicleParams;
 use serde::Deserialize;
 use std::path::Path;
 

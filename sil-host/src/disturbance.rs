@@ -1,7 +1,7 @@
 //! Disturbances of SPEC §9: `wind` (earth-frame force and body moment) and
 //! `mismatch` (the plant differs from the controller's model).
 
-use firmware::{Disturbance, VehicleParams};
+use fc_core::{Disturbance, VehicleParams};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::fmt;

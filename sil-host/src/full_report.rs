@@ -3,13 +3,14 @@
 
 use crate::disturbance::DisturbanceSet;
 use crate::figures::{self, Figure};
-use crate::flight::{fly, fly_target, ControllerFamily, FlightConfig, MpcPreset, Target};
+use crate::flight::{fly, fly_target, FlightConfig, Target};
 use crate::noise::SensorNoise;
-use crate::plant::ModelKind;
 use crate::scenario::{Scenario, ScenarioKind};
 use crate::study::{self, find, Outcome, Sel, VARIANTS};
 use crate::study_plots::{self, HorizonPoint};
 use anyhow::{Context, Result};
+use fc_core::control::{Family, Preset};
+use fc_core::AttitudeForm;
 use rayon::prelude::*;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -77,15 +78,15 @@ fn qemu_table(quick: bool, progress: bool) -> Result<Vec<QemuRow>> {
     crate::link::firmware_elf()?;
     let mut cases = Vec::new();
     for (fam, preset) in VARIANTS {
-        for model in [ModelKind::Euler, ModelKind::Quaternion] {
+        for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
             let mut sc = Scenario::default_for(ScenarioKind::Setpoint);
             sc.duration_s = match (fam, preset, quick) {
-                (ControllerFamily::Mpc, MpcPreset::Thesis, _) => 10.0, // 4 Hz: 41 steps
+                (Family::Mpc, Preset::Thesis, _) => 10.0, // 4 Hz: 41 steps
                 (_, _, true) => 0.5,
                 (_, _, false) => 2.0,
             };
             let mut cfg = FlightConfig::new(fam, model, sc);
-            cfg.preset = preset;
+            cfg.spec.preset = preset;
             cases.push(cfg);
         }
     }
@@ -132,7 +133,7 @@ fn headline(all: &[Outcome]) -> String {
     };
     for (fam, preset) in VARIANTS {
         let sel = Sel::defaults(preset);
-        let q = ModelKind::Quaternion;
+        let q = AttitudeForm::Quaternion;
         let sp = find(all, fam, q, ScenarioKind::Setpoint, DisturbanceSet::NONE, sel);
         let calm = find(all, fam, q, ScenarioKind::Helix, DisturbanceSet::NONE, sel);
         let both = DisturbanceSet {
@@ -207,15 +208,15 @@ fn noise_flights(quick: bool) -> Vec<(String, Vec<FlightConfig>)> {
             .collect()
     };
     for (fam, preset) in VARIANTS {
-        let mut cfg = FlightConfig::new(fam, ModelKind::Quaternion, sc);
-        cfg.preset = preset;
+        let mut cfg = FlightConfig::new(fam, AttitudeForm::Quaternion, sc);
+        cfg.spec.preset = preset;
         cfg.disturbance = DisturbanceSet {
             wind: true,
             mismatch: false,
         };
         rows.push((study::variant_title(fam, preset), with_noise(cfg)));
-        if fam == ControllerFamily::Mpc && preset == MpcPreset::Fast {
-            let mut held = firmware::control::MpcConfig::fast(firmware::control::MpcForm::Quaternion);
+        if fam == Family::Mpc && preset == Preset::Project {
+            let mut held = fc_core::control::MpcConfig::fast(fc_core::control::AttitudeForm::Quaternion);
             held.disturbance_trend_s = None;
             cfg.mpc_override = Some(held);
             rows.push(("MPC fast, disturbance held (no trend)".to_string(), with_noise(cfg)));
@@ -282,7 +283,7 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
     let t0 = Instant::now();
     let cfgs = study::matrix(o.quick);
     let all = study::run_all(&cfgs, o.progress)?;
-    let horizon = study_plots::horizon_sweep(ModelKind::Quaternion, o.quick)?;
+    let horizon = study_plots::horizon_sweep(AttitudeForm::Quaternion, o.quick)?;
     // A small robustness sweep (the `sweep` command does larger ones).
     let sweep_opts = crate::sweep::SweepOptions {
         samples: if o.quick { 8 } else { 40 },
@@ -297,7 +298,7 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
             b.duration_s = 30.0;
             b
         },
-        vehicle: firmware::VehicleParams::OS4,
+        vehicle: fc_core::VehicleParams::OS4,
         out: o.out.join("sweep"),
         progress: o.progress,
     };

@@ -24,5 +24,6 @@ pub mod study_plots;
 pub mod sweep;
 
 pub use disturbance::DisturbanceSet;
-pub use plant::{ModelKind, Plant, PlantConfig};
+pub use fc_core::AttitudeForm;
+pub use plant::{Plant, PlantConfig};
 pub use scenario::{Reference, Scenario, ScenarioKind};

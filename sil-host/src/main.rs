@@ -6,11 +6,14 @@
 //! `sweep`) build on the same plant, scenarios and metrics.
 
 use anyhow::{bail, Context, Result};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
+use fc_core::control::{Family, Preset, ReferenceMode, SPECS};
+use fc_core::AttitudeForm;
 use sil_host::disturbance::DisturbanceSet;
-use sil_host::flight::{ControllerFamily, FlightConfig, GainSet, MpcPreset, RefMode, Target};
+use sil_host::flight::{FlightConfig, Target};
 use sil_host::openloop::OpenLoop;
-use sil_host::plant::{ModelKind, PlantConfig};
+use sil_host::plant::PlantConfig;
 use sil_host::record::{write_csv, STATE_COLUMNS};
 use sil_host::scenario::{Scenario, ScenarioKind};
 use std::io::IsTerminal;
@@ -121,15 +124,15 @@ struct ReportArgs {
 struct FlyArgs {
     /// Controller: `pd` (thesis gains, Tables 4.1-4.4), `lqr` (thesis weights, Tables 4.5/4.7)
     /// or `mpc` (linear MPC with the core's QP solver; see --preset).
-    #[arg(long, value_enum)]
-    controller: ControllerFamily,
+    #[arg(long, value_parser = family_parser())]
+    controller: Family,
     /// MPC preset: `fast` (50 ms prediction steps over 1 s, re-solved at 200 Hz) or `thesis`
     /// (Ts 0.25 s at 4 Hz, N 20, M 2, thesis weights). Other controllers ignore it.
-    #[arg(long, value_enum, default_value = "fast")]
-    preset: MpcPreset,
+    #[arg(long, value_parser = preset_parser(Family::Mpc), default_value = "fast")]
+    preset: Preset,
     /// Form of the controller and of the plant: `euler` or `quaternion`.
-    #[arg(long, value_enum, default_value = "quaternion")]
-    model: ModelKind,
+    #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
+    model: AttitudeForm,
     /// Scenario (SPEC §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s).
     #[arg(long, value_enum, default_value = "setpoint")]
     scenario: ScenarioKind,
@@ -167,12 +170,12 @@ struct FlyArgs {
     duration: Option<f64>,
     /// Reference handling: `feedforward` (reference velocity, and the attitude and thrust its
     /// acceleration implies) or `thesis` (reference position and velocity only, as the thesis).
-    #[arg(long, value_enum, default_value = "feedforward")]
-    reference: RefMode,
+    #[arg(long, value_parser = reference_parser(), default_value = "feedforward")]
+    reference: ReferenceMode,
     /// PD gains: `tuned` (the thesis gains with the roll/pitch and quaternion z corrections
     /// explained in the README) or `thesis` (Tables 4.1-4.4 as printed). LQR ignores it.
-    #[arg(long, value_enum, default_value = "tuned")]
-    gains: GainSet,
+    #[arg(long, value_parser = preset_parser(Family::Pd), default_value = "tuned")]
+    gains: Preset,
     /// Controller rate of PD and LQR, Hz (the MPC presets fix their own rate).
     #[arg(long, default_value_t = 500.0, value_name = "HZ")]
     control_hz: f64,
@@ -218,11 +221,11 @@ struct ServeArgs {
 #[derive(Args, Debug)]
 struct MpcStepArgs {
     /// Form of the MPC and the plant.
-    #[arg(long, value_enum, default_value = "quaternion")]
-    model: ModelKind,
+    #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
+    model: AttitudeForm,
     /// MPC preset: `fast` or `thesis`.
-    #[arg(long, value_enum, default_value = "fast")]
-    preset: MpcPreset,
+    #[arg(long, value_parser = preset_parser(Family::Mpc), default_value = "fast")]
+    preset: Preset,
     /// Scenario flown up to --at.
     #[arg(long, value_enum, default_value = "setpoint")]
     scenario: ScenarioKind,
@@ -252,8 +255,8 @@ enum DesignWhat {
 #[derive(Args, Debug)]
 struct DesignLqrArgs {
     /// Form: `euler` (12 states, weights Table 4.5) or `quaternion` (reduced 12 states, Q = I, R = I).
-    #[arg(long, value_enum)]
-    model: ModelKind,
+    #[arg(long, value_parser = form_parser())]
+    model: AttitudeForm,
     /// Hover heading psi_T the model is linearised about, degrees.
     #[arg(long, default_value_t = 0.0, value_name = "DEG", allow_hyphen_values = true)]
     yaw_deg: f64,
@@ -266,8 +269,8 @@ struct DesignLqrArgs {
 #[derive(Args, Debug, Clone)]
 struct PlantArgs {
     /// Equations the plant integrates: `euler` (ZYX angles, singular at 90° pitch) or `quaternion`.
-    #[arg(long, value_enum, default_value = "quaternion")]
-    model: ModelKind,
+    #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
+    model: AttitudeForm,
     /// RK4 integration rate of the plant, Hz (each control period is cut into sub-steps at this rate).
     #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
     integration_hz: f64,
@@ -333,6 +336,44 @@ fn parse_target_arg(s: &str) -> Result<TargetArg, String> {
 }
 
 /// Parses `N` comma-separated finite numbers, e.g. `6.4765,0.001,0,0.01`.
+/// A clap parser for one of the core's named values, from `(spelling, value)`
+/// pairs the core's tables give (so the command line cannot spell a name
+/// differently from the JSON, the tables and the wire).
+fn named<T: Copy + Send + Sync + 'static>(pairs: Vec<(&'static str, T)>) -> impl TypedValueParser<Value = T> {
+    let names: Vec<&'static str> = pairs.iter().map(|(n, _)| *n).collect();
+    PossibleValuesParser::new(names).try_map(move |s: String| {
+        pairs
+            .iter()
+            .find(|(n, _)| *n == s)
+            .map(|(_, v)| *v)
+            .ok_or_else(|| format!("unknown value '{s}'"))
+    })
+}
+
+fn family_parser() -> impl TypedValueParser<Value = Family> {
+    named(Family::ALL.iter().map(|f| (f.name(), *f)).collect())
+}
+
+fn form_parser() -> impl TypedValueParser<Value = AttitudeForm> {
+    named(AttitudeForm::ALL.iter().map(|f| (f.name(), *f)).collect())
+}
+
+fn reference_parser() -> impl TypedValueParser<Value = ReferenceMode> {
+    named(ReferenceMode::ALL.iter().map(|m| (m.name(), *m)).collect())
+}
+
+/// The presets of `family` by their own names (`tuned`/`thesis` gains for
+/// PD, `fast`/`thesis` for the MPC), from the spec table.
+fn preset_parser(family: Family) -> impl TypedValueParser<Value = Preset> {
+    let mut pairs: Vec<(&'static str, Preset)> = Vec::new();
+    for r in SPECS.iter().filter(|r| r.family == family) {
+        if !pairs.iter().any(|(n, _)| *n == r.preset_name) {
+            pairs.push((r.preset_name, r.preset));
+        }
+    }
+    named(pairs)
+}
+
 fn parse_list<const N: usize>(s: &str) -> Result<[f64; N], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if parts.len() != N {
@@ -418,9 +459,13 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
         .map(|k| sil_host::noise::SensorNoise::typical(k, a.noise_seed))
         .transpose()
         .context("--noise")?;
-    cfg.reference = a.reference;
-    cfg.gains = a.gains;
-    cfg.preset = a.preset;
+    cfg.spec.reference = a.reference;
+    // PD takes its gain set from --gains, the MPC its preset from --preset.
+    cfg.spec.preset = match a.controller {
+        Family::Pd => a.gains,
+        Family::Mpc => a.preset,
+        Family::Lqr => Preset::Project,
+    };
     cfg.control_hz = a.control_hz;
     if let Some(f) = &a.vehicle {
         cfg.vehicle = sil_host::config::load_vehicle(f)?;
@@ -441,7 +486,17 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
             }
         })
         .unwrap_or(Target::InProcess);
-    let res = sil_host::flight::fly_target_with_progress(&cfg, &exec, std::io::stderr().is_terminal())?;
+    // Remote flights take real time (QEMU: milliseconds a step): show progress.
+    let bar = sil_host::study::progress_bar(
+        (cfg.scenario.duration_s * 10.0).round() as usize,
+        "× 0.1 s flown",
+        exec != Target::InProcess && std::io::stderr().is_terminal(),
+    );
+    bar.set_message(format!("{exec:?}"));
+    let tick = |t: f64| bar.set_position((t * 10.0) as u64);
+    let res = sil_host::flight::fly_target_with_progress(&cfg, &exec, Some(&tick));
+    bar.finish_and_clear();
+    let res = res?;
     if let Some(path) = &a.csv {
         write_csv(path, &res.rows, Some(&res.reference))?;
     }
@@ -478,8 +533,8 @@ fn mpc_step_cmd(a: &MpcStepArgs) -> Result<()> {
     if !(a.at.is_finite() && a.at >= 0.0 && a.at <= sc.duration_s) {
         bail!("--at must be within the scenario's 0..{} s", sc.duration_s);
     }
-    let mut cfg = FlightConfig::new(ControllerFamily::Mpc, a.model, sc);
-    cfg.preset = a.preset;
+    let mut cfg = FlightConfig::new(Family::Mpc, a.model, sc);
+    cfg.spec.preset = a.preset;
     cfg.disturbance = a.disturbance;
     let (_, ctrl) = sil_host::flight::fly_until(&cfg, Some(a.at), |_, _| {})?;
     let v = sil_host::report::mpc_step_json(&ctrl, a.at).ok_or_else(|| anyhow::anyhow!("no MPC step was taken"))?;
@@ -525,7 +580,7 @@ fn sweep_cmd(a: &SweepArgs) -> Result<()> {
         base,
         vehicle: match &a.vehicle {
             Some(f) => sil_host::config::load_vehicle(f)?,
-            None => firmware::VehicleParams::OS4,
+            None => fc_core::VehicleParams::OS4,
         },
         out: a.out.clone(),
         progress: !a.no_progress,

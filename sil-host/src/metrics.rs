@@ -1,6 +1,6 @@
 //! Flight metrics of SPEC §10, computed from a recorded trace.
 
-use firmware::{hover_input, InputBox, VehicleParams};
+use fc_core::{hover_input, InputBox, VehicleParams};
 use serde::{Deserialize, Serialize};
 
 /// Fraction of the step size that defines "settled" (2 %).

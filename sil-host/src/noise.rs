@@ -9,7 +9,7 @@
 //! that differentiates the state, such as the MPC's disturbance trend.
 
 use anyhow::{bail, Result};
-use firmware::QuatState;
+use fc_core::QuatState;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 

@@ -2,7 +2,7 @@
 
 use crate::plant::{Plant, PlantConfig};
 use crate::record::{state_row, RECORD_DT_S};
-use firmware::{hover_quat_state, Input};
+use fc_core::{hover_quat_state, Input};
 use nalgebra::Vector3;
 
 /// An open-loop run: constant commanded input from a hover state.

@@ -3,48 +3,17 @@
 //! external disturbances, quaternion renormalisation after every step.
 
 use crate::disturbance::DisturbanceSet;
-use firmware::{
+use fc_core::{
     clamp_speed, euler_state_to_quat, gyro_speed, quat_normalize, quat_state_to_euler, realised_inputs, rotor_speeds,
-    Disturbance, EulerState, Input, QuatState, Vehicle, VehicleParams,
+    AttitudeForm, Disturbance, EulerState, Input, QuatState, Vehicle, VehicleParams,
 };
 use nalgebra::{SVector, Vector3, Vector4};
-use serde::{Deserialize, Serialize};
-
-/// Which form of the equations the plant integrates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum ModelKind {
-    /// ZYX Euler angles (12 states); singular at |θ| = 90°.
-    Euler,
-    /// Unit quaternion (13 states); no singularity.
-    Quaternion,
-}
-
-impl ModelKind {
-    /// Lower-case name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            ModelKind::Euler => "euler",
-            ModelKind::Quaternion => "quaternion",
-        }
-    }
-}
-
-/// The controller form that matches a plant form (MPC configurations).
-impl From<ModelKind> for firmware::control::MpcForm {
-    fn from(m: ModelKind) -> Self {
-        match m {
-            ModelKind::Euler => firmware::control::MpcForm::Euler,
-            ModelKind::Quaternion => firmware::control::MpcForm::Quaternion,
-        }
-    }
-}
 
 /// How the plant is built.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlantConfig {
     /// Equations integrated.
-    pub model: ModelKind,
+    pub model: AttitudeForm,
     /// The true vehicle (may differ from the controller's model: `mismatch`).
     pub params: VehicleParams<f64>,
     /// RK4 rate, Hz: each `step(dt)` is cut into `ceil(dt·rate)` equal sub-steps.
@@ -57,7 +26,7 @@ pub struct PlantConfig {
 
 impl PlantConfig {
     /// Nominal OS4 plant at 1 kHz, no lag, no disturbance.
-    pub fn nominal(model: ModelKind) -> Self {
+    pub fn nominal(model: AttitudeForm) -> Self {
         Self {
             model,
             params: VehicleParams::OS4,
@@ -177,8 +146,8 @@ impl Plant {
     /// with rotors spinning at the hover speed.
     pub fn new(cfg: PlantConfig, initial: &QuatState<f64>) -> Self {
         let body = match cfg.model {
-            ModelKind::Euler => BodyState::Euler(quat_state_to_euler(initial)),
-            ModelKind::Quaternion => BodyState::Quat(*initial),
+            AttitudeForm::Euler => BodyState::Euler(quat_state_to_euler(initial)),
+            AttitudeForm::Quaternion => BodyState::Quat(*initial),
         };
         let w = cfg.params.hover_rotor_speed_radps();
         Self {

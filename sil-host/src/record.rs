@@ -4,7 +4,7 @@
 
 use crate::plant::Plant;
 use anyhow::Context;
-use firmware::quat_to_euler;
+use fc_core::quat_to_euler;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;

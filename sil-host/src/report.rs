@@ -2,11 +2,11 @@
 
 use crate::flight::{FlightConfig, FlightResult};
 use crate::metrics::AxisMetrics;
-use crate::plant::ModelKind;
-use firmware::control::lqr_euler::euler_weights;
-use firmware::control::lqr_quat::quat_weights;
-use firmware::control::lqr_table::design_continuous;
-use firmware::{euler_hover_model, quat_hover_model, VehicleParams};
+use fc_core::control::lqr_euler::euler_weights;
+use fc_core::control::lqr_quat::quat_weights;
+use fc_core::control::lqr_table::design_continuous;
+use fc_core::AttitudeForm;
+use fc_core::{euler_hover_model, quat_hover_model, VehicleParams};
 use nalgebra::{Dim, Matrix, RawStorage};
 use serde_json::{json, Value};
 
@@ -34,13 +34,13 @@ fn axis(a: &AxisMetrics, unit: &str) -> Value {
 pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
     let m = &res.metrics;
     let mut v = json!({
-        "controller": cfg.controller.name(),
-        "model": cfg.model.name(),
+        "controller": cfg.spec.family.name(),
+        "model": cfg.spec.form.name(),
         "scenario": cfg.scenario.kind.name(),
         "disturbance": cfg.disturbance.to_string(),
         "sensor_noise": cfg.noise,
-        "reference": format!("{:?}", cfg.reference).to_lowercase(),
-        "gains": format!("{:?}", cfg.gains).to_lowercase(),
+        "reference": cfg.spec.reference.name(),
+        "preset": cfg.spec.row().preset_name,
         "control_hz": cfg.control_hz,
         "integration_hz": cfg.integration_hz,
         "duration_s": cfg.scenario.duration_s,
@@ -75,8 +75,7 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
                      step_time_ns then holds SysTick counts, not ns",
         });
     }
-    if cfg.controller == crate::flight::ControllerFamily::Mpc {
-        v["preset"] = json!(cfg.preset.name());
+    if cfg.spec.family == fc_core::control::Family::Mpc {
         v["qp_iterations"] = json!({ "mean": res.qp_iterations.0, "max": res.qp_iterations.1 });
         v["qp_iteration_bound"] = json!(res.qp_iteration_bound);
     }
@@ -94,8 +93,8 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
         "{} {} {} [{}]: RMSE x {:.3} y {:.3} z {:.3} m, yaw {:.2}°; settle/overshoot x {} y {} z {} yaw {}; \
          final error {:.3} m; u_norm {:.4}; saturated {}/{} steps; controller {:.0} ns/step (max {:.0}); \
          QP iterations mean {:.1} max {} (bound {}){}",
-        cfg.controller.name(),
-        cfg.model.name(),
+        cfg.spec.family.name(),
+        cfg.spec.form.name(),
         cfg.scenario.kind.name(),
         cfg.disturbance,
         m.x.rmse_m,
@@ -121,9 +120,9 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
 
 /// `design lqr`: the hover model at heading `yaw` (rad), the thesis weights and
 /// the continuous-time gain (`U = Uss − K δX`), all row-major.
-pub fn lqr_design_json(model: ModelKind, yaw: f64) -> anyhow::Result<Value> {
+pub fn lqr_design_json(model: AttitudeForm, yaw: f64) -> anyhow::Result<Value> {
     let p = VehicleParams::OS4;
-    if model == ModelKind::Quaternion && (yaw / 2.0).cos().abs() < 1e-3 {
+    if model == AttitudeForm::Quaternion && (yaw / 2.0).cos().abs() < 1e-3 {
         anyhow::bail!(
             "the reduced quaternion form is singular at a heading of ±180° (q0 = cos(ψT/2) = 0, so roll and pitch \
              rates no longer reach q1, q2): no stabilising LQR exists there. Use another heading or --model euler; \
@@ -131,12 +130,12 @@ pub fn lqr_design_json(model: ModelKind, yaw: f64) -> anyhow::Result<Value> {
         );
     }
     let (lm, (q, r), states) = match model {
-        ModelKind::Euler => (
+        AttitudeForm::Euler => (
             euler_hover_model(&p, yaw),
             euler_weights(),
             ["x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "p", "q", "r"],
         ),
-        ModelKind::Quaternion => (
+        AttitudeForm::Quaternion => (
             quat_hover_model(&p, yaw),
             quat_weights(),
             ["x", "y", "z", "vx", "vy", "vz", "q1", "q2", "q3", "p", "q", "r"],
@@ -160,10 +159,10 @@ pub fn lqr_design_json(model: ModelKind, yaw: f64) -> anyhow::Result<Value> {
 /// The QP of the MPC's last step, exactly as its solver saw it (f32 values
 /// widened to f64): `min ½zᵀHz + gᵀz, lb ≤ z ≤ ub`, z = the moves of
 /// `U − U_hover`, 4 per move. `None` for other controllers or before a step.
-pub fn mpc_step_json(ctrl: &firmware::control::AnyController<f32>, t: f64) -> Option<Value> {
-    use firmware::control::AnyController;
+pub fn mpc_step_json(ctrl: &fc_core::control::AnyController<f32>, t: f64) -> Option<Value> {
+    use fc_core::control::AnyController;
     fn dump<const N: usize, const M: usize, const NZ: usize>(
-        m: &firmware::control::Mpc<f32, N, M, NZ>,
+        m: &fc_core::control::Mpc<f32, N, M, NZ>,
         t: f64,
     ) -> Option<Value> {
         let qp = m.last_qp()?;

@@ -3,10 +3,11 @@
 //! (SPEC §11).
 
 use crate::disturbance::DisturbanceSet;
-use crate::flight::{fly, ControllerFamily, FlightConfig, FlightResult, GainSet, MpcPreset, RefMode};
+use crate::flight::{fly, FlightConfig, FlightResult};
 use crate::metrics::AxisMetrics;
-use crate::plant::ModelKind;
 use crate::scenario::{Scenario, ScenarioKind};
+use fc_core::control::{ControllerSpec, Family, Preset, ReferenceMode};
+use fc_core::AttitudeForm;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::fmt::Write;
@@ -21,16 +22,16 @@ pub struct Outcome {
 }
 
 /// Controller families of the study, in table order.
-pub const FAMILIES: [ControllerFamily; 3] = [ControllerFamily::Pd, ControllerFamily::Lqr, ControllerFamily::Mpc];
+pub const FAMILIES: [Family; 3] = [Family::Pd, Family::Lqr, Family::Mpc];
 /// The controllers as the tables list them: family and MPC preset.
-pub const VARIANTS: [(ControllerFamily, MpcPreset); 4] = [
-    (ControllerFamily::Pd, MpcPreset::Fast),
-    (ControllerFamily::Lqr, MpcPreset::Fast),
-    (ControllerFamily::Mpc, MpcPreset::Fast),
-    (ControllerFamily::Mpc, MpcPreset::Thesis),
+pub const VARIANTS: [(Family, Preset); 4] = [
+    (Family::Pd, Preset::Project),
+    (Family::Lqr, Preset::Project),
+    (Family::Mpc, Preset::Project),
+    (Family::Mpc, Preset::Thesis),
 ];
 /// Models, in table order.
-pub const MODELS: [ModelKind; 2] = [ModelKind::Euler, ModelKind::Quaternion];
+pub const MODELS: [AttitudeForm; 2] = [AttitudeForm::Euler, AttitudeForm::Quaternion];
 /// Scenarios, in table order.
 pub const SCENARIOS: [ScenarioKind; 3] = [ScenarioKind::Setpoint, ScenarioKind::Circle, ScenarioKind::Helix];
 
@@ -49,23 +50,19 @@ pub fn matrix(quick: bool) -> Vec<FlightConfig> {
                     }
                     let mut cfg = FlightConfig::new(fam, model, sc);
                     cfg.disturbance = d;
-                    cfg.preset = preset;
+                    cfg.spec.preset = preset;
                     out.push(cfg);
                 }
             }
         }
     }
     for model in MODELS {
-        let mut cfg = FlightConfig::new(
-            ControllerFamily::Pd,
-            model,
-            Scenario::default_for(ScenarioKind::Setpoint),
-        );
-        cfg.gains = GainSet::Thesis;
+        let mut cfg = FlightConfig::new(Family::Pd, model, Scenario::default_for(ScenarioKind::Setpoint));
+        cfg.spec.preset = Preset::Thesis;
         out.push(cfg);
     }
     // The thesis-faithful reference (no acceleration/rate feed-forward) on the tracking cases.
-    for fam in [ControllerFamily::Pd, ControllerFamily::Lqr] {
+    for fam in [Family::Pd, Family::Lqr] {
         for model in MODELS {
             for kind in [ScenarioKind::Circle, ScenarioKind::Helix] {
                 let mut sc = Scenario::default_for(kind);
@@ -73,7 +70,7 @@ pub fn matrix(quick: bool) -> Vec<FlightConfig> {
                     sc.duration_s = 30.0;
                 }
                 let mut cfg = FlightConfig::new(fam, model, sc);
-                cfg.reference = RefMode::Thesis;
+                cfg.spec.reference = ReferenceMode::Thesis;
                 out.push(cfg);
             }
         }
@@ -83,27 +80,7 @@ pub fn matrix(quick: bool) -> Vec<FlightConfig> {
 
 /// A short label for progress and errors.
 pub fn label(cfg: &FlightConfig) -> String {
-    format!(
-        "{}{} {} {} [{}]{}",
-        cfg.controller.name(),
-        if cfg.controller == ControllerFamily::Mpc {
-            format!(" {}", cfg.preset.name())
-        } else {
-            String::new()
-        },
-        cfg.model.name(),
-        cfg.scenario.kind.name(),
-        cfg.disturbance,
-        if cfg.gains == GainSet::Thesis {
-            " thesis gains"
-        } else {
-            ""
-        },
-    ) + if cfg.reference == RefMode::Thesis {
-        " thesis reference"
-    } else {
-        ""
-    }
+    format!("{} {} [{}]", cfg.spec, cfg.scenario.kind.name(), cfg.disturbance)
 }
 
 /// A progress bar over `len` items of `what` that shows the current item
@@ -143,21 +120,18 @@ pub fn run_all(cfgs: &[FlightConfig], progress: bool) -> anyhow::Result<Vec<Outc
 /// How a case was flown beyond controller, model, scenario and disturbance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Sel {
-    /// PD gain set.
-    pub gains: GainSet,
+    /// Gain set or MPC preset.
+    pub preset: Preset,
     /// Reference handling.
-    pub reference: RefMode,
-    /// MPC preset (ignored for PD and LQR).
-    pub preset: MpcPreset,
+    pub reference: ReferenceMode,
 }
 
 impl Sel {
-    /// The project's defaults (tuned gains, feed-forward) with an MPC preset.
-    pub fn defaults(preset: MpcPreset) -> Self {
+    /// A preset with the reference fed forward.
+    pub fn defaults(preset: Preset) -> Self {
         Self {
-            gains: GainSet::Tuned,
-            reference: RefMode::Feedforward,
             preset,
+            reference: ReferenceMode::Feedforward,
         }
     }
 }
@@ -165,51 +139,37 @@ impl Sel {
 /// Finds the outcome of a case.
 pub fn find(
     all: &[Outcome],
-    fam: ControllerFamily,
-    model: ModelKind,
+    fam: Family,
+    model: AttitudeForm,
     kind: ScenarioKind,
     d: DisturbanceSet,
     sel: Sel,
 ) -> Option<&Outcome> {
-    let Sel {
-        gains,
-        reference,
-        preset,
-    } = sel;
-    all.iter().find(|o| {
-        (o.cfg.controller != ControllerFamily::Mpc || o.cfg.preset == preset)
-            && o.cfg.controller == fam
-            && o.cfg.model == model
-            && o.cfg.scenario.kind == kind
-            && o.cfg.disturbance == d
-            && o.cfg.gains == gains
-            && o.cfg.reference == reference
-    })
+    let want = ControllerSpec::new(fam, model)
+        .with_preset(sel.preset)
+        .with_reference(sel.reference);
+    all.iter()
+        .find(|o| o.cfg.spec == want && o.cfg.scenario.kind == kind && o.cfg.disturbance == d)
 }
 
 /// Thesis set-point numbers (SPEC §11): per axis x, y, z, ψ (q3 for the
 /// quaternion form): (settling s, overshoot %).
-pub fn thesis_setpoint(fam: ControllerFamily, model: ModelKind) -> [(f64, f64); 4] {
+pub fn thesis_setpoint(fam: Family, model: AttitudeForm) -> [(f64, f64); 4] {
     match (fam, model) {
-        (ControllerFamily::Pd, ModelKind::Euler) => [(4.09, 0.0), (3.07, 0.004), (1.77, 0.07), (1.15, 2.98)],
-        (ControllerFamily::Lqr, ModelKind::Euler) => [(2.16, 0.0), (1.83, 0.0), (1.85, 0.0), (0.60, 3.04)],
-        (ControllerFamily::Pd, ModelKind::Quaternion) => [(2.59, 1.74), (2.66, 13.12), (2.32, 2.79), (1.45, 4.25)],
-        (ControllerFamily::Lqr, ModelKind::Quaternion) => [(4.63, 0.0), (3.99, 0.0), (4.09, 0.0), (3.54, 0.006)],
-        (ControllerFamily::Mpc, ModelKind::Euler) => [(6.93, 2.26), (8.47, 2.77), (2.82, 0.02), (0.56, 1.21)],
-        (ControllerFamily::Mpc, ModelKind::Quaternion) => [(4.45, 1.64), (8.12, 3.98), (4.91, 2.23), (1.90, 0.25)],
+        (Family::Pd, AttitudeForm::Euler) => [(4.09, 0.0), (3.07, 0.004), (1.77, 0.07), (1.15, 2.98)],
+        (Family::Lqr, AttitudeForm::Euler) => [(2.16, 0.0), (1.83, 0.0), (1.85, 0.0), (0.60, 3.04)],
+        (Family::Pd, AttitudeForm::Quaternion) => [(2.59, 1.74), (2.66, 13.12), (2.32, 2.79), (1.45, 4.25)],
+        (Family::Lqr, AttitudeForm::Quaternion) => [(4.63, 0.0), (3.99, 0.0), (4.09, 0.0), (3.54, 0.006)],
+        (Family::Mpc, AttitudeForm::Euler) => [(6.93, 2.26), (8.47, 2.77), (2.82, 0.02), (0.56, 1.21)],
+        (Family::Mpc, AttitudeForm::Quaternion) => [(4.45, 1.64), (8.12, 3.98), (4.91, 2.23), (1.90, 0.25)],
     }
 }
 
 /// Thesis tracking RMSE % (x, y, z), SPEC §11; `disturbed` selects the
 /// thesis' disturbed tables (4.15–4.18).
-pub fn thesis_rmse_pct(
-    fam: ControllerFamily,
-    model: ModelKind,
-    kind: ScenarioKind,
-    disturbed: bool,
-) -> Option<[f64; 3]> {
-    use ControllerFamily::*;
-    use ModelKind::*;
+pub fn thesis_rmse_pct(fam: Family, model: AttitudeForm, kind: ScenarioKind, disturbed: bool) -> Option<[f64; 3]> {
+    use AttitudeForm::*;
+    use Family::*;
     use ScenarioKind::*;
     Some(match (model, kind, disturbed, fam) {
         (Euler, Helix, false, Pd) => [0.93, 0.52, 0.50],
@@ -251,27 +211,17 @@ fn axes(m: &crate::metrics::FlightMetrics) -> [AxisMetrics; 4] {
     [m.x, m.y, m.z, m.yaw]
 }
 
-fn fam_title(f: ControllerFamily) -> &'static str {
-    match f {
-        ControllerFamily::Pd => "PD",
-        ControllerFamily::Lqr => "LQR",
-        ControllerFamily::Mpc => "MPC",
-    }
-}
-
 /// How tables, figures and sweeps name a controller: `PD`, `LQR`, `MPC fast`, `MPC thesis`.
-pub fn variant_title(f: ControllerFamily, preset: MpcPreset) -> String {
-    match f {
-        ControllerFamily::Mpc => format!("MPC {}", preset.name()),
-        _ => fam_title(f).to_string(),
-    }
+/// (The spec table's titles: the gain set is not part of the name.)
+pub fn variant_title(f: Family, preset: Preset) -> String {
+    ControllerSpec::new(f, AttitudeForm::Euler)
+        .with_preset(preset)
+        .title()
+        .to_string()
 }
 
-fn model_title(m: ModelKind) -> &'static str {
-    match m {
-        ModelKind::Euler => "Euler",
-        ModelKind::Quaternion => "quaternion",
-    }
+fn model_title(m: AttitudeForm) -> &'static str {
+    m.title()
 }
 
 /// Markdown tables of the study (PD and LQR).
@@ -289,23 +239,12 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
     let mut cells = 0;
     for (fam, preset) in VARIANTS {
         for model in MODELS {
-            let mut rows = vec![(GainSet::Tuned, "")];
-            if fam == ControllerFamily::Pd {
-                rows.push((GainSet::Thesis, ", printed thesis gains"));
+            let mut rows = vec![(preset, "")];
+            if fam == Family::Pd {
+                rows.push((Preset::Thesis, ", printed thesis gains"));
             }
             for (gains, note) in rows {
-                let Some(o) = find(
-                    all,
-                    fam,
-                    model,
-                    ScenarioKind::Setpoint,
-                    none,
-                    Sel {
-                        gains,
-                        reference: RefMode::Feedforward,
-                        preset,
-                    },
-                ) else {
+                let Some(o) = find(all, fam, model, ScenarioKind::Setpoint, none, Sel::defaults(gains)) else {
                     continue;
                 };
                 let th = thesis_setpoint(fam, model);
@@ -332,7 +271,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
                         fmt_opt(a.overshoot_pct, 3),
                         th[i].1
                     );
-                    if gains == GainSet::Tuned {
+                    if gains == Preset::Project {
                         cells += 1;
                         if a.settling_s.is_some_and(|v| v <= th[i].0) {
                             better += 1;
@@ -353,13 +292,13 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
             "Tracking RMSE, undisturbed (thesis Tables 4.11–4.14)",
             none,
             false,
-            RefMode::Feedforward,
+            ReferenceMode::Feedforward,
         ),
         (
             "Tracking RMSE, undisturbed, thesis-faithful reference (position and velocity only)",
             none,
             false,
-            RefMode::Thesis,
+            ReferenceMode::Thesis,
         ),
         (
             "Tracking RMSE with `wind` (thesis Tables 4.15–4.18, disturbed)",
@@ -368,7 +307,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
                 mismatch: false,
             },
             true,
-            RefMode::Feedforward,
+            ReferenceMode::Feedforward,
         ),
         (
             "Tracking RMSE with `mismatch`",
@@ -377,7 +316,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
                 mismatch: true,
             },
             false,
-            RefMode::Feedforward,
+            ReferenceMode::Feedforward,
         ),
         (
             "Tracking RMSE with `wind,mismatch`",
@@ -386,7 +325,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
                 mismatch: true,
             },
             false,
-            RefMode::Feedforward,
+            ReferenceMode::Feedforward,
         ),
     ] {
         let _ = writeln!(s, "## {title}\n");
@@ -410,18 +349,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
                 let mut line = format!("| {} {} |", model_title(model), kind.name());
                 let mut worst = 0.0f64;
                 for (fam, preset) in VARIANTS {
-                    let Some(o) = find(
-                        all,
-                        fam,
-                        model,
-                        kind,
-                        dist,
-                        Sel {
-                            gains: GainSet::Tuned,
-                            reference,
-                            preset,
-                        },
-                    ) else {
+                    let Some(o) = find(all, fam, model, kind, dist, Sel { preset, reference }) else {
                         continue;
                     };
                     let m = &o.res.metrics;
@@ -495,7 +423,7 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
                     continue;
                 };
                 let m = &o.res.metrics;
-                let qp = if fam == ControllerFamily::Mpc {
+                let qp = if fam == Family::Mpc {
                     format!(
                         "{:.1} / {} ({})",
                         o.res.qp_iterations.0, o.res.qp_iterations.1, o.res.qp_iteration_bound

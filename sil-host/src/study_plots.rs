@@ -3,13 +3,14 @@
 
 use crate::disturbance::DisturbanceSet;
 use crate::figures::{decimate, Figure, Panel, Plot, Series};
-use crate::flight::{fly_with, ControllerFamily, FlightConfig, FlightResult, MpcPreset};
+use crate::flight::{fly_with, FlightConfig, FlightResult};
 use crate::metrics::AxisMetrics;
-use crate::plant::ModelKind;
 use crate::scenario::{Scenario, ScenarioKind};
 use crate::study::{find, variant_title, Outcome, Sel, VARIANTS};
-use firmware::control::{Mpc, MpcConfig, MpcForm};
-use firmware::VehicleParams;
+use fc_core::control::{Family, Preset};
+use fc_core::control::{Mpc, MpcConfig};
+use fc_core::AttitudeForm;
+use fc_core::VehicleParams;
 
 /// Points per line: plenty for a 960-pixel figure.
 const POINTS: usize = 800;
@@ -39,7 +40,7 @@ fn t_max(kind: ScenarioKind) -> f64 {
     }
 }
 
-fn undisturbed(all: &[Outcome], model: ModelKind, kind: ScenarioKind) -> Vec<(String, usize, &Outcome)> {
+fn undisturbed(all: &[Outcome], model: AttitudeForm, kind: ScenarioKind) -> Vec<(String, usize, &Outcome)> {
     VARIANTS
         .iter()
         .enumerate()
@@ -52,7 +53,7 @@ fn undisturbed(all: &[Outcome], model: ModelKind, kind: ScenarioKind) -> Vec<(St
 
 /// x, y, altitude against time with the reference (thesis Figs 4.14, 4.16).
 fn positions(all: &[Outcome], kind: ScenarioKind) -> Option<Figure> {
-    let cases = undisturbed(all, ModelKind::Quaternion, kind);
+    let cases = undisturbed(all, AttitudeForm::Quaternion, kind);
     let first = cases.first()?.2;
     let labels = ["x (m, north)", "y (m, east)", "altitude −z (m)"];
     let panels = (0..3)
@@ -76,7 +77,7 @@ fn positions(all: &[Outcome], kind: ScenarioKind) -> Option<Figure> {
 
 /// The path seen from above (thesis Figs 4.15, 4.17).
 fn path_top(all: &[Outcome], kind: ScenarioKind) -> Option<Figure> {
-    let cases = undisturbed(all, ModelKind::Quaternion, kind);
+    let cases = undisturbed(all, AttitudeForm::Quaternion, kind);
     let first = cases.first()?.2;
     let xy = |res: &FlightResult, reference: bool| -> Vec<(f64, f64)> {
         let src = if reference {
@@ -101,7 +102,7 @@ fn path_top(all: &[Outcome], kind: ScenarioKind) -> Option<Figure> {
 
 /// The helix in 3-D (thesis Fig 4.17).
 fn path_3d(all: &[Outcome]) -> Option<Figure> {
-    let cases = undisturbed(all, ModelKind::Quaternion, ScenarioKind::Helix);
+    let cases = undisturbed(all, AttitudeForm::Quaternion, ScenarioKind::Helix);
     let first = cases.first()?.2;
     let p3 = |src: &[[f64; 4]]| decimate(&src.iter().map(|v| (v[0], v[1], -v[2])).collect::<Vec<_>>(), POINTS);
     let mut series = vec![("reference".to_string(), p3(&first.res.trace.reference), None)];
@@ -121,11 +122,11 @@ fn path_3d(all: &[Outcome]) -> Option<Figure> {
 }
 
 /// Commanded inputs with their bounds on the set-point (thesis Figs 4.1–4.13).
-fn inputs(all: &[Outcome], fam: ControllerFamily, preset: MpcPreset, color: usize) -> Option<Figure> {
+fn inputs(all: &[Outcome], fam: Family, preset: Preset, color: usize) -> Option<Figure> {
     let o = find(
         all,
         fam,
-        ModelKind::Quaternion,
+        AttitudeForm::Quaternion,
         ScenarioKind::Setpoint,
         DisturbanceSet::NONE,
         Sel::defaults(preset),
@@ -173,7 +174,7 @@ fn u_norm(all: &[Outcome]) -> Figure {
     let kinds = [ScenarioKind::Setpoint, ScenarioKind::Circle, ScenarioKind::Helix];
     let mut groups = Vec::new();
     for (fam, preset) in VARIANTS {
-        for model in [ModelKind::Euler, ModelKind::Quaternion] {
+        for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
             let v: Vec<f64> = kinds
                 .iter()
                 .map(|k| {
@@ -199,16 +200,13 @@ fn u_norm(all: &[Outcome]) -> Figure {
 /// Figs 4.18–4.19), for the fast MPC and the LQR on the helix.
 fn disturbances(all: &[Outcome]) -> Option<Figure> {
     let mut panels = Vec::new();
-    for (fam, preset) in [
-        (ControllerFamily::Mpc, MpcPreset::Fast),
-        (ControllerFamily::Lqr, MpcPreset::Fast),
-    ] {
+    for (fam, preset) in [(Family::Mpc, Preset::Project), (Family::Lqr, Preset::Project)] {
         let mut series = Vec::new();
         for (i, d) in DisturbanceSet::ALL.iter().enumerate() {
             let o = find(
                 all,
                 fam,
-                ModelKind::Quaternion,
+                AttitudeForm::Quaternion,
                 ScenarioKind::Helix,
                 *d,
                 Sel::defaults(preset),
@@ -275,7 +273,7 @@ pub struct HorizonPoint {
 pub const HORIZONS: [usize; 7] = [3, 5, 8, 10, 15, 20, 30];
 
 fn fly_horizon<const N: usize>(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
-    let form = MpcForm::from(cfg.model);
+    let form = AttitudeForm::from(cfg.spec.form);
     let p: VehicleParams<f32> = cfg.vehicle.cast();
     let mpc = Mpc::<f32, N, 2, 8>::new(p, MpcConfig::thesis(form))
         .map_err(|e| anyhow::anyhow!("MPC N = {N}: design failed: {e:?}"))?;
@@ -284,14 +282,14 @@ fn fly_horizon<const N: usize>(cfg: &FlightConfig) -> anyhow::Result<FlightResul
 
 /// The thesis' study of the prediction horizon (Figs 4.9–4.10), swept: the
 /// `thesis` preset (Ts 0.25 s, M 2) on the set-point with N from 3 to 30.
-pub fn horizon_sweep(model: ModelKind, quick: bool) -> anyhow::Result<Vec<HorizonPoint>> {
+pub fn horizon_sweep(model: AttitudeForm, quick: bool) -> anyhow::Result<Vec<HorizonPoint>> {
     use rayon::prelude::*;
     let mut sc = Scenario::default_for(ScenarioKind::Setpoint);
     if quick {
         sc.duration_s = 12.0;
     }
-    let mut cfg = FlightConfig::new(ControllerFamily::Mpc, model, sc);
-    cfg.preset = MpcPreset::Thesis;
+    let mut cfg = FlightConfig::new(Family::Mpc, model, sc);
+    cfg.spec.preset = Preset::Thesis;
     HORIZONS
         .par_iter()
         .map(|&n| {

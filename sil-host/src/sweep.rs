@@ -8,10 +8,10 @@
 use crate::figures::{self, Figure, Panel, Plot, Series};
 use crate::flight::{fly, FlightConfig, Uncertainty};
 use crate::noise::SplitMix;
-use crate::plant::ModelKind;
 use crate::scenario::Scenario;
 use crate::study::{label, variant_title, VARIANTS};
 use anyhow::{bail, Context, Result};
+use fc_core::AttitudeForm;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write;
@@ -39,7 +39,7 @@ pub struct SweepOptions {
     pub base: Scenario,
     /// Vehicle the controllers are designed for.
     #[serde(skip)]
-    pub vehicle: firmware::VehicleParams<f64>,
+    pub vehicle: fc_core::VehicleParams<f64>,
     /// Output directory.
     #[serde(skip)]
     pub out: PathBuf,
@@ -111,12 +111,12 @@ pub fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[i] * (1.0 - f) + sorted[j] * f
 }
 
-fn controllers(base: &Scenario, vehicle: &firmware::VehicleParams<f64>) -> Vec<FlightConfig> {
+fn controllers(base: &Scenario, vehicle: &fc_core::VehicleParams<f64>) -> Vec<FlightConfig> {
     let mut out = Vec::new();
     for (fam, preset) in VARIANTS {
-        for model in [ModelKind::Euler, ModelKind::Quaternion] {
+        for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
             let mut c = FlightConfig::new(fam, model, *base);
-            c.preset = preset;
+            c.spec.preset = preset;
             c.vehicle = *vehicle;
             out.push(c);
         }
@@ -203,7 +203,11 @@ pub fn run(o: &SweepOptions) -> Result<Vec<SweepRow>> {
 }
 
 fn label_short(cfg: &FlightConfig) -> String {
-    format!("{} {}", variant_title(cfg.controller, cfg.preset), cfg.model.name())
+    format!(
+        "{} {}",
+        variant_title(cfg.spec.family, cfg.spec.preset),
+        cfg.spec.form.name()
+    )
 }
 
 /// Writes `DIR/sweep.md`, `DIR/sweep.json` and the RMSE-distribution figure.
@@ -299,7 +303,7 @@ mod tests {
             lag_max_s: 0.1,
             tube_m: 1.0,
             base: Scenario::default_for(crate::scenario::ScenarioKind::Helix),
-            vehicle: firmware::VehicleParams::OS4,
+            vehicle: fc_core::VehicleParams::OS4,
             out: PathBuf::from("/nonexistent"),
             progress: false,
         }

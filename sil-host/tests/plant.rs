@@ -1,13 +1,13 @@
 //! Plant tests against independent truth: equilibria, closed-form responses,
 //! agreement of the two state forms, the 90° pitch case, RK4's order.
 
-use firmware::{
+use fc_core::{
     hover_input, hover_quat_state, quat_to_rotation, realised_inputs, rotor_speeds, QuatState, VehicleParams,
 };
 use nalgebra::{Matrix3, Vector3, Vector4};
-use sil_host::{DisturbanceSet, ModelKind, Plant, PlantConfig};
+use sil_host::{AttitudeForm, DisturbanceSet, Plant, PlantConfig};
 
-const MODELS: [ModelKind; 2] = [ModelKind::Euler, ModelKind::Quaternion];
+const MODELS: [AttitudeForm; 2] = [AttitudeForm::Euler, AttitudeForm::Quaternion];
 
 fn start() -> QuatState<f64> {
     hover_quat_state(&Vector3::new(0.0, 0.0, -1.0), 0.0)
@@ -114,7 +114,7 @@ fn euler_and_quaternion_plants_agree() {
             }
             (path, pl.euler_state(), &mut worst).0.clone()
         };
-        let (pe, pq) = (run(ModelKind::Euler), run(ModelKind::Quaternion));
+        let (pe, pq) = (run(AttitudeForm::Euler), run(AttitudeForm::Quaternion));
         let worst = pe.iter().zip(&pq).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
         // The manoeuvre is real: it moves the vehicle by decimetres.
         assert!((pe.last().unwrap() - Vector3::new(0.0, 0.0, -1.0)).norm() > 0.1);
@@ -129,7 +129,7 @@ fn quaternion_plant_flies_through_ninety_degrees_pitch() {
     // rotation matrix Ṙ = R [ω]× integrated alongside with fine RK4 steps.
     let mut p = VehicleParams::OS4;
     p.rotor_inertia_kgm2 = 0.0; // keep ωr out so rates have a simple truth
-    let mut cfg = PlantConfig::nominal(ModelKind::Quaternion);
+    let mut cfg = PlantConfig::nominal(AttitudeForm::Quaternion);
     cfg.params = p;
     let u = Vector4::new(4.0, 0.0, 0.6, 0.01);
     let ur = realised_inputs(&p, &rotor_speeds(&p, &u));
@@ -190,7 +190,7 @@ fn rk4_error_falls_sixteen_fold_when_step_halves() {
     // Coarse integration rates on a vigorous manoeuvre; truth from a 64× finer step.
     let u = Vector4::new(9.0, 0.05, -0.04, 0.05);
     let at = |hz: f64| {
-        let mut cfg = PlantConfig::nominal(ModelKind::Quaternion);
+        let mut cfg = PlantConfig::nominal(AttitudeForm::Quaternion);
         cfg.integration_hz = hz;
         let pl = fly(cfg, &start(), u, 2.0, 0.1);
         pl.quat_state()
@@ -210,7 +210,7 @@ fn rk4_error_falls_sixteen_fold_when_step_halves() {
 fn rotor_lag_is_first_order_with_gain() {
     // Rotors from hover speed to a new command: Ω(t) = kΩc + (Ω0 − kΩc) e^{−t/τ}.
     let p = VehicleParams::OS4;
-    let mut cfg = PlantConfig::nominal(ModelKind::Quaternion);
+    let mut cfg = PlantConfig::nominal(AttitudeForm::Quaternion);
     cfg.rotor_lag = true;
     let u = Vector4::new(8.0, 0.0, 0.0, 0.0);
     let wc = rotor_speeds(&p, &u)[0];
@@ -230,7 +230,7 @@ fn wind_pushes_the_hovering_vehicle_along_its_force() {
     // Hover input, wind from 5 s: before 5 s nothing moves; afterwards the NED
     // force (0.5+gust, −0.3, 0.2) N accelerates the vehicle north, west(−y), down.
     let u = hover_input(&VehicleParams::OS4);
-    let cfg = PlantConfig::nominal(ModelKind::Quaternion).with_disturbance("wind".parse().unwrap());
+    let cfg = PlantConfig::nominal(AttitudeForm::Quaternion).with_disturbance("wind".parse().unwrap());
     let mut pl = Plant::new(cfg, &start());
     for _ in 0..500 {
         pl.step(&u, 0.01);
@@ -248,7 +248,7 @@ fn wind_pushes_the_hovering_vehicle_along_its_force() {
 
 #[test]
 fn mismatch_changes_the_true_vehicle() {
-    let cfg = PlantConfig::nominal(ModelKind::Euler).with_disturbance("mismatch".parse().unwrap());
+    let cfg = PlantConfig::nominal(AttitudeForm::Euler).with_disturbance("mismatch".parse().unwrap());
     assert!(cfg.rotor_lag);
     assert!((cfg.params.mass_kg - 0.65 * 1.15).abs() < 1e-12);
     assert!((cfg.params.inertia_kgm2[2] - 1.3e-2 * 1.1).abs() < 1e-12);

@@ -2,17 +2,18 @@
 //! at 500 Hz, f64 plant at 1 kHz): set-point accuracy, tracking RMSE, faster
 //! circles than the thesis flew, inputs always inside the box.
 
-use sil_host::flight::{fly, ControllerFamily, FlightConfig, FlightResult, RefMode};
-use sil_host::{ModelKind, Scenario, ScenarioKind};
+use fc_core::control::{Family, ReferenceMode};
+use sil_host::flight::{fly, FlightConfig, FlightResult};
+use sil_host::{AttitudeForm, Scenario, ScenarioKind};
 
-const VARIANTS: [(ControllerFamily, ModelKind); 4] = [
-    (ControllerFamily::Pd, ModelKind::Euler),
-    (ControllerFamily::Pd, ModelKind::Quaternion),
-    (ControllerFamily::Lqr, ModelKind::Euler),
-    (ControllerFamily::Lqr, ModelKind::Quaternion),
+const VARIANTS: [(Family, AttitudeForm); 4] = [
+    (Family::Pd, AttitudeForm::Euler),
+    (Family::Pd, AttitudeForm::Quaternion),
+    (Family::Lqr, AttitudeForm::Euler),
+    (Family::Lqr, AttitudeForm::Quaternion),
 ];
 
-fn run(c: ControllerFamily, m: ModelKind, sc: Scenario) -> FlightResult {
+fn run(c: Family, m: AttitudeForm, sc: Scenario) -> FlightResult {
     let res = fly(&FlightConfig::new(c, m, sc)).unwrap();
     assert!(!res.diverged, "{c:?} {m:?} {:?} diverged", sc.kind);
     assert_eq!(
@@ -93,7 +94,7 @@ fn feedforward_beats_pure_feedback_on_a_circle() {
     for (c, m) in VARIANTS {
         let mut cfg = FlightConfig::new(c, m, sc);
         let ff = fly(&cfg).unwrap().metrics;
-        cfg.reference = RefMode::Thesis;
+        cfg.spec.reference = ReferenceMode::Thesis;
         let th = fly(&cfg).unwrap().metrics;
         let (e_ff, e_th) = (ff.x.rmse_m.hypot(ff.y.rmse_m), th.x.rmse_m.hypot(th.y.rmse_m));
         assert!(e_ff < 0.7 * e_th, "{c:?} {m:?}: feed-forward {e_ff} vs thesis {e_th}");

@@ -2,30 +2,31 @@
 //! in-process, framed (the core behind the wire protocol) and TCP to
 //! `serve`, and `serve` surviving hostile clients.
 
-use sil_host::flight::{fly, fly_target, ControllerFamily, FlightConfig, MpcPreset, Target};
-use sil_host::{ModelKind, Scenario, ScenarioKind};
+use fc_core::control::{Family, Preset};
+use sil_host::flight::{fly, fly_target, FlightConfig, Target};
+use sil_host::{AttitudeForm, Scenario, ScenarioKind};
 use std::io::Write;
 use std::net::{TcpListener, TcpStream};
 use std::time::Duration;
 
 fn cases() -> Vec<FlightConfig> {
     let mut lqr = FlightConfig::new(
-        ControllerFamily::Lqr,
-        ModelKind::Quaternion,
+        Family::Lqr,
+        AttitudeForm::Quaternion,
         Scenario::default_for(ScenarioKind::Setpoint),
     );
     lqr.scenario.duration_s = 6.0;
     let mut mpc = FlightConfig::new(
-        ControllerFamily::Mpc,
-        ModelKind::Euler,
+        Family::Mpc,
+        AttitudeForm::Euler,
         Scenario::default_for(ScenarioKind::Helix),
     );
-    mpc.preset = MpcPreset::Fast;
+    mpc.spec.preset = Preset::Project;
     mpc.scenario.duration_s = 6.0;
     mpc.disturbance = "wind".parse().unwrap();
     let mut pd = FlightConfig::new(
-        ControllerFamily::Pd,
-        ModelKind::Euler,
+        Family::Pd,
+        AttitudeForm::Euler,
         Scenario::default_for(ScenarioKind::Circle),
     );
     pd.scenario.duration_s = 4.0;
@@ -40,7 +41,7 @@ fn framed_flight_is_identical_to_in_process() {
         // Same f32 inputs, same code: the trajectories agree exactly.
         assert_eq!(a.rows.len(), b.rows.len());
         for (ra, rb) in a.rows.iter().zip(&b.rows) {
-            assert_eq!(ra, rb, "{:?} {:?}", cfg.controller, cfg.scenario.kind);
+            assert_eq!(ra, rb, "{:?} {:?}", cfg.spec.family, cfg.scenario.kind);
         }
     }
 }

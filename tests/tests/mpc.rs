@@ -2,14 +2,15 @@
 //! box, robust to the mismatch plant, the thesis preset flying too, and the
 //! QP's a-priori iteration bound never exceeded.
 
-use sil_host::flight::{fly, ControllerFamily, FlightConfig, FlightResult, MpcPreset};
-use sil_host::{DisturbanceSet, ModelKind, Scenario, ScenarioKind};
+use fc_core::control::{Family, Preset};
+use sil_host::flight::{fly, FlightConfig, FlightResult};
+use sil_host::{AttitudeForm, DisturbanceSet, Scenario, ScenarioKind};
 
-const MODELS: [ModelKind; 2] = [ModelKind::Euler, ModelKind::Quaternion];
+const MODELS: [AttitudeForm; 2] = [AttitudeForm::Euler, AttitudeForm::Quaternion];
 
-fn run(model: ModelKind, preset: MpcPreset, sc: Scenario, d: &str) -> FlightResult {
-    let mut cfg = FlightConfig::new(ControllerFamily::Mpc, model, sc);
-    cfg.preset = preset;
+fn run(model: AttitudeForm, preset: Preset, sc: Scenario, d: &str) -> FlightResult {
+    let mut cfg = FlightConfig::new(Family::Mpc, model, sc);
+    cfg.spec.preset = preset;
     cfg.disturbance = d.parse::<DisturbanceSet>().unwrap();
     let r = fly(&cfg).unwrap();
     assert!(!r.diverged, "{model:?} {preset:?} {:?} {d} diverged", sc.kind);
@@ -31,7 +32,7 @@ fn fast_mpc_is_offset_free_under_wind() {
     for m in MODELS {
         let r = run(
             m,
-            MpcPreset::Fast,
+            Preset::Project,
             Scenario::default_for(ScenarioKind::Setpoint),
             "wind",
         );
@@ -52,8 +53,8 @@ fn fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm() {
     // a few millimetres either way (their calm RMSE is below 1 mm, so their
     // own ratio says nothing).
     for m in MODELS {
-        let calm = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "none");
-        let windy = run(m, MpcPreset::Fast, Scenario::default_for(ScenarioKind::Helix), "wind");
+        let calm = run(m, Preset::Project, Scenario::default_for(ScenarioKind::Helix), "none");
+        let windy = run(m, Preset::Project, Scenario::default_for(ScenarioKind::Helix), "wind");
         let (c, w) = (calm.metrics.position_rmse_m(), windy.metrics.position_rmse_m());
         eprintln!(
             "{m:?}: helix position RMSE {c:.5} m calm, {w:.5} m wind ({:.3}x)",
@@ -87,7 +88,7 @@ fn fast_mpc_flies_unlisted_cases_with_wind_and_mismatch() {
     climb.duration_s = 40.0;
     for m in MODELS {
         for sc in [fast_circle, target, climb] {
-            let r = run(m, MpcPreset::Fast, sc, "wind,mismatch");
+            let r = run(m, Preset::Project, sc, "wind,mismatch");
             let worst = r.metrics.x.rmse_m.max(r.metrics.y.rmse_m).max(r.metrics.z.rmse_m);
             if sc.kind == ScenarioKind::Setpoint {
                 assert!(
@@ -105,12 +106,7 @@ fn fast_mpc_flies_unlisted_cases_with_wind_and_mismatch() {
 #[test]
 fn thesis_preset_flies_the_setpoint() {
     for m in MODELS {
-        let r = run(
-            m,
-            MpcPreset::Thesis,
-            Scenario::default_for(ScenarioKind::Setpoint),
-            "none",
-        );
+        let r = run(m, Preset::Thesis, Scenario::default_for(ScenarioKind::Setpoint), "none");
         assert!(
             r.metrics.final_error_m < 0.05,
             "{m:?}: final error {}",
@@ -127,14 +123,14 @@ fn the_disturbance_trend_still_pays_under_sensor_noise() {
     // rate estimate suffers from most. The trend's second-order rate filter
     // must keep it useful: on the windy helix it beats the held estimate,
     // and the flight stays offset-free and inside the box.
-    use firmware::control::{MpcConfig, MpcForm};
+    use fc_core::control::{AttitudeForm, MpcConfig};
     use sil_host::noise::SensorNoise;
     for m in MODELS {
         let fly_with = |trend: bool| {
-            let mut cfg = FlightConfig::new(ControllerFamily::Mpc, m, Scenario::default_for(ScenarioKind::Helix));
+            let mut cfg = FlightConfig::new(Family::Mpc, m, Scenario::default_for(ScenarioKind::Helix));
             cfg.disturbance = "wind".parse().unwrap();
             cfg.noise = Some(SensorNoise::typical(1.0, 1).unwrap());
-            let mut c = MpcConfig::fast(MpcForm::from(m));
+            let mut c = MpcConfig::fast(AttitudeForm::from(m));
             if !trend {
                 c.disturbance_trend_s = None;
             }

@@ -6,7 +6,7 @@
 
 use nalgebra::Vector4;
 use sil_host::openloop::OpenLoop;
-use sil_host::{ModelKind, PlantConfig};
+use sil_host::{AttitudeForm, PlantConfig};
 
 const M: f64 = 0.65;
 const G: f64 = 9.81;
@@ -164,7 +164,7 @@ fn open_loop_matches_independent_integration() {
     // The case: U = [mg+0.1, 0.001, 0, 0.01] for 3 s from hover at (0, 0, −1).
     let u = [M * G + 0.1, 0.001, 0.0, 0.01];
     let wr = omega_r(u);
-    for model in [ModelKind::Euler, ModelKind::Quaternion] {
+    for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
         let rows = OpenLoop {
             plant: PlantConfig::nominal(model),
             u: Vector4::from(u),
@@ -176,11 +176,11 @@ fn open_loop_matches_independent_integration() {
         let mut x0 = [0.0; 13];
         x0[2] = -1.0;
         let reference = match model {
-            ModelKind::Quaternion => {
+            AttitudeForm::Quaternion => {
                 x0[6] = 1.0;
                 dopri(|x| quat_rhs(x, u, wr), x0, 3.0, 0.01, 1e-12)
             }
-            ModelKind::Euler => dopri(|x| euler_rhs(x, u, wr), x0, 3.0, 0.01, 1e-12),
+            AttitudeForm::Euler => dopri(|x| euler_rhs(x, u, wr), x0, 3.0, 0.01, 1e-12),
         };
         assert_eq!(rows.len(), reference.len());
         let mut worst = 0.0f64;

@@ -5,9 +5,10 @@
 //! `#[ignore]`d for a plain `cargo test`; `./test.sh` installs QEMU and runs
 //! them with `--include-ignored`. They fail, not skip, when QEMU is missing.
 
+use fc_core::control::{Family, Preset};
 use serde_json::Value;
-use sil_host::flight::{fly, fly_target, ControllerFamily, FlightConfig, MpcPreset, Target};
-use sil_host::{ModelKind, Scenario, ScenarioKind};
+use sil_host::flight::{fly, fly_target, FlightConfig, Target};
+use sil_host::{AttitudeForm, Scenario, ScenarioKind};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
@@ -127,13 +128,13 @@ fn mcu_and_host_compute_the_same_closed_loop() {
     }
 }
 
-fn setpoint(family: ControllerFamily, seconds: f64) -> FlightConfig {
+fn setpoint(family: Family, seconds: f64) -> FlightConfig {
     let mut c = FlightConfig::new(
         family,
-        ModelKind::Quaternion,
+        AttitudeForm::Quaternion,
         Scenario::default_for(ScenarioKind::Setpoint),
     );
-    c.preset = MpcPreset::Fast;
+    c.spec.preset = Preset::Project;
     c.scenario.duration_s = seconds;
     c
 }
@@ -142,7 +143,7 @@ fn setpoint(family: ControllerFamily, seconds: f64) -> FlightConfig {
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn qemu_flight_matches_in_process_and_counts_instructions() {
     let _lock = alone();
-    for family in [ControllerFamily::Lqr, ControllerFamily::Mpc] {
+    for family in [Family::Lqr, Family::Mpc] {
         let cfg = setpoint(family, 2.0);
         let local = fly(&cfg).unwrap();
         let pil = fly_target(&cfg, &Target::Qemu).unwrap();

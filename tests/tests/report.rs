@@ -2,11 +2,12 @@
 //! self-contained HTML) and every figure it links, and its numbers are the
 //! metrics of the same flights flown alone.
 
+use fc_core::control::{Family, Preset};
 use sil_host::disturbance::DisturbanceSet;
-use sil_host::flight::{fly, ControllerFamily, MpcPreset};
+use sil_host::flight::fly;
 use sil_host::full_report::{missing_links, write_report, ReportOptions};
 use sil_host::study::{find, Sel};
-use sil_host::{ModelKind, ScenarioKind};
+use sil_host::{AttitudeForm, ScenarioKind};
 
 #[test]
 fn quick_report_is_complete_and_its_numbers_are_single_flights() {
@@ -45,16 +46,16 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
     // Numbers in the tables are the metrics of the same flight flown alone.
     let cases = [
         (
-            ControllerFamily::Pd,
-            MpcPreset::Fast,
-            ModelKind::Euler,
+            Family::Pd,
+            Preset::Project,
+            AttitudeForm::Euler,
             ScenarioKind::Setpoint,
             DisturbanceSet::NONE,
         ),
         (
-            ControllerFamily::Mpc,
-            MpcPreset::Fast,
-            ModelKind::Quaternion,
+            Family::Mpc,
+            Preset::Project,
+            AttitudeForm::Quaternion,
             ScenarioKind::Helix,
             DisturbanceSet {
                 wind: true,
@@ -62,9 +63,9 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
             },
         ),
         (
-            ControllerFamily::Lqr,
-            MpcPreset::Fast,
-            ModelKind::Quaternion,
+            Family::Lqr,
+            Preset::Project,
+            AttitudeForm::Quaternion,
             ScenarioKind::Circle,
             DisturbanceSet::NONE,
         ),
@@ -77,11 +78,11 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
     // And the printed cells carry them: the PD Euler set-point block.
     let pd = find(
         &w.outcomes,
-        ControllerFamily::Pd,
-        ModelKind::Euler,
+        Family::Pd,
+        AttitudeForm::Euler,
         ScenarioKind::Setpoint,
         DisturbanceSet::NONE,
-        Sel::defaults(MpcPreset::Fast),
+        Sel::defaults(Preset::Project),
     )
     .unwrap();
     let alone = fly(&pd.cfg).unwrap();
@@ -93,11 +94,11 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
     let helix = |d| {
         let o = find(
             &w.outcomes,
-            ControllerFamily::Mpc,
-            ModelKind::Quaternion,
+            Family::Mpc,
+            AttitudeForm::Quaternion,
             ScenarioKind::Helix,
             d,
-            Sel::defaults(MpcPreset::Fast),
+            Sel::defaults(Preset::Project),
         )
         .unwrap();
         let m = fly(&o.cfg).unwrap().metrics;
@@ -128,7 +129,7 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
     let cells: Vec<&str> = row.split('|').map(str::trim).collect();
     let mut sc = sil_host::Scenario::default_for(ScenarioKind::Helix);
     sc.duration_s = 20.0;
-    let mut cfg = sil_host::flight::FlightConfig::new(ControllerFamily::Mpc, ModelKind::Quaternion, sc);
+    let mut cfg = sil_host::flight::FlightConfig::new(Family::Mpc, AttitudeForm::Quaternion, sc);
     cfg.disturbance = "wind".parse().unwrap();
     cfg.noise = Some(sil_host::noise::SensorNoise::typical(1.0, 1).unwrap());
     let rmse = fly(&cfg).unwrap().metrics.position_rmse_m();

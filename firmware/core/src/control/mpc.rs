@@ -1,0 +1,711 @@
+//! Linear MPC about hover (thesis 3.101–3.116, Appendix C), Euler and
+//! quaternion form, solved each step by the core's box-constrained QP solver.
+//!
+//! - **Model**: the hover model at ψT = 0, used in the frame of the current
+//!   heading (position and velocity rotated by −ψ, attitude relative to the
+//!   heading). The dynamics are yaw-symmetric and the weights treat x and y
+//!   alike, so this is the thesis' heading-scheduled model, exactly, with a
+//!   Hessian that never changes: its eigenvalues and the QP's iteration bound
+//!   are computed once.
+//! - **Prediction**: `N` steps of `pred_dt` (exact ZOH), inputs moved at the
+//!   first `M` steps and held afterwards (control horizon / move blocking),
+//!   re-solved every `exec_dt` (the two may differ).
+//! - **Cost**: `½Σ(x_k − r_k)ᵀQ(x_k − r_k) + ½Σ(u_k − u_ref,k)ᵀR(u_k − u_ref,k) +
+//!   ½ΣΔu_kᵀSΔu_k`, optional terminal weight from the DARE. In the
+//!   quaternion form the attitude part of `x − r` is the error quaternion's
+//!   vector part; about hover in the heading frame it equals the component
+//!   difference to first order (that is what a linear MPC can carry), and the
+//!   current heading error is the exact error quaternion, shortest way round.
+//! - **Reference preview**: the `N` future setpoints (supplied by the caller,
+//!   or extrapolated from the current one when absent), each with the attitude,
+//!   thrust and rates its acceleration implies.
+//! - **Offset-free**: an observer for constant force (NED) and moment (body)
+//!   disturbances, fed into the prediction (the thesis' MATLAB MPC used an
+//!   output-disturbance estimator for the same reason); optionally a damped
+//!   trend of the horizontal force over the horizon, so a gust is anticipated
+//!   rather than chased.
+//! - **Gradient by adjoint recursion**: `g` costs O(N·12²) per step and no
+//!   prediction matrix is stored.
+
+use super::reference::AttitudeRef;
+use super::{
+    validate, wrap_pi, ControlError, ControlOutput, ControlStatus, Controller, HeadingFrame, ReferenceMode, Setpoint,
+    StateEstimate,
+};
+use crate::linalg::solve_dare;
+use crate::lit;
+use crate::model::{
+    euler_hover_model, quat_hover_model, quat_to_euler, zoh, AttitudeForm, InputBox, LinearModel, VehicleParams,
+};
+use crate::qp::{BoxQp, QpSettings, QpSolution};
+use nalgebra::{RealField, SMatrix, SVector, Vector3, Vector4};
+
+/// Everything that defines an MPC besides its sizes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MpcConfig {
+    /// Attitude coordinates.
+    pub form: AttitudeForm,
+    /// Prediction step, s.
+    pub pred_dt_s: f64,
+    /// Execution period (how often the QP is re-solved), s.
+    pub exec_dt_s: f64,
+    /// Stage state weights (diagonal), in the form's coordinates.
+    pub q: [f64; 12],
+    /// Input weights on `U − U_ref` (diagonal).
+    pub r: [f64; 4],
+    /// Input-rate weights on `U_k − U_{k−1}` per prediction step (diagonal).
+    pub s: [f64; 4],
+    /// Terminal weight from the DARE of (Q, R) instead of Q at the last step.
+    pub terminal: bool,
+    /// Time constant of the disturbance observer, s (`None`: no estimate).
+    pub observer_tau_s: Option<f64>,
+    /// Damped-trend prediction of the horizontal disturbance force: its
+    /// horizon `T`, s (`None`: the estimate is held constant over the
+    /// prediction). The estimate's rate ḋ is extrapolated as
+    /// `d(τ) = d̂ + ḋ·T·(1 − e^(−τ/T))`: a gust is followed about `T` ahead
+    /// and never extrapolated without bound.
+    pub disturbance_trend_s: Option<f64>,
+    /// Largest extrapolated change `|ḋ|·T` of the horizontal disturbance
+    /// acceleration, m/s² (bounds the trend during manoeuvres, when model
+    /// error, not wind, moves the estimate).
+    pub disturbance_trend_max_mps2: f64,
+    /// Time constant τ of the rate filter `s/(τs + 1)²` that gives ḋ from the
+    /// estimate, s (> the execution period): shorter follows a gust with less
+    /// lag, longer passes less sensor noise.
+    pub disturbance_rate_filter_s: f64,
+    /// Reference feed-forward.
+    pub reference: ReferenceMode,
+    /// Largest heading error the reference may ask for, rad. The prediction
+    /// holds the heading frame fixed over the horizon; a turn much faster than
+    /// the position dynamics rotates the position feedback by up to 90°+ within
+    /// one horizon and destabilises a combined turn-and-translate. Capping the
+    /// error turns at a bounded rate instead (π: no cap).
+    pub max_heading_error_rad: f64,
+    /// QP early-exit tolerance (gradient mapping).
+    pub qp_tolerance: f64,
+    /// QP objective accuracy the iteration bound guarantees.
+    pub qp_accuracy: f64,
+    /// Real-time cap on QP iterations (below the bound if needed).
+    pub qp_max_iterations: u32,
+}
+
+impl MpcConfig {
+    /// Thesis preset (Appendix C): Ts = 0.25 s prediction and execution, N = 20,
+    /// M = 2; MATLAB's weights squared: 25 on x, y, z (and on the heading, which
+    /// the thesis' ψ settling time shows it weighted), 0.01 on every input rate,
+    /// 0.25 on U4; no terminal weight; disturbance estimate on.
+    pub fn thesis(form: AttitudeForm) -> Self {
+        let yaw_w = match form {
+            AttitudeForm::Euler => 25.0,
+            AttitudeForm::Quaternion => 100.0, // q3 ≈ ψ/2
+        };
+        Self {
+            form,
+            pred_dt_s: 0.25,
+            exec_dt_s: 0.25,
+            q: [25.0, 25.0, 25.0, 0.0, 0.0, 0.0, 0.0, 0.0, yaw_w, 0.0, 0.0, 0.0],
+            r: [0.0, 0.0, 0.0, 0.25],
+            s: [0.01; 4],
+            terminal: false,
+            observer_tau_s: Some(0.5),
+            disturbance_trend_s: None,
+            disturbance_trend_max_mps2: 0.0,
+            disturbance_rate_filter_s: 0.1,
+            reference: ReferenceMode::Thesis,
+            max_heading_error_rad: core::f64::consts::PI,
+            qp_tolerance: 1e-5,
+            qp_accuracy: 1e-6,
+            qp_max_iterations: 2000,
+        }
+    }
+
+    /// The project's preset: 50 ms prediction steps over a 1 s horizon,
+    /// re-solved at 200 Hz, full-state weights, DARE terminal weight,
+    /// feed-forward of the previewed reference, disturbance estimate.
+    ///
+    /// Tuning: tight position weights for tracking; heavy roll/pitch-rate
+    /// weights, because with the `mismatch` plant's 0.178 s rotor lag a lightly
+    /// damped attitude loop diverges (the rate weight 0.2 did, 30 does not;
+    /// 8 flies the listed cases better but loses a far turn under
+    /// `wind,mismatch`). The horizontal disturbance is predicted with a damped
+    /// trend (T = 0.3 s, rate through `s/(τs + 1)²` with τ = 50 ms, at most
+    /// 0.4 m/s² of extrapolated change): a 0.5 Hz gust moves through half its
+    /// swing within the 1 s horizon; holding the estimate left 0.016 m of x
+    /// RMS error over the gusty part of the helix, the trend leaves 0.007 m.
+    /// τ trades that against sensor noise: 30 ms left 0.006 m without noise
+    /// but lost most of the gain with it (`sil-host fly --noise 1`).
+    pub fn fast(form: AttitudeForm) -> Self {
+        let a = match form {
+            AttitudeForm::Euler => 1.0,
+            AttitudeForm::Quaternion => 4.0, // half-angles
+        };
+        Self {
+            form,
+            pred_dt_s: 0.05,
+            exec_dt_s: 0.005,
+            q: [
+                400.0,
+                400.0,
+                60.0,
+                20.0,
+                20.0,
+                8.0,
+                30.0 * a,
+                30.0 * a,
+                20.0 * a,
+                30.0,
+                30.0,
+                5.0,
+            ],
+            r: [0.5, 2.0, 2.0, 20.0],
+            s: [0.05, 0.5, 0.5, 5.0],
+            terminal: true,
+            observer_tau_s: Some(0.02),
+            disturbance_trend_s: Some(0.3),
+            disturbance_trend_max_mps2: 0.4,
+            disturbance_rate_filter_s: 0.05,
+            reference: ReferenceMode::Feedforward,
+            max_heading_error_rad: 0.35,
+            qp_tolerance: 1e-4,
+            qp_accuracy: 1e-5,
+            // The Richter–Jones–Morari bound for this accuracy (≈ 750
+            // iterations) does not fit a 5 ms step on a 168 MHz Cortex-M4;
+            // 150 does with margin (examples/budget.rs), and flights stay
+            // below it (max 97 in the study; the report's QP column shows each flight's max).
+            qp_max_iterations: 150,
+        }
+    }
+}
+
+/// The QP the MPC solved last: `min ½zᵀHz + gᵀz, lb ≤ z ≤ ub` (H is
+/// [`Mpc::hessian`]), z = the `M` moves of `U − U_hover`, 4 per move.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MpcQp<T: RealField + Copy, const NZ: usize> {
+    /// Linear term.
+    pub g: SVector<T, NZ>,
+    /// Lower bounds.
+    pub lb: SVector<T, NZ>,
+    /// Upper bounds.
+    pub ub: SVector<T, NZ>,
+    /// The solver's answer.
+    pub solution: QpSolution<T, NZ>,
+}
+
+type Mat12<T> = SMatrix<T, 12, 12>;
+type Vec12<T> = SVector<T, 12>;
+
+/// Linear MPC with horizon `N` prediction steps, `M` moves and `NZ = 4·M`
+/// decision variables.
+#[derive(Debug, Clone)]
+pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> {
+    cfg: MpcConfig,
+    params: VehicleParams<T>,
+    bx: InputBox<T>,
+    u_hover: Vector4<T>,
+    // Prediction model (pred_dt) and observer model (exec_dt), heading frame.
+    ad: Mat12<T>,
+    bd: SMatrix<T, 12, 4>,
+    wd: SMatrix<T, 12, 6>,
+    ad_e: Mat12<T>,
+    bd_e: SMatrix<T, 12, 4>,
+    wd_e: SMatrix<T, 12, 6>,
+    q: Vec12<T>,
+    p_term: Mat12<T>,
+    r: Vector4<T>,
+    s: Vector4<T>,
+    qp: BoxQp<T, NZ>,
+    lb: SVector<T, NZ>,
+    ub: SVector<T, NZ>,
+    settings: QpSettings<T>,
+    iteration_bound: u32,
+    // Run-time state.
+    preview: [Setpoint<T>; N],
+    preview_valid: bool,
+    z: SVector<T, NZ>,
+    du_prev: Vector4<T>,
+    /// Disturbance estimate: acceleration NED (m/s²) and angular acceleration body (rad/s²).
+    dist: SVector<T, 6>,
+    /// The two cascaded low-passes of the horizontal estimate the trend's
+    /// rate comes from ([`Mpc::disturbance_rate`]).
+    dist_lp: [[T; 2]; 2],
+    /// Trend gain of prediction step k: `T·(1 − e^(−τ_k/T))`, s, τ_k the step's midpoint.
+    trend: [T; N],
+    last: Option<(Vec12<T>, T)>,
+    last_qp: Option<MpcQp<T, NZ>>,
+}
+
+/// Which prediction steps belong to which move (the last move is held).
+#[inline]
+fn block_of<const M: usize>(k: usize) -> usize {
+    k.min(M - 1)
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T, N, M, NZ> {
+    /// Prediction steps (the horizon): also the number of reference preview points.
+    pub const HORIZON: usize = N;
+
+    /// Builds the MPC for the controller's vehicle `params`. Everything that
+    /// does not depend on the measured state is computed here.
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
+    pub fn new(params: VehicleParams<T>, cfg: MpcConfig) -> Result<Self, ControlError> {
+        let p64: VehicleParams<f64> = params.cast();
+        let ok_dt = |v: f64| v.is_finite() && v > 0.0;
+        if N == 0 || M == 0 || M > N || NZ != 4 * M || !p64.is_valid() || !ok_dt(cfg.pred_dt_s) || !ok_dt(cfg.exec_dt_s)
+        {
+            return Err(ControlError::InvalidParameter);
+        }
+        let lm: LinearModel<f64> = match cfg.form {
+            AttitudeForm::Euler => euler_hover_model(&p64, 0.0),
+            AttitudeForm::Quaternion => quat_hover_model(&p64, 0.0),
+        };
+        // Disturbance inputs: acceleration on ẋ ẏ ż, angular acceleration on ṗ q̇ ṙ.
+        let mut bw = SMatrix::<f64, 12, 6>::zeros();
+        for i in 0..3 {
+            bw[(3 + i, i)] = 1.0;
+            bw[(9 + i, 3 + i)] = 1.0;
+        }
+        let mut b_all = SMatrix::<f64, 12, 10>::zeros();
+        b_all.fixed_columns_mut::<4>(0).copy_from(&lm.b);
+        b_all.fixed_columns_mut::<6>(4).copy_from(&bw);
+        let (ad, b_p) = zoh(&lm.a, &b_all, cfg.pred_dt_s)?;
+        let (ad_e, b_e) = zoh(&lm.a, &b_all, cfg.exec_dt_s)?;
+        let q = Vec12::<f64>::from(cfg.q);
+        let r = Vector4::<f64>::from(cfg.r);
+        let s = Vector4::<f64>::from(cfg.s);
+        if q.iter()
+            .chain(r.iter())
+            .chain(s.iter())
+            .any(|v| !v.is_finite() || *v < 0.0)
+        {
+            return Err(ControlError::InvalidParameter);
+        }
+        let bd: SMatrix<f64, 12, 4> = b_p.fixed_columns::<4>(0).into_owned();
+        let p_term = if cfg.terminal {
+            // A tiny input weight keeps R invertible when the config has zeros.
+            let rr = SMatrix::<f64, 4, 4>::from_diagonal(&r.map(|v| v.max(1e-6)));
+            solve_dare(&ad, &bd, &SMatrix::from_diagonal(&q), &rr)?.x
+        } else {
+            SMatrix::from_diagonal(&q)
+        };
+        let mut me = Self {
+            cfg,
+            bx: params.input_box(),
+            u_hover: crate::model::hover_input(&params),
+            params,
+            ad: ad.map(lit),
+            bd: bd.map(lit),
+            wd: b_p.fixed_columns::<6>(4).into_owned().map(lit),
+            ad_e: ad_e.map(lit),
+            bd_e: b_e.fixed_columns::<4>(0).into_owned().map(lit),
+            wd_e: b_e.fixed_columns::<6>(4).into_owned().map(lit),
+            q: q.map(lit),
+            p_term: p_term.map(lit),
+            r: r.map(lit),
+            s: s.map(lit),
+            qp: BoxQp::new(&SMatrix::<T, NZ, NZ>::identity()).map_err(|_| ControlError::InvalidParameter)?,
+            lb: SVector::zeros(),
+            ub: SVector::zeros(),
+            settings: QpSettings {
+                tolerance: lit(cfg.qp_tolerance),
+                accuracy: lit(cfg.qp_accuracy),
+                max_iterations: cfg.qp_max_iterations,
+                polish: true,
+            },
+            iteration_bound: 0,
+            preview: [Setpoint::hold(Vector3::zeros(), T::zero()); N],
+            preview_valid: false,
+            z: SVector::zeros(),
+            du_prev: Vector4::zeros(),
+            dist: SVector::zeros(),
+            dist_lp: [[T::zero(); 2]; 2],
+            trend: [T::zero(); N],
+            last: None,
+            last_qp: None,
+        };
+        if let Some(tt) = cfg.disturbance_trend_s {
+            let max = cfg.disturbance_trend_max_mps2;
+            let filter_ok = cfg.disturbance_rate_filter_s.is_finite() && cfg.disturbance_rate_filter_s > cfg.exec_dt_s;
+            if !ok_dt(tt) || !filter_ok || !max.is_finite() || max < 0.0 {
+                return Err(ControlError::InvalidParameter);
+            }
+            for (k, t) in me.trend.iter_mut().enumerate() {
+                let tau = (k as f64 + 0.5) * cfg.pred_dt_s;
+                *t = lit(tt * (1.0 - libm::exp(-tau / tt)));
+            }
+        }
+        let h = me.build_hessian();
+        me.qp = BoxQp::new(&h).map_err(|_| ControlError::InvalidParameter)?;
+        for b in 0..M {
+            for c in 0..4 {
+                me.lb[4 * b + c] = me.bx.lo[c] - me.u_hover[c];
+                me.ub[4 * b + c] = me.bx.hi[c] - me.u_hover[c];
+            }
+        }
+        me.iteration_bound = me.qp.iteration_bound(&me.lb, &me.ub, me.settings.accuracy);
+        Ok(me)
+    }
+
+    /// The constant QP Hessian.
+    pub fn hessian(&self) -> &SMatrix<T, NZ, NZ> {
+        self.qp.hessian()
+    }
+
+    /// The a-priori QP iteration bound for the configured accuracy (computed
+    /// once: the Hessian and the box never change).
+    pub fn iteration_bound(&self) -> u32 {
+        self.iteration_bound
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &MpcConfig {
+        &self.cfg
+    }
+
+    /// The last QP solved (for inspection: `sil-host mpc-step`).
+    pub fn last_qp(&self) -> Option<&MpcQp<T, NZ>> {
+        self.last_qp.as_ref()
+    }
+
+    /// Current disturbance estimate: acceleration NED (m/s²), angular
+    /// acceleration body FRD (rad/s²).
+    pub fn disturbance_estimate(&self) -> (Vector3<T>, Vector3<T>) {
+        (
+            self.dist.fixed_rows::<3>(0).into_owned(),
+            self.dist.fixed_rows::<3>(3).into_owned(),
+        )
+    }
+
+    /// Current rate of the horizontal disturbance estimate used by the damped
+    /// trend, NED m/s³ (z is always 0; all zero without a trend): the
+    /// second-order derivative filter `s/(τs + 1)²` of the estimate, the
+    /// difference of its two cascaded low-passes over τ − dt (exact for a
+    /// ramp in discrete time), each axis bounded so that `|ḋ|·T` stays within
+    /// `disturbance_trend_max_mps2`.
+    pub fn disturbance_rate(&self) -> Vector3<T> {
+        let Some(tt) = self.cfg.disturbance_trend_s else {
+            return Vector3::zeros();
+        };
+        let span = lit::<T>(self.cfg.disturbance_rate_filter_s - self.cfg.exec_dt_s);
+        let lim = lit::<T>(self.cfg.disturbance_trend_max_mps2 / tt);
+        let rate = |i: usize| ((self.dist_lp[0][i] - self.dist_lp[1][i]) / span).max(-lim).min(lim);
+        Vector3::new(rate(0), rate(1), T::zero())
+    }
+
+    /// Sets the reference for prediction step `k` (1-based: time `t + k·pred_dt`).
+    /// Once step `N` is set, the preview is used by the next update; without a
+    /// complete preview the MPC extrapolates the current setpoint.
+    pub fn set_preview(&mut self, k: usize, sp: &Setpoint<T>) -> Result<(), ControlError> {
+        if k == 0 || k > N || !sp.is_valid() {
+            return Err(ControlError::InvalidSetpoint);
+        }
+        self.preview[k - 1] = *sp;
+        self.preview_valid = k == N;
+        Ok(())
+    }
+
+    /// Adjoint gradient of the state cost for a trajectory `x[1..=N]` with
+    /// references `r[1..=N]`: per-move sums of `Bdᵀλ_{k+1}`.
+    fn state_gradient(&self, x: &[Vec12<T>; N], r: &[Vec12<T>; N]) -> SVector<T, NZ> {
+        let mut g = SVector::<T, NZ>::zeros();
+        let mut lambda = Vec12::<T>::zeros();
+        for k in (0..N).rev() {
+            let e = x[k] - r[k];
+            let w = if k == N - 1 {
+                self.p_term * e
+            } else {
+                self.q.component_mul(&e)
+            };
+            lambda = w + self.ad.tr_mul(&lambda);
+            // x[k] is the state after input step k: its λ feeds input step k.
+            let gk = self.bd.tr_mul(&lambda);
+            let b = block_of::<M>(k);
+            for c in 0..4 {
+                g[4 * b + c] += gk[c];
+            }
+        }
+        g
+    }
+
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
+    fn build_hessian(&self) -> SMatrix<T, NZ, NZ> {
+        let mut h = SMatrix::<T, NZ, NZ>::zeros();
+        let zero_ref = [Vec12::<T>::zeros(); N];
+        for col in 0..NZ {
+            let (b, c) = (col / 4, col % 4);
+            let mut x = [Vec12::<T>::zeros(); N];
+            let mut xk = Vec12::<T>::zeros();
+            for (k, xs) in x.iter_mut().enumerate() {
+                let mut u = Vector4::<T>::zeros();
+                if block_of::<M>(k) == b {
+                    u[c] = T::one();
+                }
+                xk = self.ad * xk + self.bd * u;
+                *xs = xk;
+            }
+            h.set_column(col, &self.state_gradient(&x, &zero_ref));
+        }
+        // Input magnitude: each prediction step's input belongs to one move.
+        for k in 0..N {
+            let b = block_of::<M>(k);
+            for c in 0..4 {
+                h[(4 * b + c, 4 * b + c)] += self.r[c];
+            }
+        }
+        // Input rate: the first move against the previous input, then move to move.
+        for b in 0..M {
+            for c in 0..4 {
+                h[(4 * b + c, 4 * b + c)] += self.s[c];
+                if b > 0 {
+                    h[(4 * (b - 1) + c, 4 * (b - 1) + c)] += self.s[c];
+                    h[(4 * b + c, 4 * (b - 1) + c)] -= self.s[c];
+                    h[(4 * (b - 1) + c, 4 * b + c)] -= self.s[c];
+                }
+            }
+        }
+        (h + h.transpose()) * lit::<T>(0.5)
+    }
+
+    /// State in the frame of heading `yaw`, in the form's coordinates.
+    fn heading_state(&self, est: &StateEstimate<T>, yaw: T) -> Vec12<T> {
+        let frame = HeadingFrame::new(yaw);
+        let mut x = Vec12::<T>::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&est.pos_ned_m));
+        x.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&est.vel_ned_mps));
+        let att = self.attitude_coords(&est.att, &frame);
+        x.fixed_rows_mut::<3>(6).copy_from(&att);
+        x.fixed_rows_mut::<3>(9).copy_from(&est.rates_frd_radps);
+        x
+    }
+
+    /// Attitude `q` relative to a heading frame in the form's coordinates.
+    fn attitude_coords(&self, q: &Vector4<T>, frame: &HeadingFrame<T>) -> Vector3<T> {
+        let qr = frame.attitude(q);
+        match self.cfg.form {
+            AttitudeForm::Quaternion => Vector3::new(qr[1], qr[2], qr[3]),
+            AttitudeForm::Euler => {
+                let e = quat_to_euler(&qr);
+                Vector3::new(e[0], e[1], wrap_pi(e[2]))
+            }
+        }
+    }
+
+    /// Reference at prediction step `k` (1-based) as a heading-frame state and
+    /// the input reference `U_ref − U_hover`.
+    fn reference_state(
+        &self,
+        sp: &Setpoint<T>,
+        dist_acc_ned: &Vector3<T>,
+        yaw: T,
+        frame: &HeadingFrame<T>,
+    ) -> (Vec12<T>, Vector4<T>) {
+        // Target calculation of offset-free MPC: in feed-forward mode the
+        // attitude and thrust are those that produce the reference acceleration
+        // *given the estimated disturbance* (thrust must supply a_ref − d̂), and
+        // the torque references cancel the estimated moment. Without this the
+        // attitude weights pull against the tilt that holds off the wind.
+        let mut spd = *sp;
+        let mut torque_ref = Vector3::<T>::zeros();
+        if self.cfg.reference == ReferenceMode::Feedforward {
+            spd.acc_ned_mps2 -= *dist_acc_ned;
+            let p = &self.params;
+            torque_ref = Vector3::new(
+                -p.inertia_kgm2[0] * self.dist[3] / p.arm_m,
+                -p.inertia_kgm2[1] * self.dist[4] / p.arm_m,
+                -p.inertia_kgm2[2] * self.dist[5],
+            );
+        }
+        let mut ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
+        let lim = lit::<T>(self.cfg.max_heading_error_rad);
+        ar.yaw_rad = yaw + wrap_pi(ar.yaw_rad - yaw).max(-lim).min(lim);
+        let mut r = Vec12::<T>::zeros();
+        r.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&sp.pos_ned_m));
+        r.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&sp.vel_ned_mps));
+        let qref = crate::model::euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad);
+        r.fixed_rows_mut::<3>(6).copy_from(&self.attitude_coords(&qref, frame));
+        r.fixed_rows_mut::<3>(9).copy_from(&ar.rates_frd_radps);
+        let du = Vector4::new(
+            ar.thrust_n - self.u_hover[0],
+            torque_ref[0],
+            torque_ref[1],
+            torque_ref[2],
+        );
+        (r, du)
+    }
+
+    /// Setpoint `k` prediction steps ahead: the preview if complete, else the
+    /// current setpoint extrapolated along its velocity, acceleration and jerk.
+    fn horizon_setpoint(&self, sp: &Setpoint<T>, k: usize) -> Setpoint<T> {
+        if self.preview_valid {
+            return self.preview[k - 1];
+        }
+        sp.extrapolate(lit::<T>(self.cfg.pred_dt_s) * lit::<T>(k as f64))
+    }
+
+    /// The disturbance estimate with its force part in `frame`.
+    fn dist_in(&self, frame: &HeadingFrame<T>) -> SVector<T, 6> {
+        let mut d = self.dist;
+        d.fixed_rows_mut::<3>(0)
+            .copy_from(&frame.to_frame(&self.dist.fixed_rows::<3>(0).into_owned()));
+        d
+    }
+
+    /// Observer update from the previous step's prediction (and, with a
+    /// trend, the low-passed rate of the horizontal estimate).
+    fn observe(&mut self, est: &StateEstimate<T>) {
+        let Some(tau) = self.cfg.observer_tau_s else { return };
+        let Some((x_prev, yaw_prev)) = self.last else { return };
+        let frame = HeadingFrame::new(yaw_prev);
+        // Disturbance in the previous heading frame.
+        let mut dh = self.dist_in(&frame);
+        let pred = self.ad_e * x_prev + self.bd_e * self.du_prev + self.wd_e * dh;
+        let meas = self.heading_state(est, yaw_prev);
+        let nu = meas - pred;
+        // Attribute velocity and rate innovations to the disturbance, low-passed.
+        let gain = lit::<T>((self.cfg.exec_dt_s / tau).min(1.0));
+        for i in 0..3 {
+            let bf = self.wd_e[(3 + i, i)];
+            let bm = self.wd_e[(9 + i, 3 + i)];
+            if bf > T::zero() {
+                dh[i] += gain * nu[3 + i] / bf;
+            }
+            if bm > T::zero() {
+                dh[3 + i] += gain * nu[9 + i] / bm;
+            }
+        }
+        // Back to NED and clamp to a physical range (±1 g, ±100 rad/s²).
+        let f_ned = frame.to_ned(&dh.fixed_rows::<3>(0).into_owned());
+        dh.fixed_rows_mut::<3>(0).copy_from(&f_ned);
+        let g = self.params.gravity_mps2;
+        for i in 0..3 {
+            dh[i] = dh[i].max(-g).min(g);
+            dh[3 + i] = dh[3 + i].max(lit(-100.0)).min(lit(100.0));
+        }
+        if !dh.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        if self.cfg.disturbance_trend_s.is_some() {
+            // The trend's rate filter (see `disturbance_rate`): two cascaded
+            // low-passes of the horizontal estimate. Differencing the estimate
+            // directly would pass its noise at a gain of 1/dt.
+            let a = lit::<T>(self.cfg.exec_dt_s / self.cfg.disturbance_rate_filter_s);
+            for i in 0..2 {
+                let l1 = self.dist_lp[0][i] + a * (dh[i] - self.dist_lp[0][i]);
+                self.dist_lp[0][i] = l1;
+                self.dist_lp[1][i] += a * (l1 - self.dist_lp[1][i]);
+            }
+        }
+        self.dist = dh;
+    }
+}
+
+impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Controller<T> for Mpc<T, N, M, NZ> {
+    #[inline(never)]
+    fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
+        validate(est, sp)?;
+        self.observe(est);
+        let yaw = quat_to_euler(&est.att)[2];
+        let x0 = self.heading_state(est, yaw);
+        // Disturbance in this heading frame.
+        let frame = HeadingFrame::new(yaw);
+        let w = self.wd * self.dist_in(&frame);
+        let d_acc = self.dist.fixed_rows::<3>(0).into_owned();
+        let d_rate = self.disturbance_rate();
+        let w_rate = self.wd.fixed_columns::<3>(0) * frame.to_frame(&d_rate);
+        // Free response (z = 0) and references over the horizon.
+        let mut xs = [Vec12::<T>::zeros(); N];
+        let mut rs = [Vec12::<T>::zeros(); N];
+        let mut g = SVector::<T, NZ>::zeros();
+        let mut xk = x0;
+        for k in 0..N {
+            // Disturbance of step k: the estimate plus its damped trend.
+            xk = self.ad * xk + w + w_rate * self.trend[k];
+            xs[k] = xk;
+            let spk = self.horizon_setpoint(sp, k + 1);
+            let dk = d_acc + d_rate * self.trend[k];
+            let (rk, du_ref) = self.reference_state(&spk, &dk, yaw, &frame);
+            rs[k] = rk;
+            // Input magnitude reference: the input of step k is move block_of(k).
+            let b = block_of::<M>(k);
+            for ch in 0..4 {
+                g[4 * b + ch] -= self.r[ch] * du_ref[ch];
+            }
+        }
+        // The yaw reference of every step relative to the *current* heading is
+        // an angle difference: wrap it the short way round.
+        if self.cfg.form == AttitudeForm::Euler {
+            for r in rs.iter_mut() {
+                r[8] = wrap_pi(r[8]);
+            }
+        }
+        g += self.state_gradient(&xs, &rs);
+        for ch in 0..4 {
+            g[ch] -= self.s[ch] * self.du_prev[ch];
+        }
+        // Warm start: the previous moves, shifted by one when a whole
+        // prediction step has passed.
+        let mut warm = self.z;
+        if self.cfg.exec_dt_s >= self.cfg.pred_dt_s && M > 1 {
+            for b in 0..M - 1 {
+                for ch in 0..4 {
+                    warm[4 * b + ch] = self.z[4 * (b + 1) + ch];
+                }
+            }
+        }
+        let sol = self.qp.solve(&g, &self.lb, &self.ub, &warm, &self.settings);
+        self.z = sol.z;
+        let du = Vector4::new(sol.z[0], sol.z[1], sol.z[2], sol.z[3]);
+        let u = self.bx.clamp(&(self.u_hover + du));
+        self.du_prev = u - self.u_hover;
+        self.last = Some((x0, yaw));
+        self.last_qp = Some(MpcQp {
+            g,
+            lb: self.lb,
+            ub: self.ub,
+            solution: sol,
+        });
+        self.preview_valid = false;
+        Ok(ControlOutput {
+            u,
+            status: ControlStatus {
+                saturated: false,
+                excursion: 0.0,
+                iterations: sol.iterations.min(u16::MAX as u32) as u16,
+            },
+        })
+    }
+
+    fn preview_request(&self) -> Option<(usize, f64)> {
+        Some((N, self.cfg.pred_dt_s))
+    }
+
+    fn set_preview(&mut self, k: usize, sp: &Setpoint<T>) -> Result<(), ControlError> {
+        Mpc::set_preview(self, k, sp)
+    }
+
+    fn period_s(&self) -> Option<f64> {
+        Some(self.cfg.exec_dt_s)
+    }
+
+    fn iteration_bound(&self) -> u32 {
+        Mpc::iteration_bound(self)
+    }
+
+    fn reset(&mut self) {
+        self.z = SVector::zeros();
+        self.du_prev = Vector4::zeros();
+        self.dist = SVector::zeros();
+        self.dist_lp = [[T::zero(); 2]; 2];
+        self.last = None;
+        self.last_qp = None;
+        self.preview_valid = false;
+    }
+}
+
+/// The `thesis` preset's sizes: N = 20, M = 2.
+pub type MpcThesis<T> = Mpc<T, 20, 2, 8>;
+/// The `fast` preset's sizes: N = 20, M = 4.
+pub type MpcFast<T> = Mpc<T, 20, 4, 16>;

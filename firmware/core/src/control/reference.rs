@@ -1,0 +1,239 @@
+//! From a desired acceleration to the attitude and thrust that produce it
+//! (thesis 3.79, 3.85, 3.86 — an exact inversion of the translational
+//! dynamics of SPEC §4), and the reference feed-forward modes.
+
+use super::Setpoint;
+use crate::lit;
+use crate::math as trig;
+use crate::model::VehicleParams;
+use nalgebra::{RealField, Vector3};
+
+/// How much of the reference the controllers feed forward.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "lowercase")
+)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ReferenceMode {
+    /// As the thesis: the reference position and velocity enter the feedback
+    /// (3.78, 3.83, 3.84); no acceleration, attitude or thrust feed-forward.
+    Thesis,
+    /// Adds the reference acceleration: the attitude and thrust it implies are
+    /// fed forward, so moving references are tracked without feedback lag.
+    Feedforward,
+}
+
+impl ReferenceMode {
+    /// Both modes, feed-forward first.
+    pub const ALL: [ReferenceMode; 2] = [ReferenceMode::Feedforward, ReferenceMode::Thesis];
+
+    /// Lower-case name (`feedforward`, `thesis`): command line and JSON.
+    pub const fn name(self) -> &'static str {
+        match self {
+            ReferenceMode::Thesis => "thesis",
+            ReferenceMode::Feedforward => "feedforward",
+        }
+    }
+}
+
+/// Desired roll, pitch and thrust for a desired acceleration and heading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TiltThrust<T: RealField + Copy> {
+    /// Desired roll φd, rad.
+    pub roll_rad: T,
+    /// Desired pitch θd, rad.
+    pub pitch_rad: T,
+    /// Thrust that gives the desired vertical acceleration at this tilt, N.
+    pub thrust_n: T,
+}
+
+/// Largest commanded tilt, rad (45°): keeps the thrust axis well away from
+/// horizontal, where altitude cannot be held.
+pub const MAX_TILT_RAD: f64 = core::f64::consts::FRAC_PI_4;
+
+/// Attitude and thrust for acceleration `acc_d` (NED, m/s²) at velocity `vel`
+/// (for drag compensation) and heading `yaw` (thesis 3.85, 3.86, 3.79 with the
+/// desired angles). With `A = acc_d + kt∘vel/m`:
+/// `θd = atan((−cψ·Ax − sψ·Ay)/(g − Az))`,
+/// `φd = atan((−sψ·Ax + cψ·Ay)·cos θd/(g − Az))`,
+/// `U1 = m(g − Az)/(cos φd cos θd)`.
+/// `g − Az` is kept ≥ 0.2 g (no commanded free fall) and the tilt ≤ 45°.
+pub fn tilt_and_thrust<T: RealField + Copy>(
+    p: &VehicleParams<T>,
+    acc_d: &Vector3<T>,
+    vel: &Vector3<T>,
+    yaw: T,
+) -> TiltThrust<T> {
+    let m = p.mass_kg;
+    let g = p.gravity_mps2;
+    let ax = acc_d[0] + p.kt_nspm[0] / m * vel[0];
+    let ay = acc_d[1] + p.kt_nspm[1] / m * vel[1];
+    let az = acc_d[2] + p.kt_nspm[2] / m * vel[2];
+    let lift = (g - az).max(lit::<T>(0.2) * g);
+    let (s, c) = trig::sin_cos(yaw);
+    let max_tilt = lit::<T>(MAX_TILT_RAD);
+    let pitch = ((-c * ax - s * ay) / lift).atan().max(-max_tilt).min(max_tilt);
+    let roll = ((-s * ax + c * ay) * trig::cos(pitch) / lift)
+        .atan()
+        .max(-max_tilt)
+        .min(max_tilt);
+    TiltThrust {
+        roll_rad: roll,
+        pitch_rad: pitch,
+        thrust_n: m * lift / (trig::cos(roll) * trig::cos(pitch)),
+    }
+}
+
+/// The attitude, thrust and body rates a reference implies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeRef<T: RealField + Copy> {
+    /// Roll φ, rad.
+    pub roll_rad: T,
+    /// Pitch θ, rad.
+    pub pitch_rad: T,
+    /// Heading ψ, rad.
+    pub yaw_rad: T,
+    /// Thrust, N.
+    pub thrust_n: T,
+    /// Body rates (p, q, r) of the reference attitude, FRD, rad/s.
+    pub rates_frd_radps: Vector3<T>,
+}
+
+/// Time step of the central difference that gives the reference attitude's rates, s.
+const RATE_DIFF_S: f64 = 0.005;
+
+impl<T: RealField + Copy> AttitudeRef<T> {
+    /// Level at the setpoint's heading, hover thrust, no rates (what the
+    /// thesis' LQR regulates to).
+    pub fn level(p: &VehicleParams<T>, sp: &Setpoint<T>) -> Self {
+        Self {
+            roll_rad: T::zero(),
+            pitch_rad: T::zero(),
+            yaw_rad: sp.yaw_rad,
+            thrust_n: p.hover_thrust_n(),
+            rates_frd_radps: Vector3::zeros(),
+        }
+    }
+
+    /// What the reference's acceleration implies ([`tilt_and_thrust`] at the
+    /// reference velocity and heading), with body rates from a central
+    /// difference of that map along the reference's jerk and yaw rate.
+    pub fn feedforward(p: &VehicleParams<T>, sp: &Setpoint<T>) -> Self {
+        let tt = tilt_and_thrust(p, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
+        let h = lit::<T>(RATE_DIFF_S);
+        let at = |sgn: T| {
+            tilt_and_thrust(
+                p,
+                &(sp.acc_ned_mps2 + sp.jerk_ned_mps3 * (sgn * h)),
+                &(sp.vel_ned_mps + sp.acc_ned_mps2 * (sgn * h)),
+                sp.yaw_rad + sp.yaw_rate_radps * sgn * h,
+            )
+        };
+        let (fwd, back) = (at(T::one()), at(-T::one()));
+        let two_h = h + h;
+        let phi_dot = (fwd.roll_rad - back.roll_rad) / two_h;
+        let theta_dot = (fwd.pitch_rad - back.pitch_rad) / two_h;
+        let psi_dot = sp.yaw_rate_radps;
+        // Euler rates → body rates (ZYX).
+        let (sphi, cphi) = trig::sin_cos(tt.roll_rad);
+        let (sth, cth) = trig::sin_cos(tt.pitch_rad);
+        let rates = Vector3::new(
+            phi_dot - psi_dot * sth,
+            theta_dot * cphi + psi_dot * sphi * cth,
+            -theta_dot * sphi + psi_dot * cphi * cth,
+        );
+        Self {
+            roll_rad: tt.roll_rad,
+            pitch_rad: tt.pitch_rad,
+            yaw_rad: sp.yaw_rad,
+            thrust_n: tt.thrust_n,
+            rates_frd_radps: rates,
+        }
+    }
+
+    /// [`Self::level`] or [`Self::feedforward`] by mode.
+    pub fn for_mode(p: &VehicleParams<T>, sp: &Setpoint<T>, mode: ReferenceMode) -> Self {
+        match mode {
+            ReferenceMode::Thesis => Self::level(p, sp),
+            ReferenceMode::Feedforward => Self::feedforward(p, sp),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{euler_derivative, hover_euler_state, Disturbance, VehicleParams};
+    use nalgebra::Vector4;
+
+    #[test]
+    fn tilt_and_thrust_produce_the_desired_acceleration() {
+        // Independent truth: put the vehicle at the returned attitude with the
+        // returned thrust and evaluate the nonlinear dynamics.
+        let p = VehicleParams::<f64>::os4();
+        for (acc, vel, yaw) in [
+            (Vector3::new(1.0, -0.5, -0.8), Vector3::new(0.3, 0.2, -0.1), 0.3),
+            (Vector3::new(-2.0, 1.5, 0.5), Vector3::new(-1.0, 0.0, 0.4), -2.4),
+            (Vector3::zeros(), Vector3::zeros(), 1.0),
+        ] {
+            let tt = tilt_and_thrust(&p, &acc, &vel, yaw);
+            let mut x = hover_euler_state(&Vector3::zeros(), yaw);
+            x[3] = vel[0];
+            x[4] = vel[1];
+            x[5] = vel[2];
+            x[6] = tt.roll_rad;
+            x[7] = tt.pitch_rad;
+            let u = Vector4::new(tt.thrust_n, 0.0, 0.0, 0.0);
+            let d = euler_derivative(&p, &x, &u, 0.0, &Disturbance::none());
+            let got = Vector3::new(d[3], d[4], d[5]);
+            assert!((got - acc).norm() < 1e-12, "{got} vs {acc}");
+        }
+    }
+
+    #[test]
+    fn feedforward_rates_match_the_attitude_derivative() {
+        // A circle's reference: the body rates of the implied attitude must equal
+        // the finite-difference derivative of that attitude along the reference.
+        let p = VehicleParams::<f64>::os4();
+        let (r, w) = (2.0, 2.0 * core::f64::consts::PI / 6.0);
+        let sp_at = |t: f64| {
+            let (s, c) = trig::sin_cos(w * t);
+            Setpoint {
+                pos_ned_m: Vector3::new(r * s, r * (1.0 - c), -1.0),
+                vel_ned_mps: Vector3::new(r * w * c, r * w * s, 0.0),
+                acc_ned_mps2: Vector3::new(-r * w * w * s, r * w * w * c, 0.0),
+                jerk_ned_mps3: Vector3::new(-r * w * w * w * c, -r * w * w * w * s, 0.0),
+                yaw_rad: 0.3 + 0.2 * t,
+                yaw_rate_radps: 0.2,
+            }
+        };
+        let t = 1.3;
+        let a = AttitudeRef::feedforward(&p, &sp_at(t));
+        let h = 1e-5;
+        let (ap, am) = (
+            AttitudeRef::feedforward(&p, &sp_at(t + h)),
+            AttitudeRef::feedforward(&p, &sp_at(t - h)),
+        );
+        let q = |x: &AttitudeRef<f64>| crate::model::euler_to_quat(x.roll_rad, x.pitch_rad, x.yaw_rad);
+        // ω = 2 q* ⊗ q̇ (body rates of a body→earth quaternion).
+        let qd = (q(&ap) - q(&am)) / (2.0 * h);
+        let w_fd = crate::model::quat_mul(&crate::model::quat_conj(&q(&a)), &qd) * 2.0;
+        let want = Vector3::new(w_fd[1], w_fd[2], w_fd[3]);
+        assert!(
+            (a.rates_frd_radps - want).norm() < 1e-4,
+            "{} vs {want}",
+            a.rates_frd_radps
+        );
+        assert!(a.rates_frd_radps.norm() > 0.1);
+    }
+
+    #[test]
+    fn limits_hold_for_extreme_requests() {
+        let p = VehicleParams::<f64>::os4();
+        let tt = tilt_and_thrust(&p, &Vector3::new(100.0, -100.0, 50.0), &Vector3::zeros(), 0.0);
+        assert!(tt.roll_rad.abs() <= MAX_TILT_RAD + 1e-12 && tt.pitch_rad.abs() <= MAX_TILT_RAD + 1e-12);
+        assert!(tt.thrust_n > 0.0 && tt.thrust_n.is_finite());
+    }
+}

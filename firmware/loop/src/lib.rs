@@ -1,0 +1,325 @@
+//! The flight controller's loop logic, independent of hardware: frames in,
+//! controller step, frames out, failsafe. The binary (and the SIL's framed
+//! and TCP targets) drive it through hal-shim's `ByteLink` and `CycleClock`.
+//!
+//! Failure behaviour: corrupt, truncated, oversized or undecodable frames are
+//! dropped and counted; sensor frames whose sequence number does not increase
+//! are dropped and counted; NaN/∞ or a non-unit attitude is rejected (the
+//! reply repeats the current output). No valid sensor frame for
+//! `failsafe_timeout_us` → failsafe: level (zero torques) and a gentle
+//! descent (thrust below hover); the first valid frame afterwards resumes
+//! control. Every loop is bounded; nothing allocates or blocks.
+
+#![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+use fc_core::control::{AnyController, ControlError, Controller, ControllerSpec, Family, Setpoint, StateEstimate};
+use fc_core::model::{AttitudeForm, Input, QuatState, VehicleParams};
+use fc_proto::{encode, Counters, FrameDecoder, FrameError, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
+use hal_shim::{ByteLink, CycleClock};
+use nalgebra::{Vector3, Vector4};
+
+/// Loop settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FcConfig {
+    /// No valid sensor frame for this long → failsafe, µs.
+    pub failsafe_timeout_us: u64,
+    /// Failsafe thrust as a fraction of hover thrust (below 1: descend).
+    pub descent_thrust_fraction: f32,
+    /// Control period the controllers are designed for, s (PD/LQR; the MPC
+    /// presets fix their own).
+    pub control_period_s: f64,
+    /// Most link reads per `service` call (bounds the work per call).
+    pub max_reads_per_service: usize,
+}
+
+impl Default for FcConfig {
+    fn default() -> Self {
+        Self {
+            failsafe_timeout_us: 50_000,
+            descent_thrust_fraction: 0.85,
+            control_period_s: 0.002,
+            max_reads_per_service: 16,
+        }
+    }
+}
+
+/// The controller a flight controller runs from boot until a `Select`
+/// arrives: the quaternion LQR, reference fed forward.
+pub const BOOT_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Lqr, AttitudeForm::Quaternion);
+
+/// A controllers' setpoint as sent on the wire.
+pub fn setpoint_to_wire(sp: &Setpoint<f32>) -> WireSetpoint {
+    WireSetpoint {
+        pos: sp.pos_ned_m.into(),
+        vel: sp.vel_ned_mps.into(),
+        acc: sp.acc_ned_mps2.into(),
+        jerk: sp.jerk_ned_mps3.into(),
+        yaw: sp.yaw_rad,
+        yaw_rate: sp.yaw_rate_radps,
+    }
+}
+
+/// A wire setpoint as the controllers' type; `None` if any value is not finite.
+pub fn setpoint_from_wire(w: &WireSetpoint) -> Option<Setpoint<f32>> {
+    let sp = Setpoint {
+        pos_ned_m: Vector3::from(w.pos),
+        vel_ned_mps: Vector3::from(w.vel),
+        acc_ned_mps2: Vector3::from(w.acc),
+        jerk_ned_mps3: Vector3::from(w.jerk),
+        yaw_rad: w.yaw,
+        yaw_rate_radps: w.yaw_rate,
+    };
+    sp.is_valid().then_some(sp)
+}
+
+/// The flight controller's state between steps.
+#[derive(Debug)]
+pub struct FlightCore {
+    cfg: FcConfig,
+    params: VehicleParams<f32>,
+    ctrl: AnyController<f32>,
+    sp: Setpoint<f32>,
+    decoder: FrameDecoder<MAX_FRAME>,
+    counters: Counters,
+    session: bool,
+    last_seq: Option<u32>,
+    last_valid_us: Option<u64>,
+    failsafe: bool,
+    u: Input<f32>,
+    selections: u32,
+}
+
+impl FlightCore {
+    /// A flight controller running the quaternion LQR until told otherwise,
+    /// motors off until the first valid sensor frame.
+    pub fn new(cfg: FcConfig) -> Result<Self, ControlError> {
+        let params = VehicleParams::<f32>::os4();
+        let ctrl = BOOT_CONTROLLER.build(params, cfg.control_period_s)?;
+        Ok(Self {
+            cfg,
+            params,
+            ctrl,
+            sp: Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0),
+            decoder: FrameDecoder::new(),
+            counters: Counters::default(),
+            session: false,
+            last_seq: None,
+            last_valid_us: None,
+            failsafe: false,
+            u: Vector4::zeros(),
+            selections: 0,
+        })
+    }
+
+    /// The inputs to apply now `[U1 N, U2 N, U3 N, U4 N·m]`.
+    pub fn output(&self) -> Input<f32> {
+        self.u
+    }
+
+    /// Failsafe active.
+    pub fn failsafe(&self) -> bool {
+        self.failsafe
+    }
+
+    /// Frame and error counters.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Controller selections that succeeded since boot.
+    pub fn selections(&self) -> u32 {
+        self.selections
+    }
+
+    /// The handshake has completed.
+    pub fn session_open(&self) -> bool {
+        self.session
+    }
+
+    /// Reads what the link has (bounded), handles every complete frame,
+    /// writes replies, then applies the failsafe timer at time `now_us`.
+    pub fn service<L: ByteLink, C: CycleClock>(
+        &mut self,
+        link: &mut L,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), L::Error> {
+        let mut buf = [0u8; 64];
+        for _ in 0..self.cfg.max_reads_per_service {
+            let n = link.read(&mut buf)?;
+            if n == 0 {
+                break;
+            }
+            for &b in &buf[..n.min(buf.len())] {
+                if let Some(frame) = self.decoder.push::<ToFc>(b) {
+                    self.handle(frame, link, clock, now_us)?;
+                }
+            }
+        }
+        self.check_timeout(now_us);
+        Ok(())
+    }
+
+    /// Applies the failsafe timer.
+    pub fn check_timeout(&mut self, now_us: u64) {
+        if let Some(t) = self.last_valid_us {
+            if now_us.saturating_sub(t) > self.cfg.failsafe_timeout_us && !self.failsafe {
+                self.failsafe = true;
+                self.counters.failsafe_entries += 1;
+                self.u = Vector4::new(
+                    self.cfg.descent_thrust_fraction * self.params.hover_thrust_n(),
+                    0.0,
+                    0.0,
+                    0.0,
+                );
+            }
+        }
+    }
+
+    fn send<L: ByteLink>(link: &mut L, msg: &FromFc) -> Result<(), L::Error> {
+        let mut out = [0u8; MAX_FRAME];
+        match encode(msg, &mut out) {
+            Ok(n) => link.write_all(&out[..n]),
+            // Our own messages always fit MAX_FRAME (tested); nothing to send otherwise.
+            Err(_) => Ok(()),
+        }
+    }
+
+    fn handle<L: ByteLink, C: CycleClock>(
+        &mut self,
+        frame: Result<ToFc, FrameError>,
+        link: &mut L,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), L::Error> {
+        let msg = match frame {
+            Ok(m) => m,
+            Err(e) => {
+                match e {
+                    FrameError::Oversized => self.counters.oversized += 1,
+                    FrameError::Cobs => self.counters.bad_cobs += 1,
+                    FrameError::Crc => self.counters.bad_crc += 1,
+                    FrameError::Message | FrameError::BufferTooSmall => self.counters.bad_message += 1,
+                }
+                return Ok(());
+            }
+        };
+        self.counters.ok += 1;
+        match msg {
+            ToFc::Hello { version } => {
+                let accepted = version == PROTOCOL_VERSION;
+                if accepted {
+                    self.session = true;
+                    self.last_seq = None;
+                }
+                Self::send(
+                    link,
+                    &FromFc::HelloAck {
+                        version: PROTOCOL_VERSION,
+                        accepted,
+                    },
+                )
+            }
+            _ if !self.session => {
+                self.counters.unexpected += 1;
+                Ok(())
+            }
+            ToFc::Heartbeat { seq } => Self::send(link, &FromFc::Heartbeat { seq }),
+            ToFc::Select {
+                controller,
+                feedforward,
+            } => {
+                // An id no controller has is a message this end cannot read
+                // (as an unknown enum index was in protocol v2's decoder).
+                match ControllerSpec::from_wire(controller, feedforward) {
+                    Ok(spec) => match spec.build(self.params, self.cfg.control_period_s) {
+                        Ok(c) => {
+                            self.ctrl = c;
+                            self.selections = self.selections.wrapping_add(1);
+                        }
+                        Err(_) => self.counters.invalid_values += 1,
+                    },
+                    Err(_) => self.counters.bad_message += 1,
+                }
+                Ok(())
+            }
+            ToFc::Setpoint(w) => {
+                match setpoint_from_wire(&w) {
+                    Some(sp) => self.sp = sp,
+                    None => self.counters.invalid_values += 1,
+                }
+                Ok(())
+            }
+            ToFc::Preview { k, sp } => {
+                let ok = setpoint_from_wire(&sp).is_some_and(|s| self.ctrl.set_preview(k as usize, &s).is_ok());
+                if !ok && self.ctrl.preview_request().is_some() {
+                    self.counters.invalid_values += 1;
+                }
+                Ok(())
+            }
+            ToFc::Sensor { seq, t_us: _, state } => self.on_sensor(seq, &state, link, clock, now_us),
+        }
+    }
+
+    fn on_sensor<L: ByteLink, C: CycleClock>(
+        &mut self,
+        seq: u32,
+        state: &[f32; 13],
+        link: &mut L,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), L::Error> {
+        if self.last_seq.is_some_and(|last| seq <= last) {
+            self.counters.out_of_order += 1;
+            return Ok(());
+        }
+        self.last_seq = Some(seq);
+        let est = StateEstimate::from_quat_state(&QuatState::from_column_slice(state));
+        let mut cycles = 0u32;
+        let mut iterations = 0u16;
+        if !est.is_valid() {
+            self.counters.invalid_values += 1;
+        } else {
+            if self.failsafe {
+                // Valid data again: start the controller afresh.
+                self.ctrl.reset();
+                self.failsafe = false;
+            }
+            let t0 = clock.now();
+            let out = self.ctrl.update(&est, &self.sp);
+            cycles = clock.since(t0);
+            match out {
+                Ok(o) => {
+                    self.u = o.u;
+                    iterations = o.status.iterations;
+                    self.last_valid_us = Some(now_us);
+                }
+                Err(_) => self.counters.invalid_values += 1,
+            }
+        }
+        let u = [self.u[0], self.u[1], self.u[2], self.u[3]];
+        Self::send(
+            link,
+            &FromFc::Actuator {
+                seq,
+                u,
+                failsafe: self.failsafe,
+            },
+        )?;
+        Self::send(
+            link,
+            &FromFc::Telemetry {
+                seq,
+                cycles,
+                qp_iterations: iterations,
+                counters: self.counters,
+                failsafe: self.failsafe,
+            },
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,382 @@
+//! FlightCore: handshake, lockstep, every failure class of the issue, the
+//! failsafe and its recovery, and a fuzzer over raw bytes.
+
+use super::*;
+use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME};
+use hal_shim::host::LoopbackLink;
+use proptest::prelude::*;
+
+struct FakeClock(core::cell::Cell<u32>);
+impl CycleClock for FakeClock {
+    fn now(&self) -> u32 {
+        let v = self.0.get();
+        self.0.set(v.wrapping_add(1000));
+        v
+    }
+    fn hz(&self) -> u32 {
+        168_000_000
+    }
+}
+
+fn frame(m: &ToFc) -> Vec<u8> {
+    let mut b = [0u8; MAX_FRAME];
+    let n = encode(m, &mut b).unwrap();
+    b[..n].to_vec()
+}
+
+fn hover_state() -> [f32; 13] {
+    let mut s = [0.0f32; 13];
+    s[2] = -1.0;
+    s[6] = 1.0;
+    s
+}
+
+struct Rig {
+    fc: FlightCore,
+    link: LoopbackLink,
+    clock: FakeClock,
+}
+
+impl Rig {
+    fn new() -> Self {
+        Self {
+            fc: FlightCore::new(FcConfig::default()).unwrap(),
+            link: LoopbackLink::default(),
+            clock: FakeClock(0.into()),
+        }
+    }
+    fn send_bytes(&mut self, bytes: &[u8], now_us: u64) -> Vec<FromFc> {
+        self.link.rx.extend(bytes.iter().copied());
+        // Drain everything (service reads a bounded amount per call).
+        for _ in 0..1000 {
+            self.fc.service(&mut self.link, &self.clock, now_us).unwrap();
+            if self.link.rx.is_empty() {
+                break;
+            }
+        }
+        let mut d = FrameDecoder::<MAX_FRAME>::new();
+        let out: Vec<FromFc> = self
+            .link
+            .tx
+            .iter()
+            .filter_map(|b| d.push::<FromFc>(*b))
+            .map(|r| r.unwrap())
+            .collect();
+        self.link.tx.clear();
+        out
+    }
+    fn send(&mut self, m: &ToFc, now_us: u64) -> Vec<FromFc> {
+        self.send_bytes(&frame(m), now_us)
+    }
+    fn open(&mut self) {
+        let r = self.send(
+            &ToFc::Hello {
+                version: PROTOCOL_VERSION,
+            },
+            0,
+        );
+        assert_eq!(
+            r,
+            vec![FromFc::HelloAck {
+                version: PROTOCOL_VERSION,
+                accepted: true
+            }]
+        );
+    }
+}
+
+#[test]
+fn handshake_gates_the_session() {
+    let mut rig = Rig::new();
+    // Before the handshake, sensor frames are not answered.
+    assert!(rig
+        .send(
+            &ToFc::Sensor {
+                seq: 1,
+                t_us: 0,
+                state: hover_state()
+            },
+            0
+        )
+        .is_empty());
+    assert_eq!(rig.fc.counters().unexpected, 1);
+    let r = rig.send(
+        &ToFc::Hello {
+            version: PROTOCOL_VERSION + 1,
+        },
+        0,
+    );
+    assert_eq!(
+        r,
+        vec![FromFc::HelloAck {
+            version: PROTOCOL_VERSION,
+            accepted: false
+        }]
+    );
+    assert!(!rig.fc.session_open());
+    rig.open();
+    assert!(rig.fc.session_open());
+}
+
+#[test]
+fn lockstep_answers_each_step_with_its_sequence_number() {
+    let mut rig = Rig::new();
+    rig.open();
+    for seq in 1..=5u32 {
+        let r = rig.send(
+            &ToFc::Sensor {
+                seq,
+                t_us: seq as u64 * 2000,
+                state: hover_state(),
+            },
+            seq as u64 * 2000,
+        );
+        match r.as_slice() {
+            [FromFc::Actuator {
+                seq: s,
+                u,
+                failsafe: false,
+            }, FromFc::Telemetry { seq: s2, cycles, .. }] => {
+                assert_eq!((*s, *s2), (seq, seq));
+                // Hovering at the setpoint: hover thrust, no torques.
+                assert!((u[0] - 6.3765).abs() < 1e-3 && u[1].abs() < 1e-4, "{u:?}");
+                assert_eq!(*cycles, 1000);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+    assert_eq!(rig.fc.counters().ok, 6);
+}
+
+#[test]
+fn bad_frames_are_dropped_and_counted_then_flight_continues() {
+    let mut rig = Rig::new();
+    rig.open();
+    let good = frame(&ToFc::Sensor {
+        seq: 1,
+        t_us: 0,
+        state: hover_state(),
+    });
+    // Corrupt CRC.
+    let mut bad = good.clone();
+    bad[3] ^= 0x80; // never creates a 0x00 delimiter (that would split the frame in two)
+    assert_ne!(bad[3], 0);
+    assert!(rig.send_bytes(&bad, 0).is_empty());
+    // Truncated.
+    let mut trunc = good[..good.len() / 2].to_vec();
+    trunc.push(0);
+    assert!(rig.send_bytes(&trunc, 0).is_empty());
+    // Oversized.
+    let mut big = vec![7u8; 500];
+    big.push(0);
+    assert!(rig.send_bytes(&big, 0).is_empty());
+    // Well-framed nonsense (valid CRC, not a message).
+    let mut raw = [0u8; 16];
+    raw[..4].copy_from_slice(&[0xff, 0xee, 0xdd, 0xcc]);
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISCSI).checksum(&raw[..4]);
+    raw[4..8].copy_from_slice(&crc.to_le_bytes());
+    let mut enc = [0u8; 32];
+    let n = cobs::try_encode(&raw[..8], &mut enc).unwrap();
+    let mut nonsense = enc[..n].to_vec();
+    nonsense.push(0);
+    assert!(rig.send_bytes(&nonsense, 0).is_empty());
+    let c = rig.fc.counters();
+    assert_eq!((c.bad_crc + c.bad_cobs, c.oversized, c.bad_message), (2, 1, 1), "{c:?}");
+    // The next good frame is answered.
+    assert_eq!(rig.send_bytes(&good, 0).len(), 2);
+}
+
+#[test]
+fn out_of_order_and_invalid_values_are_rejected() {
+    let mut rig = Rig::new();
+    rig.open();
+    assert_eq!(
+        rig.send(
+            &ToFc::Sensor {
+                seq: 10,
+                t_us: 0,
+                state: hover_state()
+            },
+            0
+        )
+        .len(),
+        2
+    );
+    assert!(rig
+        .send(
+            &ToFc::Sensor {
+                seq: 10,
+                t_us: 0,
+                state: hover_state()
+            },
+            0
+        )
+        .is_empty());
+    assert!(rig
+        .send(
+            &ToFc::Sensor {
+                seq: 9,
+                t_us: 0,
+                state: hover_state()
+            },
+            0
+        )
+        .is_empty());
+    assert_eq!(rig.fc.counters().out_of_order, 2);
+    let before = rig.fc.output();
+    let mut nan = hover_state();
+    nan[4] = f32::NAN;
+    let r = rig.send(
+        &ToFc::Sensor {
+            seq: 11,
+            t_us: 0,
+            state: nan,
+        },
+        1000,
+    );
+    // Answered (lockstep continues) with the unchanged output; counted.
+    assert!(matches!(r[0], FromFc::Actuator { seq: 11, .. }));
+    assert_eq!(rig.fc.output(), before);
+    let mut bad_q = hover_state();
+    bad_q[6] = 2.0;
+    rig.send(
+        &ToFc::Sensor {
+            seq: 12,
+            t_us: 0,
+            state: bad_q,
+        },
+        2000,
+    );
+    let mut bad_sp = WireSetpoint {
+        pos: [0.0, 0.0, -1.0],
+        vel: [0.0; 3],
+        acc: [0.0; 3],
+        jerk: [0.0; 3],
+        yaw: 0.0,
+        yaw_rate: 0.0,
+    };
+    bad_sp.pos[0] = f32::INFINITY;
+    rig.send(&ToFc::Setpoint(bad_sp), 2000);
+    assert_eq!(rig.fc.counters().invalid_values, 3);
+}
+
+#[test]
+fn failsafe_after_50_ms_without_valid_sensor_and_recovery() {
+    let mut rig = Rig::new();
+    rig.open();
+    rig.send(
+        &ToFc::Sensor {
+            seq: 1,
+            t_us: 0,
+            state: hover_state(),
+        },
+        1_000,
+    );
+    rig.fc.check_timeout(40_000);
+    assert!(!rig.fc.failsafe());
+    // NaN frames do not refresh the timer.
+    let mut nan = hover_state();
+    nan[0] = f32::NAN;
+    rig.send(
+        &ToFc::Sensor {
+            seq: 2,
+            t_us: 0,
+            state: nan,
+        },
+        45_000,
+    );
+    rig.fc.check_timeout(51_500);
+    assert!(rig.fc.failsafe());
+    rig.fc.check_timeout(52_000);
+    assert_eq!(rig.fc.counters().failsafe_entries, 1, "one entry, counted once");
+    let u = rig.fc.output();
+    assert!(
+        (u[0] - 0.85 * 6.3765).abs() < 1e-3 && u[1] == 0.0 && u[2] == 0.0 && u[3] == 0.0,
+        "{u}"
+    );
+    // Valid data again: control resumes.
+    let r = rig.send(
+        &ToFc::Sensor {
+            seq: 3,
+            t_us: 0,
+            state: hover_state(),
+        },
+        60_000,
+    );
+    assert!(matches!(r[0], FromFc::Actuator { failsafe: false, .. }));
+    assert!(!rig.fc.failsafe());
+    // The episode stays visible in the telemetry after recovery.
+    assert!(r
+        .iter()
+        .any(|m| matches!(m, FromFc::Telemetry { counters, .. } if counters.failsafe_entries == 1)));
+}
+
+#[test]
+fn every_controller_can_be_selected_over_the_link() {
+    let mut rig = Rig::new();
+    rig.open();
+    let ids: Vec<u8> = fc_core::control::SPECS.iter().filter_map(|r| r.wire_id).collect();
+    assert_eq!(ids, (0..8).collect::<Vec<u8>>(), "protocol v2's ids");
+    for (i, id) in ids.iter().enumerate() {
+        rig.send(
+            &ToFc::Select {
+                controller: *id,
+                feedforward: true,
+            },
+            0,
+        );
+        let r = rig.send(
+            &ToFc::Sensor {
+                seq: 100 + i as u32,
+                t_us: 0,
+                state: hover_state(),
+            },
+            0,
+        );
+        match r[0] {
+            FromFc::Actuator { u, .. } => assert!((u[0] - 6.3765).abs() < 1e-2, "{id:?}: {u:?}"),
+            ref other => panic!("{other:?}"),
+        }
+    }
+    assert_eq!(rig.fc.counters().invalid_values, 0);
+    assert_eq!(rig.fc.selections(), 8);
+    // An id no controller has is dropped and counted; the controller stays.
+    rig.send(
+        &ToFc::Select {
+            controller: 8,
+            feedforward: true,
+        },
+        0,
+    );
+    assert_eq!((rig.fc.counters().bad_message, rig.fc.selections()), (1, 8));
+}
+
+proptest! {
+    // 2 000 cases per test run; `FUZZ_CASES=N` for a long run.
+    #![proptest_config(ProptestConfig::with_cases(
+        std::env::var("FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(2000)
+    ))]
+
+    /// Random bytes, random cuts of valid frames, random bit flips: the
+    /// decoder and the core never panic, and a valid frame after any of it
+    /// is still answered.
+    #[test]
+    fn fuzz_the_link(noise in proptest::collection::vec(any::<u8>(), 0..600), flips in proptest::collection::vec((0usize..80, any::<u8>()), 0..8)) {
+        let mut rig = Rig::new();
+        rig.open();
+        let mut bytes = noise;
+        let mut f = frame(&ToFc::Sensor { seq: 5, t_us: 0, state: hover_state() });
+        for (i, x) in flips {
+            let k = i % f.len();
+            f[k] ^= x;
+        }
+        bytes.extend_from_slice(&f);
+        let _ = rig.send_bytes(&bytes, 0);
+        // Resync and a fresh valid step.
+        let mut tail = vec![0u8];
+        tail.extend(frame(&ToFc::Sensor { seq: 1_000_000, t_us: 0, state: hover_state() }));
+        let r = rig.send_bytes(&tail, 0);
+        let answered = matches!(r.first(), Some(FromFc::Actuator { seq: 1_000_000, .. }));
+        prop_assert!(answered, "no answer after noise: {:?}", r);
+    }
+}

@@ -1,0 +1,155 @@
+//! The wire protocol between the flight controller and its host (plant,
+//! ground station): postcard messages, framed as `COBS(payload ‖ CRC-32C)`
+//! followed by a `0x00` delimiter.
+//!
+//! Lockstep: the host sends [`ToFc::Sensor`] for step k, the flight
+//! controller answers [`FromFc::Actuator`] for step k (and telemetry).
+//! A session starts with a version handshake ([`ToFc::Hello`] →
+//! [`FromFc::HelloAck`]).
+//!
+//! This crate knows bytes and messages only (no nalgebra, no controllers):
+//! the flight loop (`fc-loop`) turns messages into controller calls, and the
+//! controller core (`fc-core`) decides what a `Select`'s id means
+//! (`ControllerSpec::from_wire`). The format, byte by byte, is in the
+//! workspace README ("The wire format").
+#![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod frame;
+
+pub use frame::{encode, FrameDecoder, FrameError, MAX_FRAME};
+
+use serde::{Deserialize, Serialize};
+
+/// Protocol version; both ends must agree in the handshake.
+pub const PROTOCOL_VERSION: u16 = 2;
+
+/// A setpoint on the wire: NED position, velocity, acceleration, jerk (SI),
+/// heading and heading rate (rad, rad/s).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireSetpoint {
+    /// Position, NED, m.
+    pub pos: [f32; 3],
+    /// Velocity, NED, m/s.
+    pub vel: [f32; 3],
+    /// Acceleration, NED, m/s².
+    pub acc: [f32; 3],
+    /// Jerk, NED, m/s³.
+    pub jerk: [f32; 3],
+    /// Heading, rad.
+    pub yaw: f32,
+    /// Heading rate, rad/s.
+    pub yaw_rate: f32,
+}
+
+/// Host → flight controller.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ToFc {
+    /// Start of a session.
+    Hello {
+        /// The host's [`PROTOCOL_VERSION`].
+        version: u16,
+    },
+    /// Choose the controller (rebuilt on the flight controller).
+    Select {
+        /// Which one: a wire id of the controller table (`fc_core::control::SPECS`;
+        /// 0 PD Euler … 7 MPC thesis quaternion). On the wire the same byte as
+        /// protocol v2's enum index (postcard encodes indices below 128 as one byte).
+        controller: u8,
+        /// Feed the reference forward (`false`: thesis-faithful).
+        feedforward: bool,
+    },
+    /// The setpoint for the coming steps.
+    Setpoint(WireSetpoint),
+    /// A reference preview point `k` prediction steps ahead (MPC; 1-based).
+    Preview {
+        /// Step index, 1-based.
+        k: u8,
+        /// The setpoint there.
+        sp: WireSetpoint,
+    },
+    /// The state for control step `seq`: `[x y z vx vy vz q0 q1 q2 q3 p q r]`
+    /// (NED m, m/s; quaternion body→NED; body rad/s). Answered with an actuator
+    /// command for the same `seq`.
+    Sensor {
+        /// Step number, strictly increasing.
+        seq: u32,
+        /// Host time of the sample, µs.
+        t_us: u64,
+        /// The quaternion-form state.
+        state: [f32; 13],
+    },
+    /// Liveness.
+    Heartbeat {
+        /// Echoed back.
+        seq: u32,
+    },
+}
+
+/// Error and frame counters the flight controller reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Counters {
+    /// Frames accepted.
+    pub ok: u32,
+    /// Frames whose CRC did not match.
+    pub bad_crc: u32,
+    /// Frames whose COBS encoding was invalid (or empty).
+    pub bad_cobs: u32,
+    /// Frames that decoded to no known message.
+    pub bad_message: u32,
+    /// Frames longer than the receive buffer (dropped up to the next delimiter).
+    pub oversized: u32,
+    /// Sensor frames whose sequence number did not increase.
+    pub out_of_order: u32,
+    /// Messages with NaN/∞ or out-of-range values.
+    pub invalid_values: u32,
+    /// Messages that arrived in a state that does not accept them.
+    pub unexpected: u32,
+    /// Times the failsafe took over (no valid sensor frame in time). A
+    /// failsafe that starts and ends between two sensor frames shows only here.
+    pub failsafe_entries: u32,
+}
+
+/// Flight controller → host.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FromFc {
+    /// Handshake answer.
+    HelloAck {
+        /// The flight controller's [`PROTOCOL_VERSION`].
+        version: u16,
+        /// Versions match; the session is open.
+        accepted: bool,
+    },
+    /// Inputs for control step `seq`: `[U1 N, U2 N, U3 N, U4 N·m]`, inside the box.
+    Actuator {
+        /// The sensor step this answers.
+        seq: u32,
+        /// The inputs.
+        u: [f32; 4],
+        /// The failsafe produced them (no controller output).
+        failsafe: bool,
+    },
+    /// What the step cost and how the link is doing.
+    Telemetry {
+        /// The sensor step this describes.
+        seq: u32,
+        /// Cycles (instructions under QEMU icount) spent in the controller.
+        cycles: u32,
+        /// QP iterations (MPC; 0 otherwise).
+        qp_iterations: u16,
+        /// Frame and error counters.
+        counters: Counters,
+        /// Failsafe active.
+        failsafe: bool,
+    },
+    /// Liveness answer.
+    Heartbeat {
+        /// The host's sequence number.
+        seq: u32,
+    },
+}

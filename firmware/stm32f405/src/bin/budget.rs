@@ -1,0 +1,372 @@
+//! Cycle budgets and stack high-water mark of the STM32F405 image, measured
+//! in QEMU (`netduinoplus2`, `-icount shift=0`: one instruction is one
+//! nanosecond of virtual time, SysTick counts 0.168 per instruction).
+//!
+//! For every controller at its rate (PD and LQR at 1 kHz, MPC `fast` at
+//! 200 Hz, MPC `thesis` at 4 Hz) it measures, over 60 steps of a
+//! pseudo-random flight state against a climbing-circle reference (with the
+//! MPC's preview):
+//! - `control`: instructions in the controller's `update`;
+//! - `loop`: instructions in everything the firmware does per step (frame
+//!   decoding of setpoint, preview and sensor frames, the controller, the
+//!   replies), through [`fc_loop::FlightCore`] exactly as the image runs it;
+//! - for the MPCs, `a-priori`: the same with the QP forced to run its full
+//!   iteration bound (zero tolerance) plus the polish — the certified worst case.
+//!
+//! A controller fits when `worst instructions × CPI × margin ≤ 168 MHz / rate`
+//! with CPI 1.5 (Cortex-M4 from flash with the ART accelerator, FPU code;
+//! a conservative figure) and margin 1.5. The `control` and `guaranteed`
+//! rows are enforced: the example exits with failure if one does not fit.
+//! The `loop` rows are reported only: they include decoding the PIL link's
+//! frames, and the MPC's 20 preview frames per step (≈ 1.3 kB, ≈ 4 k
+//! instructions each) are an artefact of feeding the reference over the link;
+//! on a vehicle the reference comes from an onboard trajectory generator.
+//! Every row also gives the stack high-water mark of building the
+//! controller and flying it (RAM painted before, scanned after; measured from
+//! the top of RAM, so the callers' frames are included).
+//!
+//! Run (QEMU from Debian's `qemu-system-arm`; the runner is set in
+//! `.cargo/config.toml`):
+//! `cargo run --release -p fc-stm32f405 --bin budget --target thumbv7em-none-eabihf`
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
+
+#[cfg(target_os = "none")]
+mod target {
+    use core::panic::PanicInfo;
+    use cortex_m_rt::{entry, exception};
+    use cortex_m_semihosting::{debug, hprintln};
+    use fc_core::control::{AnyController, Controller, ControllerSpec, Family, Setpoint, StateEstimate, SPECS};
+    use fc_core::{euler_to_quat, VehicleParams};
+    use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
+    use fc_proto::{encode, ToFc, MAX_FRAME, PROTOCOL_VERSION};
+    use hal_shim::stm32f405::{SysTickClock, SYSCLK_HZ};
+    use hal_shim::{ByteLink, CycleClock};
+    use nalgebra::Vector3;
+
+    /// SysTick counts per executed instruction under `-icount shift=0`.
+    const TICKS_PER_INSTRUCTION: f32 = 0.168;
+    /// Cycles per instruction assumed on silicon.
+    const CPI: f32 = 1.5;
+    /// Safety factor on the worst case.
+    const MARGIN: f32 = 1.5;
+    const STEPS: u32 = 60;
+    const PAINT: u32 = 0xA5A5_A5A5;
+
+    extern "C" {
+        static __sheap: u32;
+        static __sdata: u32;
+        static _stack_start: u32;
+    }
+
+    /// Fills the free RAM between the statics and the current stack pointer
+    /// (less a small guard) with a pattern.
+    fn paint_stack() {
+        let bottom = core::ptr::addr_of!(__sheap) as usize;
+        let sp = cortex_m::register::msp::read() as usize;
+        let mut a = bottom;
+        while a + 64 < sp {
+            // SAFETY: free RAM below the live stack, above every static.
+            unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
+            a += 4;
+        }
+    }
+
+    /// Bytes of stack ever used: from the top down to the lowest word that
+    /// lost its paint.
+    fn stack_high_water() -> usize {
+        let bottom = core::ptr::addr_of!(__sheap) as usize;
+        let top = core::ptr::addr_of!(_stack_start) as usize;
+        let mut a = bottom;
+        // SAFETY: reads of RAM between the statics and the stack top.
+        while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
+            a += 4;
+        }
+        top - a
+    }
+
+    /// Runs `f` and returns its result with the stack high-water mark it
+    /// reached (bytes from the top of RAM, so including the callers' frames).
+    #[inline(never)]
+    fn with_stack<R>(f: impl FnOnce() -> R) -> (R, usize) {
+        paint_stack();
+        let r = f();
+        (r, stack_high_water())
+    }
+
+    /// A reproducible number in [−1, 1].
+    struct Lcg(u32);
+    impl Lcg {
+        fn next(&mut self) -> f32 {
+            self.0 = self.0.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (self.0 >> 8) as f32 / (1u32 << 23) as f32 - 1.0
+        }
+    }
+
+    /// The climbing circle (radius 2 m, 20 s, 0.05 m/s up) at time `t`, with
+    /// its velocity, acceleration and jerk.
+    fn reference(t: f32) -> Setpoint<f32> {
+        let w = core::f32::consts::TAU / 20.0;
+        let (s, c) = fc_core::math::sin_cos(w * t);
+        let r = 2.0;
+        Setpoint {
+            pos_ned_m: Vector3::new(r * c, r * s, -5.0 - 0.05 * t),
+            vel_ned_mps: Vector3::new(-r * w * s, r * w * c, -0.05),
+            acc_ned_mps2: Vector3::new(-r * w * w * c, -r * w * w * s, 0.0),
+            jerk_ned_mps3: Vector3::new(r * w * w * w * s, -r * w * w * w * c, 0.0),
+            yaw_rad: 0.26,
+            yaw_rate_radps: 0.0,
+        }
+    }
+
+    /// A state near the reference: up to 3 m and 2 m/s off, tilted up to
+    /// 0.3 rad at any heading, turning up to 1 rad/s.
+    fn state(rng: &mut Lcg, sp: &Setpoint<f32>) -> StateEstimate<f32> {
+        let v = |rng: &mut Lcg, s: f32| Vector3::new(s * rng.next(), s * rng.next(), s * rng.next());
+        StateEstimate {
+            pos_ned_m: sp.pos_ned_m + v(rng, 3.0),
+            vel_ned_mps: v(rng, 2.0),
+            att: euler_to_quat(0.3 * rng.next(), 0.3 * rng.next(), 3.1 * rng.next()),
+            rates_frd_radps: v(rng, 1.0),
+        }
+    }
+
+    /// Worst instructions of `update` over the test flight.
+    fn control_worst(ctrl: &mut dyn Controller<f32>, clock: &SysTickClock, dt: f32) -> u32 {
+        let mut rng = Lcg(7);
+        let mut worst = 0u32;
+        for k in 0..STEPS {
+            let t = k as f32 * dt;
+            let sp = reference(t);
+            if let Some((n, pdt)) = ctrl.preview_request() {
+                for i in 1..=n {
+                    let _ = ctrl.set_preview(i, &reference(t + i as f32 * pdt as f32));
+                }
+            }
+            let est = state(&mut rng, &sp);
+            let t0 = clock.now();
+            let _ = ctrl.update(&est, &sp);
+            worst = worst.max(clock.since(t0));
+        }
+        instructions(worst)
+    }
+
+    fn instructions(ticks: u32) -> u32 {
+        (ticks as f32 / TICKS_PER_INSTRUCTION) as u32
+    }
+
+    /// An in-memory byte link.
+    struct MemLink {
+        rx: heapless::Deque<u8, 4096>,
+        tx_bytes: u32,
+    }
+    impl ByteLink for MemLink {
+        type Error = ();
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, ()> {
+            let mut n = 0;
+            while n < buf.len() {
+                match self.rx.pop_front() {
+                    Some(b) => buf[n] = b,
+                    None => break,
+                }
+                n += 1;
+            }
+            Ok(n)
+        }
+        fn write_all(&mut self, bytes: &[u8]) -> Result<(), ()> {
+            self.tx_bytes += bytes.len() as u32;
+            Ok(())
+        }
+    }
+
+    fn push(link: &mut MemLink, m: &ToFc) {
+        let mut b = [0u8; MAX_FRAME];
+        if let Ok(n) = encode(m, &mut b) {
+            for &x in &b[..n] {
+                let _ = link.rx.push_back(x);
+            }
+        }
+    }
+
+    /// Worst instructions per step of the whole firmware loop (frames in,
+    /// controller, frames out) for controller `id` at period `dt`.
+    fn loop_worst(id: u8, dt: f32, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<u32> {
+        let cfg = FcConfig {
+            control_period_s: dt as f64,
+            ..FcConfig::default()
+        };
+        let mut fc = FlightCore::new(cfg).ok()?;
+        let mut link = MemLink {
+            rx: heapless::Deque::new(),
+            tx_bytes: 0,
+        };
+        push(
+            &mut link,
+            &ToFc::Hello {
+                version: PROTOCOL_VERSION,
+            },
+        );
+        push(
+            &mut link,
+            &ToFc::Select {
+                controller: id,
+                feedforward: true,
+            },
+        );
+        while !link.rx.is_empty() {
+            fc.service(&mut link, clock, 0).ok()?;
+        }
+        let mut rng = Lcg(7);
+        let mut worst = 0u32;
+        for k in 0..STEPS {
+            let t = k as f32 * dt;
+            let sp = reference(t);
+            push(&mut link, &ToFc::Setpoint(setpoint_to_wire(&sp)));
+            if let Some((n, pdt)) = preview {
+                for i in 1..=n {
+                    let p = reference(t + i as f32 * pdt as f32);
+                    push(
+                        &mut link,
+                        &ToFc::Preview {
+                            k: i as u8,
+                            sp: setpoint_to_wire(&p),
+                        },
+                    );
+                }
+            }
+            let e = state(&mut rng, &sp);
+            let mut x = [0f32; 13];
+            x[0..3].copy_from_slice(e.pos_ned_m.as_slice());
+            x[3..6].copy_from_slice(e.vel_ned_mps.as_slice());
+            x[6..10].copy_from_slice(e.att.as_slice());
+            x[10..13].copy_from_slice(e.rates_frd_radps.as_slice());
+            push(
+                &mut link,
+                &ToFc::Sensor {
+                    seq: k + 1,
+                    t_us: (t * 1e6) as u64,
+                    state: x,
+                },
+            );
+            let now_us = (t * 1e6) as u64;
+            let t0 = clock.now();
+            while !link.rx.is_empty() {
+                fc.service(&mut link, clock, now_us).ok()?;
+            }
+            worst = worst.max(clock.since(t0));
+        }
+        (fc.counters().ok > STEPS && link.tx_bytes > 0).then_some(instructions(worst))
+    }
+
+    /// One table row; returns whether it fits.
+    fn row(name: &str, form: &str, hz: u32, what: &str, measured: (Option<u32>, usize)) -> bool {
+        let (worst, stack) = measured;
+        let Some(worst) = worst else {
+            hprintln!("| {} | {} | {} | {} | failed | | | | {} |", name, form, hz, what, stack);
+            return false;
+        };
+        let budget = SYSCLK_HZ / hz;
+        let need = worst as f32 * CPI * MARGIN;
+        let fits = need <= budget as f32;
+        hprintln!(
+            "| {} | {} | {} | {} | {} | {} | {:.1} % | {} | {} |",
+            name,
+            form,
+            hz,
+            what,
+            worst,
+            budget,
+            100.0 * need / budget as f32,
+            if fits { "fits" } else { "OVER" },
+            stack
+        );
+        fits
+    }
+
+    #[entry]
+    fn main() -> ! {
+        let clock = SysTickClock::start(SYSCLK_HZ);
+        let p = VehicleParams::<f32>::os4();
+        hprintln!(
+            "budget: instructions per step under QEMU -icount shift=0; fits = worst x CPI {} x margin {} <= 168 MHz / rate",
+            CPI,
+            MARGIN
+        );
+        hprintln!("| controller | form | rate Hz | measured | worst instructions | budget cycles | load | verdict | stack bytes |");
+        hprintln!("|---|---|---|---|---|---|---|---|---|");
+        let mut ok = true;
+        let mut stack_max = 0usize;
+        let mut check = |name: &str, form: &str, hz: u32, what: &str, m: (Option<u32>, usize)| {
+            stack_max = stack_max.max(m.1);
+            row(name, form, hz, what, m)
+        };
+        // Every controller the wire offers, at its rate (PD and LQR at 1 kHz,
+        // the MPC presets at their own): the controller alone; for the MPCs
+        // also with the QP forced to run its full allowance (the guaranteed
+        // worst case); and the whole loop (reported, not enforced: see above).
+        for r in SPECS.iter() {
+            let Some(id) = r.wire_id else { continue };
+            let spec = ControllerSpec::new(r.family, r.form).with_preset(r.preset);
+            let dt = spec.period_s(0.001) as f32;
+            let hz = (1.0 / dt + 0.5) as u32;
+            let name = match r.family {
+                Family::Mpc => r.name.trim_end_matches(r.form.name()).trim_end_matches('-'),
+                f => f.name(),
+            };
+            let form = r.form.name();
+            let whats: &[&str] = if r.family == Family::Mpc {
+                &["control", "guaranteed"]
+            } else {
+                &["control"]
+            };
+            for &what in whats {
+                let m = with_stack(|| {
+                    let mut mpc = spec.mpc_config();
+                    if let (Some(c), "guaranteed") = (mpc.as_mut(), what) {
+                        c.qp_tolerance = 0.0;
+                    }
+                    // The MPCs are measured as their own types, as the image calls them.
+                    match spec.build_with(p, dt as f64, mpc).ok()? {
+                        AnyController::MpcFast(mut c) => Some(control_worst(&mut c, &clock, dt)),
+                        AnyController::MpcThesis(mut c) => Some(control_worst(&mut c, &clock, dt)),
+                        mut c => Some(control_worst(&mut c, &clock, dt)),
+                    }
+                });
+                ok &= check(name, form, hz, what, m);
+            }
+            let m = with_stack(|| loop_worst(id, dt, spec.preview(), &clock));
+            check(name, form, hz, "loop", m);
+        }
+        let static_ram = core::ptr::addr_of!(__sheap) as usize - core::ptr::addr_of!(__sdata) as usize;
+        hprintln!(
+            "budget: stack high-water {} bytes, static RAM {} bytes, of 131072",
+            stack_max,
+            static_ram
+        );
+        hprintln!("budget: {}", if ok { "all fit" } else { "SOME DO NOT FIT" });
+        debug::exit(if ok { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
+    /// SysTick reload: extends the counter (see hal-shim).
+    #[exception]
+    fn SysTick() {
+        hal_shim::stm32f405::systick_isr();
+    }
+
+    #[panic_handler]
+    fn panic(_: &PanicInfo) -> ! {
+        hprintln!("budget: panic");
+        debug::exit(debug::EXIT_FAILURE);
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+}
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    println!("budget runs on the MCU: cargo run --release -p fc-stm32f405 --bin budget --target thumbv7em-none-eabihf");
+}

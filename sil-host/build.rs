@@ -1,0 +1,78 @@
+//! Builds the STM32F405 firmware image (`fc-stm32f405`, binary `firmware`,
+//! release, `thumbv7em-none-eabihf`) with cargo, so that `sil-host fly
+//! --target qemu` and the report's QEMU table always fly the image of the
+//! sources beside them. It goes to its own target directory
+//! (`target/firmware-image`) so this nested cargo never waits on the outer
+//! one's lock. Its path reaches the crate as `SIL_FIRMWARE_ELF_BUILT`; when
+//! the build fails (say the thumbv7em target is not installed) the host
+//! still builds, that variable is empty and `SIL_FIRMWARE_BUILD_ERROR` says why.
+use std::path::PathBuf;
+use std::process::Command;
+
+fn main() {
+    let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let root = manifest.join("..");
+    for p in [
+        "firmware",
+        "hal-shim",
+        "memory.x",
+        "Cargo.lock",
+        "Cargo.toml",
+        ".cargo/config.toml",
+    ] {
+        println!("cargo:rerun-if-changed={}", root.join(p).display());
+    }
+    println!("cargo:rerun-if-env-changed=SIL_SKIP_FIRMWARE_BUILD");
+    let target_dir = root.join("target").join("firmware-image");
+    let elf = target_dir.join("thumbv7em-none-eabihf/release/firmware");
+    let result = if std::env::var_os("SIL_SKIP_FIRMWARE_BUILD").is_some() {
+        Err("SIL_SKIP_FIRMWARE_BUILD is set".to_string())
+    } else {
+        build(&root, &target_dir)
+    };
+    match result {
+        Ok(()) => {
+            println!("cargo:rustc-env=SIL_FIRMWARE_ELF_BUILT={}", elf.display());
+            println!("cargo:rustc-env=SIL_FIRMWARE_BUILD_ERROR=");
+        }
+        Err(e) => {
+            println!("cargo:warning=the firmware image was not built: {e}");
+            println!("cargo:rustc-env=SIL_FIRMWARE_ELF_BUILT=");
+            println!("cargo:rustc-env=SIL_FIRMWARE_BUILD_ERROR={}", e.replace('\n', " "));
+        }
+    }
+}
+
+fn build(root: &std::path::Path, target_dir: &std::path::Path) -> Result<(), String> {
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let out = Command::new(cargo)
+        .current_dir(root)
+        .args(["build", "-q", "-p", "fc-stm32f405", "--bin", "firmware", "--release"])
+        .args(["--target", "thumbv7em-none-eabihf", "--target-dir"])
+        .arg(target_dir)
+        // What the outer cargo set for this build script's own compilation
+        // must not leak into the image's (its rustflags carry the linker
+        // scripts, in .cargo/config.toml).
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
+        .env_remove("RUSTFLAGS")
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("RUSTC_WRAPPER")
+        .env_remove("CARGO_TARGET_DIR")
+        .env_remove("CARGO_BUILD_TARGET")
+        .output()
+        .map_err(|e| format!("running cargo: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let last = err
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" / ");
+        Err(format!(
+            "cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf failed: {last}"
+        ))
+    }
+}

@@ -1,0 +1,328 @@
+//! The host end of the wire protocol: a client that flies the controller
+//! behind frames — in-process over a loopback byte link (`framed`) or over a
+//! TCP stream (`tcp:HOST:PORT`, e.g. `sil-host serve`, or QEMU's USART) —
+//! and [`Remote`], the flight [`Endpoint`] built on it.
+
+use crate::flight::{Endpoint, StepReport};
+use anyhow::{bail, Context, Result};
+use fc_core::control::{ControllerSpec, Setpoint};
+use fc_core::QuatState;
+use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
+use fc_proto::{encode, FrameDecoder, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
+use hal_shim::host::{LoopbackLink, MonotonicClock};
+use std::io::{ErrorKind, Read, Write};
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
+/// What one remote control step returned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RemoteStep {
+    /// Inputs `[U1 N, U2 N, U3 N, U4 N·m]`.
+    pub u: [f32; 4],
+    /// Cycles (or instructions, or ns on the host) spent in the controller.
+    pub cycles: u32,
+    /// QP iterations.
+    pub qp_iterations: u16,
+    /// Failsafe active.
+    pub failsafe: bool,
+    /// The flight controller's frame and error counters after this step.
+    pub counters: fc_proto::Counters,
+}
+
+fn frame(m: &ToFc) -> Result<Vec<u8>> {
+    let mut b = [0u8; MAX_FRAME];
+    let n = encode(m, &mut b).map_err(|e| anyhow::anyhow!("encoding {m:?}: {e}"))?;
+    Ok(b[..n].to_vec())
+}
+
+/// Where the frames go.
+enum Transport {
+    /// The core in this process behind a loopback byte link.
+    Local {
+        fc: Box<FlightCore>,
+        link: LoopbackLink,
+        clock: MonotonicClock,
+        t0: Instant,
+    },
+    /// A TCP peer.
+    Tcp(TcpStream),
+}
+
+/// A client of the flight controller's protocol.
+pub struct FcClient {
+    transport: Transport,
+    decoder: FrameDecoder<MAX_FRAME>,
+    pending: Vec<FromFc>,
+    /// The setpoint the flight controller holds (it keeps the last one sent).
+    last_setpoint: Option<WireSetpoint>,
+}
+
+impl FcClient {
+    /// The core in-process, reached through frames only.
+    pub fn local() -> Result<Self> {
+        let fc = FlightCore::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("flight controller: {e}"))?;
+        Ok(Self::with(Transport::Local {
+            fc: Box::new(fc),
+            link: LoopbackLink::default(),
+            clock: MonotonicClock::default(),
+            t0: Instant::now(),
+        }))
+    }
+
+    /// A TCP peer at `addr` (e.g. `127.0.0.1:7000`).
+    pub fn tcp(addr: &str) -> Result<Self> {
+        let s = TcpStream::connect(addr).with_context(|| format!("connecting to {addr}"))?;
+        s.set_nodelay(true)?;
+        s.set_read_timeout(Some(Duration::from_secs(5)))?;
+        Ok(Self::with(Transport::Tcp(s)))
+    }
+
+    /// A client on an open TCP stream (QEMU's USART socket).
+    pub(crate) fn over(stream: TcpStream) -> Self {
+        Self::with(Transport::Tcp(stream))
+    }
+
+    fn with(transport: Transport) -> Self {
+        Self {
+            transport,
+            decoder: FrameDecoder::new(),
+            pending: Vec::new(),
+            last_setpoint: None,
+        }
+    }
+
+    fn send(&mut self, m: &ToFc) -> Result<()> {
+        let bytes = frame(m)?;
+        match &mut self.transport {
+            Transport::Local { fc, link, clock, t0 } => {
+                link.rx.extend(bytes);
+                let now = t0.elapsed().as_micros() as u64;
+                while !link.rx.is_empty() {
+                    // The loopback link cannot fail (its error type is Infallible).
+                    let Ok(()) = fc.service(link, clock, now);
+                }
+                Ok(())
+            }
+            Transport::Tcp(s) => Ok(s.write_all(&bytes)?),
+        }
+    }
+
+    /// Waits for the next message the flight controller sends.
+    fn receive(&mut self) -> Result<FromFc> {
+        loop {
+            if !self.pending.is_empty() {
+                return Ok(self.pending.remove(0));
+            }
+            let bytes: Vec<u8> = match &mut self.transport {
+                Transport::Local { link, .. } => {
+                    if link.tx.is_empty() {
+                        bail!("the flight controller sent nothing");
+                    }
+                    std::mem::take(&mut link.tx)
+                }
+                Transport::Tcp(s) => {
+                    let mut buf = [0u8; 512];
+                    let n = s.read(&mut buf).context("reading from the flight controller")?;
+                    if n == 0 {
+                        bail!("the flight controller closed the connection");
+                    }
+                    buf[..n].to_vec()
+                }
+            };
+            for b in bytes {
+                if let Some(Ok(m)) = self.decoder.push::<FromFc>(b) {
+                    self.pending.push(m);
+                }
+            }
+        }
+    }
+
+    /// Handshake and controller selection (`spec` must have a wire id).
+    pub fn open(&mut self, spec: ControllerSpec) -> Result<()> {
+        let (controller, feedforward) = spec.to_wire().map_err(|e| anyhow::anyhow!("{e}"))?;
+        // Hello is repeated until answered: a flight controller that is still
+        // booting drops what arrives before its UART is up.
+        let patient = match &self.transport {
+            Transport::Tcp(s) => {
+                let t = s.read_timeout()?;
+                s.set_read_timeout(Some(Duration::from_millis(200)))?;
+                t
+            }
+            Transport::Local { .. } => None,
+        };
+        let mut answer = None;
+        for _ in 0..50 {
+            self.send(&ToFc::Hello {
+                version: PROTOCOL_VERSION,
+            })?;
+            match self.receive() {
+                Ok(m) => {
+                    answer = Some(m);
+                    break;
+                }
+                // Only a read timeout means "ask again".
+                Err(e)
+                    if e.chain().any(|c| {
+                        c.downcast_ref::<std::io::Error>()
+                            .is_some_and(|io| matches!(io.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut))
+                    }) => {}
+                Err(e) => return Err(e),
+            }
+        }
+        if let Transport::Tcp(s) = &self.transport {
+            s.set_read_timeout(patient)?;
+        }
+        match answer {
+            Some(FromFc::HelloAck { accepted: true, .. }) => {}
+            Some(other) => bail!("handshake refused: {other:?}"),
+            None => bail!("no handshake answer after 50 tries"),
+        }
+        // Acknowledgements of repeated Hellos may still be queued: drop them.
+        self.pending.retain(|m| !matches!(m, FromFc::HelloAck { .. }));
+        self.last_setpoint = None;
+        self.send(&ToFc::Select {
+            controller,
+            feedforward,
+        })?;
+        // Building a controller (an MPC's condensed QP and its iteration
+        // bound) takes the flight controller a while; bytes sent meanwhile
+        // would pile up in its receive queue. A heartbeat is answered only
+        // after the selection is processed, so waiting for it paces the host.
+        self.send(&ToFc::Heartbeat { seq: u32::MAX })?;
+        // (Late acknowledgements of repeated Hellos may come first.)
+        for _ in 0..64 {
+            if let FromFc::Heartbeat { seq: u32::MAX } = self.receive()? {
+                return Ok(());
+            }
+        }
+        bail!("the flight controller did not confirm the controller selection")
+    }
+
+    /// One lockstep control step: setpoint (and preview), the state for step
+    /// `seq`, and the flight controller's answer for that step.
+    pub fn step(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        state: &[f32; 13],
+        sp: &Setpoint<f32>,
+        preview: &[Setpoint<f32>],
+    ) -> Result<RemoteStep> {
+        // The flight controller holds its setpoint: send it only when it
+        // changes (a fixed target then costs one frame a step, not two).
+        let w = setpoint_to_wire(sp);
+        if self.last_setpoint != Some(w) {
+            self.send(&ToFc::Setpoint(w))?;
+            self.last_setpoint = Some(w);
+        }
+        for (k, p) in preview.iter().enumerate() {
+            self.send(&ToFc::Preview {
+                k: (k + 1) as u8,
+                sp: setpoint_to_wire(p),
+            })?;
+        }
+        self.send(&ToFc::Sensor {
+            seq,
+            t_us,
+            state: *state,
+        })?;
+        let mut out = None;
+        for _ in 0..8 {
+            match self.receive()? {
+                FromFc::Actuator { seq: s, u, failsafe } if s == seq => {
+                    out = Some(RemoteStep {
+                        u,
+                        cycles: 0,
+                        qp_iterations: 0,
+                        failsafe,
+                        counters: Default::default(),
+                    });
+                }
+                FromFc::Telemetry {
+                    seq: s,
+                    cycles,
+                    qp_iterations,
+                    counters,
+                    ..
+                } if s == seq => {
+                    let mut r = out.ok_or_else(|| anyhow::anyhow!("telemetry before the actuator frame"))?;
+                    r.cycles = cycles;
+                    r.qp_iterations = qp_iterations;
+                    r.counters = counters;
+                    return Ok(r);
+                }
+                _ => {}
+            }
+        }
+        bail!("no answer for step {seq}")
+    }
+}
+
+/// A flight [`Endpoint`] behind the wire protocol: the flight loop's state
+/// goes out as a `Sensor` frame, the `Actuator` and `Telemetry` answers come
+/// back. The controller's period and preview come from its spec: nothing is
+/// designed on this side.
+pub struct Remote {
+    client: FcClient,
+    spec: ControllerSpec,
+    seq: u32,
+}
+
+impl Remote {
+    /// Opens the session on `client` and selects `spec`.
+    pub fn open(mut client: FcClient, spec: ControllerSpec) -> Result<Self> {
+        client.open(spec)?;
+        Ok(Self { client, spec, seq: 0 })
+    }
+}
+
+impl Endpoint for Remote {
+    fn period_s(&self) -> Option<f64> {
+        self.spec.mpc_config().map(|c| c.exec_dt_s)
+    }
+    fn preview(&self) -> Option<(usize, f64)> {
+        self.spec.preview()
+    }
+    fn step(
+        &mut self,
+        t: f64,
+        state: &QuatState<f64>,
+        sp: &Setpoint<f32>,
+        preview: &[Setpoint<f32>],
+    ) -> Result<StepReport> {
+        self.seq += 1;
+        let x: [f32; 13] = std::array::from_fn(|i| state[i] as f32);
+        // A preview the setpoint's own extrapolation reproduces is not
+        // sent: the controller extrapolates to the same values, and a
+        // fixed target then costs 2 frames a step instead of 22.
+        let dt = self.spec.preview().map_or(0.0, |(_, dt)| dt);
+        let redundant = preview.iter().enumerate().all(|(k, p)| {
+            let e = sp.extrapolate(((k + 1) as f64 * dt) as f32);
+            setpoints_equal(&e, p)
+        });
+        let sent: &[Setpoint<f32>] = if redundant { &[] } else { preview };
+        let step = self.client.step(self.seq, (t * 1e6) as u64, &x, sp, sent)?;
+        Ok(StepReport {
+            u: Some(step.u),
+            // The flight controller reports its own time per step (ns on the host).
+            cost: f64::from(step.cycles),
+            iterations: step.qp_iterations,
+            saturated: false,
+            failsafe: step.failsafe,
+            counters: Some(step.counters),
+        })
+    }
+}
+
+/// Equal to f32 rounding (relative 1e-6, absolute 1e-6).
+fn setpoints_equal(a: &Setpoint<f32>, b: &Setpoint<f32>) -> bool {
+    let close = |x: f32, y: f32| (x - y).abs() <= 1e-6 * (1.0 + x.abs().max(y.abs()));
+    let vclose =
+        |x: &nalgebra::Vector3<f32>, y: &nalgebra::Vector3<f32>| x.iter().zip(y.iter()).all(|(p, q)| close(*p, *q));
+    vclose(&a.pos_ned_m, &b.pos_ned_m)
+        && vclose(&a.vel_ned_mps, &b.vel_ned_mps)
+        && vclose(&a.acc_ned_mps2, &b.acc_ned_mps2)
+        && vclose(&a.jerk_ned_mps3, &b.jerk_ned_mps3)
+        && close(a.yaw_rad, b.yaw_rad)
+        && close(a.yaw_rate_radps, b.yaw_rate_radps)
+}

@@ -1,0 +1,12 @@
+//! Flying the core behind the wire protocol: [`client`] (the host end and
+//! the [`Remote`] flight endpoint), [`server`] (`sil-host serve`) and
+//! [`qemu`] (the firmware image in QEMU). Each depends on the protocol
+//! crates, none on another but `qemu` → `client`.
+
+pub mod client;
+pub mod qemu;
+pub mod server;
+
+pub use client::{FcClient, Remote, RemoteStep};
+pub use qemu::{decode_defmt, firmware_elf, qemu_command, Qemu, SYSTICK_PER_INSTRUCTION};
+pub use server::serve;
