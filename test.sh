@@ -20,11 +20,14 @@ echo "== format"
 cargo fmt --all -- --check
 echo "== clippy (host, all targets)"
 cargo clippy --workspace --all-targets -- -D warnings
-echo "== clippy + build (firmware for thumbv7em-none-eabihf)"
-cargo clippy -p firmware -p hal-shim --target thumbv7em-none-eabihf --bins --examples -- -D warnings
-cargo build -p firmware --release --target thumbv7em-none-eabihf
-echo "== image size (flash = text + data, static RAM = data + bss)"
-size target/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
+echo "== clippy + build (the STM32F405 image and its QEMU harness binaries, thumbv7em-none-eabihf)"
+cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --bins -- -D warnings
+cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf
+echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run here)"
+cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
+cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bin firmware --target-dir target/hardware
+echo "== image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
+size target/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
 echo "== tests"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT

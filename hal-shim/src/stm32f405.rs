@@ -1,37 +1,48 @@
 //! STM32F405 implementations: USART1 as the byte link, SysTick as the cycle
 //! clock (DWT CYCCNT on silicon is the same interface; QEMU does not model it,
-//! and under `-icount shift=0` SysTick advances with executed instructions).
+//! and under `-icount shift=0` SysTick advances with executed instructions),
+//! TIM2 as the loop timer, TIM3 as PWM outputs.
+//!
+//! Every register is reached through the `stm32f4` peripheral access crate
+//! (device peripherals) or `cortex-m` (SysTick, SCB, NVIC, DWT, DCB): no
+//! address is spelled here. The drivers own their peripheral by convention
+//! (each is started once, by the image's `main`), which is why they steal
+//! the PAC's handles instead of threading `Peripherals` through.
 
 use crate::{ByteLink, CycleClock};
 use core::cell::RefCell;
-use core::ptr::{read_volatile, write_volatile};
+use cortex_m::peripheral::{DWT, NVIC, SCB, SYST};
 use critical_section::Mutex;
+use stm32f4::stm32f405 as pac;
 
-/// System clock the drivers and the firmware assume, Hz: the F405's 168 MHz
-/// maximum. QEMU's netduinoplus2 runs at it; on silicon the PLL must be set
-/// to it before these drivers start (nothing in this crate does that yet).
-pub const SYSCLK_HZ: u32 = 168_000_000;
-/// APB2 peripheral clock (USART1) at [`SYSCLK_HZ`] / 2, Hz.
-pub const PCLK2_HZ: u32 = 84_000_000;
-/// Clock of the APB1 timers (TIM2, TIM3): twice PCLK1 = [`SYSCLK_HZ`] / 4, Hz.
-pub const APB1_TIMER_CLK_HZ: u32 = 84_000_000;
+/// The USART1 register block (the PAC's handle).
+fn usart1() -> &'static pac::usart1::RegisterBlock {
+    // SAFETY: the PAC's pointer to USART1's registers; this driver is its only user.
+    unsafe { &*pac::USART1::ptr() }
+}
+
+/// The RCC register block (the PAC's handle): enable bits only.
+fn rcc() -> &'static pac::rcc::RegisterBlock {
+    // SAFETY: the PAC's pointer; each driver sets only its own enable bit,
+    // with a read-modify-write done before interrupts are enabled.
+    unsafe { &*pac::RCC::ptr() }
+}
 
 /// Received bytes, filled by [`usart1_isr`], drained by [`Usart1::read`].
 static RX: Mutex<RefCell<heapless::Deque<u8, 1024>>> = Mutex::new(RefCell::new(heapless::Deque::new()));
 /// Bytes lost because the queue was full.
 static RX_OVERRUNS: Mutex<core::cell::Cell<u32>> = Mutex::new(core::cell::Cell::new(0));
-const CR1_RXNEIE: u32 = 1 << 5;
-/// USART1's interrupt number on the STM32F405.
-pub const USART1_IRQ: u16 = 37;
-const NVIC_ISER: usize = 0xE000_E100;
+/// USART1's interrupt number on the STM32F405 (the PAC's `Interrupt::USART1`).
+pub const USART1_IRQ: u16 = pac::Interrupt::USART1 as u16;
 
 /// USART1 receive interrupt: moves every received byte into the queue (the
 /// interrupt itself wakes a main loop sleeping in WFI). Call from the
 /// interrupt handler of [`USART1_IRQ`].
 pub fn usart1_isr() {
-    // SAFETY: reads of USART1's status and data registers; reading DR pops the byte.
-    while unsafe { read_volatile((USART1 + SR) as *const u32) } & SR_RXNE != 0 {
-        let b = unsafe { read_volatile((USART1 + DR) as *const u32) } as u8;
+    let u = usart1();
+    // Reading DR pops the byte and clears RXNE.
+    while u.sr().read().rxne().bit_is_set() {
+        let b = u.dr().read().dr().bits() as u8;
         critical_section::with(|cs| {
             if RX.borrow(cs).borrow_mut().push_back(b).is_err() {
                 let c = RX_OVERRUNS.borrow(cs);
@@ -45,19 +56,6 @@ pub fn usart1_isr() {
 pub fn rx_pending() -> bool {
     critical_section::with(|cs| !RX.borrow(cs).borrow().is_empty())
 }
-
-const USART1: usize = 0x4001_1000;
-const SR: usize = 0x00;
-const DR: usize = 0x04;
-const BRR: usize = 0x08;
-const CR1: usize = 0x0C;
-const SR_RXNE: u32 = 1 << 5;
-const SR_TXE: u32 = 1 << 7;
-const CR1_UE: u32 = 1 << 13;
-const CR1_TE: u32 = 1 << 3;
-const CR1_RE: u32 = 1 << 2;
-const RCC_APB2ENR: usize = 0x4002_3844;
-const RCC_APB2ENR_USART1EN: u32 = 1 << 4;
 
 /// USART1 (PA9/PA10 on real boards; `-serial` 0 under QEMU's netduinoplus2).
 /// Reception is interrupt-driven into a 1 KiB queue ([`usart1_isr`]); reads
@@ -75,22 +73,23 @@ impl Usart1 {
     ///
     /// Must be called once, before any other use of USART1.
     pub fn init(pclk_hz: u32, baud: u32) -> Self {
-        // SAFETY: fixed, documented STM32F405 register addresses; this driver
-        // is the only user of USART1 and of the RCC bit it sets.
-        unsafe {
-            let en = read_volatile(RCC_APB2ENR as *const u32);
-            write_volatile(RCC_APB2ENR as *mut u32, en | RCC_APB2ENR_USART1EN);
-            write_volatile((USART1 + BRR) as *mut u32, pclk_hz / baud.max(1));
-            write_volatile((USART1 + CR1) as *mut u32, CR1_UE | CR1_TE | CR1_RE | CR1_RXNEIE);
-            let irq = usize::from(USART1_IRQ);
-            write_volatile((NVIC_ISER + 4 * (irq / 32)) as *mut u32, 1 << (irq % 32));
-        }
+        rcc().apb2enr().modify(|_, w| w.usart1en().enabled());
+        // BRR = f_pclk / baud (16× oversampling): mantissa and fraction are
+        // the quotient's integer part and 1/16ths, i.e. the quotient itself.
+        let div = (pclk_hz / baud.max(1)).clamp(16, 0xFFFF);
+        let u = usart1();
+        u.brr().write(|w| {
+            w.div_mantissa()
+                .set((div >> 4) as u16)
+                .div_fraction()
+                .set((div & 0xF) as u8)
+        });
+        u.cr1()
+            .write(|w| w.ue().enabled().te().enabled().re().enabled().rxneie().enabled());
+        // SAFETY: unmasking USART1's interrupt; its handler only moves bytes
+        // into the queue under a critical section.
+        unsafe { NVIC::unmask(pac::Interrupt::USART1) };
         Self { _private: () }
-    }
-
-    fn sr(&self) -> u32 {
-        // SAFETY: read of the USART1 status register.
-        unsafe { read_volatile((USART1 + SR) as *const u32) }
     }
 }
 
@@ -118,14 +117,14 @@ impl ByteLink for Usart1 {
     fn write_all(&mut self, bytes: &[u8]) -> Result<(), Self::Error> {
         for &b in bytes {
             let mut spins = 0;
-            while self.sr() & SR_TXE == 0 {
+            while usart1().sr().read().txe().bit_is_clear() {
                 spins += 1;
                 if spins > TX_SPIN {
                     return Err(TxTimeout);
                 }
             }
-            // SAFETY: writing DR sends the byte.
-            unsafe { write_volatile((USART1 + DR) as *mut u32, u32::from(b)) };
+            // Writing DR sends the byte.
+            usart1().dr().write(|w| w.dr().set(u16::from(b)));
         }
         Ok(())
     }
@@ -153,10 +152,7 @@ pub fn systick_isr() {
     });
 }
 
-const SYST_CSR: usize = 0xE000_E010;
-const SYST_RVR: usize = 0xE000_E014;
-const SYST_CVR: usize = 0xE000_E018;
-const SCB_ICSR: usize = 0xE000_ED04;
+/// SCB ICSR: SysTick exception pending (ARMv7-M architecture manual, B3.2.4).
 const ICSR_PENDSTSET: u32 = 1 << 26;
 
 impl SysTickClock {
@@ -165,12 +161,13 @@ impl SysTickClock {
     pub fn start(hz: u32) -> Self {
         let period = (hz / 1000).clamp(2, 0x0100_0000);
         critical_section::with(|cs| PERIOD.borrow(cs).set(period));
-        // SAFETY: the architectural SysTick registers; this is their only user.
-        unsafe {
-            write_volatile(SYST_RVR as *mut u32, period - 1);
-            write_volatile(SYST_CVR as *mut u32, 0);
-            write_volatile(SYST_CSR as *mut u32, 0b111); // enable, processor clock, interrupt
-        }
+        // SAFETY: cortex-m's SysTick handle; this clock is its only user.
+        let mut syst = unsafe { cortex_m::Peripherals::steal() }.SYST;
+        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+        syst.set_reload(period - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
         Self { hz }
     }
 
@@ -187,14 +184,13 @@ pub fn ticks_now() -> u64 {
     critical_section::with(|cs| {
         let wraps = WRAPS.borrow(cs).get();
         let period = PERIOD.borrow(cs).get();
-        // SAFETY: read of the SysTick current value.
-        let cvr = unsafe { read_volatile(SYST_CVR as *const u32) } & 0x00FF_FFFF;
+        let cvr = SYST::get_current() & 0x00FF_FFFF;
         let into = (period - 1).saturating_sub(cvr);
         // A reload while interrupts are masked is pending, not yet counted:
         // ICSR.PENDSTSET says so. If it came after the counter was read, the
         // reading is near the period's end and needs no correction.
-        // SAFETY: read of the System Control Block's ICSR.
-        let pending = unsafe { read_volatile(SCB_ICSR as *const u32) } & ICSR_PENDSTSET != 0;
+        // SAFETY: a read of the System Control Block's ICSR through cortex-m's handle.
+        let pending = unsafe { (*SCB::PTR).icsr.read() } & ICSR_PENDSTSET != 0;
         let wraps = if pending && into < period / 2 { wraps + 1 } else { wraps };
         wraps * u64::from(period) + u64::from(into)
     })
@@ -217,47 +213,36 @@ pub struct DwtClock {
     hz: u32,
 }
 
-const DEMCR: usize = 0xE000_EDFC;
-const DEMCR_TRCENA: u32 = 1 << 24;
-const DWT_CTRL: usize = 0xE000_1000;
-const DWT_CYCCNT: usize = 0xE000_1004;
-
 impl DwtClock {
     /// Enables the trace block and starts CYCCNT; `hz` is the core clock.
     pub fn start(hz: u32) -> Self {
-        // SAFETY: architectural debug registers; this is their only user.
-        unsafe {
-            write_volatile(DEMCR as *mut u32, read_volatile(DEMCR as *const u32) | DEMCR_TRCENA);
-            write_volatile(DWT_CYCCNT as *mut u32, 0);
-            write_volatile(DWT_CTRL as *mut u32, read_volatile(DWT_CTRL as *const u32) | 1);
-        }
+        // SAFETY: cortex-m's DCB and DWT handles; this clock is their only user.
+        let mut p = unsafe { cortex_m::Peripherals::steal() };
+        p.DCB.enable_trace();
+        p.DWT.set_cycle_count(0);
+        p.DWT.enable_cycle_counter();
         Self { hz }
     }
 }
 
 impl CycleClock for DwtClock {
     fn now(&self) -> u32 {
-        // SAFETY: read of the cycle counter.
-        unsafe { read_volatile(DWT_CYCCNT as *const u32) }
+        DWT::cycle_count()
     }
     fn hz(&self) -> u32 {
         self.hz
     }
 }
 
-const RCC_APB1ENR: usize = 0x4002_3840;
-const TIM2: usize = 0x4000_0000;
-const TIM3: usize = 0x4000_0400;
-const TIM_CR1: usize = 0x00;
-const TIM_DIER: usize = 0x0C;
-const TIM_SR: usize = 0x10;
-const TIM_EGR: usize = 0x14;
-const TIM_CCMR1: usize = 0x18;
-const TIM_CCMR2: usize = 0x1C;
-const TIM_CCER: usize = 0x20;
-const TIM_PSC: usize = 0x28;
-const TIM_ARR: usize = 0x2C;
-const TIM_CCR1: usize = 0x34;
+fn tim2() -> &'static pac::tim2::RegisterBlock {
+    // SAFETY: the PAC's pointer to TIM2; [`LoopTimer`] is its only user.
+    unsafe { &*pac::TIM2::ptr() }
+}
+
+fn tim3() -> &'static pac::tim3::RegisterBlock {
+    // SAFETY: the PAC's pointer to TIM3; [`PwmActuators`] is its only user.
+    unsafe { &*pac::TIM3::ptr() }
+}
 
 /// TIM2 as the control-loop period: an update flag every `1/rate` s.
 pub struct LoopTimer {
@@ -270,32 +255,27 @@ impl LoopTimer {
     pub fn start(tim_clk_hz: u32, rate_hz: u32) -> Self {
         let psc = (tim_clk_hz / 1_000_000).max(1) - 1; // 1 MHz tick
         let arr = (1_000_000 / rate_hz.max(1)).max(2) - 1;
-        // SAFETY: RCC enable bit and TIM2 registers; this driver owns TIM2.
-        unsafe {
-            let en = read_volatile(RCC_APB1ENR as *const u32);
-            write_volatile(RCC_APB1ENR as *mut u32, en | 1); // TIM2EN
-            write_volatile((TIM2 + TIM_PSC) as *mut u32, psc);
-            write_volatile((TIM2 + TIM_ARR) as *mut u32, arr);
-            write_volatile((TIM2 + TIM_EGR) as *mut u32, 1); // load PSC/ARR
-            write_volatile((TIM2 + TIM_SR) as *mut u32, 0);
-            // Update interrupt enabled in the timer (not in the NVIC: nothing
-            // is taken); QEMU's timer model sets UIF only with UIE on.
-            write_volatile((TIM2 + TIM_DIER) as *mut u32, 1);
-            write_volatile((TIM2 + TIM_CR1) as *mut u32, 1); // CEN
-        }
+        rcc().apb1enr().modify(|_, w| w.tim2en().enabled());
+        let t = tim2();
+        t.psc().write(|w| w.psc().set(psc as u16));
+        t.arr().write(|w| w.arr().set(arr));
+        t.egr().write(|w| w.ug().update()); // load PSC/ARR
+        t.sr().write(|w| w.uif().clear_bit());
+        // Update interrupt enabled in the timer (not in the NVIC: nothing
+        // is taken); QEMU's timer model sets UIF only with UIE on.
+        t.dier().write(|w| w.uie().enabled());
+        t.cr1().write(|w| w.cen().enabled());
         Self { _private: () }
     }
 
     /// True once per period: the update flag, cleared when seen. Never blocks.
     pub fn expired(&mut self) -> bool {
-        // SAFETY: TIM2 status register; writing 0 to UIF clears it.
-        unsafe {
-            if read_volatile((TIM2 + TIM_SR) as *const u32) & 1 != 0 {
-                write_volatile((TIM2 + TIM_SR) as *mut u32, 0);
-                true
-            } else {
-                false
-            }
+        let t = tim2();
+        if t.sr().read().uif().bit_is_set() {
+            t.sr().write(|w| w.uif().clear_bit());
+            true
+        } else {
+            false
         }
     }
 }
@@ -316,23 +296,47 @@ impl PwmActuators {
         let counts = tim_clk_hz / pwm_hz.max(1);
         let psc = counts.div_ceil(0x1_0000).max(1) - 1;
         let arr = (counts / (psc + 1)).clamp(2, 0x1_0000) - 1;
-        // SAFETY: RCC enable bit and TIM3 registers; this driver owns TIM3.
-        unsafe {
-            let en = read_volatile(RCC_APB1ENR as *const u32);
-            write_volatile(RCC_APB1ENR as *mut u32, en | 2); // TIM3EN
-            write_volatile((TIM3 + TIM_PSC) as *mut u32, psc);
-            write_volatile((TIM3 + TIM_ARR) as *mut u32, arr);
-            // PWM mode 1 with preload on channels 1-4.
-            write_volatile((TIM3 + TIM_CCMR1) as *mut u32, 0x6868);
-            write_volatile((TIM3 + TIM_CCMR2) as *mut u32, 0x6868);
-            write_volatile((TIM3 + TIM_CCER) as *mut u32, 0x1111);
-            for ch in 0..4 {
-                write_volatile((TIM3 + TIM_CCR1 + 4 * ch) as *mut u32, 0);
-            }
-            write_volatile((TIM3 + TIM_EGR) as *mut u32, 1);
-            write_volatile((TIM3 + TIM_CR1) as *mut u32, 1 | (1 << 7)); // CEN, ARPE
+        rcc().apb1enr().modify(|_, w| w.tim3en().enabled());
+        let t = tim3();
+        t.psc().write(|w| w.psc().set(psc as u16));
+        t.arr().write(|w| w.arr().set(arr as u16));
+        // PWM mode 1 with preload on channels 1-4, outputs enabled.
+        t.ccmr1_output().write(|w| {
+            w.oc1m()
+                .pwm_mode1()
+                .oc1pe()
+                .enabled()
+                .oc2m()
+                .pwm_mode1()
+                .oc2pe()
+                .enabled()
+        });
+        t.ccmr2_output().write(|w| {
+            w.oc3m()
+                .pwm_mode1()
+                .oc3pe()
+                .enabled()
+                .oc4m()
+                .pwm_mode1()
+                .oc4pe()
+                .enabled()
+        });
+        t.ccer()
+            .write(|w| w.cc1e().set_bit().cc2e().set_bit().cc3e().set_bit().cc4e().set_bit());
+        for ch in 0..4 {
+            t.ccr(ch).write(|w| w.ccr().set(0));
         }
+        t.egr().write(|w| w.ug().update());
+        t.cr1().write(|w| w.cen().enabled().arpe().enabled());
         Self { arr, to_duty }
+    }
+
+    /// What the timer holds: the auto-reload value and the four compare
+    /// values, read back from TIM3 (for checks; duty = compare / (reload + 1)).
+    pub fn registers(&self) -> (u32, [u32; 4]) {
+        let t = tim3();
+        let ccr = core::array::from_fn(|ch| u32::from(t.ccr(ch).read().ccr().bits()));
+        (u32::from(t.arr().read().arr().bits()), ccr)
     }
 
     fn set(&mut self, duty: [f32; 4]) {
@@ -340,8 +344,7 @@ impl PwmActuators {
             // NaN or out of range → the nearest safe value (NaN → 0: motor off).
             let d = if d.is_nan() { 0.0 } else { d.clamp(0.0, 1.0) };
             let ccr = (d * self.arr as f32) as u32;
-            // SAFETY: TIM3 compare registers.
-            unsafe { write_volatile((TIM3 + TIM_CCR1 + 4 * ch) as *mut u32, ccr) };
+            tim3().ccr(ch).write(|w| w.ccr().set(ccr as u16));
         }
     }
 }

@@ -25,7 +25,7 @@ use std::path::PathBuf;
     version,
     about = "Software-in-the-loop host for the quadrotor flight-control core",
     long_about = "Flies the no_std flight-control core against a nonlinear f64 plant built from the \
-                  same equations (SPEC.md). Frames: earth NED (z down, altitude = -z), body FRD; \
+                  same equations (docs/model.md). Frames: earth NED (z down, altitude = -z), body FRD; \
                   angles in rad unless an option says degrees."
 )]
 struct Cli {
@@ -82,7 +82,7 @@ struct SweepArgs {
     /// A flight succeeds if it never strays farther than this from the reference, m.
     #[arg(long, default_value_t = 1.0, value_name = "M")]
     tube_m: f64,
-    /// Scenario flown (SPEC §9 defaults).
+    /// Scenario flown (docs/model.md §9 defaults).
     #[arg(long, value_enum, default_value = "helix")]
     scenario: ScenarioKind,
     /// Scenario from a TOML file instead (see `fly --help`).
@@ -133,10 +133,10 @@ struct FlyArgs {
     /// Form of the controller and of the plant: `euler` or `quaternion`.
     #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
     model: AttitudeForm,
-    /// Scenario (SPEC §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s).
+    /// Scenario (docs/model.md §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s).
     #[arg(long, value_enum, default_value = "setpoint")]
     scenario: ScenarioKind,
-    /// Disturbances on the plant: none, wind, mismatch or wind,mismatch (SPEC §9).
+    /// Disturbances on the plant: none, wind, mismatch or wind,mismatch (docs/model.md §9).
     #[arg(long, default_value = "none", value_name = "SET")]
     disturbance: DisturbanceSet,
     /// Sensor noise on the state the controller sees: white, Gaussian, drawn every control step;
@@ -188,7 +188,7 @@ struct FlyArgs {
     #[arg(long, value_name = "FILE")]
     vehicle: Option<PathBuf>,
     /// Scenario from a TOML file (any subset of kind, start_ned_m, start_yaw_deg, target_ned_m,
-    /// target_yaw_deg, radius_m, period_s, climb_rate_mps, duration_s; the rest are the SPEC §9
+    /// target_yaw_deg, radius_m, period_s, climb_rate_mps, duration_s; the rest are the docs/model.md §9
     /// defaults of its kind, --scenario when it names none). Other scenario options then apply
     /// on top of it.
     #[arg(long, value_name = "FILE")]
@@ -274,10 +274,10 @@ struct PlantArgs {
     /// RK4 integration rate of the plant, Hz (each control period is cut into sub-steps at this rate).
     #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
     integration_hz: f64,
-    /// Turn on the first-order rotor lag (tau = 0.178 s, gain 0.936, SPEC §6).
+    /// Turn on the first-order rotor lag (tau = 0.178 s, gain 0.936, docs/model.md §6).
     #[arg(long)]
     rotor_lag: bool,
-    /// Disturbances acting on the plant: none, wind, mismatch or wind,mismatch (SPEC §9).
+    /// Disturbances acting on the plant: none, wind, mismatch or wind,mismatch (docs/model.md §9).
     #[arg(long, default_value = "none", value_name = "SET")]
     disturbance: DisturbanceSet,
 }

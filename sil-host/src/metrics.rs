@@ -1,4 +1,4 @@
-//! Flight metrics of SPEC §10, computed from a recorded trace.
+//! Flight metrics of docs/model.md §10, computed from a recorded trace.
 
 use fc_core::{hover_input, InputBox, VehicleParams};
 use serde::{Deserialize, Serialize};

@@ -1,4 +1,4 @@
-//! Scenarios of SPEC §9: `setpoint`, `circle` and `helix`, every number a parameter.
+//! Scenarios of docs/model.md §9: `setpoint`, `circle` and `helix`, every number a parameter.
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -67,7 +67,7 @@ pub struct Reference {
 }
 
 impl Scenario {
-    /// The SPEC §9 defaults for a kind.
+    /// The docs/model.md §9 defaults for a kind.
     pub fn default_for(kind: ScenarioKind) -> Self {
         Self {
             kind,

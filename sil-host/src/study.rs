@@ -1,6 +1,5 @@
 //! The thesis' study redone by the firmware core: the flight matrix, run in
-//! parallel, and its tables in the thesis' form beside the thesis' numbers
-//! (SPEC §11).
+//! parallel, and its tables in the thesis' form beside the thesis' numbers.
 
 use crate::disturbance::DisturbanceSet;
 use crate::flight::{fly, FlightConfig, FlightResult};
@@ -152,7 +151,7 @@ pub fn find(
         .find(|o| o.cfg.spec == want && o.cfg.scenario.kind == kind && o.cfg.disturbance == d)
 }
 
-/// Thesis set-point numbers (SPEC §11): per axis x, y, z, ψ (q3 for the
+/// Thesis set-point numbers: per axis x, y, z, ψ (q3 for the
 /// quaternion form): (settling s, overshoot %).
 pub fn thesis_setpoint(fam: Family, model: AttitudeForm) -> [(f64, f64); 4] {
     match (fam, model) {
@@ -165,7 +164,7 @@ pub fn thesis_setpoint(fam: Family, model: AttitudeForm) -> [(f64, f64); 4] {
     }
 }
 
-/// Thesis tracking RMSE % (x, y, z), SPEC §11; `disturbed` selects the
+/// Thesis tracking RMSE % (x, y, z) (thesis chapter 4); `disturbed` selects the
 /// thesis' disturbed tables (4.15–4.18).
 pub fn thesis_rmse_pct(fam: Family, model: AttitudeForm, kind: ScenarioKind, disturbed: bool) -> Option<[f64; 3]> {
     use AttitudeForm::*;
@@ -456,7 +455,7 @@ pub const EXPLANATIONS: &str = "\
 ## Why the numbers differ from the thesis
 
 - **PD roll/pitch gains.** Table 4.2 repeats Table 4.1's x/y gains (2.1/2.8, 2.15/2.5) for θ/φ. With torques \
-`l·U2`, `l·U3` (SPEC §1) that leaves an attitude pole at −0.65 rad/s and a position cascade that is barely \
+`l·U2`, `l·U3` (docs/model.md §1) that leaves an attitude pole at −0.65 rad/s and a position cascade that is barely \
 stable at ψ = 0 and unstable at ψ = 15° (the test `printed_roll_pitch_gains_leave_the_euler_pd_marginal`); the \
 'printed thesis gains' rows show the result. The project's `tuned` gains change only roll/pitch (ωn ≈ 15 rad/s); \
 with them the thesis' own x, y, z, ψ gains reproduce its Euler settling times to within a few hundredths of a second.
@@ -476,7 +475,7 @@ exact ZOH model at 500 Hz with the sampled cost. With Table 4.5's weights the co
 roll/pitch pole that 500 Hz sampling cannot reproduce, so the discrete gain is ≈ 55 % different in its fastest \
 channels (test `discrete_gain_tends_to_continuous_gain`). `design lqr` prints the continuous gain and matches \
 python-control to 1e-12.
-- **Disturbances.** The thesis does not say what its disturbance was; ours are SPEC §9's. Neither PD nor LQR has \
+- **Disturbances.** The thesis does not say what its disturbance was; ours are docs/model.md §9's. Neither PD nor LQR has \
 integral action, so a constant force or a heavier vehicle leaves a steady offset. `wind` pushes 0.5 N north \
 from 5 s: the PD's x loop (Kp 2.1 m/s² per m) holds it off by F/(m·Kp) = 0.5/(0.65·2.1) ≈ 0.37 m, which is the \
 ≈ 9 % x RMSE in the `wind` table; the thesis' disturbed numbers stay near its undisturbed ones, so its \

@@ -39,16 +39,16 @@ fn cargo() -> Command {
     c
 }
 
-/// Builds (if needed) and runs a firmware example in QEMU; returns its
+/// Builds (if needed) and runs a harness binary of the image crate in QEMU; returns its
 /// semihosting output and whether it exited with success.
-fn run_example_in_qemu(name: &str) -> (String, bool) {
+fn run_harness_in_qemu(name: &str) -> (String, bool) {
     let st = cargo()
-        .args(["build", "-q", "--release", "-p", "firmware", "--example", name])
+        .args(["build", "-q", "--release", "-p", "fc-stm32f405", "--bin", name])
         .args(["--target", "thumbv7em-none-eabihf"])
         .status()
         .expect("cargo");
-    assert!(st.success(), "building example {name} for thumbv7em failed");
-    let elf = root().join(format!("target/thumbv7em-none-eabihf/release/examples/{name}"));
+    assert!(st.success(), "building harness {name} for thumbv7em failed");
+    let elf = root().join(format!("target/thumbv7em-none-eabihf/release/{name}"));
     let out = sil_host::link::qemu_command("null", &elf)
         .output()
         .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
@@ -59,7 +59,7 @@ fn run_example_in_qemu(name: &str) -> (String, bool) {
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn every_controller_fits_its_cycle_budget() {
     let _lock = shared();
-    let (out, ok) = run_example_in_qemu("budget");
+    let (out, ok) = run_harness_in_qemu("budget");
     // Rows: | controller | form | rate | measured | instructions | budget | load | verdict | stack |
     let rows: Vec<Vec<&str>> = out
         .lines()
@@ -103,12 +103,12 @@ fn every_controller_fits_its_cycle_budget() {
 fn mcu_and_host_compute_the_same_closed_loop() {
     let _lock = shared();
     let host = cargo()
-        .args(["run", "-q", "--release", "-p", "firmware", "--example", "equivalence"])
+        .args(["run", "-q", "--release", "-p", "fc-stm32f405", "--bin", "equivalence"])
         .output()
         .expect("cargo");
     assert!(host.status.success());
     let host = String::from_utf8_lossy(&host.stdout).into_owned();
-    let (mcu, ok) = run_example_in_qemu("equivalence");
+    let (mcu, ok) = run_harness_in_qemu("equivalence");
     assert!(ok);
     let parse = |s: &str| -> Vec<Vec<f64>> {
         s.lines()
@@ -179,7 +179,7 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn stm32_drivers_behave_in_qemu() {
     let _lock = shared();
-    let (out, ok) = run_example_in_qemu("drivers");
+    let (out, ok) = run_harness_in_qemu("drivers");
     assert!(ok, "{out}");
     let nums = |prefix: &str| -> Vec<u64> {
         let line = out

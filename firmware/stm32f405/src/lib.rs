@@ -1,8 +1,36 @@
 //! # fc-stm32f405 — the STM32F405 flight-controller image
 //!
-//! The binary `firmware` (`src/main.rs`) is the image: board bring-up, then
-//! the flight loop of `fc-loop` on USART1. The harness programs `budget`,
-//! `equivalence` and `drivers` (`src/bin/`) run in QEMU. This library holds
-//! what they share and what can be checked on the host.
+//! The binary `firmware` (`src/main.rs`) is the image: board bring-up
+//! ([`clocks`]), then the flight loop of `fc-loop` on USART1. The harness
+//! programs `budget`, `equivalence` and `drivers` (`src/bin/`) run in QEMU.
+//! This library holds what they share; its clock plan is checked on the host.
 #![cfg_attr(target_os = "none", no_std)]
 #![deny(missing_docs)]
+
+pub mod clocks;
+
+pub use clocks::{ClockError, ClockPlan};
+
+/// The clock tree the image runs: 168 MHz from an 8 MHz crystal.
+pub const CLOCKS: ClockPlan = ClockPlan::F405_168MHZ_FROM_8MHZ;
+/// Core clock (HCLK: SysTick, DWT), Hz.
+pub const SYSCLK_HZ: u32 = CLOCKS.hclk_hz();
+/// APB2 peripheral clock (USART1), Hz.
+pub const PCLK2_HZ: u32 = CLOCKS.pclk2_hz();
+/// Clock of the APB1 timers (TIM2, TIM3), Hz.
+pub const APB1_TIMER_CLK_HZ: u32 = CLOCKS.apb1_timer_hz();
+
+/// Polls of each ready flag before the clock bring-up gives up: HSE start-up
+/// is ≤ 2 ms (datasheet), ≈ 10 k polls at the 16 MHz HSI; this allows 50×.
+pub const CLOCK_POLLS: u32 = 500_000;
+
+/// Brings the clock tree up ([`CLOCKS`]); with the `qemu` feature, does
+/// nothing (QEMU has no RCC model and runs at 168 MHz).
+#[cfg(target_os = "none")]
+pub fn bring_up_clocks() -> Result<(), ClockError> {
+    if cfg!(feature = "qemu") {
+        Ok(())
+    } else {
+        CLOCKS.apply(CLOCK_POLLS)
+    }
+}

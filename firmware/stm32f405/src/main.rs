@@ -22,7 +22,8 @@ mod target {
     use defmt_rtt as _;
     use fc_loop::{FcConfig, FlightCore};
     use fc_proto::{Counters, PROTOCOL_VERSION};
-    use hal_shim::stm32f405::{SysTickClock, Usart1, PCLK2_HZ, SYSCLK_HZ};
+    use fc_stm32f405::{bring_up_clocks, PCLK2_HZ, SYSCLK_HZ};
+    use hal_shim::stm32f405::{SysTickClock, Usart1};
 
     // Log lines carry the SysTick time in µs.
     defmt::timestamp!("{=u64:us}", {
@@ -101,6 +102,16 @@ mod target {
         }
     }
 
+    /// A short name for a clock failure (defmt logs `str`, not `Display`).
+    fn clock_error_text(e: fc_stm32f405::ClockError) -> &'static str {
+        match e {
+            fc_stm32f405::ClockError::InvalidPlan(why) => why,
+            fc_stm32f405::ClockError::HseTimeout => "HSE crystal not ready",
+            fc_stm32f405::ClockError::PllTimeout => "PLL did not lock",
+            fc_stm32f405::ClockError::SwitchTimeout => "switch to the PLL not confirmed",
+        }
+    }
+
     /// Logs what changed in the link and failsafe state since the last call.
     fn log_changes(fc: &FlightCore, last: &mut (bool, bool, Counters, u32)) {
         let (session, failsafe, counters, ctrl) = (fc.session_open(), fc.failsafe(), fc.counters(), fc.selections());
@@ -135,6 +146,16 @@ mod target {
 
     #[entry]
     fn main() -> ! {
+        // The clock tree first: every rate below assumes 168 MHz. A board
+        // whose crystal or PLL does not start would run every timer and the
+        // UART at the wrong rate; it refuses to fly instead.
+        if let Err(e) = bring_up_clocks() {
+            defmt::error!("clock tree bring-up failed: {=str}; not flying", clock_error_text(e));
+            debug::exit(debug::EXIT_FAILURE);
+            loop {
+                cortex_m::asm::wfi();
+            }
+        }
         let clock = SysTickClock::start(SYSCLK_HZ);
         let mut usart = Usart1::init(PCLK2_HZ, 115_200);
         let mut fc = match FlightCore::new(FcConfig::default()) {

@@ -603,7 +603,6 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
 }
 
 impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Controller<T> for Mpc<T, N, M, NZ> {
-    #[inline(never)]
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         self.observe(est);

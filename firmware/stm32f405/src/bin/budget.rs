@@ -40,7 +40,8 @@ mod target {
     use fc_core::{euler_to_quat, VehicleParams};
     use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
     use fc_proto::{encode, ToFc, MAX_FRAME, PROTOCOL_VERSION};
-    use hal_shim::stm32f405::{SysTickClock, SYSCLK_HZ};
+    use fc_stm32f405::SYSCLK_HZ;
+    use hal_shim::stm32f405::SysTickClock;
     use hal_shim::{ByteLink, CycleClock};
     use nalgebra::Vector3;
 

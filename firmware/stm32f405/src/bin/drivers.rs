@@ -10,7 +10,8 @@ mod target {
     use core::panic::PanicInfo;
     use cortex_m_rt::{entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
-    use hal_shim::stm32f405::{DwtClock, LoopTimer, PwmActuators, SysTickClock, APB1_TIMER_CLK_HZ, SYSCLK_HZ};
+    use fc_stm32f405::{APB1_TIMER_CLK_HZ, SYSCLK_HZ};
+    use hal_shim::stm32f405::{DwtClock, LoopTimer, PwmActuators, SysTickClock};
     use hal_shim::{ActuatorOutput, CycleClock};
 
     #[entry]
@@ -31,25 +32,11 @@ mod target {
             [u[0] / 10.0, u[1] / 10.0, u[2] / 10.0, u[3] / 10.0]
         });
         pwm.apply([5.0, 2.5, 20.0, f32::NAN]);
-        // SAFETY: reads of TIM3's ARR and CCR1..4.
-        let rd = |off: usize| unsafe { core::ptr::read_volatile((0x4000_0400 + off) as *const u32) };
-        let arr = rd(0x2C);
-        hprintln!(
-            "drivers: pwm arr {} ccr {} {} {} {}",
-            arr,
-            rd(0x34),
-            rd(0x38),
-            rd(0x3C),
-            rd(0x40)
-        );
+        let (arr, c) = pwm.registers();
+        hprintln!("drivers: pwm arr {} ccr {} {} {} {}", arr, c[0], c[1], c[2], c[3]);
         pwm.disarm();
-        hprintln!(
-            "drivers: pwm disarmed ccr {} {} {} {}",
-            rd(0x34),
-            rd(0x38),
-            rd(0x3C),
-            rd(0x40)
-        );
+        let (_, c) = pwm.registers();
+        hprintln!("drivers: pwm disarmed ccr {} {} {} {}", c[0], c[1], c[2], c[3]);
         let dwt = DwtClock::start(SYSCLK_HZ);
         let a = dwt.now();
         cortex_m::asm::delay(1000);
