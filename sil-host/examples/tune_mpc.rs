@@ -11,7 +11,7 @@ use sil_host::{DisturbanceSet, Scenario, ScenarioKind};
 
 fn main() {
     for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
-        let form = AttitudeForm::from(model);
+        let form = model;
         let mut c = MpcConfig::fast(form);
         let mut noise = None;
         for arg in std::env::args().skip(1) {

@@ -7,6 +7,7 @@
 
 pub mod config;
 pub mod disturbance;
+pub mod endpoint;
 pub mod figures;
 pub mod flight;
 pub mod full_report;

@@ -77,9 +77,27 @@ pub fn matrix(quick: bool) -> Vec<FlightConfig> {
     out
 }
 
-/// A short label for progress and errors.
+/// A short label for progress, errors and the QEMU table: family (and MPC
+/// preset), form, scenario, disturbance, and the non-default choices.
 pub fn label(cfg: &FlightConfig) -> String {
-    format!("{} {} [{}]", cfg.spec, cfg.scenario.kind.name(), cfg.disturbance)
+    let spec = cfg.spec;
+    let mut s = spec.family.name().to_string();
+    if spec.family == Family::Mpc {
+        s += &format!(" {}", spec.row().preset_name);
+    }
+    s += &format!(
+        " {} {} [{}]",
+        spec.form.name(),
+        cfg.scenario.kind.name(),
+        cfg.disturbance
+    );
+    if spec.family == Family::Pd && spec.preset == Preset::Thesis {
+        s += " thesis gains";
+    }
+    if spec.reference == ReferenceMode::Thesis {
+        s += " thesis reference";
+    }
+    s
 }
 
 /// A progress bar over `len` items of `what` that shows the current item
@@ -270,7 +288,8 @@ pub fn tables_markdown(all: &[Outcome]) -> String {
                         fmt_opt(a.overshoot_pct, 3),
                         th[i].1
                     );
-                    if gains == Preset::Project {
+                    // The variant's own gains only, not the printed-gains extra row.
+                    if gains == preset {
                         cells += 1;
                         if a.settling_s.is_some_and(|v| v <= th[i].0) {
                             better += 1;

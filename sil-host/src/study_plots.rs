@@ -273,7 +273,7 @@ pub struct HorizonPoint {
 pub const HORIZONS: [usize; 7] = [3, 5, 8, 10, 15, 20, 30];
 
 fn fly_horizon<const N: usize>(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
-    let form = AttitudeForm::from(cfg.spec.form);
+    let form = cfg.spec.form;
     let p: VehicleParams<f32> = cfg.vehicle.cast();
     let mpc = Mpc::<f32, N, 2, 8>::new(p, MpcConfig::thesis(form))
         .map_err(|e| anyhow::anyhow!("MPC N = {N}: design failed: {e:?}"))?;

@@ -123,14 +123,14 @@ fn the_disturbance_trend_still_pays_under_sensor_noise() {
     // rate estimate suffers from most. The trend's second-order rate filter
     // must keep it useful: on the windy helix it beats the held estimate,
     // and the flight stays offset-free and inside the box.
-    use fc_core::control::{AttitudeForm, MpcConfig};
+    use fc_core::control::MpcConfig;
     use sil_host::noise::SensorNoise;
     for m in MODELS {
         let fly_with = |trend: bool| {
             let mut cfg = FlightConfig::new(Family::Mpc, m, Scenario::default_for(ScenarioKind::Helix));
             cfg.disturbance = "wind".parse().unwrap();
             cfg.noise = Some(SensorNoise::typical(1.0, 1).unwrap());
-            let mut c = MpcConfig::fast(AttitudeForm::from(m));
+            let mut c = MpcConfig::fast(m);
             if !trend {
                 c.disturbance_trend_s = None;
             }

@@ -145,7 +145,7 @@ impl ClockPlan {
     pub fn check(&self) -> Result<(), ClockError> {
         use limits::*;
         let bad = ClockError::InvalidPlan;
-        if !(2..=63).contains(&self.pllm) || self.hse_hz % u32::from(self.pllm) != 0 {
+        if !(2..=63).contains(&self.pllm) || !self.hse_hz.is_multiple_of(u32::from(self.pllm)) {
             return Err(bad("PLL M must be 2..=63 and divide the crystal frequency"));
         }
         let pll_in = self.hse_hz / u32::from(self.pllm);

@@ -3,7 +3,7 @@
 //! TCP stream (`tcp:HOST:PORT`, e.g. `sil-host serve`, or QEMU's USART) —
 //! and [`Remote`], the flight [`Endpoint`] built on it.
 
-use crate::flight::{Endpoint, StepReport};
+use crate::endpoint::{Endpoint, StepReport};
 use anyhow::{bail, Context, Result};
 use fc_core::control::{ControllerSpec, Setpoint};
 use fc_core::QuatState;
