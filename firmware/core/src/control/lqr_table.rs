@@ -27,9 +27,8 @@ impl<T: RealField + Copy, const H: usize> GainTable<T, H> {
 
     /// Designs every entry with `design(heading_rad)`; fails on the first error.
     pub fn build(mut design: impl FnMut(f64) -> Result<Gain<f64>, ControlError>) -> Result<Self, ControlError> {
-        if H == 0 {
-            return Err(ControlError::InvalidParameter);
-        }
+        // A table without entries is a type that cannot exist (compile error).
+        const { assert!(H > 0, "a gain table needs at least one heading") };
         let mut gains = [Gain::<T>::zeros(); H];
         for (i, g) in gains.iter_mut().enumerate() {
             *g = design(Self::heading(i))?.map(|v| lit::<T>(v));

@@ -250,10 +250,14 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     // merged into the callers' (stack) and not copied into each (flash).
     #[inline(never)]
     pub fn new(params: VehicleParams<T>, cfg: MpcConfig) -> Result<Self, ControlError> {
+        // The sizes are checked when the type is instantiated (compile errors).
+        const {
+            assert!(N > 0 && M > 0 && M <= N, "an MPC needs 1 ≤ M ≤ N");
+            assert!(NZ == 4 * M, "NZ must be 4·M (four inputs per move)");
+        };
         let p64: VehicleParams<f64> = params.cast();
         let ok_dt = |v: f64| v.is_finite() && v > 0.0;
-        if N == 0 || M == 0 || M > N || NZ != 4 * M || !p64.is_valid() || !ok_dt(cfg.pred_dt_s) || !ok_dt(cfg.exec_dt_s)
-        {
+        if !p64.is_valid() || !ok_dt(cfg.pred_dt_s) || !ok_dt(cfg.exec_dt_s) {
             return Err(ControlError::InvalidParameter);
         }
         let lm: LinearModel<f64> = match cfg.form {
