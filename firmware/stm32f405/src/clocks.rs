@@ -79,16 +79,24 @@ pub enum ClockError {
     SwitchTimeout,
 }
 
+impl ClockError {
+    /// What went wrong, as a static string (defmt logs `str`, not `Display`).
+    pub const fn reason(&self) -> &'static str {
+        match self {
+            ClockError::InvalidPlan(why) => why,
+            ClockError::HseTimeout => "HSE crystal not ready (no crystal, or QEMU, which has no RCC model)",
+            ClockError::PllTimeout => "PLL did not lock",
+            ClockError::SwitchTimeout => "system clock did not switch to the PLL",
+        }
+    }
+}
+
 impl core::fmt::Display for ClockError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            ClockError::InvalidPlan(why) => write!(f, "clock plan refused: {why}"),
-            ClockError::HseTimeout => {
-                f.write_str("HSE crystal not ready (no crystal, or QEMU, which has no RCC model)")
-            }
-            ClockError::PllTimeout => f.write_str("PLL did not lock"),
-            ClockError::SwitchTimeout => f.write_str("system clock did not switch to the PLL"),
+        if let ClockError::InvalidPlan(_) = self {
+            f.write_str("clock plan refused: ")?;
         }
+        f.write_str(self.reason())
     }
 }
 
@@ -161,14 +169,7 @@ impl ClockPlan {
         if !(2..=15).contains(&self.pllq) {
             return Err(bad("PLL Q must be 2..=15"));
         }
-        if self.ahb_prescaler_bits().is_none() || self.apb_prescaler_bits(self.apb1_div).is_none() {
-            return Err(bad(
-                "AHB must be divided by a power of two up to 512 (not 32), APB by 1..=16",
-            ));
-        }
-        if self.apb_prescaler_bits(self.apb2_div).is_none() {
-            return Err(bad("APB2 must be divided by 1, 2, 4, 8 or 16"));
-        }
+        self.prescaler_bits()?;
         if self.sysclk_hz() > SYSCLK_MAX_HZ {
             return Err(bad("SYSCLK above 168 MHz"));
         }
@@ -202,8 +203,20 @@ impl ClockPlan {
         })
     }
 
+    /// RCC_CFGR's HPRE, PPRE1 and PPRE2 fields for this plan, or which
+    /// divider has no encoding.
+    fn prescaler_bits(&self) -> Result<(u8, u8, u8), ClockError> {
+        let bad = ClockError::InvalidPlan;
+        let hpre = self
+            .ahb_prescaler_bits()
+            .ok_or(bad("AHB must be divided by 1, 2, 4, 8, 16, 64, 128, 256 or 512"))?;
+        let ppre1 = Self::apb_prescaler_bits(self.apb1_div).ok_or(bad("APB1 must be divided by 1, 2, 4, 8 or 16"))?;
+        let ppre2 = Self::apb_prescaler_bits(self.apb2_div).ok_or(bad("APB2 must be divided by 1, 2, 4, 8 or 16"))?;
+        Ok((hpre, ppre1, ppre2))
+    }
+
     /// RCC_CFGR.PPREx's encoding of an APB divider (RM0090 §7.3.3).
-    pub const fn apb_prescaler_bits(&self, div: u8) -> Option<u8> {
+    pub const fn apb_prescaler_bits(div: u8) -> Option<u8> {
         Some(match div {
             1 => 0b000,
             2 => 0b100,
@@ -230,6 +243,7 @@ impl ClockPlan {
     pub fn apply(&self, polls: u32) -> Result<(), ClockError> {
         use stm32f4::stm32f405 as pac;
         self.check()?;
+        let (hpre, ppre1, ppre2) = self.prescaler_bits()?;
         // SAFETY: the PAC's handles to RCC and FLASH; bring-up runs once,
         // before anything else touches them.
         let (rcc, flash) = unsafe { (&*pac::RCC::ptr(), &*pac::FLASH::ptr()) };
@@ -271,14 +285,8 @@ impl ClockPlan {
         });
         // SAFETY: the prescaler encodings come from RM0090 (checked above
         // and against the PAC's enumerations in the tests).
-        rcc.cfgr().modify(|_, w| unsafe {
-            w.hpre()
-                .bits(self.ahb_prescaler_bits().unwrap_or(0))
-                .ppre1()
-                .bits(self.apb_prescaler_bits(self.apb1_div).unwrap_or(0b101))
-                .ppre2()
-                .bits(self.apb_prescaler_bits(self.apb2_div).unwrap_or(0b100))
-        });
+        rcc.cfgr()
+            .modify(|_, w| unsafe { w.hpre().bits(hpre).ppre1().bits(ppre1).ppre2().bits(ppre2) });
         rcc.cfgr().modify(|_, w| w.sw().pll());
         wait(&|| rcc.cfgr().read().sws().is_pll(), ClockError::SwitchTimeout)
     }
@@ -319,11 +327,11 @@ mod tests {
         // What `apply` writes, against the PAC's enumerated values (from ST's SVD).
         assert_eq!(p.pllp_bits(), PLLP::Div2 as u8);
         assert_eq!(p.ahb_prescaler_bits(), Some(cfgr::HPRE::Div1 as u8));
-        assert_eq!(p.apb_prescaler_bits(4), Some(cfgr::PPRE1::Div4 as u8));
-        assert_eq!(p.apb_prescaler_bits(2), Some(cfgr::PPRE1::Div2 as u8));
+        assert_eq!(ClockPlan::apb_prescaler_bits(4), Some(cfgr::PPRE1::Div4 as u8));
+        assert_eq!(ClockPlan::apb_prescaler_bits(2), Some(cfgr::PPRE1::Div2 as u8));
         assert_eq!(p.flash_wait_states, LATENCY::Ws5 as u8);
         for (div, e) in [(1, cfgr::PPRE1::Div1), (8, cfgr::PPRE1::Div8), (16, cfgr::PPRE1::Div16)] {
-            assert_eq!(p.apb_prescaler_bits(div), Some(e as u8));
+            assert_eq!(ClockPlan::apb_prescaler_bits(div), Some(e as u8));
         }
         for (div, e) in [
             (2, cfgr::HPRE::Div2),

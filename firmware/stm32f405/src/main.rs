@@ -102,16 +102,6 @@ mod target {
         }
     }
 
-    /// A short name for a clock failure (defmt logs `str`, not `Display`).
-    fn clock_error_text(e: fc_stm32f405::ClockError) -> &'static str {
-        match e {
-            fc_stm32f405::ClockError::InvalidPlan(why) => why,
-            fc_stm32f405::ClockError::HseTimeout => "HSE crystal not ready",
-            fc_stm32f405::ClockError::PllTimeout => "PLL did not lock",
-            fc_stm32f405::ClockError::SwitchTimeout => "switch to the PLL not confirmed",
-        }
-    }
-
     /// Logs what changed in the link and failsafe state since the last call.
     fn log_changes(fc: &FlightCore, last: &mut (bool, bool, Counters, u32)) {
         let (session, failsafe, counters, ctrl) = (fc.session_open(), fc.failsafe(), fc.counters(), fc.selections());
@@ -150,7 +140,7 @@ mod target {
         // whose crystal or PLL does not start would run every timer and the
         // UART at the wrong rate; it refuses to fly instead.
         if let Err(e) = bring_up_clocks() {
-            defmt::error!("clock tree bring-up failed: {=str}; not flying", clock_error_text(e));
+            defmt::error!("clock tree bring-up failed: {=str}; not flying", e.reason());
             debug::exit(debug::EXIT_FAILURE);
             loop {
                 cortex_m::asm::wfi();
