@@ -83,23 +83,21 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
         let cost = t0.elapsed().as_nanos() as f64;
         // An estimate built from a finite state is always valid: on the
         // impossible error the loop holds the last command (its fallback).
-        Ok(match out {
-            Ok(o) => StepReport {
-                u: Some([o.u[0], o.u[1], o.u[2], o.u[3]]),
-                cost,
-                iterations: o.status.iterations,
-                saturated: o.status.saturated,
-                failsafe: false,
-                counters: None,
-            },
-            Err(_) => StepReport {
-                u: None,
-                cost,
-                iterations: 0,
-                saturated: false,
-                failsafe: false,
-                counters: None,
-            },
+        let (u, iterations, saturated) = match out {
+            Ok(o) => (
+                Some([o.u[0], o.u[1], o.u[2], o.u[3]]),
+                o.status.iterations,
+                o.status.saturated,
+            ),
+            Err(_) => (None, 0, false),
+        };
+        Ok(StepReport {
+            u,
+            cost,
+            iterations,
+            saturated,
+            failsafe: false,
+            counters: None,
         })
     }
 }

@@ -184,7 +184,7 @@ pub fn fly_target_with_progress(
     cfg.spec.to_wire().map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut qemu = None;
     let client = match target {
-        Target::InProcess => unreachable!("handled above"),
+        Target::InProcess => return fly(cfg),
         Target::Framed => FcClient::local()?,
         Target::Tcp(addr) => FcClient::tcp(addr)?,
         Target::Qemu => qemu.insert(Qemu::start(&firmware_elf()?)?).client()?,

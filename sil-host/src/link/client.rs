@@ -265,6 +265,8 @@ impl FcClient {
 pub struct Remote {
     client: FcClient,
     spec: ControllerSpec,
+    /// The spec's preview spacing, s (0 without a preview).
+    preview_dt_s: f64,
     seq: u32,
 }
 
@@ -272,13 +274,19 @@ impl Remote {
     /// Opens the session on `client` and selects `spec`.
     pub fn open(mut client: FcClient, spec: ControllerSpec) -> Result<Self> {
         client.open(spec)?;
-        Ok(Self { client, spec, seq: 0 })
+        let preview_dt_s = spec.preview().map_or(0.0, |(_, dt)| dt);
+        Ok(Self {
+            client,
+            spec,
+            preview_dt_s,
+            seq: 0,
+        })
     }
 }
 
 impl Endpoint for Remote {
     fn period_s(&self) -> Option<f64> {
-        self.spec.mpc_config().map(|c| c.exec_dt_s)
+        self.spec.own_period_s()
     }
     fn preview(&self) -> Option<(usize, f64)> {
         self.spec.preview()
@@ -295,9 +303,8 @@ impl Endpoint for Remote {
         // A preview the setpoint's own extrapolation reproduces is not
         // sent: the controller extrapolates to the same values, and a
         // fixed target then costs 2 frames a step instead of 22.
-        let dt = self.spec.preview().map_or(0.0, |(_, dt)| dt);
         let redundant = preview.iter().enumerate().all(|(k, p)| {
-            let e = sp.extrapolate(((k + 1) as f64 * dt) as f32);
+            let e = sp.extrapolate(((k + 1) as f64 * self.preview_dt_s) as f32);
             setpoints_equal(&e, p)
         });
         let sent: &[Setpoint<f32>] = if redundant { &[] } else { preview };

@@ -153,8 +153,6 @@ pub enum SpecError {
     UnknownWireId(u8),
     /// This controller has no wire id (it is not selectable over the link).
     NotOnWire(ControllerSpec),
-    /// No family, form or preset has this name.
-    UnknownName,
 }
 
 impl fmt::Display for SpecError {
@@ -167,7 +165,6 @@ impl fmt::Display for SpecError {
                 s.row().name,
                 s.row().preset_name
             ),
-            SpecError::UnknownName => f.write_str("unknown controller name"),
         }
     }
 }
@@ -253,10 +250,16 @@ impl ControllerSpec {
         }
     }
 
-    /// How often the controller runs, s: the MPC presets fix their own
-    /// execution period; PD and LQR run at `control_period_s`.
+    /// The execution period the controller fixes itself, s: the MPC
+    /// presets' (`None` for PD and LQR, which run at any rate).
+    pub fn own_period_s(&self) -> Option<f64> {
+        self.mpc_config().map(|c| c.exec_dt_s)
+    }
+
+    /// How often the controller runs, s: [`ControllerSpec::own_period_s`],
+    /// else `control_period_s` (PD and LQR).
     pub fn period_s(&self, control_period_s: f64) -> f64 {
-        self.mpc_config().map_or(control_period_s, |c| c.exec_dt_s)
+        self.own_period_s().unwrap_or(control_period_s)
     }
 
     /// The reference preview the controller wants before each step:
