@@ -141,7 +141,7 @@ fn bench(c: &mut Criterion) {
     let mut sp = Setpoint::hold(Vector3::new(1.25, 0.35, -1.0f32), 0.26);
     sp.vel_ned_mps = Vector3::new(0.45, 0.5, 0.0);
     sp.acc_ned_mps2 = Vector3::new(-0.1, 0.15, 0.0);
-    for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+    for form in AttitudeForm::ALL {
         let mut fast = MpcFast::<f32>::new(p, MpcConfig::fast(form)).unwrap();
         let mut thesis = MpcThesis::<f32>::new(p, MpcConfig::thesis(form)).unwrap();
         let name = if form == AttitudeForm::Euler {

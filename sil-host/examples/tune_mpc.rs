@@ -10,7 +10,7 @@ use sil_host::noise::SensorNoise;
 use sil_host::{DisturbanceSet, Scenario, ScenarioKind};
 
 fn main() {
-    for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+    for model in AttitudeForm::ALL {
         let form = model;
         let mut c = MpcConfig::fast(form);
         let mut noise = None;

@@ -78,7 +78,7 @@ fn qemu_table(quick: bool, progress: bool) -> Result<Vec<QemuRow>> {
     crate::link::firmware_elf()?;
     let mut cases = Vec::new();
     for (fam, preset) in VARIANTS {
-        for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+        for model in AttitudeForm::ALL {
             let mut sc = Scenario::default_for(ScenarioKind::Setpoint);
             sc.duration_s = match (fam, preset, quick) {
                 (Family::Mpc, Preset::Thesis, _) => 10.0, // 4 Hz: 41 steps

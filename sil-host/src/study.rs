@@ -21,7 +21,7 @@ pub struct Outcome {
 }
 
 /// Controller families of the study, in table order.
-pub const FAMILIES: [Family; 3] = [Family::Pd, Family::Lqr, Family::Mpc];
+pub const FAMILIES: [Family; 3] = Family::ALL;
 /// The controllers as the tables list them: family and MPC preset.
 pub const VARIANTS: [(Family, Preset); 4] = [
     (Family::Pd, Preset::Project),
@@ -30,7 +30,7 @@ pub const VARIANTS: [(Family, Preset); 4] = [
     (Family::Mpc, Preset::Thesis),
 ];
 /// Models, in table order.
-pub const MODELS: [AttitudeForm; 2] = [AttitudeForm::Euler, AttitudeForm::Quaternion];
+pub const MODELS: [AttitudeForm; 2] = AttitudeForm::ALL;
 /// Scenarios, in table order.
 pub const SCENARIOS: [ScenarioKind; 3] = [ScenarioKind::Setpoint, ScenarioKind::Circle, ScenarioKind::Helix];
 

@@ -174,7 +174,7 @@ fn u_norm(all: &[Outcome]) -> Figure {
     let kinds = [ScenarioKind::Setpoint, ScenarioKind::Circle, ScenarioKind::Helix];
     let mut groups = Vec::new();
     for (fam, preset) in VARIANTS {
-        for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+        for model in AttitudeForm::ALL {
             let v: Vec<f64> = kinds
                 .iter()
                 .map(|k| {

@@ -9,7 +9,7 @@ use crate::figures::{self, Figure, Panel, Plot, Series};
 use crate::flight::{fly, FlightConfig, Uncertainty};
 use crate::noise::SplitMix;
 use crate::scenario::Scenario;
-use crate::study::{label, variant_title, VARIANTS};
+use crate::study::{label, VARIANTS};
 use anyhow::{bail, Context, Result};
 use fc_core::AttitudeForm;
 use rayon::prelude::*;
@@ -114,7 +114,7 @@ pub fn percentile(sorted: &[f64], p: f64) -> f64 {
 fn controllers(base: &Scenario, vehicle: &fc_core::VehicleParams<f64>) -> Vec<FlightConfig> {
     let mut out = Vec::new();
     for (fam, preset) in VARIANTS {
-        for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+        for model in AttitudeForm::ALL {
             let mut c = FlightConfig::new(fam, model, *base);
             c.spec.preset = preset;
             c.vehicle = *vehicle;
@@ -203,11 +203,7 @@ pub fn run(o: &SweepOptions) -> Result<Vec<SweepRow>> {
 }
 
 fn label_short(cfg: &FlightConfig) -> String {
-    format!(
-        "{} {}",
-        variant_title(cfg.spec.family, cfg.spec.preset),
-        cfg.spec.form.name()
-    )
+    format!("{} {}", cfg.spec.title(), cfg.spec.form.name())
 }
 
 /// Writes `DIR/sweep.md`, `DIR/sweep.json` and the RMSE-distribution figure.

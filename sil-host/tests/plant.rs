@@ -7,7 +7,7 @@ use fc_core::{
 use nalgebra::{Matrix3, Vector3, Vector4};
 use sil_host::{AttitudeForm, DisturbanceSet, Plant, PlantConfig};
 
-const MODELS: [AttitudeForm; 2] = [AttitudeForm::Euler, AttitudeForm::Quaternion];
+const MODELS: [AttitudeForm; 2] = AttitudeForm::ALL;
 
 fn start() -> QuatState<f64> {
     hover_quat_state(&Vector3::new(0.0, 0.0, -1.0), 0.0)

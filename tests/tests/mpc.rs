@@ -6,7 +6,7 @@ use fc_core::control::{Family, Preset};
 use sil_host::flight::{fly, FlightConfig, FlightResult};
 use sil_host::{AttitudeForm, DisturbanceSet, Scenario, ScenarioKind};
 
-const MODELS: [AttitudeForm; 2] = [AttitudeForm::Euler, AttitudeForm::Quaternion];
+const MODELS: [AttitudeForm; 2] = AttitudeForm::ALL;
 
 fn run(model: AttitudeForm, preset: Preset, sc: Scenario, d: &str) -> FlightResult {
     let mut cfg = FlightConfig::new(Family::Mpc, model, sc);

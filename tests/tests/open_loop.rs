@@ -164,7 +164,7 @@ fn open_loop_matches_independent_integration() {
     // The case: U = [mg+0.1, 0.001, 0, 0.01] for 3 s from hover at (0, 0, −1).
     let u = [M * G + 0.1, 0.001, 0.0, 0.01];
     let wr = omega_r(u);
-    for model in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+    for model in AttitudeForm::ALL {
         let rows = OpenLoop {
             plant: PlantConfig::nominal(model),
             u: Vector4::from(u),

@@ -79,7 +79,7 @@ fn hover_under_ramp(cfg: MpcConfig) -> (f64, Vec<Vector3<f64>>) {
 fn the_trend_measures_a_force_ramp_and_cancels_its_lag() {
     let mass = VehicleParams::<f64>::os4().mass_kg;
     let truth = SLOPE_NPS / mass; // m/s³
-    for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+    for form in AttitudeForm::ALL {
         let (with, rates) = hover_under_ramp(MpcConfig::fast(form));
         for r in &rates {
             assert!(
