@@ -393,7 +393,7 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
             md.push_str(
                 "The thumbv7em image in QEMU's netduinoplus2 (`-icount shift=0`: SysTick counts 0.168 per executed \
                  instruction), flown in lockstep over the emulated USART on a short set-point, beside the same \
-                 flight in-process. Worst-case budgets: README, `firmware/examples/budget.rs`. QEMU's clock follows \
+                 flight in-process. Worst-case budgets: README, `firmware/stm32f405/src/bin/budget.rs`. QEMU's clock follows \
                  real time while the guest waits for the host, so a host too busy to send a sensor frame within \
                  50 ms makes the firmware enter its failsafe (counted; that flight's RMSE then differs).\n\n\
                  | controller | steps | instructions mean | instructions max | RMSE x/y/z m, QEMU | RMSE x/y/z m, in-process | failsafe entries |\n\

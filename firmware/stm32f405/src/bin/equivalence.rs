@@ -2,7 +2,7 @@
 //! the `fast` MPC (quaternion) flies 40 steps (0.2 s) of the set-point step
 //! against the core's own model (Euler-integrated in `f32`), and prints, per
 //! step, `k iterations U1 U2 U3 U4`. Run it on the host (`cargo run -p
-//! firmware --example equivalence`) and in QEMU (`--target
+//! fc-stm32f405 --bin equivalence`) and in QEMU (`--target
 //! thumbv7em-none-eabihf`); `tests/tests/qemu.rs` compares the two. Only the
 //! `f32` math library differs (glibc vs `libm` for atan/asin), so the outputs
 //! agree to a few ulps.
