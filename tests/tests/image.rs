@@ -4,13 +4,15 @@
 //! - flash (vector table, code, read-only data, and the initial values of
 //!   `.data`, which live in flash too) ≤ 256 KiB: a quarter of the F405's
 //!   1 MiB, leaving room for a bootloader, parameters and logs;
-//! - static RAM (`.data`, `.bss`, `.uninit`) ≤ 4 KiB: the flight controller
-//!   lives on the stack, whose high-water mark the QEMU budget test checks.
+//! - static RAM (`.data`, `.bss`, `.uninit`) ≤ 16 KiB: the flight loop with
+//!   its controller (≈ 7.5 KiB, designed in place) and the link's queues.
+//!   The stack's high-water mark (≤ 32 KiB) is the QEMU budget test's; both
+//!   together leave more than half of the 128 KiB SRAM for what comes next.
 
 use std::process::Command;
 
 const FLASH_BUDGET_B: u64 = 256 * 1024;
-const STATIC_RAM_BUDGET_B: u64 = 4 * 1024;
+const STATIC_RAM_BUDGET_B: u64 = 16 * 1024;
 const FLASH: std::ops::Range<u64> = 0x0800_0000..0x0810_0000;
 const RAM: std::ops::Range<u64> = 0x2000_0000..0x2002_0000;
 

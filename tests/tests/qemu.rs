@@ -93,7 +93,9 @@ fn every_controller_fits_its_cycle_budget() {
         .and_then(|s| s.split_whitespace().next())
         .and_then(|s| s.parse().ok())
         .expect("stack line");
-    assert!(stack > 1024 && stack < 128 * 1024, "stack high-water {stack} B");
+    // Designing and flying every controller, the whole loop included, within
+    // a quarter of the SRAM (the controllers are designed in place).
+    assert!(stack > 1024 && stack <= 32 * 1024, "stack high-water {stack} B");
     assert!(out.contains("budget: all fit"), "{out}");
     assert!(ok, "budget example exited with failure");
 }

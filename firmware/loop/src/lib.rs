@@ -14,7 +14,10 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
-use fc_core::control::{AnyController, ControlError, Controller, ControllerSpec, Family, Setpoint, StateEstimate};
+use fc_core::control::{
+    AnyController, ControlError, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
+    StateEstimate,
+};
 use fc_core::model::{AttitudeForm, Input, QuatState, VehicleParams};
 use fc_proto::{encode, Counters, FrameDecoder, FrameError, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
 use hal_shim::{ByteLink, CycleClock};
@@ -49,6 +52,10 @@ impl Default for FcConfig {
 /// arrives: the quaternion LQR, reference fed forward.
 pub const BOOT_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Lqr, AttitudeForm::Quaternion);
 
+/// The controller that flies when neither a new selection nor the previous
+/// one can be designed: the tuned Euler PD (no design step, cannot fail).
+pub const FALLBACK_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Pd, AttitudeForm::Euler);
+
 /// A controllers' setpoint as sent on the wire.
 pub fn setpoint_to_wire(sp: &Setpoint<f32>) -> WireSetpoint {
     WireSetpoint {
@@ -80,6 +87,8 @@ pub struct FlightCore {
     cfg: FcConfig,
     params: VehicleParams<f32>,
     ctrl: AnyController<f32>,
+    /// What `ctrl` was built from (rebuilt when a new selection fails).
+    spec: ControllerSpec,
     sp: Setpoint<f32>,
     decoder: FrameDecoder<MAX_FRAME>,
     counters: Counters,
@@ -93,14 +102,26 @@ pub struct FlightCore {
 
 impl FlightCore {
     /// A flight controller running the quaternion LQR until told otherwise,
-    /// motors off until the first valid sensor frame.
+    /// motors off until the first valid sensor frame:
+    /// [`FlightCore::unstarted`] then [`FlightCore::start`].
     pub fn new(cfg: FcConfig) -> Result<Self, ControlError> {
+        let mut me = Self::unstarted(cfg);
+        me.start()?;
+        Ok(me)
+    }
+
+    /// The flight loop with nothing designed yet: it flies the tuned Euler
+    /// PD (which needs no design) until [`FlightCore::start`] designs the
+    /// boot controller in place. The firmware constructs it this way, in
+    /// its static home, so that the boot design does not run beneath a
+    /// stack copy of the whole loop (the controller is ≈ 7 KiB).
+    pub fn unstarted(cfg: FcConfig) -> Self {
         let params = VehicleParams::<f32>::os4();
-        let ctrl = BOOT_CONTROLLER.build(params, cfg.control_period_s)?;
-        Ok(Self {
+        Self {
             cfg,
             params,
-            ctrl,
+            ctrl: AnyController::PdEuler(PdEuler::new(params, PdEulerGains::tuned(), ReferenceMode::Feedforward)),
+            spec: FALLBACK_CONTROLLER,
             sp: Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0),
             decoder: FrameDecoder::new(),
             counters: Counters::default(),
@@ -110,7 +131,25 @@ impl FlightCore {
             failsafe: false,
             u: Vector4::zeros(),
             selections: 0,
-        })
+        }
+    }
+
+    /// Designs the boot controller ([`BOOT_CONTROLLER`]) in place. On error
+    /// the loop keeps flying the fallback PD.
+    pub fn start(&mut self) -> Result<(), ControlError> {
+        let ts = self.cfg.control_period_s;
+        match BOOT_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None) {
+            Ok(()) => {
+                self.spec = BOOT_CONTROLLER;
+                Ok(())
+            }
+            Err(e) => {
+                self.spec = FALLBACK_CONTROLLER;
+                // PD designs cannot fail: nothing to check.
+                let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None);
+                Err(e)
+            }
+        }
     }
 
     /// The inputs to apply now `[U1 N, U2 N, U3 N, U4 N·m]`.
@@ -178,6 +217,25 @@ impl FlightCore {
         }
     }
 
+    /// Designs `spec` in place of the running controller. If the design
+    /// fails, the previous controller is designed again (it was designed
+    /// from the same parameters before, so it succeeds; should it not, the
+    /// tuned Euler PD, which cannot fail, flies) and the failure is counted.
+    fn select(&mut self, spec: ControllerSpec) {
+        let ts = self.cfg.control_period_s;
+        if spec.build_in(&mut self.ctrl, self.params, ts, None).is_ok() {
+            self.spec = spec;
+            self.selections = self.selections.wrapping_add(1);
+            return;
+        }
+        self.counters.invalid_values += 1;
+        if self.spec.build_in(&mut self.ctrl, self.params, ts, None).is_err() {
+            self.spec = FALLBACK_CONTROLLER;
+            // PD designs cannot fail: nothing to check.
+            let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None);
+        }
+    }
+
     fn send<L: ByteLink>(link: &mut L, msg: &FromFc) -> Result<(), L::Error> {
         let mut out = [0u8; MAX_FRAME];
         match encode(msg, &mut out) {
@@ -234,13 +292,7 @@ impl FlightCore {
                 // An id no controller has is a message this end cannot read
                 // (as an unknown enum index was in protocol v2's decoder).
                 match ControllerSpec::from_wire(controller, feedforward) {
-                    Ok(spec) => match spec.build(self.params, self.cfg.control_period_s) {
-                        Ok(c) => {
-                            self.ctrl = c;
-                            self.selections = self.selections.wrapping_add(1);
-                        }
-                        Err(_) => self.counters.invalid_values += 1,
-                    },
+                    Ok(spec) => self.select(spec),
                     Err(_) => self.counters.bad_message += 1,
                 }
                 Ok(())

@@ -35,23 +35,62 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
         ts: f64,
         mode: ReferenceMode,
     ) -> Result<Self, ControlError> {
+        let mut me = Self::blank(params, mode);
+        me.redesign(params, q, r, ts, mode)?;
+        Ok(me)
+    }
+
+    /// A controller with an all-zero gain table: the storage that
+    /// [`LqrEuler::redesign`] fills in place. Not a controller until then.
+    pub fn blank(params: VehicleParams<T>, mode: ReferenceMode) -> Self {
+        Self {
+            bx: params.input_box(),
+            params,
+            table: GainTable::zeros(),
+            mode,
+        }
+    }
+
+    /// Designs this controller in place, as [`LqrEuler::new`] would (the
+    /// table is large: designing in place keeps a second copy off the
+    /// stack). On error the table is incomplete: design it again.
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
+    pub fn redesign(
+        &mut self,
+        params: VehicleParams<T>,
+        q: &SMatrix<f64, 12, 12>,
+        r: &SMatrix<f64, 4, 4>,
+        ts: f64,
+        mode: ReferenceMode,
+    ) -> Result<(), ControlError> {
         let p64: VehicleParams<f64> = params.cast();
         if !p64.is_valid() {
             return Err(ControlError::InvalidParameter);
         }
-        let table = GainTable::build(|yaw| Ok(design_discrete(&euler_hover_model(&p64, yaw), q, r, ts)?.k))?;
-        Ok(Self {
-            bx: params.input_box(),
-            params,
-            table,
-            mode,
-        })
+        self.bx = params.input_box();
+        self.params = params;
+        self.mode = mode;
+        self.table
+            .redesign(|yaw| Ok(design_discrete(&euler_hover_model(&p64, yaw), q, r, ts)?.k))
     }
 
     /// The thesis weights (Table 4.5).
     pub fn thesis(params: VehicleParams<T>, ts: f64, mode: ReferenceMode) -> Result<Self, ControlError> {
         let (q, r) = euler_weights();
         Self::new(params, &q, &r, ts, mode)
+    }
+
+    /// [`LqrEuler::redesign`] with the thesis weights (Table 4.5).
+    pub fn redesign_thesis(
+        &mut self,
+        params: VehicleParams<T>,
+        ts: f64,
+        mode: ReferenceMode,
+    ) -> Result<(), ControlError> {
+        let (q, r) = euler_weights();
+        self.redesign(params, &q, &r, ts, mode)
     }
 
     /// The scheduled gain at heading `yaw` (rad).

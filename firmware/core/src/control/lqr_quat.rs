@@ -37,6 +37,9 @@ impl<T: RealField + Copy> LqrQuat<T> {
     /// Designs the discrete gain at sample time `ts` (s) for the model
     /// `params` with weights `q`, `r` (continuous-time, per second). The x and
     /// y weights (and those of ẋ, ẏ) must be equal for the heading symmetry.
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
     pub fn new(
         params: VehicleParams<T>,
         q: &SMatrix<f64, 12, 12>,

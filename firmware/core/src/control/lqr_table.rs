@@ -4,7 +4,7 @@
 use super::ControlError;
 use crate::linalg::{solve_care, solve_dare, RiccatiSolution};
 use crate::lit;
-use crate::model::{zoh, LinearModel};
+use crate::model::{zoh_into, LinearModel};
 use nalgebra::{RealField, SMatrix};
 
 /// LQR gain `K` (4 inputs × 12 states).
@@ -25,15 +25,32 @@ impl<T: RealField + Copy, const H: usize> GainTable<T, H> {
     /// Number of headings in the table.
     pub const LEN: usize = H;
 
+    /// A table of zero gains (storage for [`GainTable::redesign`]).
+    pub fn zeros() -> Self {
+        Self {
+            gains: [Gain::<T>::zeros(); H],
+        }
+    }
+
     /// Designs every entry with `design(heading_rad)`; fails on the first error.
-    pub fn build(mut design: impl FnMut(f64) -> Result<Gain<f64>, ControlError>) -> Result<Self, ControlError> {
+    pub fn build(design: impl FnMut(f64) -> Result<Gain<f64>, ControlError>) -> Result<Self, ControlError> {
+        let mut me = Self::zeros();
+        me.redesign(design)?;
+        Ok(me)
+    }
+
+    /// Designs every entry in place with `design(heading_rad)`; fails on the
+    /// first error (then the table is incomplete: design it again).
+    pub fn redesign(
+        &mut self,
+        mut design: impl FnMut(f64) -> Result<Gain<f64>, ControlError>,
+    ) -> Result<(), ControlError> {
         // A table without entries is a type that cannot exist (compile error).
         const { assert!(H > 0, "a gain table needs at least one heading") };
-        let mut gains = [Gain::<T>::zeros(); H];
-        for (i, g) in gains.iter_mut().enumerate() {
+        for (i, g) in self.gains.iter_mut().enumerate() {
             *g = design(Self::heading(i))?.map(|v| lit::<T>(v));
         }
-        Ok(Self { gains })
+        Ok(())
     }
 
     /// The gain at heading `yaw` (rad, any value), interpolated between the
@@ -80,6 +97,12 @@ pub fn design_discrete(
     if !(ts.is_finite() && ts > 0.0) {
         return Err(ControlError::InvalidParameter);
     }
-    let (ad, bd) = zoh(&lm.a, &lm.b, ts)?;
-    Ok(solve_dare(&ad, &bd, &(q * ts), &(r * ts))?)
+    let mut ad = SMatrix::<f64, 12, 12>::zeros();
+    let mut bd = SMatrix::<f64, 12, 4>::zeros();
+    zoh_into(&lm.a, &lm.b, ts, &mut ad, &mut bd)?;
+    let mut qs = *q;
+    qs.scale_mut(ts);
+    let mut rs = *r;
+    rs.scale_mut(ts);
+    Ok(solve_dare(&ad, &bd, &qs, &rs)?)
 }

@@ -327,6 +327,57 @@ pub enum AnyController<T: RealField + Copy> {
     MpcFast(MpcFast<T>),
 }
 
+// Switching the variant of a slot: each in its own out-of-line function, so
+// that the blank controller's temporary (≈ 7 KiB) lives in a frame that is
+// gone before the design (which runs in the slot) starts.
+impl<T: RealField + Copy> AnyController<T> {
+    /// Makes the slot an Euler PD with `gains`.
+    #[inline(never)]
+    pub(crate) fn become_pdeuler(
+        &mut self,
+        p: crate::model::VehicleParams<T>,
+        gains: PdEulerGains<T>,
+        mode: ReferenceMode,
+    ) {
+        *self = AnyController::PdEuler(PdEuler::new(p, gains, mode));
+    }
+
+    /// Makes the slot a quaternion PD with `gains`.
+    #[inline(never)]
+    pub(crate) fn become_pdquat(
+        &mut self,
+        p: crate::model::VehicleParams<T>,
+        gains: PdQuatGains<T>,
+        mode: ReferenceMode,
+    ) {
+        *self = AnyController::PdQuat(PdQuat::new(p, gains, mode));
+    }
+
+    /// Makes the slot the (small, already designed) quaternion LQR `c`.
+    #[inline(never)]
+    pub(crate) fn become_lqrquat(&mut self, c: LqrQuat<T>) {
+        *self = AnyController::LqrQuat(c);
+    }
+
+    /// Makes the slot a blank scheduled Euler LQR (see [`LqrEuler::blank`]).
+    #[inline(never)]
+    pub(crate) fn become_lqreuler(&mut self, p: crate::model::VehicleParams<T>, mode: ReferenceMode) {
+        *self = AnyController::LqrEuler(LqrEuler::blank(p, mode));
+    }
+
+    /// Makes the slot a blank `fast`-sized MPC (see [`Mpc::blank`]).
+    #[inline(never)]
+    pub(crate) fn become_mpcfast(&mut self, p: crate::model::VehicleParams<T>, cfg: MpcConfig) {
+        *self = AnyController::MpcFast(MpcFast::blank(p, cfg));
+    }
+
+    /// Makes the slot a blank `thesis`-sized MPC (see [`Mpc::blank`]).
+    #[inline(never)]
+    pub(crate) fn become_mpcthesis(&mut self, p: crate::model::VehicleParams<T>, cfg: MpcConfig) {
+        *self = AnyController::MpcThesis(MpcThesis::blank(p, cfg));
+    }
+}
+
 impl<T: RealField + Copy> Controller<T> for AnyController<T> {
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         match self {

@@ -35,7 +35,7 @@ use super::{
 use crate::linalg::solve_dare;
 use crate::lit;
 use crate::model::{
-    euler_hover_model, quat_hover_model, quat_to_euler, zoh, AttitudeForm, InputBox, LinearModel, VehicleParams,
+    euler_hover_model, quat_hover_model, quat_to_euler, zoh_into, AttitudeForm, InputBox, LinearModel, VehicleParams,
 };
 use crate::qp::{BoxQp, QpSettings, QpSolution};
 use nalgebra::{RealField, SMatrix, SVector, Vector3, Vector4};
@@ -234,6 +234,86 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     last_qp: Option<MpcQp<T, NZ>>,
 }
 
+/// The f64 matrices of one discretisation, in one place: the continuous
+/// hover model with the disturbance inputs appended, `[B | Bw]` (Bw =
+/// acceleration on ẋ ẏ ż, angular acceleration on ṗ q̇ ṙ), and its ZOH.
+struct ModelWork {
+    a: SMatrix<f64, 12, 12>,
+    b_all: SMatrix<f64, 12, 10>,
+    ad: SMatrix<f64, 12, 12>,
+    bd_all: SMatrix<f64, 12, 10>,
+}
+
+impl ModelWork {
+    /// The hover model of `form` for `p64` (ZOH parts zero).
+    fn hover(form: AttitudeForm, p64: &VehicleParams<f64>) -> Self {
+        let lm: LinearModel<f64> = match form {
+            AttitudeForm::Euler => euler_hover_model(p64, 0.0),
+            AttitudeForm::Quaternion => quat_hover_model(p64, 0.0),
+        };
+        let mut b_all = SMatrix::<f64, 12, 10>::zeros();
+        b_all.fixed_columns_mut::<4>(0).copy_from(&lm.b);
+        for i in 0..3 {
+            b_all[(3 + i, 4 + i)] = 1.0;
+            b_all[(9 + i, 7 + i)] = 1.0;
+        }
+        Self {
+            a: lm.a,
+            b_all,
+            ad: SMatrix::zeros(),
+            bd_all: SMatrix::zeros(),
+        }
+    }
+
+    /// Exact ZOH at `dt` (s) into `ad`, `bd_all`.
+    fn zoh(&mut self, dt: f64) -> Result<(), ControlError> {
+        Ok(zoh_into(&self.a, &self.b_all, dt, &mut self.ad, &mut self.bd_all)?)
+    }
+
+    /// The discrete model in the controller's float type: state matrix,
+    /// input matrix, disturbance matrix.
+    fn store<T: RealField + Copy>(&self, ad: &mut Mat12<T>, bd: &mut SMatrix<T, 12, 4>, wd: &mut SMatrix<T, 12, 6>) {
+        cast_into(ad, &self.ad);
+        cast_into(bd, &self.bd_all.fixed_columns::<4>(0));
+        cast_into(wd, &self.bd_all.fixed_columns::<6>(4));
+    }
+}
+
+/// `dst = src` converted from the f64 design to the controller's float type.
+fn cast_into<T, const R: usize, const C: usize, S>(
+    dst: &mut SMatrix<T, R, C>,
+    src: &nalgebra::Matrix<f64, nalgebra::Const<R>, nalgebra::Const<C>, S>,
+) where
+    T: RealField + Copy,
+    S: nalgebra::storage::Storage<f64, nalgebra::Const<R>, nalgebra::Const<C>>,
+{
+    for i in 0..R {
+        for j in 0..C {
+            dst[(i, j)] = lit(src[(i, j)]);
+        }
+    }
+}
+
+/// The terminal weight of `cfg` for the prediction model `(ad, bd)`: the
+/// DARE's solution of (Q, R) when `cfg.terminal`, else Q.
+// Design-time code: kept out of line so that its large frames are not
+// merged into the callers' (stack) and not copied into each (flash).
+#[inline(never)]
+fn terminal_weight<T: RealField + Copy>(
+    cfg: &MpcConfig,
+    ad: &SMatrix<f64, 12, 12>,
+    bd: &SMatrix<f64, 12, 4>,
+) -> Result<Mat12<T>, ControlError> {
+    let q = SMatrix::<f64, 12, 12>::from_diagonal(&Vec12::<f64>::from(cfg.q));
+    Ok(if cfg.terminal {
+        // A tiny input weight keeps R invertible when the config has zeros.
+        let rr = SMatrix::<f64, 4, 4>::from_diagonal(&Vector4::<f64>::from(cfg.r).map(|v| v.max(1e-6)));
+        solve_dare(ad, bd, &q, &rr)?.x.map(lit)
+    } else {
+        q.map(lit)
+    })
+}
+
 /// Which prediction steps belong to which move (the last move is held).
 #[inline]
 fn block_of<const M: usize>(k: usize) -> usize {
@@ -245,70 +325,41 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     pub const HORIZON: usize = N;
 
     /// Builds the MPC for the controller's vehicle `params`. Everything that
-    /// does not depend on the measured state is computed here.
+    /// does not depend on the measured state is computed here
+    /// ([`Mpc::redesign`] on a blank controller).
+    pub fn new(params: VehicleParams<T>, cfg: MpcConfig) -> Result<Self, ControlError> {
+        let mut me = Self::blank(params, cfg);
+        me.redesign(params, cfg)?;
+        Ok(me)
+    }
+
+    /// An MPC with every matrix zero and the QP an identity: the storage
+    /// that [`Mpc::redesign`] fills in place. Not a controller until then.
     // Design-time code: kept out of line so that its large frames are not
     // merged into the callers' (stack) and not copied into each (flash).
     #[inline(never)]
-    pub fn new(params: VehicleParams<T>, cfg: MpcConfig) -> Result<Self, ControlError> {
+    pub fn blank(params: VehicleParams<T>, cfg: MpcConfig) -> Self {
         // The sizes are checked when the type is instantiated (compile errors).
         const {
             assert!(N > 0 && M > 0 && M <= N, "an MPC needs 1 ≤ M ≤ N");
             assert!(NZ == 4 * M, "NZ must be 4·M (four inputs per move)");
         };
-        let p64: VehicleParams<f64> = params.cast();
-        let ok_dt = |v: f64| v.is_finite() && v > 0.0;
-        if !p64.is_valid() || !ok_dt(cfg.pred_dt_s) || !ok_dt(cfg.exec_dt_s) {
-            return Err(ControlError::InvalidParameter);
-        }
-        let lm: LinearModel<f64> = match cfg.form {
-            AttitudeForm::Euler => euler_hover_model(&p64, 0.0),
-            AttitudeForm::Quaternion => quat_hover_model(&p64, 0.0),
-        };
-        // Disturbance inputs: acceleration on ẋ ẏ ż, angular acceleration on ṗ q̇ ṙ.
-        let mut bw = SMatrix::<f64, 12, 6>::zeros();
-        for i in 0..3 {
-            bw[(3 + i, i)] = 1.0;
-            bw[(9 + i, 3 + i)] = 1.0;
-        }
-        let mut b_all = SMatrix::<f64, 12, 10>::zeros();
-        b_all.fixed_columns_mut::<4>(0).copy_from(&lm.b);
-        b_all.fixed_columns_mut::<6>(4).copy_from(&bw);
-        let (ad, b_p) = zoh(&lm.a, &b_all, cfg.pred_dt_s)?;
-        let (ad_e, b_e) = zoh(&lm.a, &b_all, cfg.exec_dt_s)?;
-        let q = Vec12::<f64>::from(cfg.q);
-        let r = Vector4::<f64>::from(cfg.r);
-        let s = Vector4::<f64>::from(cfg.s);
-        if q.iter()
-            .chain(r.iter())
-            .chain(s.iter())
-            .any(|v| !v.is_finite() || *v < 0.0)
-        {
-            return Err(ControlError::InvalidParameter);
-        }
-        let bd: SMatrix<f64, 12, 4> = b_p.fixed_columns::<4>(0).into_owned();
-        let p_term = if cfg.terminal {
-            // A tiny input weight keeps R invertible when the config has zeros.
-            let rr = SMatrix::<f64, 4, 4>::from_diagonal(&r.map(|v| v.max(1e-6)));
-            solve_dare(&ad, &bd, &SMatrix::from_diagonal(&q), &rr)?.x
-        } else {
-            SMatrix::from_diagonal(&q)
-        };
-        let mut me = Self {
+        Self {
             cfg,
             bx: params.input_box(),
             u_hover: crate::model::hover_input(&params),
             params,
-            ad: ad.map(lit),
-            bd: bd.map(lit),
-            wd: b_p.fixed_columns::<6>(4).into_owned().map(lit),
-            ad_e: ad_e.map(lit),
-            bd_e: b_e.fixed_columns::<4>(0).into_owned().map(lit),
-            wd_e: b_e.fixed_columns::<6>(4).into_owned().map(lit),
-            q: q.map(lit),
-            p_term: p_term.map(lit),
-            r: r.map(lit),
-            s: s.map(lit),
-            qp: BoxQp::new(&SMatrix::<T, NZ, NZ>::identity()).map_err(|_| ControlError::InvalidParameter)?,
+            ad: Mat12::zeros(),
+            bd: SMatrix::zeros(),
+            wd: SMatrix::zeros(),
+            ad_e: Mat12::zeros(),
+            bd_e: SMatrix::zeros(),
+            wd_e: SMatrix::zeros(),
+            q: Vec12::zeros(),
+            p_term: Mat12::zeros(),
+            r: Vector4::zeros(),
+            s: Vector4::zeros(),
+            qp: BoxQp::identity(),
             lb: SVector::zeros(),
             ub: SVector::zeros(),
             settings: QpSettings {
@@ -327,28 +378,99 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             trend: [T::zero(); N],
             last: None,
             last_qp: None,
+        }
+    }
+
+    /// Designs this MPC in place for the vehicle `params` and `cfg`, as
+    /// [`Mpc::new`] would, and clears its run-time state. The design's f64
+    /// scratch lives in the frames of the steps below, one at a time, so
+    /// that designing on a microcontroller needs a few KiB of stack, not a
+    /// second controller's worth. On error the controller is not usable
+    /// (design it again, or another one).
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
+    pub fn redesign(&mut self, params: VehicleParams<T>, cfg: MpcConfig) -> Result<(), ControlError> {
+        let p64: VehicleParams<f64> = params.cast();
+        let ok_dt = |v: f64| v.is_finite() && v > 0.0;
+        if !p64.is_valid() || !ok_dt(cfg.pred_dt_s) || !ok_dt(cfg.exec_dt_s) {
+            return Err(ControlError::InvalidParameter);
+        }
+        if cfg
+            .q
+            .iter()
+            .chain(cfg.r.iter())
+            .chain(cfg.s.iter())
+            .any(|v| !v.is_finite() || *v < 0.0)
+        {
+            return Err(ControlError::InvalidParameter);
+        }
+        self.cfg = cfg;
+        self.bx = params.input_box();
+        self.u_hover = crate::model::hover_input(&params);
+        self.params = params;
+        self.settings = QpSettings {
+            tolerance: lit(cfg.qp_tolerance),
+            accuracy: lit(cfg.qp_accuracy),
+            max_iterations: cfg.qp_max_iterations,
+            polish: true,
         };
+        self.trend = [T::zero(); N];
+        self.preview = [Setpoint::hold(Vector3::zeros(), T::zero()); N];
+        Controller::reset(self);
+        self.q = Vec12::<f64>::from(cfg.q).map(lit);
+        self.r = Vector4::<f64>::from(cfg.r).map(lit);
+        self.s = Vector4::<f64>::from(cfg.s).map(lit);
+        self.design_prediction(&p64)?;
+        self.design_observer(&p64)?;
         if let Some(tt) = cfg.disturbance_trend_s {
             let max = cfg.disturbance_trend_max_mps2;
             let filter_ok = cfg.disturbance_rate_filter_s.is_finite() && cfg.disturbance_rate_filter_s > cfg.exec_dt_s;
             if !ok_dt(tt) || !filter_ok || !max.is_finite() || max < 0.0 {
                 return Err(ControlError::InvalidParameter);
             }
-            for (k, t) in me.trend.iter_mut().enumerate() {
+            for (k, t) in self.trend.iter_mut().enumerate() {
                 let tau = (k as f64 + 0.5) * cfg.pred_dt_s;
                 *t = lit(tt * (1.0 - libm::exp(-tau / tt)));
             }
         }
-        let h = me.build_hessian();
-        me.qp = BoxQp::new(&h).map_err(|_| ControlError::InvalidParameter)?;
+        self.design_qp()
+    }
+
+    /// Prediction model (ZOH at `pred_dt`) and the terminal weight (DARE of
+    /// (Q, R), or Q).
+    #[inline(never)]
+    fn design_prediction(&mut self, p64: &VehicleParams<f64>) -> Result<(), ControlError> {
+        let mut w = ModelWork::hover(self.cfg.form, p64);
+        w.zoh(self.cfg.pred_dt_s)?;
+        w.store(&mut self.ad, &mut self.bd, &mut self.wd);
+        let bd: SMatrix<f64, 12, 4> = w.bd_all.fixed_columns::<4>(0).into_owned();
+        self.p_term = terminal_weight(&self.cfg, &w.ad, &bd)?;
+        Ok(())
+    }
+
+    /// Observer model (ZOH at `exec_dt`).
+    #[inline(never)]
+    fn design_observer(&mut self, p64: &VehicleParams<f64>) -> Result<(), ControlError> {
+        let mut w = ModelWork::hover(self.cfg.form, p64);
+        w.zoh(self.cfg.exec_dt_s)?;
+        w.store(&mut self.ad_e, &mut self.bd_e, &mut self.wd_e);
+        Ok(())
+    }
+
+    /// The condensed Hessian, its QP solver and the box of the moves.
+    #[inline(never)]
+    fn design_qp(&mut self) -> Result<(), ControlError> {
+        let h = self.build_hessian();
+        self.qp = BoxQp::new(&h).map_err(|_| ControlError::InvalidParameter)?;
         for b in 0..M {
             for c in 0..4 {
-                me.lb[4 * b + c] = me.bx.lo[c] - me.u_hover[c];
-                me.ub[4 * b + c] = me.bx.hi[c] - me.u_hover[c];
+                self.lb[4 * b + c] = self.bx.lo[c] - self.u_hover[c];
+                self.ub[4 * b + c] = self.bx.hi[c] - self.u_hover[c];
             }
         }
-        me.iteration_bound = me.qp.iteration_bound(&me.lb, &me.ub, me.settings.accuracy);
-        Ok(me)
+        self.iteration_bound = self.qp.iteration_bound(&self.lb, &self.ub, self.settings.accuracy);
+        Ok(())
     }
 
     /// The constant QP Hessian.

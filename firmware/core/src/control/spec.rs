@@ -12,8 +12,8 @@
 //! loop on the MCU and the wire all go through here.
 
 use super::{
-    AnyController, ControlError, LqrEuler, LqrQuat, MpcConfig, MpcFast, MpcThesis, PdEuler, PdEulerGains, PdQuat,
-    PdQuatGains, ReferenceMode,
+    AnyController, ControlError, LqrQuat, MpcConfig, MpcFast, MpcThesis, PdEuler, PdEulerGains, PdQuatGains,
+    ReferenceMode,
 };
 use crate::model::{AttitudeForm, VehicleParams};
 use core::fmt;
@@ -291,18 +291,60 @@ impl ControllerSpec {
         control_period_s: f64,
         mpc: Option<MpcConfig>,
     ) -> Result<AnyController<T>, ControlError> {
+        let mut c = AnyController::PdEuler(PdEuler::new(p, PdEulerGains::tuned(), self.reference));
+        self.build_in(&mut c, p, control_period_s, mpc)?;
+        Ok(c)
+    }
+
+    /// Builds the controller in place, in `slot` (the controller it held is
+    /// replaced): what the firmware does, so that the large controllers
+    /// (MPC, scheduled LQR, ≈ 7 KiB each) are designed where they live
+    /// instead of being built on the stack and moved. `mpc` as in
+    /// [`ControllerSpec::build_with`]. On error `slot` holds no usable
+    /// controller: build one again (the flight loop rebuilds the previous).
+    pub fn build_in<T: RealField + Copy>(
+        &self,
+        slot: &mut AnyController<T>,
+        p: VehicleParams<T>,
+        control_period_s: f64,
+        mpc: Option<MpcConfig>,
+    ) -> Result<(), ControlError> {
         let mode = self.reference;
         let ts = control_period_s;
-        Ok(match (self.family, self.form, self.preset) {
-            (Pd, Euler, Project) => AnyController::PdEuler(PdEuler::new(p, PdEulerGains::tuned(), mode)),
-            (Pd, Euler, Thesis) => AnyController::PdEuler(PdEuler::new(p, PdEulerGains::thesis(), mode)),
-            (Pd, Quaternion, Project) => AnyController::PdQuat(PdQuat::new(p, PdQuatGains::tuned(), mode)),
-            (Pd, Quaternion, Thesis) => AnyController::PdQuat(PdQuat::new(p, PdQuatGains::thesis(), mode)),
-            (Lqr, Euler, _) => AnyController::LqrEuler(LqrEuler::thesis(p, ts, mode)?),
-            (Lqr, Quaternion, _) => AnyController::LqrQuat(LqrQuat::thesis(p, ts, mode)?),
-            (Mpc, form, Project) => AnyController::MpcFast(MpcFast::new(p, mpc.unwrap_or(MpcConfig::fast(form)))?),
-            (Mpc, form, Thesis) => AnyController::MpcThesis(MpcThesis::new(p, mpc.unwrap_or(MpcConfig::thesis(form)))?),
-        })
+        match (self.family, self.form, self.preset) {
+            (Pd, Euler, Project) => slot.become_pdeuler(p, PdEulerGains::tuned(), mode),
+            (Pd, Euler, Thesis) => slot.become_pdeuler(p, PdEulerGains::thesis(), mode),
+            (Pd, Quaternion, Project) => slot.become_pdquat(p, PdQuatGains::tuned(), mode),
+            (Pd, Quaternion, Thesis) => slot.become_pdquat(p, PdQuatGains::thesis(), mode),
+            (Lqr, Euler, _) => {
+                if !matches!(slot, AnyController::LqrEuler(_)) {
+                    slot.become_lqreuler(p, mode);
+                }
+                if let AnyController::LqrEuler(c) = slot {
+                    c.redesign_thesis(p, ts, mode)?;
+                }
+            }
+            (Lqr, Quaternion, _) => slot.become_lqrquat(LqrQuat::thesis(p, ts, mode)?),
+            (Mpc, form, Project) => {
+                let cfg = mpc.unwrap_or(MpcConfig::fast(form));
+                if !matches!(slot, AnyController::MpcFast(_)) {
+                    slot.become_mpcfast(p, cfg);
+                }
+                if let AnyController::MpcFast(c) = slot {
+                    c.redesign(p, cfg)?;
+                }
+            }
+            (Mpc, form, Thesis) => {
+                let cfg = mpc.unwrap_or(MpcConfig::thesis(form));
+                if !matches!(slot, AnyController::MpcThesis(_)) {
+                    slot.become_mpcthesis(p, cfg);
+                }
+                if let AnyController::MpcThesis(c) = slot {
+                    c.redesign(p, cfg)?;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The wire form: `(id, feedforward)` as the protocol's `Select` carries it.
@@ -380,6 +422,40 @@ mod tests {
             }
         }
         assert_eq!(ControllerSpec::from_wire(200, true), Err(SpecError::UnknownWireId(200)));
+    }
+
+    #[test]
+    fn designing_in_place_over_any_controller_equals_a_fresh_design() {
+        // Every spec built into a slot that held every other spec (the state
+        // a flight controller's slot is in after a selection) must be the
+        // controller a fresh build gives, to the bit: nothing of the
+        // previous occupant (gains, Hessian, observer state) survives.
+        extern crate std;
+        use std::format;
+        let p = VehicleParams::<f32>::os4();
+        let specs: std::vec::Vec<ControllerSpec> = SPECS
+            .iter()
+            .map(|r| ControllerSpec::new(r.family, r.form).with_preset(r.preset))
+            .collect();
+        for s in &specs {
+            let fresh = format!("{:?}", s.build(p, 0.001).expect("design"));
+            for before in &specs {
+                let mut slot = before.build(p, 0.001).expect("design");
+                // Fly it a little, off the setpoint, so its run-time state is not the initial one.
+                let sp = crate::control::Setpoint::hold(nalgebra::Vector3::new(0.0, 0.0, -1.0), 0.0);
+                let est = crate::control::StateEstimate {
+                    pos_ned_m: nalgebra::Vector3::new(0.3, -0.2, -0.8),
+                    vel_ned_mps: nalgebra::Vector3::new(0.1, 0.0, 0.05),
+                    att: crate::model::euler_to_quat(0.05, -0.03, 0.2),
+                    rates_frd_radps: nalgebra::Vector3::new(0.01, 0.02, -0.01),
+                };
+                for _ in 0..3 {
+                    crate::control::Controller::update(&mut slot, &est, &sp).expect("step");
+                }
+                s.build_in(&mut slot, p, 0.001, None).expect("design in place");
+                assert_eq!(format!("{slot:?}"), fresh, "{} over {}", s.name(), before.name());
+            }
+        }
     }
 
     #[test]

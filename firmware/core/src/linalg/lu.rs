@@ -3,21 +3,27 @@
 
 use nalgebra::{RealField, SMatrix};
 
-/// Solves `A X = B` for square `A` (N×N) and `B` (N×C) by Gaussian
-/// elimination with partial pivoting. `None` if `A` is singular to working
-/// precision or the result is not finite. O(N³ + N²C), no allocation.
+/// Row exchanges of an LU factorisation: at elimination step `k` row `k`
+/// was swapped with row `pivots[k]` (≥ k).
+pub type Pivots<const N: usize> = [usize; N];
+
+/// Factors `A` (N×N) in place by Gaussian elimination with partial
+/// pivoting: afterwards the upper triangle holds U and the part below the
+/// diagonal the multipliers of each step where that step computed them (not
+/// permuted by later exchanges, unlike LAPACK's `getrf`), and `pivots` the row exchanges. `false` if
+/// `A` is singular to working precision or not finite (then `A` is garbage).
+/// O(N³), no allocation, no copy of `A`: the design code factors its
+/// scratch matrices where they lie.
 // Design-time code: kept out of line so that its large frames are not
 // merged into the callers' (stack) and not copied into each (flash).
 #[inline(never)]
-pub fn lu_solve<T: RealField + Copy, const N: usize, const C: usize>(
-    a: &SMatrix<T, N, N>,
-    b: &SMatrix<T, N, C>,
-) -> Option<SMatrix<T, N, C>> {
-    let mut m = *a;
-    let mut x = *b;
+pub fn lu_factor_in_place<T: RealField + Copy, const N: usize>(
+    m: &mut SMatrix<T, N, N>,
+    pivots: &mut Pivots<N>,
+) -> bool {
     let scale = m.amax();
     if !(scale.is_finite() && scale > T::zero()) {
-        return None;
+        return false;
     }
     let tiny = scale * T::default_epsilon() * nalgebra::convert::<f64, T>(N as f64);
     for k in 0..N {
@@ -32,11 +38,16 @@ pub fn lu_solve<T: RealField + Copy, const N: usize, const C: usize>(
             }
         }
         if best <= tiny || !best.is_finite() {
-            return None;
+            return false;
         }
+        pivots[k] = piv;
         if piv != k {
-            m.swap_rows(piv, k);
-            x.swap_rows(piv, k);
+            // Only the active columns: the multipliers left of k stay in the
+            // rows they were computed for, so that `lu_apply_in_place` replays
+            // the elimination exactly.
+            for j in k..N {
+                m.swap((piv, j), (k, j));
+            }
         }
         let d = T::one() / m[(k, k)];
         for i in (k + 1)..N {
@@ -46,30 +57,62 @@ pub fn lu_solve<T: RealField + Copy, const N: usize, const C: usize>(
                     let v = m[(k, j)];
                     m[(i, j)] -= f * v;
                 }
+            }
+            m[(i, k)] = f;
+        }
+    }
+    true
+}
+
+/// Solves `A X = B` in place (`x` holds B on entry, X on return) from the
+/// factors of [`lu_factor_in_place`]: the same row operations, in the same
+/// order, as eliminating `[A | B]` at once. `false` if X is not finite.
+// Design-time code: see `lu_factor_in_place`.
+#[inline(never)]
+pub fn lu_apply_in_place<T: RealField + Copy, const N: usize, const C: usize>(
+    lu: &SMatrix<T, N, N>,
+    pivots: &Pivots<N>,
+    x: &mut SMatrix<T, N, C>,
+) -> bool {
+    for k in 0..N {
+        if pivots[k] != k {
+            x.swap_rows(pivots[k], k);
+        }
+        for i in (k + 1)..N {
+            let f = lu[(i, k)];
+            if f != T::zero() {
                 for j in 0..C {
                     let v = x[(k, j)];
                     x[(i, j)] -= f * v;
                 }
             }
-            m[(i, k)] = T::zero();
         }
     }
     // Back substitution.
     for k in (0..N).rev() {
-        let d = T::one() / m[(k, k)];
+        let d = T::one() / lu[(k, k)];
         for j in 0..C {
             let mut s = x[(k, j)];
             for i in (k + 1)..N {
-                s -= m[(k, i)] * x[(i, j)];
+                s -= lu[(k, i)] * x[(i, j)];
             }
             x[(k, j)] = s * d;
         }
     }
-    if x.iter().all(|v| v.is_finite()) {
-        Some(x)
-    } else {
-        None
-    }
+    x.iter().all(|v| v.is_finite())
+}
+
+/// Solves `A X = B` for square `A` (N×N) and `B` (N×C) by Gaussian
+/// elimination with partial pivoting. `None` if `A` is singular to working
+/// precision or the result is not finite. O(N³ + N²C), no allocation.
+pub fn lu_solve<T: RealField + Copy, const N: usize, const C: usize>(
+    a: &SMatrix<T, N, N>,
+    b: &SMatrix<T, N, C>,
+) -> Option<SMatrix<T, N, C>> {
+    let mut m = *a;
+    let mut x = *b;
+    let mut pivots = [0; N];
+    (lu_factor_in_place(&mut m, &mut pivots) && lu_apply_in_place(&m, &pivots, &mut x)).then_some(x)
 }
 
 /// Inverse of a square matrix via [`lu_solve`]; `None` when singular.

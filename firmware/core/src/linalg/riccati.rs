@@ -11,7 +11,8 @@
 //! Each doubling step is `W = I + GH`, `A ← A W⁻¹ A`, `G ← G + A W⁻¹ G Aᵀ`,
 //! `H ← H + Aᵀ H W⁻¹ A`; `H` converges quadratically to the stabilising `X`.
 
-use super::lu::{inverse, lu_solve};
+use super::lu::{inverse, lu_apply_in_place, lu_factor_in_place, lu_solve};
+use super::mul_into;
 use crate::lit;
 use nalgebra::{RealField, SMatrix};
 
@@ -81,54 +82,143 @@ fn check_residual<T: RealField + Copy, const N: usize>(res: &SMatrix<T, N, N>, s
     }
 }
 
-/// The SDA doubling loop from `(A₀, G₀, H₀)`; returns `H∞` and the steps taken.
-// Design-time code: kept out of line so that its large frames are not
-// merged into the callers' (stack) and not copied into each (flash).
+/// Symmetrises `m` in place: `(M + Mᵀ)/2`, entry by entry as the
+/// expression would compute it (so the diagonal is `(m + m)/2`, too).
 #[inline(never)]
-fn doubling<T: RealField + Copy, const N: usize>(
-    mut a: SMatrix<T, N, N>,
-    mut g: SMatrix<T, N, N>,
-    mut h: SMatrix<T, N, N>,
-) -> Result<(SMatrix<T, N, N>, u32), RiccatiError> {
-    let id = SMatrix::<T, N, N>::identity();
-    let tol = tolerance::<T>();
-    for it in 1..=MAX_DOUBLINGS {
-        let w = id + g * h;
-        let wa = lu_solve(&w, &a).ok_or(RiccatiError::Singular)?; // W⁻¹A
-        let wg = lu_solve(&w, &g).ok_or(RiccatiError::Singular)?; // W⁻¹G
-        let h_next = symmetrise(&(h + a.transpose() * h * wa));
-        let g_next = symmetrise(&(g + a * wg * a.transpose()));
-        let a_next = a * wa;
-        if !(finite(&h_next) && finite(&g_next) && finite(&a_next)) {
+fn symmetrise_in_place<T: RealField + Copy, const N: usize>(m: &mut SMatrix<T, N, N>) {
+    let half = lit::<T>(0.5);
+    for i in 0..N {
+        for j in i..N {
+            let v = (m[(i, j)] + m[(j, i)]) * half;
+            m[(i, j)] = v;
+            m[(j, i)] = v;
+        }
+    }
+}
+
+/// The doubling's workspace: the iterates and the products of one step,
+/// every one a named N×N buffer written in place, no temporaries (with
+/// N = 12 in f64, ≈ 8 KiB: the largest frame of a design).
+struct Sda<T: RealField + Copy, const N: usize> {
+    /// `Aₖ`.
+    a: SMatrix<T, N, N>,
+    /// `Gₖ`.
+    g: SMatrix<T, N, N>,
+    /// `Hₖ` (→ X).
+    h: SMatrix<T, N, N>,
+    /// `W = I + GH`, then its LU factors; then `A·W⁻¹G`, `AᵀH`; then `Aₖ₊₁`.
+    w: SMatrix<T, N, N>,
+    /// `W⁻¹A`.
+    wa: SMatrix<T, N, N>,
+    /// `W⁻¹G`, then `Gₖ₊₁`.
+    wg: SMatrix<T, N, N>,
+    /// `Aᵀ`, then `Hₖ₊₁`.
+    at: SMatrix<T, N, N>,
+    /// Row exchanges of W's factors.
+    pivots: super::lu::Pivots<N>,
+}
+
+impl<T: RealField + Copy, const N: usize> Sda<T, N> {
+    /// One doubling step `(A, G, H) → (A W⁻¹A, G + A W⁻¹G Aᵀ, H + AᵀH W⁻¹A)`,
+    /// both sums symmetrised; returns `(‖Hₖ₊₁ − Hₖ‖max, ‖Hₖ₊₁‖max)`.
+    fn step(&mut self) -> Result<(T, T), RiccatiError> {
+        let one = T::one();
+        mul_into(&self.g, &self.h, &mut self.w);
+        for i in 0..N {
+            self.w[(i, i)] += one;
+        }
+        if !lu_factor_in_place(&mut self.w, &mut self.pivots) {
+            return Err(RiccatiError::Singular);
+        }
+        self.wa.copy_from(&self.a);
+        self.wg.copy_from(&self.g);
+        if !(lu_apply_in_place(&self.w, &self.pivots, &mut self.wa)
+            && lu_apply_in_place(&self.w, &self.pivots, &mut self.wg))
+        {
+            return Err(RiccatiError::Singular);
+        }
+        self.a.transpose_to(&mut self.at);
+        // Gₖ₊₁ = sym(G + (A W⁻¹G) Aᵀ), into wg.
+        mul_into(&self.a, &self.wg, &mut self.w);
+        mul_into(&self.w, &self.at, &mut self.wg);
+        self.wg += &self.g;
+        symmetrise_in_place(&mut self.wg);
+        // Hₖ₊₁ = sym(H + (AᵀH)(W⁻¹A)), into at.
+        mul_into(&self.at, &self.h, &mut self.w);
+        mul_into(&self.w, &self.wa, &mut self.at);
+        self.at += &self.h;
+        symmetrise_in_place(&mut self.at);
+        // Aₖ₊₁ = A W⁻¹A, into w.
+        mul_into(&self.a, &self.wa, &mut self.w);
+        if !(finite(&self.at) && finite(&self.wg) && finite(&self.w)) {
             return Err(RiccatiError::NotConverged);
         }
         // Max-norms: no squaring, so no overflow before the finiteness check.
-        let change = (h_next - h).amax();
-        let scale = h_next.amax();
-        h = h_next;
-        g = g_next;
-        a = a_next;
-        if scale.is_finite() && (change <= tol * scale || a.amax() <= tol) {
-            return Ok((h, it));
+        let mut change = T::zero();
+        for (n, o) in self.at.iter().zip(self.h.iter()) {
+            change = change.max((*n - *o).abs());
         }
+        let scale = self.at.amax();
+        core::mem::swap(&mut self.h, &mut self.at);
+        core::mem::swap(&mut self.g, &mut self.wg);
+        core::mem::swap(&mut self.a, &mut self.w);
+        Ok((change, scale))
     }
-    Err(RiccatiError::NotConverged)
 }
 
-/// Checks the data and forms `R⁻¹` and `G = BR⁻¹Bᵀ`, shared by both equations.
-#[allow(clippy::type_complexity)]
+impl<T: RealField + Copy, const N: usize> Sda<T, N> {
+    /// A workspace starting from `(A₀, G₀, H₀)`.
+    fn new(a: &SMatrix<T, N, N>, g: &SMatrix<T, N, N>, h: &SMatrix<T, N, N>) -> Self {
+        let z = SMatrix::<T, N, N>::zeros();
+        Self {
+            a: *a,
+            g: *g,
+            h: *h,
+            w: z,
+            wa: z,
+            wg: z,
+            at: z,
+            pivots: [0; N],
+        }
+    }
+
+    /// The doubling loop; on success `self.h` is `H∞` and the steps taken
+    /// are returned.
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
+    fn run(&mut self) -> Result<u32, RiccatiError> {
+        let tol = tolerance::<T>();
+        for it in 1..=MAX_DOUBLINGS {
+            let (change, scale) = self.step()?;
+            if scale.is_finite() && (change <= tol * scale || self.a.amax() <= tol) {
+                return Ok(it);
+            }
+        }
+        Err(RiccatiError::NotConverged)
+    }
+}
+
+/// Checks the data and forms `G = BR⁻¹Bᵀ` (symmetrised) into `g`, shared by
+/// both equations; returns `R⁻¹`.
+// Design-time code: kept out of line so that its large frames are not
+// merged into the callers' (stack) and not copied into each (flash).
+#[inline(never)]
 fn prepare<T: RealField + Copy, const N: usize, const M: usize>(
     a: &SMatrix<T, N, N>,
     b: &SMatrix<T, N, M>,
     q: &SMatrix<T, N, N>,
     r: &SMatrix<T, M, M>,
-) -> Result<(SMatrix<T, M, M>, SMatrix<T, N, N>), RiccatiError> {
+    g: &mut SMatrix<T, N, N>,
+) -> Result<SMatrix<T, M, M>, RiccatiError> {
     if !(finite(a) && finite(b) && finite(q) && finite(r)) {
         return Err(RiccatiError::NonFinite);
     }
     let rinv = inv(r)?;
-    let g = symmetrise(&(b * rinv * b.transpose()));
-    Ok((rinv, g))
+    let br = b * rinv;
+    mul_into(&br, &b.transpose(), g);
+    symmetrise_in_place(g);
+    Ok(rinv)
 }
 
 /// Solves the discrete ARE for `x⁺ = A x + B u` with stage cost `xᵀQx + uᵀRu`;
@@ -142,15 +232,58 @@ pub fn solve_dare<T: RealField + Copy, const N: usize, const M: usize>(
     q: &SMatrix<T, N, N>,
     r: &SMatrix<T, M, M>,
 ) -> Result<RiccatiSolution<T, N, M>, RiccatiError> {
-    let (_, g) = prepare(a, b, q, r)?;
-    let (x, iterations) = doubling(*a, g, symmetrise(q))?;
+    let mut sda = Sda::new(a, q, q);
+    prepare(a, b, q, r, &mut sda.g)?;
+    symmetrise_in_place(&mut sda.h);
+    let iterations = sda.run()?;
+    let k = dare_gain(a, b, r, &sda.h)?;
+    sda.check_dare_residual(a, b, q, &k)?;
+    Ok(RiccatiSolution {
+        x: sda.h,
+        k,
+        iterations,
+    })
+}
+
+/// The DARE's gain `K = (R + BᵀXB)⁻¹BᵀXA`.
+// Design-time code: see `solve_dare`.
+#[inline(never)]
+fn dare_gain<T: RealField + Copy, const N: usize, const M: usize>(
+    a: &SMatrix<T, N, N>,
+    b: &SMatrix<T, N, M>,
+    r: &SMatrix<T, M, M>,
+    x: &SMatrix<T, N, N>,
+) -> Result<SMatrix<T, M, N>, RiccatiError> {
     let s = r + b.transpose() * x * b;
-    let k = lu_solve(&s, &(b.transpose() * x * a)).ok_or(RiccatiError::Singular)?;
-    // Independent acceptance test: the DARE residual, relative to its terms.
-    let ax = a.transpose() * x * a;
-    let res = ax - a.transpose() * x * b * k + q - x;
-    check_residual(&res, ax.amax() + q.amax() + x.amax())?;
-    Ok(RiccatiSolution { x, k, iterations })
+    lu_solve(&s, &(b.transpose() * x * a)).ok_or(RiccatiError::Singular)
+}
+
+impl<T: RealField + Copy, const N: usize> Sda<T, N> {
+    /// Independent acceptance test of the solution `X = self.h`: the DARE
+    /// residual `AᵀXA − AᵀXB·K + Q − X`, relative to its terms, formed in the
+    /// workspace's free buffers.
+    // Design-time code: see `solve_dare`.
+    #[inline(never)]
+    fn check_dare_residual<const M: usize>(
+        &mut self,
+        a: &SMatrix<T, N, N>,
+        b: &SMatrix<T, N, M>,
+        q: &SMatrix<T, N, N>,
+        k: &SMatrix<T, M, N>,
+    ) -> Result<(), RiccatiError> {
+        a.transpose_to(&mut self.at);
+        mul_into(&self.at, &self.h, &mut self.w); // AᵀX
+        mul_into(&self.w, a, &mut self.wa); // AᵀXA
+        let mut xb = SMatrix::<T, N, M>::zeros();
+        mul_into(&self.w, b, &mut xb); // AᵀXB
+        mul_into(&xb, k, &mut self.wg); // AᵀXB·K
+        for i in 0..N {
+            for j in 0..N {
+                self.g[(i, j)] = self.wa[(i, j)] - self.wg[(i, j)] + q[(i, j)] - self.h[(i, j)];
+            }
+        }
+        check_residual(&self.g, self.wa.amax() + q.amax() + self.h.amax())
+    }
 }
 
 /// Solves the continuous ARE for `ẋ = A x + B u` with cost `∫ xᵀQx + uᵀRu dt`;
@@ -164,7 +297,8 @@ pub fn solve_care<T: RealField + Copy, const N: usize, const M: usize>(
     q: &SMatrix<T, N, N>,
     r: &SMatrix<T, M, M>,
 ) -> Result<RiccatiSolution<T, N, M>, RiccatiError> {
-    let (rinv, g) = prepare(a, b, q, r)?;
+    let mut g = SMatrix::<T, N, N>::zeros();
+    let rinv = prepare(a, b, q, r, &mut g)?;
     let q = symmetrise(q);
     // Shift: of the order of A's and the coupling's size, so that Aγ and Wγ are
     // well conditioned; any γ > 0 that is not an eigenvalue of A is valid.
@@ -180,7 +314,9 @@ pub fn solve_care<T: RealField + Copy, const N: usize, const M: usize>(
     let a0 = id + v_inv * two_g;
     let g0 = symmetrise(&(ag_inv * g * w_inv * two_g));
     let h0 = symmetrise(&(w_inv * q * ag_inv * two_g));
-    let (x, iterations) = doubling(a0, g0, h0)?;
+    let mut sda = Sda::new(&a0, &g0, &h0);
+    let iterations = sda.run()?;
+    let x = sda.h;
     let k = rinv * b.transpose() * x;
     // Independent acceptance test: the CARE residual, relative to its terms.
     let xa = x * a;

@@ -6,6 +6,7 @@
 //! allocation; the only failure is non-finite or absurdly large input.
 
 use super::lit;
+use crate::linalg::mul_into;
 use nalgebra::{RealField, SMatrix};
 
 /// Why a discretisation failed.
@@ -36,31 +37,61 @@ pub const MAX_SQUARINGS: u32 = 40;
 pub const TAYLOR_TERMS: u32 = 14;
 
 /// Discrete pair `(Ad, Bd)` of `ẋ = A x + B u` under zero-order hold at `ts` (s).
-// Design-time code: kept out of line so that its large frames are not
-// merged into the callers' (stack) and not copied into each (flash).
-#[inline(never)]
 pub fn zoh<T: RealField + Copy, const N: usize, const M: usize>(
     a: &SMatrix<T, N, N>,
     b: &SMatrix<T, N, M>,
     ts: T,
 ) -> Result<(SMatrix<T, N, N>, SMatrix<T, N, M>), DiscretiseError> {
-    let (phi, gamma) = expm_with_integral(a, ts)?;
-    let bd = gamma * b;
+    let mut ad = SMatrix::zeros();
+    let mut bd = SMatrix::zeros();
+    zoh_into(a, b, ts, &mut ad, &mut bd)?;
+    Ok((ad, bd))
+}
+
+/// [`zoh`] into the caller's matrices: what the design code on the MCU
+/// calls, so that no result is copied through the stack.
+// Design-time code: kept out of line so that its large frames are not
+// merged into the callers' (stack) and not copied into each (flash).
+#[inline(never)]
+pub fn zoh_into<T: RealField + Copy, const N: usize, const M: usize>(
+    a: &SMatrix<T, N, N>,
+    b: &SMatrix<T, N, M>,
+    ts: T,
+    ad: &mut SMatrix<T, N, N>,
+    bd: &mut SMatrix<T, N, M>,
+) -> Result<(), DiscretiseError> {
+    let mut gamma = SMatrix::<T, N, N>::zeros();
+    expm_with_integral_into(a, ts, ad, &mut gamma)?;
+    mul_into(&gamma, b, bd);
     if bd.iter().all(|v| v.is_finite()) {
-        Ok((phi, bd))
+        Ok(())
     } else {
         Err(DiscretiseError::NonFinite)
     }
 }
 
 /// `(e^{A·t}, ∫₀^t e^{Aτ}dτ)` for a square A and time `t` (s).
-// Design-time code: kept out of line so that its large frames are not
-// merged into the callers' (stack) and not copied into each (flash).
-#[inline(never)]
 pub fn expm_with_integral<T: RealField + Copy, const N: usize>(
     a: &SMatrix<T, N, N>,
     t: T,
 ) -> Result<(SMatrix<T, N, N>, SMatrix<T, N, N>), DiscretiseError> {
+    let mut phi = SMatrix::zeros();
+    let mut gamma = SMatrix::zeros();
+    expm_with_integral_into(a, t, &mut phi, &mut gamma)?;
+    Ok((phi, gamma))
+}
+
+/// [`expm_with_integral`] into the caller's `phi` and `gamma`; the series
+/// runs in four named N×N buffers written in place (no matrix temporaries).
+// Design-time code: kept out of line so that its large frames are not
+// merged into the callers' (stack) and not copied into each (flash).
+#[inline(never)]
+pub fn expm_with_integral_into<T: RealField + Copy, const N: usize>(
+    a: &SMatrix<T, N, N>,
+    t: T,
+    phi: &mut SMatrix<T, N, N>,
+    gamma: &mut SMatrix<T, N, N>,
+) -> Result<(), DiscretiseError> {
     if !(t.is_finite() && t > T::zero() && a.iter().all(|v| v.is_finite())) {
         return Err(DiscretiseError::NonFinite);
     }
@@ -85,24 +116,42 @@ pub fn expm_with_integral<T: RealField + Copy, const N: usize>(
         s += 1;
     }
     // Φ = Σ (Ah)^k/k!,  Γ = h Σ (Ah)^k/(k+1)!
-    let ah = a * h;
-    let id = SMatrix::<T, N, N>::identity();
-    let mut term = id; // (Ah)^k / k!
-    let mut phi = id;
-    let mut gsum = id; // Σ (Ah)^k/(k+1)!
+    let mut ah = *a;
+    ah.scale_mut(h);
+    let mut term = SMatrix::<T, N, N>::identity(); // (Ah)^k / k!
+    phi.fill_with_identity();
+    gamma.fill_with_identity(); // Σ (Ah)^k/(k+1)!, then Γ
+    let mut tmp = SMatrix::<T, N, N>::zeros();
     for k in 1..=TAYLOR_TERMS {
         let kk: T = lit(k as f64);
-        term = (term * ah) / kk;
-        phi += term;
-        gsum += term / (kk + T::one());
+        mul_into(&term, &ah, &mut tmp);
+        let k1 = kk + T::one();
+        for ((t, x), (p, g)) in term
+            .iter_mut()
+            .zip(tmp.iter())
+            .zip(phi.iter_mut().zip(gamma.iter_mut()))
+        {
+            *t = *x / kk;
+            *p += *t;
+            *g += *t / k1;
+        }
     }
-    let mut gamma = gsum * h;
+    gamma.scale_mut(h);
+    // `ah` and `term` are free now: they hold I + Φ and the products.
     for _ in 0..s {
-        gamma = (id + phi) * gamma;
-        phi = phi * phi;
+        // Γ ← (I + Φ)Γ, Φ ← Φ² (I + Φ entry by entry, as the sum of matrices).
+        for i in 0..N {
+            for j in 0..N {
+                ah[(i, j)] = if i == j { T::one() } else { T::zero() } + phi[(i, j)];
+            }
+        }
+        mul_into(&ah, &*gamma, &mut term);
+        gamma.copy_from(&term);
+        mul_into(&*phi, &*phi, &mut term);
+        phi.copy_from(&term);
     }
     if phi.iter().chain(gamma.iter()).all(|v| v.is_finite()) {
-        Ok((phi, gamma))
+        Ok(())
     } else {
         Err(DiscretiseError::NonFinite)
     }

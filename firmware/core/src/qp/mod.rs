@@ -160,6 +160,21 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
         })
     }
 
+    /// The solver of the identity Hessian (what [`BoxQp::new`] gives for
+    /// `I`, without computing it): a placeholder that design overwrites.
+    pub fn identity() -> Self {
+        let one = SVector::<T, N>::repeat(T::one());
+        Self {
+            h: SMatrix::identity(),
+            hs: SMatrix::identity(),
+            d: one,
+            l: T::one(),
+            mu: T::one(),
+            beta: T::zero(),
+            l_over_d: one,
+        }
+    }
+
     /// The Hessian.
     pub fn hessian(&self) -> &SMatrix<T, N, N> {
         &self.h

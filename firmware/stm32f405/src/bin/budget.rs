@@ -23,7 +23,9 @@
 //! on a vehicle the reference comes from an onboard trajectory generator.
 //! Every row also gives the stack high-water mark of building the
 //! controller and flying it (RAM painted before, scanned after; measured from
-//! the top of RAM, so the callers' frames are included).
+//! the top of RAM, so the callers' frames are included); the largest must be
+//! within 32 KiB. The controller and the flight loop live in static RAM and
+//! are designed in place, as in the image.
 //!
 //! Run (QEMU from Debian's `qemu-system-arm`; the runner is set in
 //! `.cargo/config.toml`):
@@ -36,7 +38,10 @@ mod target {
     use core::panic::PanicInfo;
     use cortex_m_rt::{entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
-    use fc_core::control::{AnyController, Controller, ControllerSpec, Family, Setpoint, StateEstimate, SPECS};
+    use fc_core::control::{
+        AnyController, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
+        StateEstimate, SPECS,
+    };
     use fc_core::{euler_to_quat, VehicleParams};
     use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
     use fc_proto::{encode, ToFc, MAX_FRAME, PROTOCOL_VERSION};
@@ -52,6 +57,9 @@ mod target {
     /// Safety factor on the worst case.
     const MARGIN: f32 = 1.5;
     const STEPS: u32 = 60;
+    /// Stack allowed for designing and flying any controller (a quarter of
+    /// the SRAM), enforced like the cycle budgets.
+    const STACK_BUDGET: usize = 32 * 1024;
     const PAINT: u32 = 0xA5A5_A5A5;
 
     extern "C" {
@@ -93,6 +101,54 @@ mod target {
         paint_stack();
         let r = f();
         (r, stack_high_water())
+    }
+
+    /// The controller under test, in static RAM and designed in place, as
+    /// the image's lives inside its `FlightCore`: the stack figures are then
+    /// the design's and the flight's, not a harness copy of the controller.
+    static mut SLOT: Option<AnyController<f32>> = None;
+    /// The flight loop of the `loop` rows, likewise.
+    static mut CORE: Option<FlightCore> = None;
+
+    /// The controller slot (a placeholder PD until a row designs its own).
+    #[inline(never)]
+    fn slot() -> &'static mut AnyController<f32> {
+        // SAFETY: the harness is single-threaded and no interrupt touches
+        // SLOT; each row takes this reference once and drops it before the next.
+        let s = unsafe { &mut *core::ptr::addr_of_mut!(SLOT) };
+        s.get_or_insert_with(|| {
+            AnyController::PdEuler(PdEuler::new(
+                VehicleParams::os4(),
+                PdEulerGains::tuned(),
+                ReferenceMode::Feedforward,
+            ))
+        })
+    }
+
+    /// A fresh, unstarted flight loop in its static home (the caller starts
+    /// it, outside this frame, as the image does).
+    #[inline(never)]
+    fn fresh_core(cfg: FcConfig) -> &'static mut FlightCore {
+        // SAFETY: as for `slot`.
+        let s = unsafe { &mut *core::ptr::addr_of_mut!(CORE) };
+        s.insert(FlightCore::unstarted(cfg))
+    }
+
+    /// The `loop` rows' byte link (its 4 KiB queue is static RAM, as the
+    /// image's USART queues are).
+    static mut LINK: MemLink = MemLink {
+        rx: heapless::Deque::new(),
+        tx_bytes: 0,
+    };
+
+    /// The link, emptied.
+    #[inline(never)]
+    fn fresh_link() -> &'static mut MemLink {
+        // SAFETY: as for `slot`.
+        let l = unsafe { &mut *core::ptr::addr_of_mut!(LINK) };
+        l.rx.clear();
+        l.tx_bytes = 0;
+        l
     }
 
     /// A reproducible number in [−1, 1].
@@ -196,38 +252,36 @@ mod target {
             control_period_s: dt as f64,
             ..FcConfig::default()
         };
-        let mut fc = FlightCore::new(cfg).ok()?;
-        let mut link = MemLink {
-            rx: heapless::Deque::new(),
-            tx_bytes: 0,
-        };
+        let fc = fresh_core(cfg);
+        fc.start().ok()?;
+        let link = fresh_link();
         push(
-            &mut link,
+            link,
             &ToFc::Hello {
                 version: PROTOCOL_VERSION,
             },
         );
         push(
-            &mut link,
+            link,
             &ToFc::Select {
                 controller: id,
                 feedforward: true,
             },
         );
         while !link.rx.is_empty() {
-            fc.service(&mut link, clock, 0).ok()?;
+            fc.service(link, clock, 0).ok()?;
         }
         let mut rng = Lcg(7);
         let mut worst = 0u32;
         for k in 0..STEPS {
             let t = k as f32 * dt;
             let sp = reference(t);
-            push(&mut link, &ToFc::Setpoint(setpoint_to_wire(&sp)));
+            push(link, &ToFc::Setpoint(setpoint_to_wire(&sp)));
             if let Some((n, pdt)) = preview {
                 for i in 1..=n {
                     let p = reference(t + i as f32 * pdt as f32);
                     push(
-                        &mut link,
+                        link,
                         &ToFc::Preview {
                             k: i as u8,
                             sp: setpoint_to_wire(&p),
@@ -242,7 +296,7 @@ mod target {
             x[6..10].copy_from_slice(e.att.as_slice());
             x[10..13].copy_from_slice(e.rates_frd_radps.as_slice());
             push(
-                &mut link,
+                link,
                 &ToFc::Sensor {
                     seq: k + 1,
                     t_us: (t * 1e6) as u64,
@@ -252,7 +306,7 @@ mod target {
             let now_us = (t * 1e6) as u64;
             let t0 = clock.now();
             while !link.rx.is_empty() {
-                fc.service(&mut link, clock, now_us).ok()?;
+                fc.service(link, clock, now_us).ok()?;
             }
             worst = worst.max(clock.since(t0));
         }
@@ -326,11 +380,13 @@ mod target {
                     if let (Some(c), "guaranteed") = (mpc.as_mut(), what) {
                         c.qp_tolerance = 0.0;
                     }
+                    let slot = slot();
+                    spec.build_in(slot, p, dt as f64, mpc).ok()?;
                     // The MPCs are measured as their own types, as the image calls them.
-                    match spec.build_with(p, dt as f64, mpc).ok()? {
-                        AnyController::MpcFast(mut c) => Some(control_worst(&mut c, &clock, dt)),
-                        AnyController::MpcThesis(mut c) => Some(control_worst(&mut c, &clock, dt)),
-                        mut c => Some(control_worst(&mut c, &clock, dt)),
+                    match slot {
+                        AnyController::MpcFast(c) => Some(control_worst(c, &clock, dt)),
+                        AnyController::MpcThesis(c) => Some(control_worst(c, &clock, dt)),
+                        c => Some(control_worst(c, &clock, dt)),
                     }
                 });
                 ok &= check(name, form, hz, what, m);
@@ -344,6 +400,10 @@ mod target {
             stack_max,
             static_ram
         );
+        if stack_max > STACK_BUDGET {
+            hprintln!("budget: stack high-water over its budget of {} bytes", STACK_BUDGET);
+            ok = false;
+        }
         hprintln!("budget: {}", if ok { "all fit" } else { "SOME DO NOT FIT" });
         debug::exit(if ok { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
         loop {
