@@ -242,11 +242,24 @@ impl ClockPlan {
     #[cfg(target_os = "none")]
     pub fn apply(&self, polls: u32) -> Result<(), ClockError> {
         use stm32f4::stm32f405 as pac;
-        self.check()?;
-        let (hpre, ppre1, ppre2) = self.prescaler_bits()?;
         // SAFETY: the PAC's handles to RCC and FLASH; bring-up runs once,
         // before anything else touches them.
         let (rcc, flash) = unsafe { (&*pac::RCC::ptr(), &*pac::FLASH::ptr()) };
+        self.apply_to(rcc, flash, polls)
+    }
+
+    /// The sequence of [`ClockPlan::apply`] on the given RCC and FLASH
+    /// register blocks: the chip's on the MCU, RAM-backed ones in the host
+    /// tests, which check the values it writes against RM0090's encodings
+    /// and what it leaves untouched when a flag never comes.
+    pub fn apply_to(
+        &self,
+        rcc: &stm32f4::stm32f405::rcc::RegisterBlock,
+        flash: &stm32f4::stm32f405::flash::RegisterBlock,
+        polls: u32,
+    ) -> Result<(), ClockError> {
+        self.check()?;
+        let (hpre, ppre1, ppre2) = self.prescaler_bits()?;
         let wait = |ready: &dyn Fn() -> bool, e: ClockError| {
             for _ in 0..polls {
                 if ready() {
@@ -343,6 +356,88 @@ mod tests {
         for (pp, e) in [(4, PLLP::Div4), (6, PLLP::Div6), (8, PLLP::Div8)] {
             assert_eq!(ClockPlan { pllp: pp, ..p }.pllp_bits(), e as u8);
         }
+    }
+
+    /// RCC and FLASH register blocks in host memory, at their reset values
+    /// (RM0090 §7.3, §3.9), with the ready flags a test wants "set by the
+    /// hardware" already set (nothing here sets them by itself: as QEMU).
+    struct FakeChip {
+        rcc: [u32; 64],
+        flash: [u32; 16],
+    }
+
+    // Word indices of the registers (byte offsets 0x00, 0x04, 0x08; ACR 0x00).
+    const CR: usize = 0;
+    const PLLCFGR: usize = 1;
+    const CFGR: usize = 2;
+    const ACR: usize = 0;
+    const HSERDY: u32 = 1 << 17;
+    const PLLRDY: u32 = 1 << 25;
+    const SWS_PLL: u32 = 0b10 << 2;
+
+    impl FakeChip {
+        fn new(ready: u32, sws_pll: bool) -> Self {
+            let mut rcc = [0u32; 64];
+            rcc[CR] = 0x0000_0083 | ready; // HSION, HSIRDY, HSITRIM = 16
+            rcc[PLLCFGR] = 0x2400_3010;
+            rcc[CFGR] = if sws_pll { SWS_PLL } else { 0 };
+            Self { rcc, flash: [0; 16] }
+        }
+
+        fn apply(&mut self, plan: &ClockPlan) -> Result<(), ClockError> {
+            use stm32f4::stm32f405::{flash, rcc};
+            assert!(core::mem::size_of::<rcc::RegisterBlock>() <= core::mem::size_of_val(&self.rcc));
+            assert!(core::mem::size_of::<flash::RegisterBlock>() <= core::mem::size_of_val(&self.flash));
+            // SAFETY: both arrays are larger than the register blocks, u32
+            // aligned, and borrowed mutably for the call; the PAC's registers
+            // are volatile cells, so host memory serves as well as the chip's.
+            let (r, f) = unsafe {
+                (
+                    &*self.rcc.as_mut_ptr().cast::<rcc::RegisterBlock>(),
+                    &*self.flash.as_mut_ptr().cast::<flash::RegisterBlock>(),
+                )
+            };
+            plan.apply_to(r, f, 1000)
+        }
+    }
+
+    #[test]
+    fn the_register_sequence_writes_rm0090s_values() {
+        let p = ClockPlan::F405_168MHZ_FROM_8MHZ;
+        let mut chip = FakeChip::new(HSERDY | PLLRDY, true);
+        assert_eq!(chip.apply(&p), Ok(()));
+        // RCC_CR: HSEON (16) and PLLON (24) added to the reset value.
+        assert_eq!(chip.rcc[CR], 0x0000_0083 | HSERDY | PLLRDY | 1 << 16 | 1 << 24);
+        // RCC_PLLCFGR: M = 8 (bits 0–5), N = 336 (6–14), P = /2 → 0b00 (16–17),
+        // source HSE (22), Q = 7 (24–27); reserved bit 29 keeps its reset 1.
+        assert_eq!(chip.rcc[PLLCFGR], 8 | 336 << 6 | 1 << 22 | 7 << 24 | 1 << 29);
+        // RCC_CFGR: SW = PLL (0b10), HPRE /1 (0b0000), PPRE1 /4 (0b101 at 10),
+        // PPRE2 /2 (0b100 at 13); SWS as the "hardware" left it.
+        assert_eq!(chip.rcc[CFGR], 0b10 | SWS_PLL | 0b101 << 10 | 0b100 << 13);
+        // FLASH_ACR: 5 wait states, prefetch (8), instruction (9) and data (10) caches.
+        assert_eq!(chip.flash[ACR], 5 | 1 << 8 | 1 << 9 | 1 << 10);
+    }
+
+    #[test]
+    fn a_flag_that_never_comes_stops_the_sequence_before_anything_is_switched() {
+        let p = ClockPlan::F405_168MHZ_FROM_8MHZ;
+        // No crystal: HSE on, nothing else touched, still on the HSI.
+        let mut chip = FakeChip::new(0, false);
+        assert_eq!(chip.apply(&p), Err(ClockError::HseTimeout));
+        assert_eq!(chip.rcc[CR], 0x0000_0083 | 1 << 16);
+        assert_eq!(
+            (chip.rcc[PLLCFGR], chip.rcc[CFGR], chip.flash[ACR]),
+            (0x2400_3010, 0, 0)
+        );
+        // The PLL does not lock: configured and on, but no wait states and no switch.
+        let mut chip = FakeChip::new(HSERDY, false);
+        assert_eq!(chip.apply(&p), Err(ClockError::PllTimeout));
+        assert_eq!((chip.rcc[CFGR], chip.flash[ACR]), (0, 0));
+        // The switch is not confirmed: it was requested, with the 5 wait states in place.
+        let mut chip = FakeChip::new(HSERDY | PLLRDY, false);
+        assert_eq!(chip.apply(&p), Err(ClockError::SwitchTimeout));
+        assert_eq!(chip.flash[ACR] & 0xF, 5);
+        assert_eq!(chip.rcc[CFGR] & 0b11, 0b10);
     }
 
     #[test]
