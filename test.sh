@@ -25,9 +25,11 @@ cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --bins -- -D warning
 cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf
 echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run here)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
-cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bin firmware --target-dir target/hardware
+cargo board-build  # the alias a user with a board runs (.cargo/config.toml; `cargo board-run` flashes it)
 echo "== image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
 size target/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
+echo "== API docs (warnings denied; the doctests run with the tests below)"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 echo "== tests"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT

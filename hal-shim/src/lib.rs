@@ -8,6 +8,39 @@
 #![deny(missing_docs)]
 
 /// A non-blocking byte stream (a UART on the MCU, a socket or pipe on the host).
+///
+/// An implementation over two fixed buffers (what a test double or a DMA
+/// ring looks like; `no_std`, nothing allocated):
+///
+/// ```
+/// use hal_shim::ByteLink;
+///
+/// /// Reads from `rx`, writes into `tx`; fails when `tx` is full.
+/// struct Buffers<'a> { rx: &'a [u8], tx: heapless::Vec<u8, 16> }
+///
+/// #[derive(Debug)]
+/// struct Full;
+///
+/// impl ByteLink for Buffers<'_> {
+///     type Error = Full;
+///     fn read(&mut self, buf: &mut [u8]) -> Result<usize, Full> {
+///         let n = buf.len().min(self.rx.len());
+///         buf[..n].copy_from_slice(&self.rx[..n]);
+///         self.rx = &self.rx[n..];
+///         Ok(n)
+///     }
+///     fn write_all(&mut self, bytes: &[u8]) -> Result<(), Full> {
+///         self.tx.extend_from_slice(bytes).map_err(|_| Full)
+///     }
+/// }
+///
+/// let mut link = Buffers { rx: b"ab", tx: heapless::Vec::new() };
+/// let mut buf = [0u8; 8];
+/// assert_eq!(link.read(&mut buf).unwrap(), 2);
+/// assert_eq!(link.read(&mut buf).unwrap(), 0); // nothing waiting: no blocking
+/// assert!(link.write_all(&[1; 16]).is_ok());
+/// assert!(link.write_all(&[1]).is_err()); // full: an error, not a hang
+/// ```
 pub trait ByteLink {
     /// Error a transfer can report (overrun, framing, closed link).
     type Error: core::fmt::Debug;

@@ -82,6 +82,39 @@ pub fn setpoint_from_wire(w: &WireSetpoint) -> Option<Setpoint<f32>> {
 }
 
 /// The flight controller's state between steps.
+///
+/// One lockstep step over a host link (the SIL's `--target framed` does the
+/// same; the image does it over USART1):
+///
+/// ```
+/// use fc_loop::{FcConfig, FlightCore};
+/// use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
+/// use hal_shim::host::{LoopbackLink, MonotonicClock};
+///
+/// let mut fc = FlightCore::new(FcConfig::default())?; // quaternion LQR, motors off
+/// let (mut link, clock) = (LoopbackLink::default(), MonotonicClock::default());
+/// let send = |link: &mut LoopbackLink, m: &ToFc| {
+///     let mut frame = [0u8; MAX_FRAME];
+///     let n = encode(m, &mut frame).expect("our messages fit a frame");
+///     link.rx.extend(&frame[..n]);
+/// };
+/// send(&mut link, &ToFc::Hello { version: PROTOCOL_VERSION });
+/// // The vehicle hovers at its boot setpoint, 1 m up: state
+/// // [x y z (m, NED), ẋ ẏ ż (m/s), q0 q1 q2 q3, p q r (rad/s, FRD)].
+/// let mut state = [0.0f32; 13];
+/// (state[2], state[6]) = (-1.0, 1.0);
+/// send(&mut link, &ToFc::Sensor { seq: 1, t_us: 2_000, state });
+/// fc.service(&mut link, &clock, 2_000)?;
+///
+/// let mut rx = FrameDecoder::<MAX_FRAME>::new();
+/// let replies: Vec<FromFc> = link.tx.iter().filter_map(|&b| rx.push(b)).collect::<Result<_, _>>()?;
+/// assert!(matches!(replies[0], FromFc::HelloAck { accepted: true, .. }));
+/// // Step 1's inputs: hover thrust (0.65 kg × 9.81 m/s²), no torque, not the failsafe.
+/// let FromFc::Actuator { seq: 1, u, failsafe: false } = replies[1] else { panic!("{replies:?}") };
+/// assert!((u[0] - 0.65 * 9.81).abs() < 1e-3 && u[1..].iter().all(|v| v.abs() < 1e-4));
+/// assert!(matches!(replies[2], FromFc::Telemetry { .. }));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug)]
 pub struct FlightCore {
     cfg: FcConfig,

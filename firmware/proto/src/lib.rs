@@ -12,6 +12,28 @@
 //! controller core (`fc-core`) decides what a `Select`'s id means
 //! (`ControllerSpec::from_wire`). The format, byte by byte, is in the
 //! workspace README ("The wire format").
+//!
+//! # Example: frame a message and parse it back
+//!
+//! ```
+//! use fc_proto::{encode, FrameDecoder, FrameError, ToFc, MAX_FRAME, PROTOCOL_VERSION};
+//!
+//! let mut wire = [0u8; MAX_FRAME];
+//! let n = encode(&ToFc::Hello { version: PROTOCOL_VERSION }, &mut wire)?;
+//! assert_eq!(wire[n - 1], 0x00); // the delimiter ends the frame, and only it is zero
+//! assert!(wire[..n - 1].iter().all(|&b| b != 0));
+//!
+//! // The receiver feeds bytes as they arrive; a message comes out at the delimiter.
+//! let mut rx = FrameDecoder::<MAX_FRAME>::new();
+//! let got: Vec<ToFc> = wire[..n].iter().filter_map(|&b| rx.push(b)).collect::<Result<_, _>>()?;
+//! assert_eq!(got, [ToFc::Hello { version: PROTOCOL_VERSION }]);
+//!
+//! // One flipped bit anywhere is caught by the CRC (or COBS) and dropped, never misread.
+//! wire[2] ^= 0x10;
+//! let bad = wire[..n].iter().find_map(|&b| rx.push::<ToFc>(b));
+//! assert!(matches!(bad, Some(Err(FrameError::Crc | FrameError::Cobs | FrameError::Message))));
+//! # Ok::<(), FrameError>(())
+//! ```
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]

@@ -13,9 +13,10 @@
 //! with 5 flash wait states (RM0090 table 10: HCLK 150–168 MHz at 2.7–3.6 V),
 //! prefetch and both caches (the "ART accelerator") on. [`ClockPlan`] holds
 //! those numbers and checks them against the reference manual's limits on
-//! any host; [`ClockPlan::apply`] (MCU only) programs RCC and FLASH through
-//! the `stm32f4` PAC and waits for every ready flag a bounded number of polls,
-//! returning an error instead of hanging.
+//! any host; `ClockPlan::apply` (MCU only; [`ClockPlan::apply_to`] on any
+//! register blocks) programs RCC and FLASH through the `stm32f4` PAC and
+//! waits for every ready flag a bounded number of polls, returning an error
+//! instead of hanging.
 //!
 //! QEMU's `netduinoplus2` does not model the RCC (its ready flags never set)
 //! and runs the core at 168 MHz regardless. The image therefore has a
@@ -248,7 +249,7 @@ impl ClockPlan {
         self.apply_to(rcc, flash, polls)
     }
 
-    /// The sequence of [`ClockPlan::apply`] on the given RCC and FLASH
+    /// The sequence of `ClockPlan::apply` (MCU only) on the given RCC and FLASH
     /// register blocks: the chip's on the MCU, RAM-backed ones in the host
     /// tests, which check the values it writes against RM0090's encodings
     /// and what it leaves untouched when a flag never comes.

@@ -196,6 +196,35 @@ type Vec12<T> = SVector<T, 12>;
 
 /// Linear MPC with horizon `N` prediction steps, `M` moves and `NZ = 4·M`
 /// decision variables.
+///
+/// ```
+/// use fc_core::control::{Controller, MpcConfig, MpcFast, Setpoint, StateEstimate};
+/// use fc_core::model::{AttitudeForm, VehicleParams};
+/// use nalgebra::{Vector3, Vector4};
+///
+/// let params = VehicleParams::<f32>::os4();
+/// let mut mpc = MpcFast::new(params, MpcConfig::fast(AttitudeForm::Euler))?;
+/// // The reference 1 s ahead, one point per prediction step (50 ms): a
+/// // climb from 1 m to 2 m (NED z from −1 to −2).
+/// let (n, pred_dt) = mpc.preview_request().expect("the MPC asks for a preview");
+/// for k in 1..=n {
+///     let z = -1.0 - (k as f32 * pred_dt as f32).min(1.0);
+///     mpc.set_preview(k, &Setpoint::hold(Vector3::new(0.0, 0.0, z), 0.0))?;
+/// }
+/// let est = StateEstimate {
+///     pos_ned_m: Vector3::new(0.0, 0.0, -1.0),
+///     vel_ned_mps: Vector3::zeros(),
+///     att: Vector4::new(1.0, 0.0, 0.0, 0.0),
+///     rates_frd_radps: Vector3::zeros(),
+/// };
+/// let out = mpc.update(&est, &Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0))?;
+/// assert!(out.u[0] > params.hover_thrust_n()); // it starts climbing before the setpoint moves
+/// // The QP it solved: within its iteration cap, inside the input box.
+/// let qp = mpc.last_qp().expect("a QP was solved");
+/// assert!(qp.solution.iterations <= MpcConfig::fast(AttitudeForm::Euler).qp_max_iterations);
+/// assert!((0..16).all(|i| qp.lb[i] <= qp.solution.z[i] && qp.solution.z[i] <= qp.ub[i]));
+/// # Ok::<(), fc_core::control::ControlError>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> {
     cfg: MpcConfig,

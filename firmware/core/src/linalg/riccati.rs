@@ -223,6 +223,20 @@ fn prepare<T: RealField + Copy, const N: usize, const M: usize>(
 
 /// Solves the discrete ARE for `x⁺ = A x + B u` with stage cost `xᵀQx + uᵀRu`;
 /// the gain is `K = (R + BᵀXB)⁻¹BᵀXA`.
+///
+/// ```
+/// use fc_core::linalg::solve_dare;
+/// use nalgebra::Matrix1;
+///
+/// // Scalar, unstable (a = 1.2): X solves b²X² + (r(1 − a²) − b²q)X − qr = 0.
+/// let (a, b, q, r) = (1.2, 0.7, 2.0, 0.5);
+/// let s = solve_dare(&Matrix1::new(a), &Matrix1::new(b), &Matrix1::new(q), &Matrix1::new(r))?;
+/// let (qa, qb, qc): (f64, f64, f64) = (b * b, r * (1.0 - a * a) - b * b * q, -q * r);
+/// let x = (-qb + (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa);
+/// assert!((s.x[0] - x).abs() < 1e-12 * x);
+/// assert!((a - b * s.k[0]).abs() < 1.0); // the closed loop is stable
+/// # Ok::<(), fc_core::linalg::RiccatiError>(())
+/// ```
 // Design-time code: kept out of line so that its large frames are not
 // merged into the callers' (stack) and not copied into each (flash).
 #[inline(never)]

@@ -37,6 +37,19 @@ pub const MAX_SQUARINGS: u32 = 40;
 pub const TAYLOR_TERMS: u32 = 14;
 
 /// Discrete pair `(Ad, Bd)` of `ẋ = A x + B u` under zero-order hold at `ts` (s).
+///
+/// ```
+/// use fc_core::model::zoh;
+/// use nalgebra::{Matrix2, Vector2};
+///
+/// // A double integrator (position, velocity; input acceleration) held for
+/// // T = 0.1 s: Ad = [[1, T], [0, 1]], Bd = [T²/2, T], exactly.
+/// let a = Matrix2::new(0.0, 1.0, 0.0, 0.0);
+/// let (ad, bd) = zoh(&a, &Vector2::new(0.0, 1.0), 0.1)?;
+/// assert!((ad - Matrix2::new(1.0, 0.1, 0.0, 1.0)).amax() < 1e-15);
+/// assert!((bd - Vector2::new(0.005, 0.1)).amax() < 1e-15);
+/// # Ok::<(), fc_core::model::DiscretiseError>(())
+/// ```
 pub fn zoh<T: RealField + Copy, const N: usize, const M: usize>(
     a: &SMatrix<T, N, N>,
     b: &SMatrix<T, N, M>,

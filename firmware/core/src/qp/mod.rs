@@ -109,6 +109,21 @@ impl<T: RealField + Copy> Default for QpSettings<T> {
 
 /// A QP with a fixed Hessian: everything that depends only on `H` is
 /// computed once here.
+///
+/// ```
+/// use fc_core::qp::{BoxQp, QpSettings, QpStatus};
+/// use nalgebra::{Matrix2, Vector2};
+///
+/// // min ½‖z‖² − 2 z₁ + z₂ over the box [0, 1]²: the unconstrained optimum
+/// // (2, −1) lies outside; with H = I the answer is its projection, (1, 0).
+/// let qp = BoxQp::new(&Matrix2::<f64>::identity())?;
+/// let (lb, ub) = (Vector2::new(0.0, 0.0), Vector2::new(1.0, 1.0));
+/// let sol = qp.solve(&Vector2::new(-2.0, 1.0), &lb, &ub, &Vector2::zeros(), &QpSettings::default());
+/// assert!((sol.z - Vector2::new(1.0, 0.0)).amax() < 1e-9);
+/// assert!(matches!(sol.status, QpStatus::Converged | QpStatus::Polished));
+/// assert!(sol.iterations <= sol.iteration_bound); // the a-priori bound holds
+/// # Ok::<(), fc_core::qp::QpError>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct BoxQp<T: RealField + Copy, const N: usize> {
     h: SMatrix<T, N, N>,
