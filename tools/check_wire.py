@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """A flight-controller client written from the README's wire-format section
-only (COBS + CRC-32C + postcard, protocol v2), run against `sil-host serve`:
+only (COBS + CRC-32C + postcard, protocol v3), run against `sil-host serve`:
 it sends garbage first, then handshakes, selects the LQR, holds a set-point
 and flies a few hundred lockstep steps of a crude vertical model, and checks
 every answer. Usage: check_wire.py path/to/sil-host. Prints
@@ -160,9 +160,9 @@ def main():
         # That probe was client 1 (it hung up). Client 2: garbage, then a flight.
         c = Client(("127.0.0.1", port))
         c.s.sendall(bytes(range(1, 200)) + b"\x00\x00" + b"\x05\x01\x02\x00" + b"\xff" * 300 + b"\x00")
-        c.send(varint(0) + varint(2))  # Hello v2
+        c.send(varint(0) + varint(3))  # Hello v3
         ack = c.recv()
-        check(ack == ("HelloAck", 2, 1), f"handshake accepted: {ack}")
+        check(ack == ("HelloAck", 3, 1), f"handshake accepted: {ack}")
         c.send(varint(1) + varint(3) + b"\x01")  # Select LqrQuat, feed-forward
         c.send(varint(2) + sp((0.0, 0.0, -2.0), 0.0))  # Setpoint: hover at 2 m
         # A crude vertical model: the vehicle starts at 1 m, thrust U1 lifts it.

@@ -53,6 +53,15 @@ pub trait Endpoint {
 pub struct InProcess<C> {
     /// The controller (read it back after a flight, e.g. the MPC's last QP).
     pub ctrl: C,
+    /// Time of the last step, s.
+    last_t: Option<f64>,
+}
+
+impl<C> InProcess<C> {
+    /// The endpoint of `ctrl`.
+    pub fn new(ctrl: C) -> Self {
+        Self { ctrl, last_t: None }
+    }
 }
 
 impl<C: Controller<f32>> Endpoint for InProcess<C> {
@@ -67,11 +76,18 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
     }
     fn step(
         &mut self,
-        _t: f64,
+        t: f64,
         state: &QuatState<f64>,
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
     ) -> anyhow::Result<StepReport> {
+        // After a gap in the steps (a sensor outage), as the flight loop on
+        // the MCU does: the controller forgets only the step before.
+        let period = self.ctrl.period_s().unwrap_or(0.0);
+        if self.last_t.is_some_and(|last| t - last > 1.5 * period && period > 0.0) {
+            self.ctrl.resume();
+        }
+        self.last_t = Some(t);
         for (k, p) in preview.iter().enumerate() {
             // The scenario defines the reference; a rejected point only
             // means the controller extrapolates instead.

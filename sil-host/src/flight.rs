@@ -38,6 +38,10 @@ pub struct FlightConfig {
     pub uncertainty: Option<Uncertainty>,
     /// Errors on the state the controller sees (`None`: the true state).
     pub noise: Option<crate::noise::SensorNoise>,
+    /// A sensor outage `(start s, duration s)`: no sensor frame reaches the
+    /// controller in that window (the plant keeps the last input), as when
+    /// the link or the sensors drop out. `None`: none.
+    pub sensor_gap: Option<(f64, f64)>,
 }
 
 impl FlightConfig {
@@ -53,6 +57,7 @@ impl FlightConfig {
             vehicle: VehicleParams::OS4,
             uncertainty: None,
             noise: None,
+            sensor_gap: None,
         }
     }
 }
@@ -213,7 +218,7 @@ pub fn fly_until(
     stop_at: Option<f64>,
     mut inspect: impl FnMut(f64, &AnyController<f32>),
 ) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
-    let ep = InProcess { ctrl: build_for(cfg)? };
+    let ep = InProcess::new(build_for(cfg)?);
     let (res, ep) = fly_endpoint(cfg, ep, stop_at, |t, ep: &InProcess<_>| inspect(t, &ep.ctrl))?;
     Ok((res, ep.ctrl))
 }
@@ -221,7 +226,7 @@ pub fn fly_until(
 /// Flies `cfg` with a controller built by the caller (e.g. an MPC with a
 /// horizon no preset has); `cfg`'s controller fields then only label it.
 pub fn fly_with<C: Controller<f32>>(cfg: &FlightConfig, ctrl: C) -> anyhow::Result<FlightResult> {
-    fly_endpoint(cfg, InProcess { ctrl }, None, |_, _| {}).map(|(r, _)| r)
+    fly_endpoint(cfg, InProcess::new(ctrl), None, |_, _| {}).map(|(r, _)| r)
 }
 
 /// The flight loop: the plant at `cfg.integration_hz`, one `endpoint` step
@@ -294,7 +299,8 @@ pub fn fly_endpoint<E: Endpoint>(
     for i in 0..=ticks {
         let t = i as f64 * tick;
         let r = sc.reference(t);
-        if i % ctrl_every == 0 {
+        let in_gap = cfg.sensor_gap.is_some_and(|(start, len)| t >= start && t < start + len);
+        if i % ctrl_every == 0 && !in_gap {
             let xq = plant.quat_state();
             if !xq.iter().all(|v| v.is_finite()) || xq.fixed_rows::<3>(0).amax() > 1e4 {
                 res.diverged = true;

@@ -57,8 +57,8 @@ pub struct QemuRow {
     pub rmse: ([f64; 3], [f64; 3]),
     /// Steps flown.
     pub steps: usize,
-    /// Times the firmware entered its failsafe (no sensor frame for 50 ms:
-    /// the host or QEMU was descheduled that long).
+    /// Times the firmware entered its failsafe (no valid sensor frame for
+    /// 50 ms of simulated time).
     pub failsafe_entries: u32,
 }
 
@@ -393,9 +393,9 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
             md.push_str(
                 "The thumbv7em image in QEMU's netduinoplus2 (`-icount shift=0`: SysTick counts 0.168 per executed \
                  instruction), flown in lockstep over the emulated USART on a short set-point, beside the same \
-                 flight in-process. Worst-case budgets: README, `firmware/stm32f405/src/bin/budget.rs`. QEMU's clock follows \
-                 real time while the guest waits for the host, so a host too busy to send a sensor frame within \
-                 50 ms makes the firmware enter its failsafe (counted; that flight's RMSE then differs).\n\n\
+                 flight in-process. Worst-case budgets: README, `firmware/stm32f405/src/bin/budget.rs`. The \
+                 firmware's failsafe timer runs on the frames' simulated time, so a busy host cannot trigger it: \
+                 the failsafe column is 0 unless the flight itself starves the controller of valid frames.\n\n\
                  | controller | steps | instructions mean | instructions max | RMSE x/y/z m, QEMU | RMSE x/y/z m, in-process | failsafe entries |\n\
                  |---|---|---|---|---|---|---|\n",
             );

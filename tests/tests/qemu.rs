@@ -11,23 +11,8 @@ use sil_host::flight::{fly, fly_target, FlightConfig, Target};
 use sil_host::{AttitudeForm, Scenario, ScenarioKind};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
-
-/// The link flight runs alone. Under `-icount` QEMU's virtual clock follows
-/// real time while the guest idles, waiting for the host; on a 2-core machine
-/// with the other QEMU tests running beside it, the host or QEMU can be
-/// descheduled for more than the firmware's 50 ms sensor timeout, and the
-/// firmware then rightly enters its failsafe (seen once in `./test.sh`).
-/// The other tests have no timeout and share the lock.
-static LINK_FLIGHT: RwLock<()> = RwLock::new(());
-
-fn shared() -> RwLockReadGuard<'static, ()> {
-    LINK_FLIGHT.read().unwrap_or_else(|e| e.into_inner())
-}
-
-fn alone() -> RwLockWriteGuard<'static, ()> {
-    LINK_FLIGHT.write().unwrap_or_else(|e| e.into_inner())
-}
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -58,7 +43,6 @@ fn run_harness_in_qemu(name: &str) -> (String, bool) {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn every_controller_fits_its_cycle_budget() {
-    let _lock = shared();
     let (out, ok) = run_harness_in_qemu("budget");
     // Rows: | controller | form | rate | measured | instructions | budget | load | verdict | stack |
     let rows: Vec<Vec<&str>> = out
@@ -103,7 +87,6 @@ fn every_controller_fits_its_cycle_budget() {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn mcu_and_host_compute_the_same_closed_loop() {
-    let _lock = shared();
     let host = cargo()
         .args(["run", "-q", "--release", "-p", "fc-stm32f405", "--bin", "equivalence"])
         .output()
@@ -144,7 +127,6 @@ fn setpoint(family: Family, seconds: f64) -> FlightConfig {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn qemu_flight_matches_in_process_and_counts_instructions() {
-    let _lock = alone();
     for family in [Family::Lqr, Family::Mpc] {
         let cfg = setpoint(family, 2.0);
         let local = fly(&cfg).unwrap();
@@ -168,7 +150,7 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
         assert_eq!(pil.failsafe_steps, 0);
         // The firmware's own defmt log, decoded from QEMU's semihosting output.
         let log = pil.firmware_log.join("\n");
-        for line in ["INFO up: protocol v2", "INFO session open", "INFO controller selected"] {
+        for line in ["INFO up: protocol v3", "INFO session open", "INFO controller selected"] {
             assert!(log.contains(line), "{line:?} missing from the firmware log:\n{log}");
         }
         assert!(!log.contains("WARN") && !log.contains("ERROR"), "{log}");
@@ -180,7 +162,6 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn stm32_drivers_behave_in_qemu() {
-    let _lock = shared();
     let (out, ok) = run_harness_in_qemu("drivers");
     assert!(ok, "{out}");
     let nums = |prefix: &str| -> Vec<u64> {
@@ -195,12 +176,59 @@ fn stm32_drivers_behave_in_qemu() {
             .collect()
     };
     // TIM2 fires periodically (QEMU's timer model has its own clock, so the
-    // count is not the silicon's 20; it must not be 0 or run away).
+    // count is not the silicon's 20, and it varies from run to run and with
+    // the host's load: 13–50 seen; it must not be stuck or run away).
     let periods = nums("drivers: loop timer 1000 Hz: ")[0];
-    assert!((10..=100).contains(&periods), "{periods}");
+    assert!((5..=200).contains(&periods), "{periods}");
     // PWM: 400 Hz from 84 MHz needs prescaler 4 → ARR 52 499; duties 0.5, 0.25,
     // 2.0 (clamped to 1) and NaN (motor off).
     let v = nums("drivers: pwm arr ");
     assert_eq!(v, vec![52_499, 26_249, 13_124, 52_499, 0]);
     assert_eq!(nums("drivers: pwm disarmed ccr "), vec![0, 0, 0, 0]);
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn qemu_flight_does_not_depend_on_the_hosts_load() {
+    // The fast MPC holding a set-point in the wind for 3 s in QEMU, flown
+    // once as it comes and once with every core of the host saturated by
+    // busy loops. The flight loop's clock is the frames' simulated time, so
+    // the host's stalls are not timeouts: the flights are the same to the
+    // bit, with no failsafe in either.
+    let mut cfg = setpoint(Family::Mpc, 3.0);
+    cfg.disturbance = "wind".parse().unwrap();
+    let calm = fly_target(&cfg, &Target::Qemu).unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let burners: Vec<_> = (0..cores)
+        .map(|_| {
+            let stop = Arc::clone(&stop);
+            std::thread::spawn(move || {
+                let mut x = 0u64;
+                while !stop.load(Ordering::Relaxed) {
+                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+                }
+            })
+        })
+        .collect();
+    let busy = fly_target(&cfg, &Target::Qemu);
+    stop.store(true, Ordering::Relaxed);
+    for b in burners {
+        b.join().unwrap();
+    }
+    let busy = busy.unwrap();
+    assert_eq!(calm.steps, 601, "3 s at 200 Hz, both ends");
+    assert_eq!(calm.rows, busy.rows, "the actuator streams (and so the flights) differ");
+    for r in [&calm, &busy] {
+        assert_eq!(r.link_counters.expect("counters").failsafe_entries, 0);
+        assert_eq!(r.failsafe_steps, 0);
+    }
+    // The instruction counts are the guest's own, taken inside each step;
+    // they may differ by the 1 ms SysTick interrupt (≈ 20 instructions)
+    // landing inside a step or not, as that phase follows the host's timing.
+    let ((m1, x1), (m2, x2)) = (calm.instructions_per_step.unwrap(), busy.instructions_per_step.unwrap());
+    assert!(
+        (m1 - m2).abs() < 5.0 && (x1 - x2).abs() < 60.0,
+        "{m1} {x1} vs {m2} {x2}"
+    );
 }

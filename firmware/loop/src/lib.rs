@@ -3,12 +3,21 @@
 //! and TCP targets) drive it through hal-shim's `ByteLink` and `CycleClock`.
 //!
 //! Failure behaviour: corrupt, truncated, oversized or undecodable frames are
-//! dropped and counted; sensor frames whose sequence number does not increase
-//! are dropped and counted; NaN/∞ or a non-unit attitude is rejected (the
-//! reply repeats the current output). No valid sensor frame for
-//! `failsafe_timeout_us` → failsafe: level (zero torques) and a gentle
-//! descent (thrust below hover); the first valid frame afterwards resumes
-//! control. Every loop is bounded; nothing allocates or blocks.
+//! dropped and counted; sensor frames whose sequence number or (in lockstep)
+//! time does not increase are dropped and counted; NaN/∞ or a non-unit
+//! attitude is rejected (the reply repeats the current output). No valid
+//! sensor frame for `failsafe_timeout_us` → failsafe: level (zero torques)
+//! and a gentle descent (thrust below hover); the first valid frame
+//! afterwards resumes control. Every loop is bounded; nothing allocates or
+//! blocks.
+//!
+//! Time ([`TimeBase`]): in lockstep (the SIL, QEMU, simulators) the clock is
+//! the simulated time each sensor frame carries, so a host that is slow in
+//! wall time causes nothing, and a gap in *simulated* time longer than the
+//! timeout is a failsafe episode; free-running (a vehicle) uses the caller's
+//! real clock. Resuming after a gap keeps the controller's estimates (the
+//! MPC's disturbance estimate, its warm start) and drops only what links one
+//! step to the one before (`Controller::resume`).
 
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
@@ -26,7 +35,9 @@ use nalgebra::{Vector3, Vector4};
 /// Loop settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FcConfig {
-    /// No valid sensor frame for this long → failsafe, µs.
+    /// No valid sensor frame for this long → failsafe, µs; never less than
+    /// two periods of the running controller (the thesis MPC steps at 4 Hz:
+    /// its frames are 250 ms apart by design).
     pub failsafe_timeout_us: u64,
     /// Failsafe thrust as a fraction of hover thrust (below 1: descend).
     pub descent_thrust_fraction: f32,
@@ -35,6 +46,32 @@ pub struct FcConfig {
     pub control_period_s: f64,
     /// Most link reads per `service` call (bounds the work per call).
     pub max_reads_per_service: usize,
+    /// The clock the failsafe timer runs on.
+    pub time_base: TimeBase,
+    /// Lockstep: the largest step of simulated time between two accepted
+    /// sensor frames, µs. A frame whose time jumps further is an absurd
+    /// timestamp: dropped and counted as out of order, so that it cannot
+    /// become the clock (every later frame would then be "in the past").
+    /// A simulation that really jumps that far starts a new session (`Hello`).
+    pub max_time_step_us: u64,
+}
+
+/// The clock of the flight loop's failsafe timer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TimeBase {
+    /// Lockstep simulation (SIL, QEMU, a simulator driving the loop): the
+    /// time is the simulated time `t_us` of the sensor frames, as PX4's
+    /// lockstep takes the simulator's timestamps. Wall time that passes
+    /// without frames is not a timeout (a host that stops, stops time); a
+    /// frame whose time jumps past the timeout since the last valid one
+    /// ends a failsafe episode (counted) and resumes control; a frame whose
+    /// time does not increase is dropped and counted as out of order.
+    Lockstep,
+    /// Free-running (a vehicle): the caller's real clock, the `now_us` of
+    /// [`FlightCore::service`] and [`FlightCore::check_timeout`]; the
+    /// frames' `t_us` is not used.
+    FreeRunning,
 }
 
 impl Default for FcConfig {
@@ -44,6 +81,8 @@ impl Default for FcConfig {
             descent_thrust_fraction: 0.85,
             control_period_s: 0.002,
             max_reads_per_service: 16,
+            time_base: TimeBase::Lockstep,
+            max_time_step_us: 10_000_000,
         }
     }
 }
@@ -127,6 +166,9 @@ pub struct FlightCore {
     counters: Counters,
     session: bool,
     last_seq: Option<u32>,
+    /// Time of the last accepted sensor frame (lockstep), µs.
+    last_t_us: Option<u64>,
+    /// Time of the last valid controller step, µs, on the time base's clock.
     last_valid_us: Option<u64>,
     failsafe: bool,
     u: Input<f32>,
@@ -160,6 +202,7 @@ impl FlightCore {
             counters: Counters::default(),
             session: false,
             last_seq: None,
+            last_t_us: None,
             last_valid_us: None,
             failsafe: false,
             u: Vector4::zeros(),
@@ -234,10 +277,26 @@ impl FlightCore {
         Ok(())
     }
 
-    /// Applies the failsafe timer.
+    /// Applies the failsafe timer at real time `now_us` (free-running only:
+    /// in lockstep the timer runs on the sensor frames' time, and wall time
+    /// is not a timeout).
     pub fn check_timeout(&mut self, now_us: u64) {
+        if self.cfg.time_base == TimeBase::FreeRunning {
+            self.timeout_at(now_us);
+        }
+    }
+
+    /// The running controller's period, µs.
+    fn period_us(&self) -> u64 {
+        (self.ctrl.period_s().unwrap_or(self.cfg.control_period_s) * 1e6) as u64
+    }
+
+    /// Enters the failsafe if the last valid step is more than the timeout
+    /// (at least two controller periods) before `now_us`, on the time base's clock.
+    fn timeout_at(&mut self, now_us: u64) {
+        let timeout = self.cfg.failsafe_timeout_us.max(self.period_us().saturating_mul(2));
         if let Some(t) = self.last_valid_us {
-            if now_us.saturating_sub(t) > self.cfg.failsafe_timeout_us && !self.failsafe {
+            if now_us.saturating_sub(t) > timeout && !self.failsafe {
                 self.failsafe = true;
                 self.counters.failsafe_entries += 1;
                 self.u = Vector4::new(
@@ -267,6 +326,14 @@ impl FlightCore {
             // PD designs cannot fail: nothing to check.
             let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None);
         }
+    }
+
+    /// More than one and a half control periods since the last valid step:
+    /// this step does not follow that one (frames were missing or invalid).
+    fn gap_since_last_step(&self, now_us: u64) -> bool {
+        let period_us = self.period_us();
+        self.last_valid_us
+            .is_some_and(|t| now_us.saturating_sub(t) > period_us.saturating_add(period_us / 2))
     }
 
     fn send<L: ByteLink>(link: &mut L, msg: &FromFc) -> Result<(), L::Error> {
@@ -302,8 +369,11 @@ impl FlightCore {
             ToFc::Hello { version } => {
                 let accepted = version == PROTOCOL_VERSION;
                 if accepted {
+                    // A new session is a new time line (a simulation restarts at t = 0).
                     self.session = true;
                     self.last_seq = None;
+                    self.last_t_us = None;
+                    self.last_valid_us = None;
                 }
                 Self::send(
                     link,
@@ -344,32 +414,49 @@ impl FlightCore {
                 }
                 Ok(())
             }
-            ToFc::Sensor { seq, t_us: _, state } => self.on_sensor(seq, &state, link, clock, now_us),
+            ToFc::Sensor { seq, t_us, state } => self.on_sensor(seq, t_us, &state, link, clock, now_us),
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn on_sensor<L: ByteLink, C: CycleClock>(
         &mut self,
         seq: u32,
+        t_us: u64,
         state: &[f32; 13],
         link: &mut L,
         clock: &C,
         now_us: u64,
     ) -> Result<(), L::Error> {
-        if self.last_seq.is_some_and(|last| seq <= last) {
+        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
+        let absurd_time = lockstep
+            && self
+                .last_t_us
+                .is_some_and(|last| t_us <= last || t_us - last > self.cfg.max_time_step_us);
+        if self.last_seq.is_some_and(|last| seq <= last) || absurd_time {
             self.counters.out_of_order += 1;
             return Ok(());
         }
         self.last_seq = Some(seq);
+        let now = if lockstep {
+            self.last_t_us = Some(t_us);
+            // The simulated time since the last valid step: past the
+            // timeout it was a failsafe episode, even if this frame ends it.
+            self.timeout_at(t_us);
+            t_us
+        } else {
+            now_us
+        };
         let est = StateEstimate::from_quat_state(&QuatState::from_column_slice(state));
         let mut cycles = 0u32;
         let mut iterations = 0u16;
         if !est.is_valid() {
             self.counters.invalid_values += 1;
         } else {
-            if self.failsafe {
-                // Valid data again: start the controller afresh.
-                self.ctrl.reset();
+            if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
+                // Valid data again after a gap: the controller keeps its
+                // estimates and forgets only the step before (see `Controller::resume`).
+                self.ctrl.resume();
                 self.failsafe = false;
             }
             let t0 = clock.now();
@@ -379,7 +466,7 @@ impl FlightCore {
                 Ok(o) => {
                     self.u = o.u;
                     iterations = o.status.iterations;
-                    self.last_valid_us = Some(now_us);
+                    self.last_valid_us = Some(now);
                 }
                 Err(_) => self.counters.invalid_values += 1,
             }

@@ -39,8 +39,11 @@ struct Rig {
 
 impl Rig {
     fn new() -> Self {
+        Self::with(FcConfig::default())
+    }
+    fn with(cfg: FcConfig) -> Self {
         Self {
-            fc: FlightCore::new(FcConfig::default()).unwrap(),
+            fc: FlightCore::new(cfg).unwrap(),
             link: LoopbackLink::default(),
             clock: FakeClock(0.into()),
         }
@@ -194,7 +197,7 @@ fn out_of_order_and_invalid_values_are_rejected() {
         rig.send(
             &ToFc::Sensor {
                 seq: 10,
-                t_us: 0,
+                t_us: 20_000,
                 state: hover_state()
             },
             0
@@ -206,7 +209,7 @@ fn out_of_order_and_invalid_values_are_rejected() {
         .send(
             &ToFc::Sensor {
                 seq: 10,
-                t_us: 0,
+                t_us: 20_000,
                 state: hover_state()
             },
             0
@@ -216,7 +219,7 @@ fn out_of_order_and_invalid_values_are_rejected() {
         .send(
             &ToFc::Sensor {
                 seq: 9,
-                t_us: 0,
+                t_us: 18_000,
                 state: hover_state()
             },
             0
@@ -229,7 +232,7 @@ fn out_of_order_and_invalid_values_are_rejected() {
     let r = rig.send(
         &ToFc::Sensor {
             seq: 11,
-            t_us: 0,
+            t_us: 22_000,
             state: nan,
         },
         1000,
@@ -242,7 +245,7 @@ fn out_of_order_and_invalid_values_are_rejected() {
     rig.send(
         &ToFc::Sensor {
             seq: 12,
-            t_us: 0,
+            t_us: 24_000,
             state: bad_q,
         },
         2000,
@@ -261,8 +264,13 @@ fn out_of_order_and_invalid_values_are_rejected() {
 }
 
 #[test]
-fn failsafe_after_50_ms_without_valid_sensor_and_recovery() {
-    let mut rig = Rig::new();
+fn free_running_failsafe_after_50_ms_without_valid_sensor_and_recovery() {
+    // The real-time watchdog of a vehicle: `now_us` is the clock, the
+    // frames' time is not used (all 0 here).
+    let mut rig = Rig::with(FcConfig {
+        time_base: TimeBase::FreeRunning,
+        ..FcConfig::default()
+    });
     rig.open();
     rig.send(
         &ToFc::Sensor {
@@ -311,6 +319,116 @@ fn failsafe_after_50_ms_without_valid_sensor_and_recovery() {
         .any(|m| matches!(m, FromFc::Telemetry { counters, .. } if counters.failsafe_entries == 1)));
 }
 
+/// A lockstep sensor frame at simulated time `t_us`.
+fn sensor_at(seq: u32, t_us: u64, state: [f32; 13]) -> ToFc {
+    ToFc::Sensor { seq, t_us, state }
+}
+
+#[test]
+fn lockstep_wall_time_is_not_a_timeout() {
+    // A host that takes 10 s of wall time between two frames 2 ms apart in
+    // simulated time: no failsafe, whatever the real clock says.
+    let mut rig = Rig::new();
+    rig.open();
+    rig.send(&sensor_at(1, 2_000, hover_state()), 0);
+    rig.fc.check_timeout(10_000_000);
+    let r = rig.send(&sensor_at(2, 4_000, hover_state()), 10_000_000);
+    assert!(
+        matches!(
+            r[0],
+            FromFc::Actuator {
+                seq: 2,
+                failsafe: false,
+                ..
+            }
+        ),
+        "{r:?}"
+    );
+    assert_eq!((rig.fc.failsafe(), rig.fc.counters().failsafe_entries), (false, 0));
+}
+
+#[test]
+fn lockstep_simulated_gap_past_the_timeout_is_a_failsafe_episode() {
+    // Simulated time jumps 200 ms between two frames: the vehicle flew that
+    // long without the loop. Counted as one episode; the valid frame that
+    // ends it is flown by the controller, not the failsafe.
+    let mut rig = Rig::new();
+    rig.open();
+    rig.send(&sensor_at(1, 2_000, hover_state()), 0);
+    let r = rig.send(&sensor_at(2, 202_000, hover_state()), 0);
+    assert!(
+        matches!(
+            r[0],
+            FromFc::Actuator {
+                seq: 2,
+                failsafe: false,
+                ..
+            }
+        ),
+        "{r:?}"
+    );
+    assert!(r
+        .iter()
+        .any(|m| matches!(m, FromFc::Telemetry { counters, .. } if counters.failsafe_entries == 1)));
+    // A gap up to the timeout is not one.
+    rig.send(&sensor_at(3, 252_000, hover_state()), 0);
+    assert_eq!(rig.fc.counters().failsafe_entries, 1);
+}
+
+#[test]
+fn lockstep_invalid_frames_past_the_timeout_enter_the_failsafe_and_valid_ones_end_it() {
+    let mut rig = Rig::new();
+    rig.open();
+    rig.send(&sensor_at(1, 2_000, hover_state()), 0);
+    let mut nan = hover_state();
+    nan[0] = f32::NAN;
+    // 2 ms frames, all NaN: the failsafe takes over once 50 ms of simulated time have passed.
+    let mut entered_at = None;
+    for k in 2..40u32 {
+        let r = rig.send(&sensor_at(k, u64::from(k) * 2_000, nan), 0);
+        if let FromFc::Actuator { failsafe: true, u, .. } = r[0] {
+            entered_at.get_or_insert((k, u));
+        }
+    }
+    let (k, u) = entered_at.expect("failsafe entered");
+    assert_eq!(k, 27, "first frame more than 50 ms after the last valid one (t = 2 ms)");
+    assert!(
+        (u[0] - 0.85 * 6.3765).abs() < 1e-3 && u[1..].iter().all(|v| *v == 0.0),
+        "{u:?}"
+    );
+    let r = rig.send(&sensor_at(40, 80_000, hover_state()), 0);
+    assert!(
+        matches!(
+            r[0],
+            FromFc::Actuator {
+                seq: 40,
+                failsafe: false,
+                ..
+            }
+        ),
+        "{r:?}"
+    );
+    assert_eq!(rig.fc.counters().failsafe_entries, 1);
+}
+
+#[test]
+fn lockstep_time_that_does_not_increase_is_out_of_order() {
+    let mut rig = Rig::new();
+    rig.open();
+    rig.send(&sensor_at(1, 4_000, hover_state()), 0);
+    // A newer sequence number with an older or equal time: dropped, counted, not answered.
+    assert!(rig.send(&sensor_at(2, 4_000, hover_state()), 0).is_empty());
+    assert!(rig.send(&sensor_at(3, 2_000, hover_state()), 0).is_empty());
+    assert_eq!(rig.fc.counters().out_of_order, 2);
+    assert_eq!(rig.send(&sensor_at(4, 6_000, hover_state()), 0).len(), 2);
+    // An absurd jump (here 2⁶⁰ µs) does not become the clock: dropped and
+    // counted, and the flight goes on from where it was.
+    assert!(rig.send(&sensor_at(5, 1 << 60, hover_state()), 0).is_empty());
+    assert_eq!(rig.fc.counters().out_of_order, 3);
+    assert_eq!(rig.send(&sensor_at(6, 8_000, hover_state()), 0).len(), 2);
+    assert_eq!(rig.fc.counters().failsafe_entries, 0);
+}
+
 #[test]
 fn every_controller_can_be_selected_over_the_link() {
     let mut rig = Rig::new();
@@ -328,7 +446,7 @@ fn every_controller_can_be_selected_over_the_link() {
         let r = rig.send(
             &ToFc::Sensor {
                 seq: 100 + i as u32,
-                t_us: 0,
+                t_us: (i as u64 + 1) * 5_000,
                 state: hover_state(),
             },
             0,
@@ -374,9 +492,35 @@ proptest! {
         let _ = rig.send_bytes(&bytes, 0);
         // Resync and a fresh valid step.
         let mut tail = vec![0u8];
-        tail.extend(frame(&ToFc::Sensor { seq: 1_000_000, t_us: 0, state: hover_state() }));
+        tail.extend(frame(&ToFc::Sensor { seq: 1_000_000, t_us: 1_000_000, state: hover_state() }));
         let r = rig.send_bytes(&tail, 0);
         let answered = matches!(r.first(), Some(FromFc::Actuator { seq: 1_000_000, .. }));
         prop_assert!(answered, "no answer after noise: {:?}", r);
     }
+}
+
+#[test]
+fn a_slow_controllers_own_period_is_not_a_timeout() {
+    // The thesis MPC steps at 4 Hz: frames 250 ms apart are on time (the
+    // timeout is at least two of its periods), 600 ms is a gap.
+    let mut rig = Rig::new();
+    rig.open();
+    let id = fc_core::control::ControllerSpec::new(fc_core::control::Family::Mpc, AttitudeForm::Euler)
+        .with_preset(fc_core::control::Preset::Thesis)
+        .to_wire()
+        .unwrap()
+        .0;
+    rig.send(
+        &ToFc::Select {
+            controller: id,
+            feedforward: true,
+        },
+        0,
+    );
+    for k in 1..=4u32 {
+        rig.send(&sensor_at(k, u64::from(k) * 250_000, hover_state()), 0);
+    }
+    assert_eq!(rig.fc.counters().failsafe_entries, 0);
+    rig.send(&sensor_at(5, 1_600_000, hover_state()), 0);
+    assert_eq!(rig.fc.counters().failsafe_entries, 1);
 }

@@ -45,7 +45,7 @@ pub use frame::{encode, FrameDecoder, FrameError, MAX_FRAME};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version; both ends must agree in the handshake.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// A setpoint on the wire: NED position, velocity, acceleration, jerk (SI),
 /// heading and heading rate (rad, rad/s).
@@ -99,7 +99,9 @@ pub enum ToFc {
     Sensor {
         /// Step number, strictly increasing.
         seq: u32,
-        /// Host time of the sample, µs.
+        /// Time of this sample, µs: in lockstep the flight loop's
+        /// clock (it must increase; a frame whose time does not is dropped
+        /// as out of order; since protocol v3).
         t_us: u64,
         /// The quaternion-form state.
         state: [f32; 13],

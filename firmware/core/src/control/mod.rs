@@ -208,6 +208,15 @@ pub trait Controller<T: RealField + Copy> {
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError>;
     /// Forgets internal state (warm starts, estimates) before a new flight.
     fn reset(&mut self);
+    /// The next `update` does not follow the last one by one period (sensor
+    /// data were missing or invalid, e.g. a failsafe episode): forget what
+    /// ties one step to the step before, keep what is still true of the
+    /// vehicle and its surroundings. The default keeps everything (a
+    /// controller without memory). The MPC drops its previous state (its
+    /// disturbance observer would otherwise read the whole gap as one
+    /// step's innovation) and keeps its disturbance estimate and trend,
+    /// warm start, previous input and preview.
+    fn resume(&mut self) {}
     /// Reference preview wanted before each update: `(steps, spacing s)`;
     /// `None` for controllers that use only the current setpoint.
     fn preview_request(&self) -> Option<(usize, f64)> {
@@ -387,6 +396,16 @@ impl<T: RealField + Copy> Controller<T> for AnyController<T> {
             AnyController::LqrQuat(c) => c.update(est, sp),
             AnyController::MpcThesis(c) => c.update(est, sp),
             AnyController::MpcFast(c) => c.update(est, sp),
+        }
+    }
+    fn resume(&mut self) {
+        match self {
+            AnyController::PdEuler(c) => c.resume(),
+            AnyController::PdQuat(c) => c.resume(),
+            AnyController::LqrEuler(c) => c.resume(),
+            AnyController::LqrQuat(c) => c.resume(),
+            AnyController::MpcThesis(c) => c.resume(),
+            AnyController::MpcFast(c) => c.resume(),
         }
     }
     fn reset(&mut self) {

@@ -848,6 +848,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         Mpc::iteration_bound(self)
     }
 
+    fn resume(&mut self) {
+        self.last = None;
+    }
+
     fn reset(&mut self) {
         self.z = SVector::zeros();
         self.du_prev = Vector4::zeros();
