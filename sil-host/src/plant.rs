@@ -274,16 +274,22 @@ impl Plant {
         for i in 0..n {
             let ti = t0 + i as f64 * h;
             if cfg.rotor_lag {
+                // The first-order lag in closed form over the sub-step,
+                // ω(s) = ω∞ + (ω₀ − ω∞)·e^{−s/τ} with ω∞ = k·Ω_cmd, fed to RK4
+                // at its stage times: exact and stable for every τ > 0 (an RK4
+                // of the lag itself is unstable for τ below ≈ h/2.8).
                 let (k, tau) = (p.rotor_gain, p.rotor_tau_s);
-                let f = |tt: f64, s: &(B, Vector4<f64>)| {
-                    let u = realised_inputs(p, &s.1);
-                    let wr = gyro_speed(&s.1);
-                    let d = dist.at(tt);
-                    (B::deriv(v, &s.0, &u, wr, &d), (omega_cmd * k - s.1) / tau)
+                let w_inf = omega_cmd * k;
+                let w0 = *omega;
+                let at = |s: f64| w_inf + (w0 - w_inf) * (-s / tau).exp();
+                let stages = [w0, at(0.5 * h), at(h)];
+                let f = |tt: f64, s: &B| {
+                    // RK4 evaluates at ti, ti + h/2 (twice) and ti + h.
+                    let w = &stages[usize::from(tt > ti) + usize::from(tt > ti + 0.75 * h)];
+                    B::deriv(v, s, &realised_inputs(p, w), gyro_speed(w), &dist.at(tt))
                 };
-                let (nx, nw) = rk4(f, &(*x, *omega), ti, h);
-                *x = nx;
-                *omega = nw.map(|w| clamp_speed(p, w));
+                *x = rk4(f, x, ti, h);
+                *omega = stages[2].map(|w| clamp_speed(p, w));
             } else {
                 *omega = *omega_cmd;
                 let u = realised_inputs(p, omega);

@@ -208,21 +208,57 @@ fn rk4_error_falls_sixteen_fold_when_step_halves() {
 
 #[test]
 fn rotor_lag_is_first_order_with_gain() {
-    // Rotors from hover speed to a new command: Ω(t) = kΩc + (Ω0 − kΩc) e^{−t/τ}.
-    let p = VehicleParams::OS4;
-    let mut cfg = PlantConfig::nominal(AttitudeForm::Quaternion);
-    cfg.rotor_lag = true;
-    let u = Vector4::new(8.0, 0.0, 0.0, 0.0);
-    let wc = rotor_speeds(&p, &u)[0];
-    let w0 = p.hover_rotor_speed_radps();
-    let mut pl = Plant::new(cfg, &start());
-    for k in 1..=100 {
-        pl.step(&u, 0.01);
-        let t = k as f64 * 0.01;
-        let want = p.rotor_gain * wc + (w0 - p.rotor_gain * wc) * (-t / p.rotor_tau_s).exp();
-        let got = pl.rotor_speeds();
-        assert!(got.iter().all(|w| (w - want).abs() < 1e-9), "t={t}: {got} vs {want}");
+    // Rotors from hover speed to a new command: Ω(t) = kΩc + (Ω0 − kΩc) e^{−t/τ},
+    // for the OS4's τ, a slow 0.2 s and a near-instant 10 µs (far below the
+    // 1 ms step, where an RK4 of the lag itself diverges).
+    for tau in [VehicleParams::OS4.rotor_tau_s, 0.2, 1e-5] {
+        let mut p = VehicleParams::OS4;
+        p.rotor_tau_s = tau;
+        let mut cfg = PlantConfig::nominal(AttitudeForm::Quaternion);
+        cfg.params = p;
+        cfg.rotor_lag = true;
+        let u = Vector4::new(8.0, 0.0, 0.0, 0.0);
+        let wc = rotor_speeds(&p, &u)[0];
+        let w0 = p.hover_rotor_speed_radps();
+        let mut pl = Plant::new(cfg, &start());
+        for k in 1..=100 {
+            pl.step(&u, 0.01);
+            let t = k as f64 * 0.01;
+            let want = p.rotor_gain * wc + (w0 - p.rotor_gain * wc) * (-t / tau).exp();
+            let got = pl.rotor_speeds();
+            assert!(
+                got.iter().all(|w| (w - want).abs() < 1e-9),
+                "τ={tau} t={t}: {got} vs {want}"
+            );
+        }
+        assert!(pl.position().iter().all(|v| v.is_finite()));
     }
+}
+
+#[test]
+fn a_near_instant_rotor_lag_flies_like_no_lag() {
+    // τ = 10 µs with the command scaled by 1/k: the rotors sit at the
+    // commanded speed within a sub-step, so the flight is the lag-free one
+    // (to the lag's first 10 µs of each command change).
+    let mut p = VehicleParams::OS4;
+    p.rotor_tau_s = 1e-5;
+    let fly = |lag: bool| {
+        let mut cfg = PlantConfig::nominal(AttitudeForm::Quaternion);
+        cfg.params = p;
+        cfg.rotor_lag = lag;
+        let mut pl = Plant::new(cfg, &start());
+        for k in 0..2000 {
+            // A command that changes every 10 ms: a small roll doublet on hover.
+            let roll = if (k / 10) % 2 == 0 { 0.01 } else { -0.01 };
+            let u = Vector4::new(p.hover_thrust_n(), roll, 0.0, 0.0);
+            let w = rotor_speeds(&p, &u) / if lag { p.rotor_gain } else { 1.0 };
+            let u = realised_inputs(&p, &w);
+            pl.step(&u, 0.001);
+        }
+        pl.position()
+    };
+    let (a, b) = (fly(true), fly(false));
+    assert!((a - b).amax() < 1e-4, "{a} vs {b}");
 }
 
 #[test]
