@@ -298,7 +298,7 @@ impl FlightCore {
         if let Some(t) = self.last_valid_us {
             if now_us.saturating_sub(t) > timeout && !self.failsafe {
                 self.failsafe = true;
-                self.counters.failsafe_entries += 1;
+                self.counters.failsafe_entries = self.counters.failsafe_entries.wrapping_add(1);
                 self.u = Vector4::new(
                     self.cfg.descent_thrust_fraction * self.params.hover_thrust_n(),
                     0.0,
@@ -320,7 +320,7 @@ impl FlightCore {
             self.selections = self.selections.wrapping_add(1);
             return;
         }
-        self.counters.invalid_values += 1;
+        self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
         if self.spec.build_in(&mut self.ctrl, self.params, ts, None).is_err() {
             self.spec = FALLBACK_CONTROLLER;
             // PD designs cannot fail: nothing to check.
@@ -356,15 +356,17 @@ impl FlightCore {
             Ok(m) => m,
             Err(e) => {
                 match e {
-                    FrameError::Oversized => self.counters.oversized += 1,
-                    FrameError::Cobs => self.counters.bad_cobs += 1,
-                    FrameError::Crc => self.counters.bad_crc += 1,
-                    FrameError::Message | FrameError::BufferTooSmall => self.counters.bad_message += 1,
+                    FrameError::Oversized => self.counters.oversized = self.counters.oversized.wrapping_add(1),
+                    FrameError::Cobs => self.counters.bad_cobs = self.counters.bad_cobs.wrapping_add(1),
+                    FrameError::Crc => self.counters.bad_crc = self.counters.bad_crc.wrapping_add(1),
+                    FrameError::Message | FrameError::BufferTooSmall => {
+                        self.counters.bad_message = self.counters.bad_message.wrapping_add(1)
+                    }
                 }
                 return Ok(());
             }
         };
-        self.counters.ok += 1;
+        self.counters.ok = self.counters.ok.wrapping_add(1);
         match msg {
             ToFc::Hello { version } => {
                 let accepted = version == PROTOCOL_VERSION;
@@ -384,7 +386,7 @@ impl FlightCore {
                 )
             }
             _ if !self.session => {
-                self.counters.unexpected += 1;
+                self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
                 Ok(())
             }
             ToFc::Heartbeat { seq } => Self::send(link, &FromFc::Heartbeat { seq }),
@@ -396,21 +398,21 @@ impl FlightCore {
                 // (as an unknown enum index was in protocol v2's decoder).
                 match ControllerSpec::from_wire(controller, feedforward) {
                     Ok(spec) => self.select(spec),
-                    Err(_) => self.counters.bad_message += 1,
+                    Err(_) => self.counters.bad_message = self.counters.bad_message.wrapping_add(1),
                 }
                 Ok(())
             }
             ToFc::Setpoint(w) => {
                 match setpoint_from_wire(&w) {
                     Some(sp) => self.sp = sp,
-                    None => self.counters.invalid_values += 1,
+                    None => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
                 }
                 Ok(())
             }
             ToFc::Preview { k, sp } => {
                 let ok = setpoint_from_wire(&sp).is_some_and(|s| self.ctrl.set_preview(k as usize, &s).is_ok());
                 if !ok && self.ctrl.preview_request().is_some() {
-                    self.counters.invalid_values += 1;
+                    self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
                 }
                 Ok(())
             }
@@ -434,7 +436,7 @@ impl FlightCore {
                 .last_t_us
                 .is_some_and(|last| t_us <= last || t_us - last > self.cfg.max_time_step_us);
         if self.last_seq.is_some_and(|last| seq <= last) || absurd_time {
-            self.counters.out_of_order += 1;
+            self.counters.out_of_order = self.counters.out_of_order.wrapping_add(1);
             return Ok(());
         }
         self.last_seq = Some(seq);
@@ -451,7 +453,7 @@ impl FlightCore {
         let mut cycles = 0u32;
         let mut iterations = 0u16;
         if !est.is_valid() {
-            self.counters.invalid_values += 1;
+            self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
         } else {
             if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
                 // Valid data again after a gap: the controller keeps its
@@ -468,7 +470,7 @@ impl FlightCore {
                     iterations = o.status.iterations;
                     self.last_valid_us = Some(now);
                 }
-                Err(_) => self.counters.invalid_values += 1,
+                Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
             }
         }
         let u = [self.u[0], self.u[1], self.u[2], self.u[3]];

@@ -57,7 +57,9 @@ pub fn encode<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, FrameError
     Ok(len + 1)
 }
 
-/// Accumulates bytes into frames. `CAP` bounds the memory (heapless style).
+/// Accumulates bytes into frames. `CAP` bounds the memory (heapless style)
+/// and the frame: at most `CAP` bytes with the delimiter; a longer one is
+/// dropped up to its delimiter as [`FrameError::Oversized`].
 #[derive(Debug, Clone)]
 pub struct FrameDecoder<const CAP: usize = MAX_FRAME> {
     buf: heapless::Vec<u8, CAP>,
@@ -83,7 +85,8 @@ impl<const CAP: usize> FrameDecoder<CAP> {
     /// frame was dropped; otherwise `None`.
     pub fn push<T: DeserializeOwned>(&mut self, byte: u8) -> Option<Result<T, FrameError>> {
         if byte != 0 {
-            if self.buf.push(byte).is_err() {
+            // At most CAP bytes per frame with its delimiter: CAP − 1 before it.
+            if self.buf.len() + 1 >= CAP || self.buf.push(byte).is_err() {
                 self.overflow = true;
             }
             return None;
@@ -190,5 +193,18 @@ mod tests {
         assert_eq!(decode_all(&big), vec![Err(FrameError::Oversized), Ok(sensor(1))]);
         // Empty frames are resyncs, not errors.
         assert!(decode_all(&[0, 0, 0]).is_empty());
+    }
+
+    #[test]
+    fn a_frame_is_at_most_max_frame_bytes_with_its_delimiter() {
+        // 127 bytes and the delimiter: read (and rejected for its content);
+        // 128 and the delimiter: oversized.
+        for (body, oversized) in [(MAX_FRAME - 1, false), (MAX_FRAME, true)] {
+            let mut f = vec![0x55u8; body];
+            f.push(0);
+            let r = decode_all(&f);
+            assert_eq!(r.len(), 1);
+            assert_eq!(r[0] == Err(FrameError::Oversized), oversized, "{body}: {r:?}");
+        }
     }
 }
