@@ -119,6 +119,7 @@ pub fn vehicle_from_str(path: &Path, text: &str) -> Result<VehicleParams<f64>> {
             p.mass_kg * p.gravity_mps2
         );
     }
+    p.check().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     Ok(p)
 }
 

@@ -44,7 +44,35 @@ pub struct FlightConfig {
     pub sensor_gap: Option<(f64, f64)>,
 }
 
+/// Fastest plant integration rate accepted, Hz.
+pub const MAX_INTEGRATION_HZ: f64 = 100_000.0;
+
 impl FlightConfig {
+    /// Refuses what cannot be flown honestly, before anything is designed
+    /// or flown, naming the value and its flag: the scenario's ranges
+    /// ([`Scenario::validate`]), a reference the vehicle cannot follow
+    /// ([`Scenario::check_feasible`]), the vehicle's parameters
+    /// ([`VehicleParams::check`]), the control rate (finite, > 0, at
+    /// most the plant's) and the plant rate (1 Hz … 100 kHz).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        self.vehicle
+            .check()
+            .map_err(|e| anyhow::anyhow!("{e} (the vehicle: --vehicle FILE, or the built-in OS4)"))?;
+        self.scenario.validate().map_err(anyhow::Error::msg)?;
+        self.scenario
+            .check_feasible(&self.vehicle)
+            .map_err(anyhow::Error::msg)?;
+        let ih = self.integration_hz;
+        if !(ih.is_finite() && (1.0..=MAX_INTEGRATION_HZ).contains(&ih)) {
+            anyhow::bail!("--integration-hz {ih:?} is out of range: must be in [1, {MAX_INTEGRATION_HZ}] Hz");
+        }
+        let ch = self.control_hz;
+        if !(ch.is_finite() && ch > 0.0 && ch <= ih) {
+            anyhow::bail!("--control-hz {ch:?} is out of range: must be > 0 and at most --integration-hz ({ih} Hz)");
+        }
+        Ok(())
+    }
+
     /// Defaults: feed-forward reference, 500 Hz control, 1 kHz plant.
     pub fn new(controller: Family, model: AttitudeForm, scenario: Scenario) -> Self {
         Self {
@@ -107,6 +135,7 @@ pub struct FlightResult {
 /// The controller of a flight as `cfg` describes it (its vehicle, and its
 /// MPC configuration override if any), PD and LQR at `cfg.control_hz`.
 pub fn build_for(cfg: &FlightConfig) -> anyhow::Result<AnyController<f32>> {
+    cfg.validate()?;
     cfg.spec
         .build_with(cfg.vehicle.cast(), 1.0 / cfg.control_hz, cfg.mpc_override)
         .map_err(|e| anyhow::anyhow!("designing {} failed: {e}", cfg.spec))
@@ -172,6 +201,7 @@ pub fn fly_target_with_progress(
     progress: Option<&dyn Fn(f64)>,
 ) -> anyhow::Result<FlightResult> {
     use crate::link::{firmware_elf, FcClient, Qemu, Remote, SYSTICK_PER_INSTRUCTION};
+    cfg.validate()?;
     if *target == Target::InProcess {
         return fly(cfg);
     }
@@ -238,10 +268,7 @@ pub fn fly_endpoint<E: Endpoint>(
     stop_at: Option<f64>,
     mut inspect: impl FnMut(f64, &E),
 ) -> anyhow::Result<(FlightResult, E)> {
-    cfg.scenario.validate().map_err(anyhow::Error::msg)?;
-    if !(cfg.integration_hz.is_finite() && cfg.integration_hz >= 1.0) {
-        anyhow::bail!("integration rate must be at least 1 Hz");
-    }
+    cfg.validate()?;
     // The MPC presets fix their own execution period; PD/LQR run at control_hz.
     let ts = ep.period_s().unwrap_or(1.0 / cfg.control_hz);
     if !(ts.is_finite() && ts > 0.0) {
@@ -295,6 +322,7 @@ pub fn fly_endpoint<E: Endpoint>(
     };
     let mut total_cost = 0.0;
     let mut total_it = 0u64;
+    let mut failing_since: Option<f64> = None;
     let mut u = Vector4::<f64>::zeros();
     for i in 0..=ticks {
         let t = i as f64 * tick;
@@ -319,6 +347,17 @@ pub fn fly_endpoint<E: Endpoint>(
             let step = ep.step(t, &xq, &sp, &previews)?;
             if let Some(v) = step.u {
                 u = Vector4::from(v).cast::<f64>();
+                failing_since = None;
+            } else {
+                // The loop holds the last command; a controller that fails
+                // for a whole second is a flight that cannot be reported.
+                let since = *failing_since.get_or_insert(t);
+                if t - since >= 1.0 {
+                    anyhow::bail!(
+                        "the controller produced no output at any step from t = {since:.3} s to {t:.3} s \
+                         (it refuses its state or setpoint); the flight is abandoned"
+                    );
+                }
             }
             res.saturated_steps += usize::from(step.saturated);
             res.failsafe_steps += usize::from(step.failsafe);

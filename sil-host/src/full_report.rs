@@ -281,6 +281,8 @@ fn figure_markdown(f: &Figure) -> String {
 /// Flies the study and writes the report.
 pub fn write_report(o: &ReportOptions) -> Result<Written> {
     let t0 = Instant::now();
+    // Refuse an unusable destination before flying for seconds.
+    crate::record::prepare_output_dir(&o.out)?;
     let cfgs = study::matrix(o.quick);
     let all = study::run_all(&cfgs, o.progress)?;
     let horizon = study_plots::horizon_sweep(AttitudeForm::Quaternion, o.quick)?;

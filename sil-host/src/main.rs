@@ -148,10 +148,10 @@ struct FlyArgs {
     #[arg(long, default_value_t = 1, value_name = "N")]
     noise_seed: u64,
     /// Circle/helix radius, m (default 2).
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
     radius: Option<f64>,
     /// Circle/helix period of one revolution, s (default 20).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
     period: Option<f64>,
     /// Helix climb rate, m/s of altitude gained (default 0.05).
     #[arg(long, value_name = "M_PER_S", allow_hyphen_values = true)]
@@ -166,7 +166,7 @@ struct FlyArgs {
     #[arg(long, value_name = "X,Y,Z,YAW_DEG|TARGET", value_parser = parse_target_arg, allow_hyphen_values = true)]
     target: Vec<TargetArg>,
     /// Flight length, s (default 20 for setpoint, 100 for circle and helix).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
     duration: Option<f64>,
     /// Reference handling: `feedforward` (reference velocity, and the attitude and thrust its
     /// acceleration implies) or `thesis` (reference position and velocity only, as the thesis).
@@ -177,10 +177,10 @@ struct FlyArgs {
     #[arg(long, value_parser = preset_parser(Family::Pd), default_value = "tuned")]
     gains: Preset,
     /// Controller rate of PD and LQR, Hz (the MPC presets fix their own rate).
-    #[arg(long, default_value_t = 500.0, value_name = "HZ")]
+    #[arg(long, default_value_t = 500.0, value_name = "HZ", allow_negative_numbers = true)]
     control_hz: f64,
     /// Plant RK4 rate, Hz (sub-steps within each control period).
-    #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
+    #[arg(long, default_value_t = 1000.0, value_name = "HZ", allow_negative_numbers = true)]
     integration_hz: f64,
     /// Vehicle parameters from a TOML file (any subset of mass_kg, gravity_mps2, inertia_kgm2,
     /// arm_m, rotor_inertia_kgm2, kf_ns2, km_nms2, kt_nspm, kr_nms, omega_max_radps, rotor_tau_s,
@@ -272,7 +272,7 @@ struct PlantArgs {
     #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
     model: AttitudeForm,
     /// RK4 integration rate of the plant, Hz (each control period is cut into sub-steps at this rate).
-    #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
+    #[arg(long, default_value_t = 1000.0, value_name = "HZ", allow_negative_numbers = true)]
     integration_hz: f64,
     /// Turn on the first-order rotor lag (tau = 0.178 s, gain 0.936, docs/model.md §6).
     #[arg(long)]
@@ -284,8 +284,9 @@ struct PlantArgs {
 
 impl PlantArgs {
     fn config(&self) -> Result<PlantConfig> {
-        if !(self.integration_hz.is_finite() && self.integration_hz >= 1.0) {
-            bail!("--integration-hz must be at least 1 Hz, got {}", self.integration_hz);
+        let (ih, max) = (self.integration_hz, sil_host::flight::MAX_INTEGRATION_HZ);
+        if !(ih.is_finite() && (1.0..=max).contains(&ih)) {
+            bail!("--integration-hz {ih:?} is out of range: must be in [1, {max}] Hz");
         }
         let mut cfg = PlantConfig::nominal(self.model);
         cfg.integration_hz = self.integration_hz;
@@ -390,8 +391,9 @@ fn parse_list<const N: usize>(s: &str) -> Result<[f64; N], String> {
 }
 
 fn open_loop(a: &OpenLoopArgs) -> Result<()> {
-    if !(a.duration.is_finite() && a.duration > 0.0) {
-        bail!("--duration must be positive, got {}", a.duration);
+    let max = sil_host::scenario::LIMITS.duration_s;
+    if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= max) {
+        bail!("--duration {:?} is out of range: must be in (0, {max}] s", a.duration);
     }
     let run = OpenLoop {
         plant: a.plant.config()?,

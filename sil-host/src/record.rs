@@ -56,3 +56,18 @@ pub fn write_csv(path: &Path, rows: &[[f64; 21]], reference: Option<&[[f64; 4]]>
     w.flush()?;
     Ok(())
 }
+
+/// Makes sure `dir` can take a command's output *before* the work starts:
+/// creates it if missing; refuses a path that exists and is not a directory,
+/// or a directory this process cannot write into (checked by creating and
+/// removing a probe file), with a message naming the path.
+pub fn prepare_output_dir(dir: &Path) -> anyhow::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        anyhow::bail!("output directory {} exists and is not a directory", dir.display());
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating output directory {}", dir.display()))?;
+    let probe = dir.join(".sil-host-write-probe");
+    File::create(&probe).with_context(|| format!("output directory {} is not writable", dir.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}

@@ -1,5 +1,6 @@
 //! Scenarios of docs/model.md §9: `setpoint`, `circle` and `helix`, every number a parameter.
 
+use fc_core::VehicleParams;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -66,6 +67,29 @@ pub struct Reference {
     pub yaw_rate: f64,
 }
 
+/// The ranges [`Scenario::validate`] accepts.
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    /// Largest position coordinate and radius, m: a 10 km box (f32 keeps
+    /// millimetres there).
+    pub position_m: f64,
+    /// Largest heading, rad (any heading is within ±π; this only keeps f32 sane).
+    pub yaw_rad: f64,
+    /// Largest climb rate, m/s.
+    pub speed_mps: f64,
+    /// Longest flight and reference period, s (one hour: the recorded
+    /// trace, 100 rows a second, then stays under 70 MB).
+    pub duration_s: f64,
+}
+
+/// The limits in force.
+pub const LIMITS: Limits = Limits {
+    position_m: 1.0e4,
+    yaw_rad: 1.0e3,
+    speed_mps: 100.0,
+    duration_s: 3600.0,
+};
+
 impl Scenario {
     /// The docs/model.md §9 defaults for a kind.
     pub fn default_for(kind: ScenarioKind) -> Self {
@@ -119,28 +143,79 @@ impl Scenario {
     }
 
     /// Checks the numbers make a flyable scenario; the error names the field.
+    ///
+    /// The one rule for scenario values, from the command line and from
+    /// files alike (the file loader calls it too): every value finite and
+    /// within [`LIMITS`]' range, each error naming the field, its flag, the
+    /// value and the range. What the vehicle can fly is
+    /// [`Scenario::check_feasible`]'s.
     pub fn validate(&self) -> Result<(), String> {
-        let finite = |name: &str, v: f64| {
-            if v.is_finite() {
+        let within = |field: &str, v: f64, (lo, hi, open_lo): (f64, f64, bool)| {
+            let above = if open_lo { v > lo } else { v >= lo };
+            if v.is_finite() && above && v <= hi {
                 Ok(())
             } else {
-                Err(format!("{name} must be a finite number"))
+                Err(format!(
+                    "{field} = {v:?} is out of range: must be in {}{lo}, {hi}]",
+                    if open_lo { "(" } else { "[" }
+                ))
             }
         };
+        let pos = (-LIMITS.position_m, LIMITS.position_m, false);
         for (i, v) in self.start_ned_m.iter().enumerate() {
-            finite(&format!("start_ned_m[{i}]"), *v)?;
+            within(&format!("start_ned_m[{i}], m"), *v, pos)?;
         }
         for (i, v) in self.target_ned_m.iter().enumerate() {
-            finite(&format!("target_ned_m[{i}]"), *v)?;
+            within(&format!("target_ned_m[{i}] (--target X,Y,Z,YAW_DEG), m"), *v, pos)?;
         }
-        finite("radius_m", self.radius_m)?;
-        finite("climb_rate_mps", self.climb_rate_mps)?;
-        finite("target_yaw_rad", self.target_yaw_rad)?;
-        if !(self.duration_s > 0.0 && self.duration_s.is_finite()) {
-            return Err("duration_s must be positive".into());
+        let yaw = (-LIMITS.yaw_rad, LIMITS.yaw_rad, false);
+        within("start_yaw, rad", self.start_yaw_rad, yaw)?;
+        within("target_yaw (--target X,Y,Z,YAW_DEG), rad", self.target_yaw_rad, yaw)?;
+        within("radius_m (--radius), m", self.radius_m, (0.0, LIMITS.position_m, true))?;
+        within(
+            "climb_rate_mps (--climb-rate), m/s",
+            self.climb_rate_mps,
+            (-LIMITS.speed_mps, LIMITS.speed_mps, false),
+        )?;
+        within("period_s (--period), s", self.period_s, (0.0, LIMITS.duration_s, true))?;
+        within(
+            "duration_s (--duration), s",
+            self.duration_s,
+            (0.0, LIMITS.duration_s, true),
+        )?;
+        Ok(())
+    }
+
+    /// Largest horizontal acceleration the reference asks for, m/s² (the
+    /// circle's and helix's centripetal `r·ω²`; a set-point is a step and
+    /// asks for none by itself).
+    pub fn peak_horizontal_acceleration(&self) -> f64 {
+        match self.kind {
+            ScenarioKind::Setpoint => 0.0,
+            ScenarioKind::Circle | ScenarioKind::Helix => {
+                let w = 2.0 * std::f64::consts::PI / self.period_s;
+                self.radius_m * w * w
+            }
         }
-        if !(self.period_s > 0.0 && self.period_s.is_finite()) {
-            return Err("period_s must be positive".into());
+    }
+
+    /// Refuses a reference `vehicle` cannot fly: a peak horizontal
+    /// acceleration above half of what its full thrust allows while
+    /// holding its weight (`√((T_max/m)² − g²)`), naming both numbers.
+    pub fn check_feasible(&self, vehicle: &VehicleParams<f64>) -> Result<(), String> {
+        let t_over_m = vehicle.input_box().hi[0] / vehicle.mass_kg;
+        let g = vehicle.gravity_mps2;
+        let a_max = (t_over_m * t_over_m - g * g).max(0.0).sqrt();
+        let a = self.peak_horizontal_acceleration();
+        if a > 0.5 * a_max {
+            return Err(format!(
+                "the reference needs {a:.3e} m/s² of horizontal acceleration (radius {:?} m, period {:?} s); \
+                 this vehicle has {a_max:.1} m/s² at full thrust and the limit is half of that, {:.1} m/s²: \
+                 use a larger --period or a smaller --radius",
+                self.radius_m,
+                self.period_s,
+                0.5 * a_max
+            ));
         }
         Ok(())
     }

@@ -126,6 +126,8 @@ fn controllers(base: &Scenario, vehicle: &fc_core::VehicleParams<f64>) -> Vec<Fl
 
 /// Runs the sweep.
 pub fn run(o: &SweepOptions) -> Result<Vec<SweepRow>> {
+    // Refuse an unusable destination before flying.
+    crate::record::prepare_output_dir(&o.out)?;
     if o.samples == 0 {
         bail!("--samples must be at least 1");
     }

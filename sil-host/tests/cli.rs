@@ -80,3 +80,125 @@ fn help_explains_every_option() {
         assert!(text.contains(opt), "help lacks {opt}");
     }
 }
+
+#[test]
+fn an_unusable_output_is_refused_before_any_flight() {
+    // `report --out FILE` and `sweep --out FILE` where FILE exists: refused
+    // at once (no flight flown, so well under a second), naming the path.
+    let file = std::env::temp_dir().join(format!("sil-host-not-a-dir-{}", std::process::id()));
+    std::fs::write(&file, b"x").unwrap();
+    for cmd in ["report", "sweep"] {
+        let t0 = std::time::Instant::now();
+        let out = sil_host()
+            .args([cmd, "--no-progress", "--out"])
+            .arg(&file)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{cmd}: {err}");
+        assert!(
+            err.contains("is not a directory") && err.contains(&*file.to_string_lossy()),
+            "{cmd}: {err}"
+        );
+        assert!(t0.elapsed().as_secs_f64() < 5.0, "{cmd} flew before refusing");
+    }
+    let _ = std::fs::remove_file(&file);
+}
+
+#[test]
+fn inputs_that_cannot_be_flown_are_refused_by_name_before_flying() {
+    // Each: the arguments, and what the message must name. All are refused
+    // at once with a non-zero exit: none may hang, allocate without bound or
+    // "fly" saturated nonsense.
+    let dir = std::env::temp_dir().join(format!("sil-host-refusals-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let vehicle = |name: &str, text: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_string_lossy().into_owned()
+    };
+    let huge_inertia = vehicle("huge.toml", "inertia_kgm2 = [1e300, 0.0075, 0.013]\n");
+    let tiny_inertia = vehicle("tiny.toml", "inertia_kgm2 = [1e-300, 0.0075, 0.013]\n");
+    let bad_radius = vehicle("radius.toml", "kind = \"circle\"\nradius_m = -1\n");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["fly", "--controller", "lqr", "--duration", "1e300"],
+            "(--duration)",
+        ),
+        (
+            vec!["fly", "--controller", "lqr", "--integration-hz", "1e12"],
+            "--integration-hz",
+        ),
+        (vec!["open-loop", "--u", "6,0,0,0", "--duration", "1e300"], "--duration"),
+        (
+            vec!["open-loop", "--u", "6,0,0,0", "--integration-hz", "1e12"],
+            "--integration-hz",
+        ),
+        (
+            vec!["fly", "--controller", "pd", "--target", "1e300,0,-1,0"],
+            "target_ned_m[0]",
+        ),
+        (
+            vec!["fly", "--controller", "pd", "--target", "0,0,-1,1e300"],
+            "target_yaw",
+        ),
+        (
+            vec!["fly", "--controller", "pd", "--scenario", "circle", "--radius", "1e9"],
+            "radius_m (--radius)",
+        ),
+        (
+            vec!["fly", "--controller", "pd", "--scenario", "circle", "--radius", "-1"],
+            "radius_m (--radius)",
+        ),
+        (
+            vec!["fly", "--controller", "pd", "--scenario", "circle", "--radius", "0"],
+            "radius_m (--radius)",
+        ),
+        (
+            vec!["fly", "--controller", "pd", "--scenario", "circle", "--period", "1e-9"],
+            "horizontal acceleration",
+        ),
+        (
+            vec![
+                "fly",
+                "--controller",
+                "pd",
+                "--scenario",
+                "helix",
+                "--climb-rate",
+                "1e300",
+            ],
+            "climb_rate_mps",
+        ),
+        (vec!["fly", "--controller", "lqr", "--control-hz", "0"], "--control-hz"),
+        (vec!["fly", "--controller", "lqr", "--control-hz", "-5"], "--control-hz"),
+        (
+            vec!["fly", "--controller", "lqr", "--control-hz", "nan"],
+            "--control-hz",
+        ),
+        (
+            vec!["fly", "--controller", "lqr", "--vehicle", &huge_inertia],
+            "inertia_kgm2[0]",
+        ),
+        (
+            vec!["fly", "--controller", "lqr", "--vehicle", &tiny_inertia],
+            "inertia_kgm2[0]",
+        ),
+        (
+            vec!["fly", "--controller", "lqr", "--scenario-file", &bad_radius],
+            "radius_m",
+        ),
+    ];
+    for (args, names) in cases {
+        let t0 = std::time::Instant::now();
+        let out = sil_host().args(&args).env("RUST_BACKTRACE", "0").output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(
+            err.contains(names),
+            "{args:?}: the message does not name {names:?}: {err}"
+        );
+        assert!(t0.elapsed().as_secs_f64() < 10.0, "{args:?} took {:?}", t0.elapsed());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -3,6 +3,69 @@
 use super::lit;
 use nalgebra::{RealField, Vector4};
 
+/// The plausible range of one vehicle parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamRange {
+    /// The field (with its unit, as in [`VehicleParams`]).
+    pub field: &'static str,
+    /// Smallest accepted value.
+    pub lo: f64,
+    /// Largest accepted value.
+    pub hi: f64,
+}
+
+/// What [`VehicleParams::check`] accepts, in field order: wide enough for
+/// any multirotor from a 10 g micro to a 100 kg heavy lifter, narrow enough
+/// that every derived quantity stays finite in f32 (a design with an
+/// inertia of 1e300 or 1e-300 is refused here, by name, instead of failing
+/// somewhere inside a Riccati solve).
+pub const PARAM_RANGES: [ParamRange; 18] = {
+    const fn r(field: &'static str, lo: f64, hi: f64) -> ParamRange {
+        ParamRange { field, lo, hi }
+    }
+    [
+        r("mass_kg", 0.01, 100.0),
+        r("gravity_mps2", 0.1, 100.0),
+        r("inertia_kgm2[0]", 1e-7, 100.0),
+        r("inertia_kgm2[1]", 1e-7, 100.0),
+        r("inertia_kgm2[2]", 1e-7, 100.0),
+        r("arm_m", 0.01, 5.0),
+        r("rotor_inertia_kgm2", 0.0, 0.1),
+        r("kf_ns2", 1e-10, 1.0),
+        r("km_nms2", 1e-12, 1.0),
+        r("kt_nspm[0]", 0.0, 100.0),
+        r("kt_nspm[1]", 0.0, 100.0),
+        r("kt_nspm[2]", 0.0, 100.0),
+        r("kr_nms[0]", 0.0, 100.0),
+        r("kr_nms[1]", 0.0, 100.0),
+        r("kr_nms[2]", 0.0, 100.0),
+        r("omega_max_radps", 1.0, 1e5),
+        r("rotor_tau_s", 1e-6, 10.0),
+        r("rotor_gain", 0.01, 10.0),
+    ]
+};
+
+/// A vehicle parameter out of its plausible range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamError {
+    /// Which parameter and what it may be.
+    pub range: ParamRange,
+    /// The value given (NaN if not representable).
+    pub value: f64,
+}
+
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "vehicle parameter {} = {:?} is out of range: must be in [{:?}, {:?}]",
+            self.range.field, self.value, self.range.lo, self.range.hi
+        )
+    }
+}
+
+impl core::error::Error for ParamError {}
+
 /// Physical parameters of the quadrotor. Units are in the field names.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VehicleParams<T> {
@@ -100,31 +163,41 @@ impl<T: RealField + Copy> VehicleParams<T> {
         }
     }
 
-    /// True if every parameter is finite and the physical ones are positive.
+    /// True if every parameter is finite and in its plausible range ([`PARAM_RANGES`]).
     pub fn is_valid(&self) -> bool {
-        let pos = [
+        self.check().is_ok()
+    }
+
+    /// Checks every parameter against [`PARAM_RANGES`]; the first one out
+    /// of range (or not finite) is named in the error with its value.
+    pub fn check(&self) -> Result<(), ParamError> {
+        let values = [
             self.mass_kg,
             self.gravity_mps2,
             self.inertia_kgm2[0],
             self.inertia_kgm2[1],
             self.inertia_kgm2[2],
             self.arm_m,
+            self.rotor_inertia_kgm2,
             self.kf_ns2,
             self.km_nms2,
-            self.omega_max_radps,
-            self.rotor_tau_s,
-            self.rotor_gain,
-        ];
-        let nonneg = [
-            self.rotor_inertia_kgm2,
             self.kt_nspm[0],
             self.kt_nspm[1],
             self.kt_nspm[2],
             self.kr_nms[0],
             self.kr_nms[1],
             self.kr_nms[2],
+            self.omega_max_radps,
+            self.rotor_tau_s,
+            self.rotor_gain,
         ];
-        pos.iter().all(|x| x.is_finite() && *x > T::zero()) && nonneg.iter().all(|x| x.is_finite() && *x >= T::zero())
+        for (v, r) in values.iter().zip(PARAM_RANGES.iter()) {
+            let x = nalgebra::try_convert::<T, f64>(*v).unwrap_or(f64::NAN);
+            if !(x.is_finite() && x >= r.lo && x <= r.hi) {
+                return Err(ParamError { range: *r, value: x });
+            }
+        }
+        Ok(())
     }
 }
 
@@ -173,5 +246,51 @@ impl<T: RealField + Copy> InputBox<T> {
     /// normalisation used by the control-effort metric.
     pub fn scale(&self) -> Vector4<T> {
         self.lo.abs().sup(&self.hi.abs())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_os4_is_plausible_and_each_implausible_field_is_named() {
+        let os4 = VehicleParams::<f64>::OS4;
+        assert_eq!(os4.check(), Ok(()));
+        assert_eq!(VehicleParams::<f32>::os4().check(), Ok(()));
+        // Field i set to something absurd must be reported as PARAM_RANGES[i]
+        // (this also pins the order of `check`'s list to the table's).
+        let setters: [fn(&mut VehicleParams<f64>, f64); 18] = [
+            |p, v| p.mass_kg = v,
+            |p, v| p.gravity_mps2 = v,
+            |p, v| p.inertia_kgm2[0] = v,
+            |p, v| p.inertia_kgm2[1] = v,
+            |p, v| p.inertia_kgm2[2] = v,
+            |p, v| p.arm_m = v,
+            |p, v| p.rotor_inertia_kgm2 = v,
+            |p, v| p.kf_ns2 = v,
+            |p, v| p.km_nms2 = v,
+            |p, v| p.kt_nspm[0] = v,
+            |p, v| p.kt_nspm[1] = v,
+            |p, v| p.kt_nspm[2] = v,
+            |p, v| p.kr_nms[0] = v,
+            |p, v| p.kr_nms[1] = v,
+            |p, v| p.kr_nms[2] = v,
+            |p, v| p.omega_max_radps = v,
+            |p, v| p.rotor_tau_s = v,
+            |p, v| p.rotor_gain = v,
+        ];
+        for (set, range) in setters.iter().zip(PARAM_RANGES.iter()) {
+            for bad in [1e300, -1.0, f64::NAN, 1e-300_f64.min(range.lo * 0.5).max(-1.0)] {
+                if bad >= range.lo && bad <= range.hi {
+                    continue; // 0 is fine for the ones that may be 0
+                }
+                let mut p = os4;
+                set(&mut p, bad);
+                let e = p.check().expect_err(range.field);
+                assert_eq!(e.range.field, range.field);
+                assert!(e.to_string().contains(range.field), "{e}");
+            }
+        }
     }
 }
