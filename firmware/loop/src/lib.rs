@@ -4,7 +4,8 @@
 //!
 //! Failure behaviour: corrupt, truncated, oversized or undecodable frames are
 //! dropped and counted; sensor frames whose sequence number or (in lockstep)
-//! time does not increase are dropped and counted; NaN/∞ or a non-unit
+//! time does not increase are not flown, counted, and answered with the
+//! held output (a lockstep client must not block); NaN/∞ or a non-unit
 //! attitude is rejected (the reply repeats the current output). No valid
 //! sensor frame for `failsafe_timeout_us` → failsafe: level (zero torques)
 //! and a gentle descent (thrust below hover); the first valid frame
@@ -50,7 +51,7 @@ pub struct FcConfig {
     pub time_base: TimeBase,
     /// Lockstep: the largest step of simulated time between two accepted
     /// sensor frames, µs. A frame whose time jumps further is an absurd
-    /// timestamp: dropped and counted as out of order, so that it cannot
+    /// timestamp: not flown and counted as out of order, so that it cannot
     /// become the clock (every later frame would then be "in the past").
     /// A simulation that really jumps that far starts a new session (`Hello`).
     pub max_time_step_us: u64,
@@ -66,7 +67,7 @@ pub enum TimeBase {
     /// without frames is not a timeout (a host that stops, stops time); a
     /// frame whose time jumps past the timeout since the last valid one
     /// ends a failsafe episode (counted) and resumes control; a frame whose
-    /// time does not increase is dropped and counted as out of order.
+    /// time does not increase is not flown and is counted as out of order.
     Lockstep,
     /// Free-running (a vehicle): the caller's real clock, the `now_us` of
     /// [`FlightCore::service`] and [`FlightCore::check_timeout`]; the
@@ -436,8 +437,11 @@ impl FlightCore {
                 .last_t_us
                 .is_some_and(|last| t_us <= last || t_us - last > self.cfg.max_time_step_us);
         if self.last_seq.is_some_and(|last| seq <= last) || absurd_time {
+            // Not flown, but answered (the held output, the counter in the
+            // telemetry), so that a lockstep client waiting on this `seq`
+            // does not block.
             self.counters.out_of_order = self.counters.out_of_order.wrapping_add(1);
-            return Ok(());
+            return self.reply(seq, 0, 0, link);
         }
         self.last_seq = Some(seq);
         let now = if lockstep {
@@ -473,6 +477,11 @@ impl FlightCore {
                 Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
             }
         }
+        self.reply(seq, cycles, iterations, link)
+    }
+
+    /// Answers sensor frame `seq`: the output now held, then the telemetry.
+    fn reply<L: ByteLink>(&self, seq: u32, cycles: u32, iterations: u16, link: &mut L) -> Result<(), L::Error> {
         let u = [self.u[0], self.u[1], self.u[2], self.u[3]];
         Self::send(
             link,

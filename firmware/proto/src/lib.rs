@@ -100,8 +100,8 @@ pub enum ToFc {
         /// Step number, strictly increasing.
         seq: u32,
         /// Time of this sample, µs: in lockstep the flight loop's
-        /// clock (it must increase; a frame whose time does not is dropped
-        /// as out of order; since protocol v3).
+        /// clock (it must increase; a frame whose time does not is not
+        /// flown and is counted as out of order; since protocol v3).
         t_us: u64,
         /// The quaternion-form state.
         state: [f32; 13],
