@@ -88,6 +88,29 @@ impl Default for FcConfig {
     }
 }
 
+/// Bounds of a plausible sensor state (see `FlightCore`'s frame checks).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plausible {
+    /// Largest position coordinate, m (NED).
+    pub position_m: f32,
+    /// Largest velocity component, m/s: also the speed at which the
+    /// position may move between two frames.
+    pub speed_mps: f32,
+    /// Largest body rate, rad/s (a BMI088 gyro saturates at 2000 °/s ≈ 35 rad/s).
+    pub rate_radps: f32,
+    /// Position change allowed on top of `speed × time` between two frames, m
+    /// (a position fix that corrects a drifted estimate).
+    pub jump_m: f32,
+}
+
+/// The bounds in force.
+pub const PLAUSIBLE: Plausible = Plausible {
+    position_m: 1.0e4,
+    speed_mps: 100.0,
+    rate_radps: 50.0,
+    jump_m: 1.0,
+};
+
 /// The controller a flight controller runs from boot until a `Select`
 /// arrives: the quaternion LQR, reference fed forward.
 pub const BOOT_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Lqr, AttitudeForm::Quaternion);
@@ -171,6 +194,8 @@ pub struct FlightCore {
     last_t_us: Option<u64>,
     /// Time of the last valid controller step, µs, on the time base's clock.
     last_valid_us: Option<u64>,
+    /// Position of the last flown sensor frame (NED, m) and its time, µs.
+    last_pos: Option<(Vector3<f32>, u64)>,
     failsafe: bool,
     u: Input<f32>,
     selections: u32,
@@ -205,6 +230,7 @@ impl FlightCore {
             last_seq: None,
             last_t_us: None,
             last_valid_us: None,
+            last_pos: None,
             failsafe: false,
             u: Vector4::zeros(),
             selections: 0,
@@ -329,6 +355,23 @@ impl FlightCore {
         }
     }
 
+    /// A state a multirotor can be in, reached from the last flown one:
+    /// within [`PLAUSIBLE`]'s bounds, and moved no further than its top
+    /// speed allows in the time since (plus a jump allowance). A finite but
+    /// absurd frame (a 100 m jump, rates of 1e30 rad/s) is refused here
+    /// rather than flown: one such frame loses a 4 Hz MPC its vehicle.
+    fn plausible(&self, est: &StateEstimate<f32>, now_us: u64) -> bool {
+        let p = &PLAUSIBLE;
+        let within = est.pos_ned_m.amax() <= p.position_m
+            && est.vel_ned_mps.amax() <= p.speed_mps
+            && est.rates_frd_radps.amax() <= p.rate_radps;
+        let reachable = self.last_pos.is_none_or(|(last, t)| {
+            let dt_s = now_us.saturating_sub(t) as f32 * 1e-6;
+            (est.pos_ned_m - last).amax() <= p.speed_mps * dt_s + p.jump_m
+        });
+        within && reachable
+    }
+
     /// More than one and a half control periods since the last valid step:
     /// this step does not follow that one (frames were missing or invalid).
     fn gap_since_last_step(&self, now_us: u64) -> bool {
@@ -377,6 +420,7 @@ impl FlightCore {
                     self.last_seq = None;
                     self.last_t_us = None;
                     self.last_valid_us = None;
+                    self.last_pos = None;
                 }
                 Self::send(
                     link,
@@ -456,9 +500,10 @@ impl FlightCore {
         let est = StateEstimate::from_quat_state(&QuatState::from_column_slice(state));
         let mut cycles = 0u32;
         let mut iterations = 0u16;
-        if !est.is_valid() {
+        if !est.is_valid() || !self.plausible(&est, now) {
             self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
         } else {
+            self.last_pos = Some((est.pos_ned_m, now));
             if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
                 // Valid data again after a gap: the controller keeps its
                 // estimates and forgets only the step before (see `Controller::resume`).

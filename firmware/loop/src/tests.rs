@@ -541,3 +541,36 @@ fn a_slow_controllers_own_period_is_not_a_timeout() {
     rig.send(&sensor_at(5, 1_600_000, hover_state()), 0);
     assert_eq!(rig.fc.counters().failsafe_entries, 1);
 }
+
+#[test]
+fn finite_but_absurd_sensor_frames_are_refused_not_flown() {
+    let mut rig = Rig::new();
+    rig.open();
+    rig.send(&sensor_at(1, 2_000, hover_state()), 0);
+    let held = rig.fc.output();
+    // A 100 m jump 2 ms after the last frame (the vehicle's top speed would
+    // allow 0.2 m + 1 m), and body rates of 1e30 rad/s: counted as invalid,
+    // answered with the held output.
+    let mut jump = hover_state();
+    jump[0] = 100.0;
+    let mut spin = hover_state();
+    spin[10] = 1e30;
+    for (k, s) in [(2u32, jump), (3, spin)] {
+        let r = rig.send(&sensor_at(k, u64::from(k) * 2_000, s), 0);
+        assert!(
+            matches!(r[0], FromFc::Actuator { seq, u, .. } if seq == k && u == [held[0], held[1], held[2], held[3]]),
+            "{r:?}"
+        );
+    }
+    assert_eq!(rig.fc.counters().invalid_values, 2);
+    // A 0.5 m correction (a position fix) is plausible and flown.
+    let mut fix = hover_state();
+    fix[0] = 0.5;
+    rig.send(&sensor_at(4, 8_000, fix), 0);
+    assert_eq!(rig.fc.counters().invalid_values, 2);
+    assert_ne!(
+        rig.fc.output(),
+        held,
+        "flown: the controller reacts to the 0.5 m offset"
+    );
+}

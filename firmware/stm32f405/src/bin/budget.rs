@@ -272,6 +272,7 @@ mod target {
             fc.service(link, clock, 0).ok()?;
         }
         let mut rng = Lcg(7);
+        let mut offset = Vector3::<f32>::zeros();
         let mut worst = 0u32;
         for k in 0..STEPS {
             let t = k as f32 * dt;
@@ -289,7 +290,13 @@ mod target {
                     );
                 }
             }
-            let e = state(&mut rng, &sp);
+            let mut e = state(&mut rng, &sp);
+            // The position may not jump between frames (the loop refuses a
+            // state the vehicle cannot have reached): it wanders up to 3 m
+            // off the reference, at most 1 m a step; the rest stays random.
+            let step = Vector3::new(rng.next(), rng.next(), rng.next());
+            offset = (offset + step).map(|v| v.clamp(-3.0, 3.0));
+            e.pos_ned_m = sp.pos_ned_m + offset;
             let mut x = [0f32; 13];
             x[0..3].copy_from_slice(e.pos_ned_m.as_slice());
             x[3..6].copy_from_slice(e.vel_ned_mps.as_slice());
@@ -310,7 +317,9 @@ mod target {
             }
             worst = worst.max(clock.since(t0));
         }
-        (fc.counters().ok > STEPS && link.tx_bytes > 0).then_some(instructions(worst))
+        // Every sensor frame flown (none refused as invalid or implausible).
+        let c = fc.counters();
+        (c.ok > STEPS && c.invalid_values == 0 && link.tx_bytes > 0).then_some(instructions(worst))
     }
 
     /// One table row; returns whether it fits.
