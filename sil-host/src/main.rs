@@ -210,9 +210,14 @@ struct ServeArgs {
     /// Address to listen on, HOST:PORT (e.g. 127.0.0.1:7000).
     #[arg(long, value_name = "HOST:PORT")]
     listen: String,
-    /// End a session after this many seconds without a complete frame.
-    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    /// End a session after this many seconds without a valid frame, or when
+    /// the client has not read its replies for that long.
+    #[arg(long, default_value_t = 10.0, value_name = "S", allow_negative_numbers = true)]
     idle_timeout: f64,
+    /// End any session after this many seconds, however busy (one client
+    /// cannot hold the only slot forever).
+    #[arg(long, default_value_t = 7200.0, value_name = "S", allow_negative_numbers = true)]
+    max_session: f64,
     /// Stop after this many client sessions (default: serve forever).
     #[arg(long, value_name = "N")]
     max_clients: Option<usize>,
@@ -611,16 +616,21 @@ fn main() -> Result<()> {
         Command::Sweep(a) => sweep_cmd(a),
         Command::MpcStep(a) => mpc_step_cmd(a),
         Command::Serve(a) => {
-            if !(a.idle_timeout.is_finite() && a.idle_timeout > 0.0) {
-                bail!("--idle-timeout must be positive");
+            for (flag, v) in [("--idle-timeout", a.idle_timeout), ("--max-session", a.max_session)] {
+                if !(v.is_finite() && v > 0.0 && v <= 1e6) {
+                    bail!("{flag} {v:?} is out of range: must be in (0, 1e6] s");
+                }
             }
             let listener = std::net::TcpListener::bind(&a.listen).with_context(|| format!("binding {}", a.listen))?;
             eprintln!("serve: listening on {}", listener.local_addr()?);
             sil_host::link::serve(
                 listener,
-                std::time::Duration::from_secs_f64(a.idle_timeout),
-                a.max_clients,
-                true,
+                &sil_host::link::ServeOptions {
+                    idle: std::time::Duration::from_secs_f64(a.idle_timeout),
+                    max_session: std::time::Duration::from_secs_f64(a.max_session),
+                    max_clients: a.max_clients,
+                    log: true,
+                },
             )
         }
     }

@@ -50,7 +50,12 @@ fn framed_flight_is_identical_to_in_process() {
 fn serve_survives_hostile_clients_then_flies() {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
-    let server = std::thread::spawn(move || sil_host::link::serve(listener, Duration::from_secs(2), Some(6), false));
+    let o = sil_host::link::ServeOptions {
+        idle: Duration::from_secs(2),
+        max_clients: Some(6),
+        ..Default::default()
+    };
+    let server = std::thread::spawn(move || sil_host::link::serve(listener, &o));
     let hostile: Vec<Vec<u8>> = vec![
         (0..5000u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8).collect(), // random bytes
         vec![0u8; 100],                                                           // empty frames
@@ -190,7 +195,12 @@ impl RawClient {
 fn serve_runs_on_simulated_time_not_wall_time() {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
-    let server = std::thread::spawn(move || sil_host::link::serve(listener, Duration::from_secs(5), Some(1), false));
+    let o = sil_host::link::ServeOptions {
+        idle: Duration::from_secs(5),
+        max_clients: Some(1),
+        ..Default::default()
+    };
+    let server = std::thread::spawn(move || sil_host::link::serve(listener, &o));
     let mut c = RawClient::connect(&addr);
     assert_eq!(c.step(1, 2_000), (false, 0));
     // 500 ms of wall time, one 2 ms step of simulated time: no failsafe.
@@ -201,5 +211,72 @@ fn serve_runs_on_simulated_time_not_wall_time() {
     assert_eq!(c.step(3, 204_000), (false, 1));
     assert_eq!(c.step(4, 206_000), (false, 1));
     drop(c);
+    assert!(server.join().unwrap().is_ok());
+}
+
+#[test]
+fn serve_drops_clients_that_hold_its_only_slot_then_flies() {
+    // `serve` has one slot. Two clients try to keep it: the next client
+    // must be served anyway, within a few idle periods (1 s here).
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    let o = sil_host::link::ServeOptions {
+        idle: Duration::from_secs(1),
+        max_session: Duration::from_secs(30),
+        max_clients: Some(5), // hog, probe, pest, probe, flight
+        log: false,
+    };
+    let server = std::thread::spawn(move || sil_host::link::serve(listener, &o));
+    let served_within = |addr: &str| {
+        let t0 = std::time::Instant::now();
+        drop(RawClient::connect(addr)); // panics if no HelloAck within 10 s
+        t0.elapsed()
+    };
+    // 1. A client that never reads its replies: it floods valid sensor
+    // frames until its own writes stall (the server, blocked writing
+    // replies, has stopped reading), then stays connected and silent.
+    let mut hog = RawClient::connect(&addr);
+    hog.s.set_write_timeout(Some(Duration::from_millis(500))).unwrap();
+    let mut state = [0.0f32; 13];
+    (state[2], state[6]) = (-1.0, 1.0);
+    let mut stalled = false;
+    for seq in 1..2_000_000u32 {
+        let mut f = [0u8; fc_proto::MAX_FRAME];
+        let m = fc_proto::ToFc::Sensor {
+            seq,
+            t_us: u64::from(seq) * 2_000,
+            state,
+        };
+        let n = fc_proto::encode(&m, &mut f).unwrap();
+        if hog.s.write_all(&f[..n]).is_err() {
+            stalled = true;
+            break;
+        }
+    }
+    assert!(stalled, "the server never stopped reading");
+    let t = served_within(&addr);
+    assert!(t < Duration::from_secs(4), "the next client waited {t:?}");
+    drop(hog);
+    // 2. A client that keeps sending traffic but never a valid frame (a
+    // delimiter and a bad frame every 0.3 s), from a thread, for 5 s.
+    let a2 = addr.clone();
+    let pest = std::thread::spawn(move || {
+        let mut c = TcpStream::connect(&a2).unwrap();
+        for _ in 0..17 {
+            if c.write_all(&[0x00, 0x05, 0x01, 0x02, 0x03, 0x04, 0x00]).is_err() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(300));
+        }
+    });
+    std::thread::sleep(Duration::from_millis(200)); // let it take the slot first
+    let t = served_within(&addr);
+    assert!(t < Duration::from_secs(4), "the next client waited {t:?}");
+    pest.join().unwrap();
+    // 3. A good client still flies, the same as in-process.
+    let cfg = &cases()[0];
+    let want = fly(cfg).unwrap();
+    let got = fly_target(cfg, &Target::Tcp(addr.clone())).unwrap();
+    assert_eq!(want.rows, got.rows);
     assert!(server.join().unwrap().is_ok());
 }

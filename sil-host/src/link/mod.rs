@@ -9,4 +9,4 @@ pub mod server;
 
 pub use client::{FcClient, Remote, RemoteStep};
 pub use qemu::{decode_defmt, firmware_elf, qemu_command, Qemu, SYSTICK_PER_INSTRUCTION};
-pub use server::serve;
+pub use server::{serve, ServeOptions};

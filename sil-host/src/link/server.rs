@@ -27,11 +27,39 @@ impl ByteLink for TcpLink {
     }
 }
 
+/// How `serve` keeps one client from holding its only slot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServeOptions {
+    /// A session with no *valid* frame for this long ends (garbage, empty
+    /// frames and bad frames do not keep it open). Also the write timeout: a
+    /// client that does not read its replies for this long is dropped.
+    pub idle: Duration,
+    /// No session lasts longer than this, however busy.
+    pub max_session: Duration,
+    /// Stop after this many sessions (`None`: serve forever).
+    pub max_clients: Option<usize>,
+    /// Log each session's end on standard error.
+    pub log: bool,
+}
+
+impl Default for ServeOptions {
+    /// Idle 10 s, sessions up to 2 hours (the longest flight is one), forever, quiet.
+    fn default() -> Self {
+        Self {
+            idle: Duration::from_secs(10),
+            max_session: Duration::from_secs(7200),
+            max_clients: None,
+            log: false,
+        }
+    }
+}
+
 /// Serves the flight controller on `listener`, one client after another: each
-/// client gets a fresh core; garbage is dropped and counted, a hang-up or an
-/// idle client (no byte for `idle` time) ends only that session. Stops after
-/// `max_clients` sessions when given.
-pub fn serve(listener: TcpListener, idle: Duration, max_clients: Option<usize>, log: bool) -> Result<()> {
+/// client gets a fresh core; garbage is dropped and counted; a hang-up, an
+/// idle client, one that does not read its replies, or a session over its
+/// limit ends only that session (see [`ServeOptions`]).
+pub fn serve(listener: TcpListener, o: &ServeOptions) -> Result<()> {
+    let (max_clients, log) = (o.max_clients, o.log);
     let mut served = 0usize;
     for conn in listener.incoming() {
         let stream = match conn {
@@ -44,7 +72,7 @@ pub fn serve(listener: TcpListener, idle: Duration, max_clients: Option<usize>, 
             }
         };
         let peer = stream.peer_addr().map(|a| a.to_string()).unwrap_or_else(|_| "?".into());
-        let result = session(stream, idle);
+        let result = session(stream, o);
         served += 1;
         if log {
             match &result {
@@ -59,26 +87,36 @@ pub fn serve(listener: TcpListener, idle: Duration, max_clients: Option<usize>, 
     Ok(())
 }
 
-fn session(stream: TcpStream, idle: Duration) -> Result<fc_proto::Counters> {
+fn session(stream: TcpStream, o: &ServeOptions) -> Result<fc_proto::Counters> {
+    let idle = o.idle;
     stream.set_nodelay(true)?;
     stream.set_read_timeout(Some(Duration::from_millis(5)))?;
+    // A client that does not read its replies fills the socket buffer; the
+    // write then fails after `idle` instead of blocking the server forever.
+    stream.set_write_timeout(Some(idle))?;
     let mut link = TcpLink(stream);
     let mut fc = FlightCore::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("flight controller: {e}"))?;
     let clock = MonotonicClock::default();
     let t0 = Instant::now();
-    let mut last_byte = Instant::now();
+    let mut last_valid = Instant::now();
     loop {
-        let before = fc.counters();
+        let before = fc.counters().ok;
         match fc.service(&mut link, &clock, t0.elapsed().as_micros() as u64) {
             Ok(()) => {}
             Err(e) if e.kind() == ErrorKind::UnexpectedEof => return Ok(fc.counters()),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+                bail!("the client did not read its replies for {idle:?}")
+            }
             Err(e) => return Err(e.into()),
         }
-        if fc.counters() != before {
-            last_byte = Instant::now();
+        if fc.counters().ok != before {
+            last_valid = Instant::now();
         }
-        if last_byte.elapsed() > idle {
-            bail!("idle for {idle:?}");
+        if last_valid.elapsed() > idle {
+            bail!("no valid frame for {idle:?}");
+        }
+        if t0.elapsed() > o.max_session {
+            bail!("session longer than {:?}", o.max_session);
         }
     }
 }
