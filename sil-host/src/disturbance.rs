@@ -67,7 +67,7 @@ impl DisturbanceSet {
             mass_scale: 1.15,
             inertia_scale: [1.10; 3],
             drag_scale: 1.5,
-            rotor_tau_s: None,
+            ..Uncertainty::NONE
         }
         .apply(p)
     }
@@ -84,9 +84,28 @@ pub struct Uncertainty {
     pub drag_scale: f64,
     /// Rotor lag time constant, s (the plant's rotor lag is on); `None`: no lag.
     pub rotor_tau_s: Option<f64>,
+    /// Multiplier of the rotors' thrust coefficient `kf`.
+    pub kf_scale: f64,
+    /// A steady wind, NED, m/s: the air moves, so the translational drag
+    /// acts on the velocity relative to it (a constant force `kt ⊙ wind`).
+    pub wind_ned_mps: [f64; 3],
+    /// The controller sees the state this long after it was true, s
+    /// (sensing and link latency; rounded to whole plant steps).
+    pub latency_s: f64,
 }
 
 impl Uncertainty {
+    /// The vehicle as designed, in still air, seen at once.
+    pub const NONE: Self = Self {
+        mass_scale: 1.0,
+        inertia_scale: [1.0; 3],
+        drag_scale: 1.0,
+        rotor_tau_s: None,
+        kf_scale: 1.0,
+        wind_ned_mps: [0.0; 3],
+        latency_s: 0.0,
+    };
+
     /// `p` with this uncertainty applied.
     pub fn apply(&self, p: &VehicleParams<f64>) -> VehicleParams<f64> {
         let mut q = *p;
@@ -99,6 +118,7 @@ impl Uncertainty {
         if let Some(t) = self.rotor_tau_s {
             q.rotor_tau_s = t;
         }
+        q.kf_ns2 *= self.kf_scale;
         q
     }
 }

@@ -12,7 +12,7 @@ use crate::plant::{Plant, PlantConfig};
 use crate::record::{state_row, RECORD_DT_S};
 use crate::scenario::{Reference, Scenario};
 use fc_core::control::{wrap_pi, AnyController, Controller, ControllerSpec, Family, MpcConfig, Setpoint};
-use fc_core::{hover_quat_state, AttitudeForm, VehicleParams};
+use fc_core::{hover_quat_state, AttitudeForm, QuatState, VehicleParams};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
@@ -290,10 +290,23 @@ pub fn fly_endpoint<E: Endpoint>(
         ..PlantConfig::nominal(cfg.spec.form)
     }
     .with_disturbance(cfg.disturbance);
+    let mut latency_ticks = 0usize;
     if let Some(u) = cfg.uncertainty {
         pc.params = u.apply(&pc.params);
         pc.rotor_lag |= u.rotor_tau_s.is_some();
+        pc.wind_ned_mps = Vector3::from(u.wind_ned_mps);
+        if !(u.latency_s.is_finite() && (0.0..=1.0).contains(&u.latency_s)) {
+            anyhow::bail!(
+                "sensor latency {:?} s is out of range: must be in [0, 1] s",
+                u.latency_s
+            );
+        }
+        latency_ticks = (u.latency_s * cfg.integration_hz).round() as usize;
     }
+    // The true states of the last `latency_ticks` plant steps: the
+    // controller sees the oldest (the initial state until there is history).
+    let mut history: std::collections::VecDeque<QuatState<f64>> =
+        std::collections::VecDeque::with_capacity(latency_ticks + 1);
     pc.integration_hz = cfg.integration_hz;
     let sc = &cfg.scenario;
     let x0 = hover_quat_state(&Vector3::from(sc.start_ned_m), sc.start_yaw_rad);
@@ -327,6 +340,12 @@ pub fn fly_endpoint<E: Endpoint>(
     for i in 0..=ticks {
         let t = i as f64 * tick;
         let r = sc.reference(t);
+        if latency_ticks > 0 {
+            if history.len() > latency_ticks {
+                history.pop_front();
+            }
+            history.push_back(plant.quat_state());
+        }
         let in_gap = cfg.sensor_gap.is_some_and(|(start, len)| t >= start && t < start + len);
         if i % ctrl_every == 0 && !in_gap {
             let xq = plant.quat_state();
@@ -334,6 +353,11 @@ pub fn fly_endpoint<E: Endpoint>(
                 res.diverged = true;
                 break;
             }
+            let xq = if latency_ticks > 0 {
+                history.front().copied().unwrap_or(xq)
+            } else {
+                xq
+            };
             // What the controller sees: the true state, or its noisy measurement.
             let xq = match sensors.as_mut() {
                 Some(s) => s.measure(&xq),

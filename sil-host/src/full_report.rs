@@ -287,22 +287,18 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
     let all = study::run_all(&cfgs, o.progress)?;
     let horizon = study_plots::horizon_sweep(AttitudeForm::Quaternion, o.quick)?;
     // A small robustness sweep (the `sweep` command does larger ones).
+    // The `sweep` command's default ranges, fewer vehicles.
     let sweep_opts = crate::sweep::SweepOptions {
         samples: if o.quick { 8 } else { 40 },
-        seed: 1,
-        mass_frac: 0.2,
-        inertia_frac: 0.3,
-        drag_frac: 0.5,
-        lag_max_s: 0.1,
-        tube_m: 1.0,
-        base: {
-            let mut b = Scenario::default_for(ScenarioKind::Helix);
-            b.duration_s = 30.0;
-            b
-        },
-        vehicle: fc_core::VehicleParams::OS4,
-        out: o.out.join("sweep"),
         progress: o.progress,
+        ..crate::sweep::SweepOptions::defaults(
+            {
+                let mut b = Scenario::default_for(ScenarioKind::Helix);
+                b.duration_s = 30.0;
+                b
+            },
+            o.out.join("sweep"),
+        )
     };
     let sweep_rows = crate::sweep::run(&sweep_opts)?;
     crate::sweep::write(&sweep_opts, &sweep_rows)?;

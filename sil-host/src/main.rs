@@ -60,9 +60,13 @@ enum Command {
 }
 
 #[derive(Args, Debug)]
+#[command(args_conflicts_with_subcommands = true)]
 struct SweepArgs {
+    /// `merge`: put shards together (see `sweep merge --help`).
+    #[command(subcommand)]
+    action: Option<SweepAction>,
     /// Number of true vehicles drawn (each flown by all 8 controller variants).
-    #[arg(long, default_value_t = 50, value_name = "N")]
+    #[arg(long, default_value_t = 400, value_name = "N")]
     samples: usize,
     /// Seed of the generator: the same seed draws the same vehicles.
     #[arg(long, default_value_t = 1, value_name = "S")]
@@ -77,8 +81,22 @@ struct SweepArgs {
     #[arg(long, default_value_t = 50.0, value_name = "PCT")]
     drag_pct: f64,
     /// Rotor lag time constant drawn in [0, this] s (0 turns the lag off).
-    #[arg(long, default_value_t = 0.1, value_name = "S")]
+    #[arg(long, default_value_t = 0.2, value_name = "S")]
     lag_max_s: f64,
+    /// Rotor thrust coefficient within ± this percentage.
+    #[arg(long, default_value_t = 10.0, value_name = "PCT")]
+    kf_pct: f64,
+    /// Steady horizontal wind up to this speed, m/s, from a random direction.
+    #[arg(long, default_value_t = 3.0, value_name = "M_PER_S")]
+    wind_max: f64,
+    /// Sensor latency drawn in [0, this] ms.
+    #[arg(long, default_value_t = 5.0, value_name = "MS")]
+    latency_max_ms: f64,
+    /// Fly only the slice I of N (samples with index ≡ I mod N) and write it
+    /// as DIR/shard-I-of-N.jsonl; `sweep merge` puts the shards together.
+    /// For job arrays: `--shard $SLURM_ARRAY_TASK_ID/$COUNT`.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard)]
+    shard: Option<(usize, usize)>,
     /// A flight succeeds if it never strays farther than this from the reference, m.
     #[arg(long, default_value_t = 1.0, value_name = "M")]
     tube_m: f64,
@@ -100,6 +118,36 @@ struct SweepArgs {
     /// Hide the progress bar.
     #[arg(long)]
     no_progress: bool,
+}
+
+#[derive(Subcommand, Debug)]
+enum SweepAction {
+    /// Merges the shards of one sweep (the *.jsonl files in the given
+    /// directories): checks that every sample is there exactly once and
+    /// writes the same tables, JSON and figure as a one-machine sweep.
+    Merge {
+        /// Directories holding shard files.
+        #[arg(required = true, value_name = "DIR")]
+        dirs: Vec<PathBuf>,
+        /// Output directory (created if missing).
+        #[arg(long, default_value = "sweep", value_name = "DIR")]
+        out: PathBuf,
+    },
+}
+
+/// `I/N` with N ≥ 1 and I < N.
+fn parse_shard(s: &str) -> Result<(usize, usize), String> {
+    let (i, n) = s
+        .split_once('/')
+        .ok_or_else(|| format!("'{s}': expected I/N, e.g. 0/8"))?;
+    let (i, n): (usize, usize) = (
+        i.trim().parse().map_err(|_| format!("'{i}' is not a shard index"))?,
+        n.trim().parse().map_err(|_| format!("'{n}' is not a shard count"))?,
+    );
+    if n == 0 || i >= n {
+        return Err(format!("{i}/{n}: needs N ≥ 1 and 0 ≤ I < N"));
+    }
+    Ok((i, n))
 }
 
 #[derive(Args, Debug)]
@@ -568,32 +616,49 @@ fn report_cmd(a: &ReportArgs) -> Result<()> {
 }
 
 fn sweep_cmd(a: &SweepArgs) -> Result<()> {
-    let mut base = match &a.scenario_file {
-        Some(f) => sil_host::config::load_scenario(f, a.scenario)?,
-        None => Scenario::default_for(a.scenario),
-    };
-    if a.scenario_file.is_none() {
-        base.duration_s = a.duration;
-    }
-    base.validate().map_err(anyhow::Error::msg)?;
-    let o = sil_host::sweep::SweepOptions {
-        samples: a.samples,
-        seed: a.seed,
-        mass_frac: a.mass_pct / 100.0,
-        inertia_frac: a.inertia_pct / 100.0,
-        drag_frac: a.drag_pct / 100.0,
-        lag_max_s: a.lag_max_s,
-        tube_m: a.tube_m,
-        base,
-        vehicle: match &a.vehicle {
-            Some(f) => sil_host::config::load_vehicle(f)?,
-            None => fc_core::VehicleParams::OS4,
-        },
-        out: a.out.clone(),
-        progress: !a.no_progress,
-    };
     let t0 = std::time::Instant::now();
-    let rows = sil_host::sweep::run(&o)?;
+    let (o, rows) = match &a.action {
+        Some(SweepAction::Merge { dirs, out }) => {
+            sil_host::record::prepare_output_dir(out)?;
+            sil_host::sweep::merge(dirs, out.clone())?
+        }
+        None => {
+            let mut base = match &a.scenario_file {
+                Some(f) => sil_host::config::load_scenario(f, a.scenario)?,
+                None => Scenario::default_for(a.scenario),
+            };
+            if a.scenario_file.is_none() {
+                base.duration_s = a.duration;
+            }
+            base.validate().map_err(anyhow::Error::msg)?;
+            let o = sil_host::sweep::SweepOptions {
+                samples: a.samples,
+                seed: a.seed,
+                mass_frac: a.mass_pct / 100.0,
+                inertia_frac: a.inertia_pct / 100.0,
+                drag_frac: a.drag_pct / 100.0,
+                lag_max_s: a.lag_max_s,
+                kf_frac: a.kf_pct / 100.0,
+                wind_max_mps: a.wind_max,
+                latency_max_s: a.latency_max_ms / 1e3,
+                tube_m: a.tube_m,
+                base,
+                vehicle: match &a.vehicle {
+                    Some(f) => sil_host::config::load_vehicle(f)?,
+                    None => fc_core::VehicleParams::OS4,
+                },
+                out: a.out.clone(),
+                progress: !a.no_progress,
+            };
+            if let Some(shard) = a.shard {
+                let path = sil_host::sweep::run_shard(&o, shard)?;
+                eprintln!("wrote {} ({:.1} s)", path.display(), t0.elapsed().as_secs_f64());
+                return Ok(());
+            }
+            let rows = sil_host::sweep::run(&o)?;
+            (o, rows)
+        }
+    };
     let path = sil_host::sweep::write(&o, &rows)?;
     for r in &rows {
         let p = r.rmse_percentiles_m;

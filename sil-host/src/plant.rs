@@ -22,6 +22,9 @@ pub struct PlantConfig {
     pub rotor_lag: bool,
     /// Time-varying external force/moment.
     pub disturbance: DisturbanceSet,
+    /// Steady wind, NED, m/s: drag acts on the velocity relative to the air,
+    /// i.e. an added force `kt ⊙ wind` (the true vehicle's drag coefficients).
+    pub wind_ned_mps: Vector3<f64>,
 }
 
 impl PlantConfig {
@@ -33,6 +36,7 @@ impl PlantConfig {
             integration_hz: 1000.0,
             rotor_lag: false,
             disturbance: DisturbanceSet::NONE,
+            wind_ned_mps: Vector3::zeros(),
         }
     }
 
@@ -269,7 +273,12 @@ impl Plant {
         (B, Vector4<f64>): Axpy,
     {
         let p = &cfg.params;
-        let dist = &cfg.disturbance;
+        let wind_force = Vector3::from(p.kt_nspm).component_mul(&cfg.wind_ned_mps);
+        let dist = |tt: f64| {
+            let mut d = cfg.disturbance.at(tt);
+            d.force_ned_n += wind_force;
+            d
+        };
         let t0 = *t;
         for i in 0..n {
             let ti = t0 + i as f64 * h;
@@ -286,7 +295,7 @@ impl Plant {
                 let f = |tt: f64, s: &B| {
                     // RK4 evaluates at ti, ti + h/2 (twice) and ti + h.
                     let w = &stages[usize::from(tt > ti) + usize::from(tt > ti + 0.75 * h)];
-                    B::deriv(v, s, &realised_inputs(p, w), gyro_speed(w), &dist.at(tt))
+                    B::deriv(v, s, &realised_inputs(p, w), gyro_speed(w), &dist(tt))
                 };
                 *x = rk4(f, x, ti, h);
                 *omega = stages[2].map(|w| clamp_speed(p, w));
@@ -294,7 +303,7 @@ impl Plant {
                 *omega = *omega_cmd;
                 let u = realised_inputs(p, omega);
                 let wr = gyro_speed(omega);
-                let f = |tt: f64, s: &B| B::deriv(v, s, &u, wr, &dist.at(tt));
+                let f = |tt: f64, s: &B| B::deriv(v, s, &u, wr, &dist(tt));
                 *x = rk4(f, x, ti, h);
             }
             x.renormalise();

@@ -294,3 +294,28 @@ fn mismatch_changes_the_true_vehicle() {
     assert!(pl.position()[2] > -1.0 + 0.1);
     assert!("bogus".parse::<DisturbanceSet>().is_err());
 }
+
+#[test]
+fn a_steady_wind_carries_the_hovering_vehicle_at_its_speed() {
+    // Hover thrust, a 3 m/s wind along north-east: drag acts on the velocity
+    // relative to the air, so each horizontal axis obeys m v̇ = kt (w − v):
+    // v(t) = w (1 − e^{−kt t/m}), and the vehicle ends up moving with the air.
+    let p = VehicleParams::OS4;
+    let w = Vector3::new(3.0, -2.0, 0.0);
+    for m in MODELS {
+        let mut cfg = PlantConfig::nominal(m);
+        cfg.wind_ned_mps = w;
+        let mut pl = Plant::new(cfg, &start());
+        let u = Vector4::new(p.hover_thrust_n(), 0.0, 0.0, 0.0);
+        for k in 1..=20 {
+            pl.step(&u, 0.5);
+            let t = 0.5 * k as f64;
+            let x = pl.quat_state();
+            for i in 0..2 {
+                let want = w[i] * (1.0 - (-p.kt_nspm[i] * t / p.mass_kg).exp());
+                assert!((x[3 + i] - want).abs() < 1e-9, "{m:?} t={t} axis {i}: {} vs {want}", x[3 + i]);
+            }
+            assert!(x[5].abs() < 1e-9, "no vertical motion");
+        }
+    }
+}

@@ -68,6 +68,7 @@ impl core::error::Error for ParamError {}
 
 /// Physical parameters of the quadrotor. Units are in the field names.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct VehicleParams<T> {
     /// Mass m, kg.
     pub mass_kg: T,
