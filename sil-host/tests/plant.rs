@@ -313,7 +313,11 @@ fn a_steady_wind_carries_the_hovering_vehicle_at_its_speed() {
             let x = pl.quat_state();
             for i in 0..2 {
                 let want = w[i] * (1.0 - (-p.kt_nspm[i] * t / p.mass_kg).exp());
-                assert!((x[3 + i] - want).abs() < 1e-9, "{m:?} t={t} axis {i}: {} vs {want}", x[3 + i]);
+                assert!(
+                    (x[3 + i] - want).abs() < 1e-9,
+                    "{m:?} t={t} axis {i}: {} vs {want}",
+                    x[3 + i]
+                );
             }
             assert!(x[5].abs() < 1e-9, "no vertical motion");
         }

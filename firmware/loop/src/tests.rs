@@ -337,6 +337,14 @@ fn assert_not_flown(r: &[FromFc], seq: u32, u: Input<f32>, n: u32) {
     }
 }
 
+/// The answer to sensor frame `seq` came from the controller (not the failsafe).
+fn assert_flown(r: &[FromFc], seq: u32) {
+    assert!(
+        matches!(r.first(), Some(FromFc::Actuator { seq: s, failsafe: false, .. }) if *s == seq),
+        "{r:?}"
+    );
+}
+
 /// A lockstep sensor frame at simulated time `t_us`.
 fn sensor_at(seq: u32, t_us: u64, state: [f32; 13]) -> ToFc {
     ToFc::Sensor { seq, t_us, state }
@@ -351,17 +359,7 @@ fn lockstep_wall_time_is_not_a_timeout() {
     rig.send(&sensor_at(1, 2_000, hover_state()), 0);
     rig.fc.check_timeout(10_000_000);
     let r = rig.send(&sensor_at(2, 4_000, hover_state()), 10_000_000);
-    assert!(
-        matches!(
-            r[0],
-            FromFc::Actuator {
-                seq: 2,
-                failsafe: false,
-                ..
-            }
-        ),
-        "{r:?}"
-    );
+    assert_flown(&r, 2);
     assert_eq!((rig.fc.failsafe(), rig.fc.counters().failsafe_entries), (false, 0));
 }
 
@@ -374,17 +372,7 @@ fn lockstep_simulated_gap_past_the_timeout_is_a_failsafe_episode() {
     rig.open();
     rig.send(&sensor_at(1, 2_000, hover_state()), 0);
     let r = rig.send(&sensor_at(2, 202_000, hover_state()), 0);
-    assert!(
-        matches!(
-            r[0],
-            FromFc::Actuator {
-                seq: 2,
-                failsafe: false,
-                ..
-            }
-        ),
-        "{r:?}"
-    );
+    assert_flown(&r, 2);
     assert!(r
         .iter()
         .any(|m| matches!(m, FromFc::Telemetry { counters, .. } if counters.failsafe_entries == 1)));
@@ -415,17 +403,7 @@ fn lockstep_invalid_frames_past_the_timeout_enter_the_failsafe_and_valid_ones_en
         "{u:?}"
     );
     let r = rig.send(&sensor_at(40, 80_000, hover_state()), 0);
-    assert!(
-        matches!(
-            r[0],
-            FromFc::Actuator {
-                seq: 40,
-                failsafe: false,
-                ..
-            }
-        ),
-        "{r:?}"
-    );
+    assert_flown(&r, 40);
     assert_eq!(rig.fc.counters().failsafe_entries, 1);
 }
 
