@@ -145,11 +145,15 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
         let (mean, max) = pil.instructions_per_step.expect("instructions per step");
         assert!(mean > 1000.0 && max >= mean, "{mean} {max}");
         let c = pil.link_counters.expect("counters");
-        assert_eq!(c.failsafe_entries, 0);
-        assert_eq!(c.bad_crc + c.bad_cobs + c.bad_message + c.oversized + c.out_of_order, 0);
+        let log = pil.firmware_log.join("\n");
+        assert_eq!(c.failsafe_entries, 0, "{family:?}: {c:?}\n{log}");
+        assert_eq!(
+            c.bad_crc + c.bad_cobs + c.bad_message + c.oversized + c.out_of_order,
+            0,
+            "{c:?}"
+        );
         assert_eq!(pil.failsafe_steps, 0);
         // The firmware's own defmt log, decoded from QEMU's semihosting output.
-        let log = pil.firmware_log.join("\n");
         for line in ["INFO up: protocol v3", "INFO session open", "INFO controller selected"] {
             assert!(log.contains(line), "{line:?} missing from the firmware log:\n{log}");
         }

@@ -145,6 +145,10 @@ impl Qemu {
             if let Ok(s) = TcpStream::connect(&self.addr) {
                 s.set_nodelay(true)?;
                 s.set_read_timeout(Some(Duration::from_secs(30)))?;
+                // The guest starts when we connect (`wait=on`); bytes sent
+                // before its USART is up are dropped, and a Hello cut in half
+                // is counted as a link error. Wait for its "up" log line.
+                self.wait_until_up(t0)?;
                 return Ok(FcClient::over(s));
             }
             if let Ok(Some(st)) = self.child.try_wait() {
@@ -159,6 +163,28 @@ impl Qemu {
 }
 
 impl Qemu {
+    /// Waits (up to 10 s from `t0`) until the firmware has logged that its
+    /// USART is up (`up: protocol vN, waiting on USART1`).
+    fn wait_until_up(&mut self, t0: Instant) -> Result<()> {
+        loop {
+            let bytes = std::fs::read(&self.out).unwrap_or_default();
+            if !bytes.is_empty()
+                && decode_defmt(&self.elf, &bytes)?
+                    .iter()
+                    .any(|l| l.contains("up: protocol"))
+            {
+                return Ok(());
+            }
+            if let Ok(Some(st)) = self.child.try_wait() {
+                bail!("qemu exited before the firmware was up: {st}");
+            }
+            if t0.elapsed() > Duration::from_secs(10) {
+                bail!("the firmware did not log that it is up within 10 s");
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
     /// Stops QEMU the way Ctrl-C does (so it flushes the guest's output),
     /// killing it after a second if it lingers.
     fn stop(&mut self) {
