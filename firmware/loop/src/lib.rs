@@ -240,19 +240,8 @@ impl FlightCore {
     /// Designs the boot controller ([`BOOT_CONTROLLER`]) in place. On error
     /// the loop keeps flying the fallback PD.
     pub fn start(&mut self) -> Result<(), ControlError> {
-        let ts = self.cfg.control_period_s;
-        match BOOT_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None) {
-            Ok(()) => {
-                self.spec = BOOT_CONTROLLER;
-                Ok(())
-            }
-            Err(e) => {
-                self.spec = FALLBACK_CONTROLLER;
-                // PD designs cannot fail: nothing to check.
-                let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None);
-                Err(e)
-            }
-        }
+        // Unstarted, the previous controller is the fallback PD.
+        self.install(BOOT_CONTROLLER)
     }
 
     /// The inputs to apply now `[U1 N, U2 N, U3 N, U4 N·m]`.
@@ -341,18 +330,26 @@ impl FlightCore {
     /// from the same parameters before, so it succeeds; should it not, the
     /// tuned Euler PD, which cannot fail, flies) and the failure is counted.
     fn select(&mut self, spec: ControllerSpec) {
-        let ts = self.cfg.control_period_s;
-        if spec.build_in(&mut self.ctrl, self.params, ts, None).is_ok() {
-            self.spec = spec;
-            self.selections = self.selections.wrapping_add(1);
-            return;
+        match self.install(spec) {
+            Ok(()) => self.selections = self.selections.wrapping_add(1),
+            Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
         }
-        self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
-        if self.spec.build_in(&mut self.ctrl, self.params, ts, None).is_err() {
+    }
+
+    /// Designs `spec` in place of the running controller; on failure the
+    /// running one is designed again (the slot no longer holds it), or the
+    /// fallback PD if even that fails, and the error is returned.
+    fn install(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
+        let ts = self.cfg.control_period_s;
+        let result = spec.build_in(&mut self.ctrl, self.params, ts, None);
+        if result.is_ok() {
+            self.spec = spec;
+        } else if self.spec.build_in(&mut self.ctrl, self.params, ts, None).is_err() {
             self.spec = FALLBACK_CONTROLLER;
             // PD designs cannot fail: nothing to check.
             let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None);
         }
+        result
     }
 
     /// A state a multirotor can be in, reached from the last flown one:

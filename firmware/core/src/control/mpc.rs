@@ -323,6 +323,16 @@ fn cast_into<T, const R: usize, const C: usize, S>(
     }
 }
 
+/// The QP settings `cfg` asks for (polish always on).
+fn qp_settings<T: RealField + Copy>(cfg: &MpcConfig) -> QpSettings<T> {
+    QpSettings {
+        tolerance: lit(cfg.qp_tolerance),
+        accuracy: lit(cfg.qp_accuracy),
+        max_iterations: cfg.qp_max_iterations,
+        polish: true,
+    }
+}
+
 /// The terminal weight of `cfg` for the prediction model `(ad, bd)`: the
 /// DARE's solution of (Q, R) when `cfg.terminal`, else Q.
 // Design-time code: kept out of line so that its large frames are not
@@ -391,12 +401,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             qp: BoxQp::identity(),
             lb: SVector::zeros(),
             ub: SVector::zeros(),
-            settings: QpSettings {
-                tolerance: lit(cfg.qp_tolerance),
-                accuracy: lit(cfg.qp_accuracy),
-                max_iterations: cfg.qp_max_iterations,
-                polish: true,
-            },
+            settings: qp_settings(&cfg),
             iteration_bound: 0,
             preview: [Setpoint::hold(Vector3::zeros(), T::zero()); N],
             preview_valid: false,
@@ -438,12 +443,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         self.bx = params.input_box();
         self.u_hover = crate::model::hover_input(&params);
         self.params = params;
-        self.settings = QpSettings {
-            tolerance: lit(cfg.qp_tolerance),
-            accuracy: lit(cfg.qp_accuracy),
-            max_iterations: cfg.qp_max_iterations,
-            polish: true,
-        };
+        self.settings = qp_settings(&cfg);
         self.trend = [T::zero(); N];
         self.preview = [Setpoint::hold(Vector3::zeros(), T::zero()); N];
         Controller::reset(self);
