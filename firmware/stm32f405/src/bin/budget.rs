@@ -11,7 +11,10 @@
 //!   decoding of setpoint, preview and sensor frames, the controller, the
 //!   replies), through [`fc_loop::FlightCore`] exactly as the image runs it;
 //! - for the MPCs, `a-priori`: the same with the QP forced to run its full
-//!   iteration bound (zero tolerance) plus the polish — the certified worst case.
+//!   iteration allowance, `min(cap, bound)` (zero tolerance), plus the polish —
+//!   the worst case in instructions as configured; the QP's accuracy is
+//!   certified only where the cap is not below the a-priori bound (the thesis
+//!   preset; not the fast one, capped at 150 of its 754).
 //!
 //! A controller fits when `worst instructions × CPI × margin ≤ 168 MHz / rate`
 //! with CPI 1.5 (Cortex-M4 from flash with the ART accelerator, FPU code;
