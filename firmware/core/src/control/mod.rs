@@ -10,6 +10,7 @@ pub mod lqr_euler;
 pub mod lqr_quat;
 pub mod lqr_table;
 pub mod mpc;
+pub mod observer;
 pub mod pd_euler;
 pub mod pd_quat;
 pub mod reference;
@@ -20,10 +21,11 @@ pub use lqr_euler::LqrEuler;
 pub use lqr_quat::LqrQuat;
 pub use lqr_table::GainTable;
 pub use mpc::{Mpc, MpcConfig, MpcFast, MpcThesis};
+pub use observer::AccelObserver;
 pub use pd_euler::{PdEuler, PdEulerGains};
 pub use pd_quat::{PdQuat, PdQuatGains};
 pub use reference::{tilt_and_thrust, AttitudeRef, ReferenceMode, TiltThrust};
-pub use spec::{ControllerSpec, Family, Preset, SpecError, SpecRow, SPECS};
+pub use spec::{ControllerSpec, Family, Preset, SpecError, SpecRow, INTEGRAL_MOMENT_TAU_S, INTEGRAL_TAU_S, SPECS};
 
 use crate::linalg::RiccatiError;
 use crate::model::{quat_to_euler, DiscretiseError, Input, Quat, QuatState};
@@ -347,8 +349,9 @@ impl<T: RealField + Copy> AnyController<T> {
         p: crate::model::VehicleParams<T>,
         gains: PdEulerGains<T>,
         mode: ReferenceMode,
+        obs: AccelObserver<T>,
     ) {
-        *self = AnyController::PdEuler(PdEuler::new(p, gains, mode));
+        *self = AnyController::PdEuler(PdEuler::new(p, gains, mode).with_observer(obs));
     }
 
     /// Makes the slot a quaternion PD with `gains`.
@@ -358,8 +361,9 @@ impl<T: RealField + Copy> AnyController<T> {
         p: crate::model::VehicleParams<T>,
         gains: PdQuatGains<T>,
         mode: ReferenceMode,
+        obs: AccelObserver<T>,
     ) {
-        *self = AnyController::PdQuat(PdQuat::new(p, gains, mode));
+        *self = AnyController::PdQuat(PdQuat::new(p, gains, mode).with_observer(obs));
     }
 
     /// Makes the slot the (small, already designed) quaternion LQR `c`.

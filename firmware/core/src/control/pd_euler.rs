@@ -2,12 +2,12 @@
 //! attitude mode (3.75–3.79). Gains: thesis Tables 4.1–4.2.
 
 use super::{
-    reference::tilt_and_thrust, saturate, validate, wrap_pi, AttitudeRef, ControlError, ControlOutput, Controller,
-    ReferenceMode, Setpoint, StateEstimate,
+    observer::AccelObserver, reference::tilt_and_thrust, saturate, validate, wrap_pi, AttitudeRef, ControlError,
+    ControlOutput, Controller, ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
 use crate::math as trig;
-use crate::model::{InputBox, VehicleParams};
+use crate::model::{InputBox, Vehicle, VehicleParams};
 use nalgebra::{RealField, Vector3, Vector4};
 
 /// Proportional and derivative gain of one loop.
@@ -74,13 +74,18 @@ impl<T: RealField + Copy> PdEulerGains<T> {
     /// they give `θ̈ = 64.5(θd − θ) − 99.3 θ̇`, an attitude pole at −0.65 rad/s,
     /// and the x cascade `1.53s³ + 1.24s² + 2.95s + 2.1` is barely stable
     /// (Routh margin 3.65 vs 3.21): the vehicle never settles. Here roll and
-    /// pitch are placed at ωn ≈ 15 rad/s, ζ ≈ 0.9 (Kp 7.3 N/rad, Kd 0.45 N·s/rad),
-    /// ten times faster than the position loops; x, y, z and ψ keep the thesis
-    /// gains (z and ψ reproduce the thesis' settling times).
+    /// pitch are placed at ωn ≈ 15 rad/s, ten times faster than the position
+    /// loops (Kp 7.3 N/rad), and damped for the rotors: Kd 1.0 N·s/rad
+    /// (ζ ≈ 1.5 without rotor lag). With the vehicle's 0.178 s rotor lag a
+    /// lighter Kd (0.45, ζ ≈ 0.9 on paper) loses the loop once the rotational
+    /// drag is half the nominal and the inertia 30 % higher: the sweep's
+    /// corner, where the Routh condition of `(Is² + k_r s)(τs + 1) + l(K_d s +
+    /// K_p)` fails (docs/model.md §10). x, y, z and ψ keep the thesis gains (z
+    /// and ψ reproduce the thesis' settling times).
     pub fn tuned() -> Self {
         Self {
-            roll: PdAxis::new(7.3, 0.45),
-            pitch: PdAxis::new(7.3, 0.45),
+            roll: PdAxis::new(7.3, 1.0),
+            pitch: PdAxis::new(7.3, 1.0),
             ..Self::thesis()
         }
     }
@@ -93,6 +98,7 @@ pub struct PdEuler<T: RealField + Copy> {
     gains: PdEulerGains<T>,
     mode: ReferenceMode,
     bx: InputBox<T>,
+    obs: AccelObserver<T>,
 }
 
 impl<T: RealField + Copy> PdEuler<T> {
@@ -103,7 +109,20 @@ impl<T: RealField + Copy> PdEuler<T> {
             params,
             gains,
             mode,
+            obs: AccelObserver::off(),
         }
+    }
+
+    /// The same with integral action: the disturbance observer `obs`
+    /// ([`AccelObserver`]) whose estimate the position loops cancel.
+    pub fn with_observer(mut self, obs: AccelObserver<T>) -> Self {
+        self.obs = obs;
+        self
+    }
+
+    /// The disturbance observer (off for the thesis gains).
+    pub fn observer(&self) -> &AccelObserver<T> {
+        &self.obs
     }
 }
 
@@ -130,7 +149,8 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         let g = &self.gains;
-        let acc = desired_accel(&g.x, &g.y, &g.z, est, sp, self.mode);
+        self.obs.observe(est);
+        let acc = desired_accel(&g.x, &g.y, &g.z, est, sp, self.mode) - self.obs.estimate();
         let e = est.euler();
         let (phi, theta, psi) = (e[0], e[1], e[2]);
         // Desired tilt from the desired acceleration at the current heading (3.85, 3.86).
@@ -152,15 +172,25 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
         };
         // Thrust with tilt and drag compensation at the actual attitude (3.79).
         let tilt_cos = (cphi * trig::cos(theta)).max(lit(0.5));
+        let vehicle = Vehicle::new(&self.params);
+        let tff = self.obs.torque_feedforward(&vehicle);
         let lift = tt.thrust_n * trig::cos(tt.roll_rad) * trig::cos(tt.pitch_rad);
         let raw = Vector4::new(
             lift / tilt_cos,
-            g.roll.law(tt.roll_rad - phi, wd[0] - phi_dot),
-            g.pitch.law(tt.pitch_rad - theta, wd[1] - theta_dot),
-            g.yaw.law(wrap_pi(sp.yaw_rad - psi), wd[2] - psi_dot),
+            g.roll.law(tt.roll_rad - phi, wd[0] - phi_dot) + tff[0],
+            g.pitch.law(tt.pitch_rad - theta, wd[1] - theta_dot) + tff[1],
+            g.yaw.law(wrap_pi(sp.yaw_rad - psi), wd[2] - psi_dot) + tff[2],
         );
-        Ok(saturate(&self.bx, &raw))
+        let out = saturate(&self.bx, &raw);
+        self.obs.record(&vehicle, est, &out.u);
+        Ok(out)
     }
 
-    fn reset(&mut self) {}
+    fn reset(&mut self) {
+        self.obs.reset();
+    }
+
+    fn resume(&mut self) {
+        self.obs.resume();
+    }
 }

@@ -10,12 +10,12 @@
 
 use super::pd_euler::{desired_accel, PdAxis};
 use super::{
-    reference::tilt_and_thrust, saturate, validate, AttitudeRef, ControlError, ControlOutput, Controller,
-    ReferenceMode, Setpoint, StateEstimate,
+    observer::AccelObserver, reference::tilt_and_thrust, saturate, validate, AttitudeRef, ControlError, ControlOutput,
+    Controller, ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
 use crate::math as trig;
-use crate::model::{euler_to_quat, quat_conj, quat_mul, quat_to_rotation, InputBox, VehicleParams};
+use crate::model::{euler_to_quat, quat_conj, quat_mul, quat_to_rotation, InputBox, Vehicle, VehicleParams};
 use nalgebra::{RealField, Vector3, Vector4};
 
 /// Gains of the quaternion PD controller: position loops as in the Euler
@@ -59,14 +59,15 @@ impl<T: RealField + Copy> PdQuatGains<T> {
     /// ran with U1 unbounded, its Fig. 4.3). Here z uses the Euler PD's
     /// 7.495/5, x and y the Euler PD's 2.1/2.8 and 2.15/2.5, and the attitude
     /// loops the Euler-tuned loop in quaternion units (qe ≈ half the angle, so
-    /// Kp doubles): q1, q2 14.6/0.45, q3 10/1.4.
+    /// Kp doubles): q1, q2 14.6/1.0, q3 10/1.4 (the rate gain is a rate gain in
+    /// both forms: 1.0, as the Euler loop).
     pub fn tuned() -> Self {
         Self {
             x: PdAxis::new(2.1, 2.8),
             y: PdAxis::new(2.15, 2.5),
             z: PdAxis::new(7.495, 5.0),
-            q1: PdAxis::new(14.6, 0.45),
-            q2: PdAxis::new(14.6, 0.45),
+            q1: PdAxis::new(14.6, 1.0),
+            q2: PdAxis::new(14.6, 1.0),
             q3: PdAxis::new(10.0, 1.4),
         }
     }
@@ -79,6 +80,7 @@ pub struct PdQuat<T: RealField + Copy> {
     gains: PdQuatGains<T>,
     mode: ReferenceMode,
     bx: InputBox<T>,
+    obs: AccelObserver<T>,
 }
 
 impl<T: RealField + Copy> PdQuat<T> {
@@ -89,7 +91,20 @@ impl<T: RealField + Copy> PdQuat<T> {
             params,
             gains,
             mode,
+            obs: AccelObserver::off(),
         }
+    }
+
+    /// The same with integral action: the disturbance observer `obs`
+    /// ([`AccelObserver`]) whose estimate the position loops cancel.
+    pub fn with_observer(mut self, obs: AccelObserver<T>) -> Self {
+        self.obs = obs;
+        self
+    }
+
+    /// The disturbance observer (off for the thesis gains).
+    pub fn observer(&self) -> &AccelObserver<T> {
+        &self.obs
     }
 }
 
@@ -97,7 +112,8 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         let g = &self.gains;
-        let acc = desired_accel(&g.x, &g.y, &g.z, est, sp, self.mode);
+        self.obs.observe(est);
+        let acc = desired_accel(&g.x, &g.y, &g.z, est, sp, self.mode) - self.obs.estimate();
         // Desired attitude: tilt that realises the acceleration, at the desired heading.
         let tt = tilt_and_thrust(&self.params, &acc, &est.vel_ned_mps, sp.yaw_rad);
         let qd = euler_to_quat(tt.roll_rad, tt.pitch_rad, sp.yaw_rad);
@@ -113,15 +129,25 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
         };
         // Thrust: vertical component from the desired lift, over the actual R33.
         let r33 = quat_to_rotation(&qa)[(2, 2)].max(lit(0.5));
+        let vehicle = Vehicle::new(&self.params);
+        let tff = self.obs.torque_feedforward(&vehicle);
         let lift = tt.thrust_n * trig::cos(tt.roll_rad) * trig::cos(tt.pitch_rad);
         let raw = Vector4::new(
             lift / r33,
-            -g.q1.kp * qe[1] - g.q1.kd * (w[0] - wd[0]),
-            -g.q2.kp * qe[2] - g.q2.kd * (w[1] - wd[1]),
-            -g.q3.kp * qe[3] - g.q3.kd * (w[2] - wd[2]),
+            -g.q1.kp * qe[1] - g.q1.kd * (w[0] - wd[0]) + tff[0],
+            -g.q2.kp * qe[2] - g.q2.kd * (w[1] - wd[1]) + tff[1],
+            -g.q3.kp * qe[3] - g.q3.kd * (w[2] - wd[2]) + tff[2],
         );
-        Ok(saturate(&self.bx, &raw))
+        let out = saturate(&self.bx, &raw);
+        self.obs.record(&vehicle, est, &out.u);
+        Ok(out)
     }
 
-    fn reset(&mut self) {}
+    fn reset(&mut self) {
+        self.obs.reset();
+    }
+
+    fn resume(&mut self) {
+        self.obs.resume();
+    }
 }

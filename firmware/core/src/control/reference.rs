@@ -160,6 +160,31 @@ impl<T: RealField + Copy> AttitudeRef<T> {
             ReferenceMode::Feedforward => Self::feedforward(p, sp),
         }
     }
+
+    /// The attitude and thrust to aim at when an estimated disturbance
+    /// `d_hat` (NED, m/s², see [`super::observer::AccelObserver`]) adds to
+    /// the vehicle's acceleration: those that produce the reference's
+    /// acceleration minus `d_hat` (the target calculation of offset-free
+    /// control). In `Thesis` mode the reference's derivatives stay out (only
+    /// `−d_hat` is fed forward, no rates); with `d_hat = 0` this is
+    /// [`Self::for_mode`].
+    pub fn with_disturbance(p: &VehicleParams<T>, sp: &Setpoint<T>, mode: ReferenceMode, d_hat: &Vector3<T>) -> Self {
+        if d_hat.iter().all(|v| *v == T::zero()) {
+            return Self::for_mode(p, sp, mode);
+        }
+        let target = match mode {
+            ReferenceMode::Feedforward => Setpoint {
+                acc_ned_mps2: sp.acc_ned_mps2 - d_hat,
+                ..*sp
+            },
+            ReferenceMode::Thesis => Setpoint {
+                acc_ned_mps2: -d_hat,
+                yaw_rate_radps: T::zero(),
+                ..Setpoint::hold(sp.pos_ned_m, sp.yaw_rad)
+            },
+        };
+        Self::feedforward(p, &target)
+    }
 }
 
 #[cfg(test)]

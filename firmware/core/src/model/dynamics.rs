@@ -125,7 +125,7 @@ impl<T: RealField + Copy> Vehicle<T> {
     /// Translational acceleration (NED, m/s²) from velocity, the body z axis in
     /// NED `(R13, R23, R33)`, thrust `U1` and the disturbance force.
     #[inline(always)]
-    fn accel(&self, vel: &Vector3<T>, r_col3: &Vector3<T>, u1: T, d: &Disturbance<T>) -> Vector3<T> {
+    pub fn accel(&self, vel: &Vector3<T>, r_col3: &Vector3<T>, u1: T, d: &Disturbance<T>) -> Vector3<T> {
         let p = &self.params;
         Vector3::new(
             -(p.kt_nspm[0] * vel[0] + u1 * r_col3[0] - d.force_ned_n[0]) * self.inv_mass,
