@@ -57,8 +57,16 @@ pub struct MpcConfig {
     pub s: [f64; 4],
     /// Terminal weight from the DARE of (Q, R) instead of Q at the last step.
     pub terminal: bool,
-    /// Time constant of the disturbance observer, s (`None`: no estimate).
+    /// Time constant of the disturbance observer's force part, s (`None`:
+    /// no estimate, neither force nor moment).
     pub observer_tau_s: Option<f64>,
+    /// Time constant of its moment part, s (used when `observer_tau_s` is
+    /// set; at most one execution period means the estimate is the last
+    /// step's whole rate innovation). A fast moment estimate is what keeps the
+    /// attitude loop stable with slow rotors: the torque the rotors have not
+    /// yet delivered shows up as a moment "disturbance" and is asked for
+    /// again on the next step, which makes up for most of the lag.
+    pub observer_moment_tau_s: f64,
     /// Damped-trend prediction of the horizontal disturbance force: its
     /// horizon `T`, s (`None`: the estimate is held constant over the
     /// prediction). The estimate's rate ḋ is extrapolated as
@@ -108,6 +116,7 @@ impl MpcConfig {
             s: [0.01; 4],
             terminal: false,
             observer_tau_s: Some(0.5),
+            observer_moment_tau_s: 0.5,
             disturbance_trend_s: None,
             disturbance_trend_max_mps2: 0.0,
             disturbance_rate_filter_s: 0.1,
@@ -124,16 +133,23 @@ impl MpcConfig {
     /// feed-forward of the previewed reference, disturbance estimate.
     ///
     /// Tuning: tight position weights for tracking; heavy roll/pitch-rate
-    /// weights, because with the `mismatch` plant's 0.178 s rotor lag a lightly
-    /// damped attitude loop diverges (the rate weight 0.2 did, 30 does not;
-    /// 8 flies the listed cases better but loses a far turn under
-    /// `wind,mismatch`). The horizontal disturbance is predicted with a damped
+    /// weights, because with slow rotors a lightly damped attitude loop
+    /// diverges: under `mismatch` (0.178 s rotor lag) the rate weight 0.2 did
+    /// and 30 did not, but 30 still lost the robustness sweep's worst corner
+    /// (0.2 s lag, half the rotational drag, 30 % more inertia, 10 % stronger
+    /// rotors; 300 nearly held it, 600 holds it with margin, docs/model.md §8.6).
+    /// The price of 600 over 30: the calm helix's x RMSE 15 → 28 mm, the
+    /// set-point's x settling 2.3 → 3.5 s. The horizontal disturbance is predicted with a damped
     /// trend (T = 0.3 s, rate through `s/(τs + 1)²` with τ = 50 ms, at most
     /// 0.4 m/s² of extrapolated change): a 0.5 Hz gust moves through half its
     /// swing within the 1 s horizon; holding the estimate left 0.016 m of x
     /// RMS error over the gusty part of the helix, the trend leaves 0.007 m.
     /// τ trades that against sensor noise: 30 ms left 0.006 m without noise
-    /// but lost most of the gain with it (`sil-host fly --noise 1`).
+    /// but lost most of the gain with it (`sil-host fly --noise 1`). The
+    /// moment estimate takes each step's whole rate innovation (τ = one
+    /// 5 ms period): with a 20 ms moment estimate the robustness sweep lost
+    /// 6 % of its vehicles (slow rotors with little rotational drag), with
+    /// 5 ms none diverges.
     pub fn fast(form: AttitudeForm) -> Self {
         let a = match form {
             AttitudeForm::Euler => 1.0,
@@ -153,14 +169,15 @@ impl MpcConfig {
                 30.0 * a,
                 30.0 * a,
                 20.0 * a,
-                30.0,
-                30.0,
+                600.0,
+                600.0,
                 5.0,
             ],
             r: [0.5, 2.0, 2.0, 20.0],
             s: [0.05, 0.5, 0.5, 5.0],
             terminal: true,
             observer_tau_s: Some(0.02),
+            observer_moment_tau_s: 0.005,
             disturbance_trend_s: Some(0.3),
             disturbance_trend_max_mps2: 0.4,
             disturbance_rate_filter_s: 0.05,
@@ -428,6 +445,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let p64: VehicleParams<f64> = params.cast();
         let ok_dt = |v: f64| v.is_finite() && v > 0.0;
         if !p64.is_valid() || !ok_dt(cfg.pred_dt_s) || !ok_dt(cfg.exec_dt_s) {
+            return Err(ControlError::InvalidParameter);
+        }
+        if cfg.observer_tau_s.is_some_and(|t| !ok_dt(t)) || !ok_dt(cfg.observer_moment_tau_s) {
             return Err(ControlError::InvalidParameter);
         }
         if cfg
@@ -721,6 +741,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let nu = meas - pred;
         // Attribute velocity and rate innovations to the disturbance, low-passed.
         let gain = lit::<T>((self.cfg.exec_dt_s / tau).min(1.0));
+        let gain_m = lit::<T>((self.cfg.exec_dt_s / self.cfg.observer_moment_tau_s).min(1.0));
         for i in 0..3 {
             let bf = self.wd_e[(3 + i, i)];
             let bm = self.wd_e[(9 + i, 3 + i)];
@@ -728,7 +749,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
                 dh[i] += gain * nu[3 + i] / bf;
             }
             if bm > T::zero() {
-                dh[3 + i] += gain * nu[9 + i] / bm;
+                dh[3 + i] += gain_m * nu[9 + i] / bm;
             }
         }
         // Back to NED and clamp to a physical range (±1 g, ±100 rad/s²).
