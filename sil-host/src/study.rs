@@ -494,14 +494,14 @@ exact ZOH model at 500 Hz with the sampled cost. With Table 4.5's weights the co
 roll/pitch pole that 500 Hz sampling cannot reproduce, so the discrete gain is ≈ 55 % different in its fastest \
 channels (test `discrete_gain_tends_to_continuous_gain`). `design lqr` prints the continuous gain and matches \
 python-control to 1e-12.
-- **Disturbances.** The thesis does not say what its disturbance was; ours are docs/model.md §9's. Neither PD nor LQR has \
-integral action, so a constant force or a heavier vehicle leaves a steady offset. `wind` pushes 0.5 N north \
-from 5 s: the PD's x loop (Kp 2.1 m/s² per m) holds it off by F/(m·Kp) = 0.5/(0.65·2.1) ≈ 0.37 m, which is the \
-≈ 9 % x RMSE in the `wind` table; the thesis' disturbed numbers stay near its undisturbed ones, so its \
-disturbance was much smaller or had no constant part. With `mismatch` (+15 % mass) \
-the weakly weighted quaternion LQR (Q = I: ≈ 1 N per metre of z error) sags ≈ 2 m, the thesis' own 48 % RMSE \
-for its disturbed quaternion LQR shows the same weakness. Offset-free tracking is the MPC's job (disturbance \
-estimate).
+- **Disturbances.** The thesis does not say what its disturbance was; ours are docs/model.md §9's. The thesis' \
+PD and LQR have no integral action: `wind` pushes 0.5 N north from 5 s, which the PD's x loop (Kp 2.1 m/s² per m) \
+alone would hold off by F/(m·Kp) = 0.5/(0.65·2.1) ≈ 0.37 m, and with `mismatch` (+15 % mass) the quaternion LQR \
+with Table 4.7's Q = I (≈ 1 N per metre of z error) sags ≈ 2 m; the thesis' own 48 % RMSE for its disturbed \
+quaternion LQR shows that weakness. The project's PD and LQR carry a disturbance observer (docs/model.md §8.6: \
+force τ = 50 ms, moment τ = 1 s) and are offset-free: the set-point under `wind` ends within 3 cm while the 0.5 Hz \
+gust still blows, and the helix under `wind,mismatch` stays within 0.1 m (RMSE). The thesis' disturbed numbers \
+stay near its undisturbed ones, so its disturbance was much smaller or had no constant part.
 - **MPC.** `thesis` runs the thesis' Appendix C problem at its 4 Hz; our set-point settles in ≈ 4.4 s against the \
 thesis' 6.9–8.5 s (the thesis' MPC had no reference preview and, in MATLAB, a soft output constraint). `fast` \
 re-solves at 200 Hz over a 1 s horizon with preview, feed-forward and a disturbance estimate: offset-free under \

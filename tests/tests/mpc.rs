@@ -51,7 +51,8 @@ fn fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm() {
     // wind (force and moment steps at 5 s, 0.2 N gust at 0.5 Hz) may add
     // little to it. x carries nearly all of the error; y and z stay within
     // a few millimetres either way (their calm RMSE is below 1 mm, so their
-    // own ratio says nothing).
+    // own ratio says nothing; 5 mm since the roll/pitch-rate weight went
+    // from 30 to 600 for the robustness sweep's worst corner: y 4.3 mm).
     for m in MODELS {
         let calm = run(m, Preset::Project, Scenario::default_for(ScenarioKind::Helix), "none");
         let windy = run(m, Preset::Project, Scenario::default_for(ScenarioKind::Helix), "wind");
@@ -65,7 +66,7 @@ fn fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm() {
         assert!(windy.metrics.x.rmse_m <= 1.15 * calm.metrics.x.rmse_m, "{m:?}: x");
         for (a, b) in [(calm.metrics.y, windy.metrics.y), (calm.metrics.z, windy.metrics.z)] {
             assert!(
-                a.rmse_m < 0.003 && b.rmse_m < 0.003,
+                a.rmse_m < 0.005 && b.rmse_m < 0.005,
                 "{m:?}: {} / {}",
                 a.rmse_m,
                 b.rmse_m
