@@ -354,7 +354,7 @@ impl ControllerSpec {
                         Thesis => lqr_euler::euler_weights(),
                     };
                     c.redesign(p, &q, &r, ts, mode)?;
-                    c.set_observer(obs);
+                    c.set_observer(obs.smoothed());
                 }
             }
             (Lqr, Quaternion, preset) => {
@@ -362,7 +362,7 @@ impl ControllerSpec {
                     Project => lqr_quat::tuned_weights(),
                     Thesis => lqr_quat::quat_weights(),
                 };
-                slot.become_lqrquat(LqrQuat::new(p, &q, &r, ts, mode)?.with_observer(obs))
+                slot.become_lqrquat(LqrQuat::new(p, &q, &r, ts, mode)?.with_observer(obs.smoothed()))
             }
             (Mpc, form, Project) => {
                 let cfg = mpc.unwrap_or(MpcConfig::fast(form));
