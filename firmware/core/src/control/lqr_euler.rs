@@ -3,8 +3,8 @@
 
 use super::lqr_table::{design_discrete, GainTable};
 use super::{
-    observer::AccelObserver, saturate, validate, wrap_pi, AttitudeRef, ControlError, ControlOutput, Controller,
-    ReferenceMode, Setpoint, StateEstimate,
+    observer::AccelObserver, validate, wrap_pi, AttitudeRef, ControlError, ControlOutput, Controller, ReferenceMode,
+    Setpoint, StateEstimate,
 };
 use crate::model::{euler_hover_model, InputBox, Vehicle, VehicleParams};
 use nalgebra::{RealField, SMatrix, SVector, Vector4};
@@ -143,9 +143,7 @@ impl<T: RealField + Copy, const H: usize> Controller<T> for LqrEuler<T, H> {
         let tff = self.obs.torque_feedforward(&vehicle);
         let u_ref = Vector4::new(ar.thrust_n, tff[0], tff[1], tff[2]);
         let raw = u_ref - self.table.at(e[2]) * dx;
-        let out = saturate(&self.bx, &raw);
-        self.obs.record(&vehicle, est, &out.u);
-        Ok(out)
+        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
     }
 
     fn reset(&mut self) {

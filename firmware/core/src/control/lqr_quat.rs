@@ -12,7 +12,7 @@
 
 use super::lqr_table::{design_discrete, Gain};
 use super::{
-    observer::AccelObserver, saturate, validate, AttitudeRef, ControlError, ControlOutput, Controller, HeadingFrame,
+    observer::AccelObserver, validate, AttitudeRef, ControlError, ControlOutput, Controller, HeadingFrame,
     ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
@@ -128,9 +128,7 @@ impl<T: RealField + Copy> Controller<T> for LqrQuat<T> {
         let tff = self.obs.torque_feedforward(&vehicle);
         let u_ref = Vector4::new(ar.thrust_n, tff[0], tff[1], tff[2]);
         let raw = u_ref - self.gain * dx;
-        let out = saturate(&self.bx, &raw);
-        self.obs.record(&vehicle, est, &out.u);
-        Ok(out)
+        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
     }
 
     fn reset(&mut self) {

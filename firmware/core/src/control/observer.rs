@@ -44,9 +44,9 @@
 //! turned the PD's and LQR's attitude loops unstable on some of the
 //! robustness sweep's vehicles.
 
-use super::{ControlError, StateEstimate};
+use super::{ControlError, ControlOutput, StateEstimate};
 use crate::lit;
-use crate::model::{quat_to_rotation, Disturbance, Input, Vehicle};
+use crate::model::{quat_to_rotation, Disturbance, Input, InputBox, Vehicle};
 use nalgebra::{RealField, Vector3};
 
 /// Largest disturbance the observer will believe, per NED axis, as a
@@ -219,6 +219,21 @@ impl<T: RealField + Copy> AccelObserver<T> {
             // controller does not know; it is small and left to the estimate.
             model_rate_dot_frd_radps2: v.rate_derivative(&est.rates_frd_radps, u, T::zero(), &none),
         });
+    }
+
+    /// The step's output: `raw` clamped into the box `bx` (see
+    /// [`super::saturate`]), remembered as the input sent (the last call of
+    /// a controller's step).
+    pub(crate) fn finish(
+        &mut self,
+        bx: &InputBox<T>,
+        v: &Vehicle<T>,
+        est: &StateEstimate<T>,
+        raw: &Input<T>,
+    ) -> ControlOutput<T> {
+        let out = super::saturate(bx, raw);
+        self.record(v, est, &out.u);
+        out
     }
 
     /// The next step does not follow this one by one period: skip one update

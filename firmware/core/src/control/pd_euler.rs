@@ -2,8 +2,8 @@
 //! attitude mode (3.75–3.79). Gains: thesis Tables 4.1–4.2.
 
 use super::{
-    observer::AccelObserver, reference::tilt_and_thrust, saturate, validate, wrap_pi, AttitudeRef, ControlError,
-    ControlOutput, Controller, ReferenceMode, Setpoint, StateEstimate,
+    observer::AccelObserver, reference::tilt_and_thrust, validate, wrap_pi, AttitudeRef, ControlError, ControlOutput,
+    Controller, ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
 use crate::math as trig;
@@ -181,9 +181,7 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
             g.pitch.law(tt.pitch_rad - theta, wd[1] - theta_dot) + tff[1],
             g.yaw.law(wrap_pi(sp.yaw_rad - psi), wd[2] - psi_dot) + tff[2],
         );
-        let out = saturate(&self.bx, &raw);
-        self.obs.record(&vehicle, est, &out.u);
-        Ok(out)
+        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
     }
 
     fn reset(&mut self) {

@@ -10,7 +10,7 @@
 
 use super::pd_euler::{desired_accel, PdAxis};
 use super::{
-    observer::AccelObserver, reference::tilt_and_thrust, saturate, validate, AttitudeRef, ControlError, ControlOutput,
+    observer::AccelObserver, reference::tilt_and_thrust, validate, AttitudeRef, ControlError, ControlOutput,
     Controller, ReferenceMode, Setpoint, StateEstimate,
 };
 use crate::lit;
@@ -138,9 +138,7 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
             -g.q2.kp * qe[2] - g.q2.kd * (w[1] - wd[1]) + tff[1],
             -g.q3.kp * qe[3] - g.q3.kd * (w[2] - wd[2]) + tff[2],
         );
-        let out = saturate(&self.bx, &raw);
-        self.obs.record(&vehicle, est, &out.u);
-        Ok(out)
+        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
     }
 
     fn reset(&mut self) {
