@@ -185,8 +185,9 @@ impl MpcConfig {
             max_heading_error_rad: 0.35,
             qp_tolerance: 1e-4,
             qp_accuracy: 1e-5,
-            // The Richter–Jones–Morari bound for this accuracy (327 since the rate weight is 600; ≈ 750
-            // iterations) does not fit a 5 ms step on a 168 MHz Cortex-M4;
+            // The Richter–Jones–Morari bound for this accuracy (327
+            // iterations; ≈ 750 before the rate weight went to 600) does
+            // not fit a 5 ms step on a 168 MHz Cortex-M4;
             // 150 does with margin (examples/budget.rs), and flights stay
             // below it (max 97 in the study; the report's QP column shows each flight's max).
             qp_max_iterations: 150,
