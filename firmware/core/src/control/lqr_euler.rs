@@ -31,7 +31,7 @@ pub fn tuned_weights() -> (SMatrix<f64, 12, 12>, SMatrix<f64, 4, 4>) {
 /// The Euler LQR with `H` scheduled headings (default 36, every 10°).
 #[derive(Debug, Clone)]
 pub struct LqrEuler<T: RealField + Copy, const H: usize = 36> {
-    params: VehicleParams<T>,
+    vehicle: Vehicle<T>,
     table: GainTable<T, H>,
     mode: ReferenceMode,
     bx: InputBox<T>,
@@ -58,7 +58,7 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
     pub fn blank(params: VehicleParams<T>, mode: ReferenceMode) -> Self {
         Self {
             bx: params.input_box(),
-            params,
+            vehicle: Vehicle::new(&params),
             table: GainTable::zeros(),
             mode,
             obs: AccelObserver::off(),
@@ -96,7 +96,7 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
             return Err(ControlError::InvalidParameter);
         }
         self.bx = params.input_box();
-        self.params = params;
+        self.vehicle = Vehicle::new(&params);
         self.mode = mode;
         self.table
             .redesign(|yaw| Ok(design_discrete(&euler_hover_model(&p64, yaw), q, r, ts)?.k))
@@ -130,7 +130,7 @@ impl<T: RealField + Copy, const H: usize> Controller<T> for LqrEuler<T, H> {
         validate(est, sp)?;
         let e = est.euler();
         self.obs.observe(est);
-        let ar = AttitudeRef::with_disturbance(&self.params, sp, self.mode, &self.obs.estimate());
+        let ar = AttitudeRef::with_disturbance(&self.vehicle.params, sp, self.mode, &self.obs.estimate());
         let mut dx = SVector::<T, 12>::zeros();
         dx.fixed_rows_mut::<3>(0).copy_from(&(est.pos_ned_m - sp.pos_ned_m));
         dx.fixed_rows_mut::<3>(3).copy_from(&(est.vel_ned_mps - sp.vel_ned_mps));
@@ -139,11 +139,10 @@ impl<T: RealField + Copy, const H: usize> Controller<T> for LqrEuler<T, H> {
         dx[8] = wrap_pi(e[2] - ar.yaw_rad);
         dx.fixed_rows_mut::<3>(9)
             .copy_from(&(est.rates_frd_radps - ar.rates_frd_radps));
-        let vehicle = Vehicle::new(&self.params);
-        let tff = self.obs.torque_feedforward(&vehicle);
+        let tff = self.obs.torque_feedforward(&self.vehicle);
         let u_ref = Vector4::new(ar.thrust_n, tff[0], tff[1], tff[2]);
         let raw = u_ref - self.table.at(e[2]) * dx;
-        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
+        Ok(self.obs.finish(&self.bx, &self.vehicle, est, &raw))
     }
 
     fn reset(&mut self) {

@@ -46,7 +46,7 @@ pub fn tuned_weights() -> (SMatrix<f64, 12, 12>, SMatrix<f64, 4, 4>) {
 /// The quaternion LQR.
 #[derive(Debug, Clone)]
 pub struct LqrQuat<T: RealField + Copy> {
-    params: VehicleParams<T>,
+    vehicle: Vehicle<T>,
     gain: Gain<T>,
     mode: ReferenceMode,
     bx: InputBox<T>,
@@ -74,7 +74,7 @@ impl<T: RealField + Copy> LqrQuat<T> {
         let k = design_discrete(&quat_hover_model(&p64, 0.0), q, r, ts)?.k;
         Ok(Self {
             bx: params.input_box(),
-            params,
+            vehicle: Vehicle::new(&params),
             gain: k.map(|v| lit::<T>(v)),
             mode,
             obs: AccelObserver::off(),
@@ -110,7 +110,7 @@ impl<T: RealField + Copy> Controller<T> for LqrQuat<T> {
     fn update(&mut self, est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<ControlOutput<T>, ControlError> {
         validate(est, sp)?;
         self.obs.observe(est);
-        let ar = AttitudeRef::with_disturbance(&self.params, sp, self.mode, &self.obs.estimate());
+        let ar = AttitudeRef::with_disturbance(&self.vehicle.params, sp, self.mode, &self.obs.estimate());
         let frame = HeadingFrame::new(quat_to_euler(&est.att)[2]);
         let qa = frame.attitude(&est.att);
         let qr = frame.attitude(&euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad));
@@ -124,11 +124,10 @@ impl<T: RealField + Copy> Controller<T> for LqrQuat<T> {
         }
         dx.fixed_rows_mut::<3>(9)
             .copy_from(&(est.rates_frd_radps - ar.rates_frd_radps));
-        let vehicle = Vehicle::new(&self.params);
-        let tff = self.obs.torque_feedforward(&vehicle);
+        let tff = self.obs.torque_feedforward(&self.vehicle);
         let u_ref = Vector4::new(ar.thrust_n, tff[0], tff[1], tff[2]);
         let raw = u_ref - self.gain * dx;
-        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
+        Ok(self.obs.finish(&self.bx, &self.vehicle, est, &raw))
     }
 
     fn reset(&mut self) {

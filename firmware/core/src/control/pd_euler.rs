@@ -80,7 +80,7 @@ impl<T: RealField + Copy> PdEulerGains<T> {
     /// lighter Kd (0.45, ζ ≈ 0.9 on paper) loses the loop once the rotational
     /// drag is half the nominal and the inertia 30 % higher: the sweep's
     /// corner, where the Routh condition of `(Is² + k_r s)(τs + 1) + l(K_d s +
-    /// K_p)` fails (docs/model.md §10). x, y, z and ψ keep the thesis gains (z
+    /// K_p)` fails (docs/model.md §8.6). x, y, z and ψ keep the thesis gains (z
     /// and ψ reproduce the thesis' settling times).
     pub fn tuned() -> Self {
         Self {
@@ -94,7 +94,7 @@ impl<T: RealField + Copy> PdEulerGains<T> {
 /// The Euler PD controller.
 #[derive(Debug, Clone)]
 pub struct PdEuler<T: RealField + Copy> {
-    params: VehicleParams<T>,
+    vehicle: Vehicle<T>,
     gains: PdEulerGains<T>,
     mode: ReferenceMode,
     bx: InputBox<T>,
@@ -106,7 +106,7 @@ impl<T: RealField + Copy> PdEuler<T> {
     pub fn new(params: VehicleParams<T>, gains: PdEulerGains<T>, mode: ReferenceMode) -> Self {
         Self {
             bx: params.input_box(),
-            params,
+            vehicle: Vehicle::new(&params),
             gains,
             mode,
             obs: AccelObserver::off(),
@@ -154,7 +154,7 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
         let e = est.euler();
         let (phi, theta, psi) = (e[0], e[1], e[2]);
         // Desired tilt from the desired acceleration at the current heading (3.85, 3.86).
-        let tt = tilt_and_thrust(&self.params, &acc, &est.vel_ned_mps, psi);
+        let tt = tilt_and_thrust(&self.vehicle.params, &acc, &est.vel_ned_mps, psi);
         // Euler angle rates from body rates.
         let w = est.rates_frd_radps;
         let (sphi, cphi) = trig::sin_cos(phi);
@@ -168,12 +168,11 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
         // rates at the small tilts where the feed-forward matters).
         let wd = match self.mode {
             ReferenceMode::Thesis => Vector3::zeros(),
-            ReferenceMode::Feedforward => AttitudeRef::feedforward(&self.params, sp).rates_frd_radps,
+            ReferenceMode::Feedforward => AttitudeRef::feedforward(&self.vehicle.params, sp).rates_frd_radps,
         };
         // Thrust with tilt and drag compensation at the actual attitude (3.79).
         let tilt_cos = (cphi * trig::cos(theta)).max(lit(0.5));
-        let vehicle = Vehicle::new(&self.params);
-        let tff = self.obs.torque_feedforward(&vehicle);
+        let tff = self.obs.torque_feedforward(&self.vehicle);
         let lift = tt.thrust_n * trig::cos(tt.roll_rad) * trig::cos(tt.pitch_rad);
         let raw = Vector4::new(
             lift / tilt_cos,
@@ -181,7 +180,7 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
             g.pitch.law(tt.pitch_rad - theta, wd[1] - theta_dot) + tff[1],
             g.yaw.law(wrap_pi(sp.yaw_rad - psi), wd[2] - psi_dot) + tff[2],
         );
-        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
+        Ok(self.obs.finish(&self.bx, &self.vehicle, est, &raw))
     }
 
     fn reset(&mut self) {

@@ -76,7 +76,7 @@ impl<T: RealField + Copy> PdQuatGains<T> {
 /// The quaternion PD controller.
 #[derive(Debug, Clone)]
 pub struct PdQuat<T: RealField + Copy> {
-    params: VehicleParams<T>,
+    vehicle: Vehicle<T>,
     gains: PdQuatGains<T>,
     mode: ReferenceMode,
     bx: InputBox<T>,
@@ -88,7 +88,7 @@ impl<T: RealField + Copy> PdQuat<T> {
     pub fn new(params: VehicleParams<T>, gains: PdQuatGains<T>, mode: ReferenceMode) -> Self {
         Self {
             bx: params.input_box(),
-            params,
+            vehicle: Vehicle::new(&params),
             gains,
             mode,
             obs: AccelObserver::off(),
@@ -115,7 +115,7 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
         self.obs.observe(est);
         let acc = desired_accel(&g.x, &g.y, &g.z, est, sp, self.mode) - self.obs.estimate();
         // Desired attitude: tilt that realises the acceleration, at the desired heading.
-        let tt = tilt_and_thrust(&self.params, &acc, &est.vel_ned_mps, sp.yaw_rad);
+        let tt = tilt_and_thrust(&self.vehicle.params, &acc, &est.vel_ned_mps, sp.yaw_rad);
         let qd = euler_to_quat(tt.roll_rad, tt.pitch_rad, sp.yaw_rad);
         let qa = est.att;
         let mut qe = quat_mul(&quat_conj(&qd), &qa);
@@ -125,12 +125,11 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
         let w = est.rates_frd_radps;
         let wd = match self.mode {
             ReferenceMode::Thesis => Vector3::zeros(),
-            ReferenceMode::Feedforward => AttitudeRef::feedforward(&self.params, sp).rates_frd_radps,
+            ReferenceMode::Feedforward => AttitudeRef::feedforward(&self.vehicle.params, sp).rates_frd_radps,
         };
         // Thrust: vertical component from the desired lift, over the actual R33.
         let r33 = quat_to_rotation(&qa)[(2, 2)].max(lit(0.5));
-        let vehicle = Vehicle::new(&self.params);
-        let tff = self.obs.torque_feedforward(&vehicle);
+        let tff = self.obs.torque_feedforward(&self.vehicle);
         let lift = tt.thrust_n * trig::cos(tt.roll_rad) * trig::cos(tt.pitch_rad);
         let raw = Vector4::new(
             lift / r33,
@@ -138,7 +137,7 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
             -g.q2.kp * qe[2] - g.q2.kd * (w[1] - wd[1]) + tff[1],
             -g.q3.kp * qe[3] - g.q3.kd * (w[2] - wd[2]) + tff[2],
         );
-        Ok(self.obs.finish(&self.bx, &vehicle, est, &raw))
+        Ok(self.obs.finish(&self.bx, &self.vehicle, est, &raw))
     }
 
     fn reset(&mut self) {
