@@ -7,9 +7,9 @@
 use crate::disturbance::DisturbanceSet;
 pub use crate::disturbance::Uncertainty;
 pub use crate::endpoint::{Endpoint, InProcess, StepReport};
-use crate::metrics::{flight_metrics, FlightMetrics, Trace};
+use crate::metrics::{FlightMetrics, MetricsAccumulator, Trace};
 use crate::plant::{Plant, PlantConfig};
-use crate::record::{state_row, RECORD_DT_S};
+use crate::record::{state_row, RowSink, RECORD_DT_S};
 use crate::scenario::{Reference, Scenario};
 use fc_core::control::{wrap_pi, AnyController, Controller, ControllerSpec, Family, MpcConfig, Setpoint};
 use fc_core::{hover_quat_state, AttitudeForm, QuatState, VehicleParams};
@@ -99,14 +99,26 @@ pub struct StepTime {
     pub max: f64,
 }
 
+/// What a flight keeps of its record rows (one per [`RECORD_DT_S`]).
+pub enum Recording<'a> {
+    /// Rows, references and the trace in the [`FlightResult`] (for plots and
+    /// tests); memory grows with the flight's length.
+    Keep,
+    /// Each row (with its reference) to the sink as it is produced, nothing
+    /// kept: the result's `rows`, `reference` and `trace` stay empty, the
+    /// metrics are computed online. Memory is constant in the flight's length.
+    Stream(&'a mut dyn RowSink),
+}
+
 /// A flown scenario.
 #[derive(Debug, Clone)]
 pub struct FlightResult {
-    /// Recorded rows (state part, see [`crate::record::STATE_COLUMNS`]).
+    /// Recorded rows (state part, see [`crate::record::STATE_COLUMNS`]);
+    /// empty when the flight was [`Recording::Stream`]ed.
     pub rows: Vec<[f64; 21]>,
-    /// Reference at each row `[x, y, z, ψ]`.
+    /// Reference at each row `[x, y, z, ψ]`; empty when streamed.
     pub reference: Vec<[f64; 4]>,
-    /// What the metrics were computed from.
+    /// The samples the metrics are computed from; empty when streamed.
     pub trace: Trace,
     /// docs/model.md §10 metrics.
     pub metrics: FlightMetrics,
@@ -190,20 +202,28 @@ pub fn fly(cfg: &FlightConfig) -> anyhow::Result<FlightResult> {
 
 /// Flies one scenario with the controller at `target`.
 pub fn fly_target(cfg: &FlightConfig, target: &Target) -> anyhow::Result<FlightResult> {
-    fly_target_with_progress(cfg, target, None)
+    fly_target_with_progress(cfg, target, None, Recording::Keep)
 }
 
 /// [`fly_target`], calling `progress(t)` with the simulated time after every
-/// control step (remote flights take real time: the CLI draws a bar with it).
+/// control step (remote flights take real time: the CLI draws a bar with
+/// it), the rows recorded as `rec` says.
 pub fn fly_target_with_progress(
     cfg: &FlightConfig,
     target: &Target,
     progress: Option<&dyn Fn(f64)>,
+    rec: Recording<'_>,
 ) -> anyhow::Result<FlightResult> {
     use crate::link::{firmware_elf, FcClient, Qemu, Remote, SYSTICK_PER_INSTRUCTION};
     cfg.validate()?;
+    let tick = |t: f64| {
+        if let Some(p) = progress {
+            p(t)
+        }
+    };
     if *target == Target::InProcess {
-        return fly(cfg);
+        let ep = InProcess::new(build_for(cfg)?);
+        return fly_endpoint(cfg, ep, None, |t, _| tick(t), rec).map(|(r, _)| r);
     }
     if cfg.vehicle != VehicleParams::OS4 {
         anyhow::bail!(
@@ -219,18 +239,13 @@ pub fn fly_target_with_progress(
     cfg.spec.to_wire().map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut qemu = None;
     let client = match target {
-        Target::InProcess => return fly(cfg),
+        Target::InProcess => anyhow::bail!("an in-process flight has no link"),
         Target::Framed => FcClient::local()?,
         Target::Tcp(addr) => FcClient::tcp(addr)?,
         Target::Qemu => qemu.insert(Qemu::start(&firmware_elf()?)?).client()?,
     };
     let remote = Remote::open(client, cfg.spec)?;
-    let tick = |t: f64, _: &Remote| {
-        if let Some(p) = progress {
-            p(t)
-        }
-    };
-    let (mut res, _) = fly_endpoint(cfg, remote, None, tick)?;
+    let (mut res, _) = fly_endpoint(cfg, remote, None, |t, _| tick(t), rec)?;
     if let Some(q) = qemu {
         // The telemetry's cycles are SysTick counts; under icount they count instructions.
         let k = 1.0 / SYSTICK_PER_INSTRUCTION;
@@ -249,24 +264,32 @@ pub fn fly_until(
     mut inspect: impl FnMut(f64, &AnyController<f32>),
 ) -> anyhow::Result<(FlightResult, AnyController<f32>)> {
     let ep = InProcess::new(build_for(cfg)?);
-    let (res, ep) = fly_endpoint(cfg, ep, stop_at, |t, ep: &InProcess<_>| inspect(t, &ep.ctrl))?;
+    let (res, ep) = fly_endpoint(
+        cfg,
+        ep,
+        stop_at,
+        |t, ep: &InProcess<_>| inspect(t, &ep.ctrl),
+        Recording::Keep,
+    )?;
     Ok((res, ep.ctrl))
 }
 
 /// Flies `cfg` with a controller built by the caller (e.g. an MPC with a
 /// horizon no preset has); `cfg`'s controller fields then only label it.
 pub fn fly_with<C: Controller<f32>>(cfg: &FlightConfig, ctrl: C) -> anyhow::Result<FlightResult> {
-    fly_endpoint(cfg, InProcess::new(ctrl), None, |_, _| {}).map(|(r, _)| r)
+    fly_endpoint(cfg, InProcess::new(ctrl), None, |_, _| {}, Recording::Keep).map(|(r, _)| r)
 }
 
 /// The flight loop: the plant at `cfg.integration_hz`, one `endpoint` step
-/// per control period, a record row every 10 ms; `inspect(t, endpoint)`
-/// after every control step. Returns the result and the endpoint.
+/// per control period, a record row every 10 ms kept or streamed as `rec`
+/// says; `inspect(t, endpoint)` after every control step. Returns the
+/// result and the endpoint.
 pub fn fly_endpoint<E: Endpoint>(
     cfg: &FlightConfig,
     mut ep: E,
     stop_at: Option<f64>,
     mut inspect: impl FnMut(f64, &E),
+    mut rec: Recording<'_>,
 ) -> anyhow::Result<(FlightResult, E)> {
     cfg.validate()?;
     // The MPC presets fix their own execution period; PD/LQR run at control_hz.
@@ -321,7 +344,7 @@ pub fn fly_endpoint<E: Endpoint>(
         rows: Vec::new(),
         reference: Vec::new(),
         trace: Trace::default(),
-        metrics: flight_metrics(&Trace::default(), &nominal),
+        metrics: MetricsAccumulator::new(&nominal).metrics(),
         step_time_ns: StepTime { mean: 0.0, max: 0.0 },
         saturated_steps: 0,
         qp_iterations: (0.0, 0),
@@ -333,6 +356,7 @@ pub fn fly_endpoint<E: Endpoint>(
         firmware_log: Vec::new(),
         diverged: false,
     };
+    let mut metrics = MetricsAccumulator::new(&nominal);
     let mut total_cost = 0.0;
     let mut total_it = 0u64;
     let mut failing_since: Option<f64> = None;
@@ -401,12 +425,20 @@ pub fn fly_endpoint<E: Endpoint>(
             let yaw = row[13];
             let yaw_unwrapped = r.yaw + wrap_pi(yaw - r.yaw);
             let rref = [r.pos[0], r.pos[1], r.pos[2], r.yaw];
-            res.trace.t.push(t);
-            res.trace.actual.push([row[1], row[2], row[3], yaw_unwrapped]);
-            res.trace.reference.push(rref);
-            res.trace.u_cmd.push([u[0], u[1], u[2], u[3]]);
-            res.rows.push(row);
-            res.reference.push(rref);
+            let actual = [row[1], row[2], row[3], yaw_unwrapped];
+            let u_cmd = [u[0], u[1], u[2], u[3]];
+            metrics.push(t, &actual, &rref, &u_cmd);
+            match &mut rec {
+                Recording::Keep => {
+                    res.trace.t.push(t);
+                    res.trace.actual.push(actual);
+                    res.trace.reference.push(rref);
+                    res.trace.u_cmd.push(u_cmd);
+                    res.rows.push(row);
+                    res.reference.push(rref);
+                }
+                Recording::Stream(sink) => sink.push(&row, Some(&rref))?,
+            }
         }
         if i < ticks {
             plant.step(&u, tick);
@@ -416,6 +448,6 @@ pub fn fly_endpoint<E: Endpoint>(
         res.step_time_ns.mean = total_cost / res.steps as f64;
         res.qp_iterations.0 = total_it as f64 / res.steps as f64;
     }
-    res.metrics = flight_metrics(&res.trace, &nominal);
+    res.metrics = metrics.metrics();
     Ok((res, ep))
 }

@@ -11,10 +11,11 @@ use clap::{Args, Parser, Subcommand};
 use fc_core::control::{Family, Preset, ReferenceMode, SPECS};
 use fc_core::AttitudeForm;
 use sil_host::disturbance::DisturbanceSet;
+use sil_host::flight::Recording;
 use sil_host::flight::{FlightConfig, Target};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::PlantConfig;
-use sil_host::record::{write_csv, STATE_COLUMNS};
+use sil_host::record::{CsvSink, Discard, RowSink, STATE_COLUMNS};
 use sil_host::scenario::{Scenario, ScenarioKind};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -455,12 +456,24 @@ fn open_loop(a: &OpenLoopArgs) -> Result<()> {
         start_yaw_rad: a.yaw_deg.to_radians(),
         duration_s: a.duration,
     };
-    let rows = run.run();
-    if let Some(path) = &a.csv {
-        write_csv(path, &rows, None)?;
-        eprintln!("wrote {} rows to {}", rows.len(), path.display());
-    }
-    if let Some(last) = rows.last() {
+    // Rows go straight to the file (a long run never sits in memory); only
+    // the last one is kept for the summary.
+    let last = match &a.csv {
+        Some(path) => {
+            let mut sink = CsvSink::create(path, false)?;
+            run.run_into(&mut sink)?;
+            let last = sink.last().copied();
+            let n = sink.finish()?;
+            eprintln!("wrote {n} rows to {}", path.display());
+            last
+        }
+        None => {
+            let mut last = LastRow(None);
+            run.run_into(&mut last)?;
+            last.0
+        }
+    };
+    if let Some(last) = last {
         for (name, v) in STATE_COLUMNS.iter().zip(last.iter()) {
             print!("{name}={v:.6} ");
         }
@@ -549,11 +562,19 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
     );
     bar.set_message(format!("{exec:?}"));
     let tick = |t: f64| bar.set_position((t * 10.0) as u64);
-    let res = sil_host::flight::fly_target_with_progress(&cfg, &exec, Some(&tick));
+    // The rows go to the CSV file as they are flown, or nowhere: the CLI
+    // reports metrics, which are computed online, so no flight of any
+    // length is held in memory.
+    let mut csv = a.csv.as_deref().map(|p| CsvSink::create(p, true)).transpose()?;
+    let rec = match csv.as_mut() {
+        Some(sink) => Recording::Stream(sink),
+        None => Recording::Stream(&mut Discard),
+    };
+    let res = sil_host::flight::fly_target_with_progress(&cfg, &exec, Some(&tick), rec);
     bar.finish_and_clear();
     let res = res?;
-    if let Some(path) = &a.csv {
-        write_csv(path, &res.rows, Some(&res.reference))?;
+    if let Some(sink) = csv {
+        sink.finish()?;
     }
     if a.firmware_log {
         for l in &res.firmware_log {
@@ -698,5 +719,15 @@ fn main() -> Result<()> {
                 },
             )
         }
+    }
+}
+
+/// Keeps only the last row of a run (the open-loop summary without a file).
+struct LastRow(Option<[f64; 21]>);
+
+impl RowSink for LastRow {
+    fn push(&mut self, row: &[f64; 21], _: Option<&[f64; 4]>) -> Result<()> {
+        self.0 = Some(*row);
+        Ok(())
     }
 }

@@ -1,4 +1,5 @@
-//! Flight metrics of docs/model.md §10, computed from a recorded trace.
+//! Flight metrics of docs/model.md §10, computed online while a flight is
+//! flown ([`MetricsAccumulator`]) or from a recorded trace.
 
 use fc_core::{hover_input, InputBox, VehicleParams};
 use serde::{Deserialize, Serialize};
@@ -60,92 +61,181 @@ impl FlightMetrics {
     }
 }
 
-/// Axis metrics for samples `y` (actual) against `r` (reference) with the
-/// flight's initial value `y0`. A step is detected when the reference is
-/// constant and differs from `y0`.
-pub fn axis_metrics(t: &[f64], y: &[f64], r: &[f64], y0: f64) -> AxisMetrics {
-    let n = y.len().min(r.len()).min(t.len());
-    if n == 0 {
-        return AxisMetrics {
-            rmse_m: 0.0,
-            rmse_pct: 0.0,
-            settling_s: None,
-            overshoot_pct: None,
-        };
+/// Axis metrics computed online, one sample at a time, so a flight of any
+/// length needs no trace in memory. [`axis_metrics`] is the same on stored
+/// samples. A step is detected when the reference is constant and differs
+/// from the first measured value.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct AxisAccumulator {
+    n: usize,
+    sum_sq: f64,
+    t0: f64,
+    y0: f64,
+    r0: f64,
+    rmin: f64,
+    rmax: f64,
+    /// From when the error has stayed inside the band (around `r0`), if it has.
+    settled_from: Option<f64>,
+    last_outside: bool,
+    /// Largest excursion past `r0` in the direction of the step.
+    past: f64,
+}
+
+impl AxisAccumulator {
+    /// Adds the sample `y` (measured) against `r` (reference) at time `t`, s.
+    pub fn push(&mut self, t: f64, y: f64, r: f64) {
+        if self.n == 0 {
+            *self = AxisAccumulator {
+                t0: t,
+                y0: y,
+                r0: r,
+                rmin: r,
+                rmax: r,
+                settled_from: Some(t),
+                ..Self::default()
+            };
+        }
+        self.n += 1;
+        self.sum_sq += (y - r).powi(2);
+        self.rmin = self.rmin.min(r);
+        self.rmax = self.rmax.max(r);
+        // Tracked as if the reference were the constant r0; used only if it was.
+        let step = self.r0 - self.y0;
+        if self.last_outside {
+            self.settled_from = Some(t);
+        }
+        self.last_outside = (y - self.r0).abs() > SETTLING_BAND * step.abs();
+        if self.last_outside {
+            self.settled_from = None;
+        }
+        self.past = self.past.max((y - self.r0) * step.signum());
     }
-    let mse = (0..n).map(|i| (y[i] - r[i]).powi(2)).sum::<f64>() / n as f64;
-    let rmse = mse.sqrt();
-    let (rmin, rmax) = r[..n]
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
-    let range = rmax - rmin;
-    let constant = range <= 1e-12;
-    // Reference range, or the step from the start where the reference is constant.
-    let span = if constant { (rmax - y0).abs() } else { range };
-    let rmse_pct = 100.0 * rmse / if span > 1e-9 { span } else { 1.0 };
-    let step = rmax - y0;
-    let (settling_s, overshoot_pct) = if constant && step.abs() > 1e-9 {
-        let target = rmax;
-        let band = SETTLING_BAND * step.abs();
-        // Last sample outside the band; settled from the next one.
-        let settled = match (0..n).rev().find(|&i| (y[i] - target).abs() > band) {
-            None => Some(t[0]),
-            Some(i) if i + 1 < n => Some(t[i + 1]),
-            Some(_) => None,
+
+    /// The metrics of the samples pushed so far.
+    pub fn metrics(&self) -> AxisMetrics {
+        if self.n == 0 {
+            return AxisMetrics {
+                rmse_m: 0.0,
+                rmse_pct: 0.0,
+                settling_s: None,
+                overshoot_pct: None,
+            };
+        }
+        let rmse = (self.sum_sq / self.n as f64).sqrt();
+        let range = self.rmax - self.rmin;
+        let constant = range <= 1e-12;
+        // Reference range, or the step from the start where the reference is constant.
+        let span = if constant { (self.rmax - self.y0).abs() } else { range };
+        let rmse_pct = 100.0 * rmse / if span > 1e-9 { span } else { 1.0 };
+        let step = self.r0 - self.y0;
+        let (settling_s, overshoot_pct) = if constant && step.abs() > 1e-9 {
+            (
+                self.settled_from.map(|s| s - self.t0),
+                Some(100.0 * self.past / step.abs()),
+            )
+        } else {
+            (None, None)
         };
-        let past = y[..n]
-            .iter()
-            .map(|v| (v - target) * step.signum())
-            .fold(0.0f64, f64::max);
-        (settled.map(|s| s - t[0]), Some(100.0 * past / step.abs()))
-    } else {
-        (None, None)
-    };
-    AxisMetrics {
-        rmse_m: rmse,
-        rmse_pct,
-        settling_s,
-        overshoot_pct,
+        AxisMetrics {
+            rmse_m: rmse,
+            rmse_pct,
+            settling_s,
+            overshoot_pct,
+        }
     }
 }
 
-/// All metrics of a trace, with `p` the controller's nominal vehicle (for the
-/// hover input and the input box).
+/// Axis metrics for stored samples `y` (actual) against `r` (reference) at
+/// times `t`, the first sample being the flight's start. See [`AxisAccumulator`].
+pub fn axis_metrics(t: &[f64], y: &[f64], r: &[f64]) -> AxisMetrics {
+    let mut acc = AxisAccumulator::default();
+    for ((&t, &y), &r) in t.iter().zip(y).zip(r) {
+        acc.push(t, y, r);
+    }
+    acc.metrics()
+}
+
+/// All of a flight's metrics computed online: push one sample per record
+/// row with [`MetricsAccumulator::push`], read them with
+/// [`MetricsAccumulator::metrics`]. Memory is constant in the flight's length.
+#[derive(Debug, Clone, Copy)]
+pub struct MetricsAccumulator {
+    axes: [AxisAccumulator; 4],
+    bx: InputBox<f64>,
+    scale: nalgebra::Vector4<f64>,
+    uh: nalgebra::Vector4<f64>,
+    effort_sq: f64,
+    inputs: usize,
+    violation: f64,
+    last_error_m: f64,
+}
+
+impl MetricsAccumulator {
+    /// An empty flight of the controller's nominal vehicle `p` (for the
+    /// hover input and the input box).
+    pub fn new(p: &VehicleParams<f64>) -> Self {
+        let bx: InputBox<f64> = p.input_box();
+        MetricsAccumulator {
+            axes: [AxisAccumulator::default(); 4],
+            scale: bx.scale(),
+            bx,
+            uh: hover_input(p),
+            effort_sq: 0.0,
+            inputs: 0,
+            violation: 0.0,
+            last_error_m: f64::NAN,
+        }
+    }
+
+    /// Adds one sample at time `t`, s: measured and reference `[x, y, z, ψ]`
+    /// (m, rad) and the commanded input as it left the controller.
+    pub fn push(&mut self, t: f64, actual: &[f64; 4], reference: &[f64; 4], u_cmd: &[f64; 4]) {
+        for (k, axis) in self.axes.iter_mut().enumerate() {
+            axis.push(t, actual[k], reference[k]);
+        }
+        let u = nalgebra::Vector4::from(*u_cmd);
+        self.effort_sq += (u - self.uh).component_div(&self.scale).norm_squared();
+        self.inputs += 1;
+        self.violation = self.violation.max(self.bx.violation(&u));
+        self.last_error_m = ((actual[0] - reference[0]).powi(2)
+            + (actual[1] - reference[1]).powi(2)
+            + (actual[2] - reference[2]).powi(2))
+        .sqrt();
+    }
+
+    /// The metrics of the samples pushed so far.
+    pub fn metrics(&self) -> FlightMetrics {
+        FlightMetrics {
+            x: self.axes[0].metrics(),
+            y: self.axes[1].metrics(),
+            z: self.axes[2].metrics(),
+            yaw: self.axes[3].metrics(),
+            u_norm: if self.inputs == 0 {
+                0.0
+            } else {
+                (self.effort_sq / self.inputs as f64).sqrt()
+            },
+            max_box_violation: self.violation,
+            final_error_m: self.last_error_m,
+        }
+    }
+}
+
+/// All metrics of a stored trace, with `p` the controller's nominal vehicle
+/// (for the hover input and the input box); the same as pushing every sample
+/// into a [`MetricsAccumulator`].
 pub fn flight_metrics(trace: &Trace, p: &VehicleParams<f64>) -> FlightMetrics {
-    let col = |v: &[[f64; 4]], k: usize| v.iter().map(|s| s[k]).collect::<Vec<_>>();
-    let axis = |k: usize| {
-        let y = col(&trace.actual, k);
-        let y0 = y.first().copied().unwrap_or(0.0);
-        axis_metrics(&trace.t, &y, &col(&trace.reference, k), y0)
-    };
-    let bx: InputBox<f64> = p.input_box();
-    let scale = bx.scale();
-    let uh = hover_input(p);
-    let mut acc = 0.0;
-    let mut viol = 0.0f64;
-    for u in &trace.u_cmd {
-        let u = nalgebra::Vector4::from(*u);
-        acc += (u - uh).component_div(&scale).norm_squared();
-        viol = viol.max(bx.violation(&u));
+    let mut acc = MetricsAccumulator::new(p);
+    for (((t, a), r), u) in trace
+        .t
+        .iter()
+        .zip(&trace.actual)
+        .zip(&trace.reference)
+        .zip(&trace.u_cmd)
+    {
+        acc.push(*t, a, r, u);
     }
-    let u_norm = if trace.u_cmd.is_empty() {
-        0.0
-    } else {
-        (acc / trace.u_cmd.len() as f64).sqrt()
-    };
-    let final_error_m = match (trace.actual.last(), trace.reference.last()) {
-        (Some(a), Some(r)) => ((a[0] - r[0]).powi(2) + (a[1] - r[1]).powi(2) + (a[2] - r[2]).powi(2)).sqrt(),
-        _ => f64::NAN,
-    };
-    FlightMetrics {
-        x: axis(0),
-        y: axis(1),
-        z: axis(2),
-        yaw: axis(3),
-        u_norm,
-        max_box_violation: viol,
-        final_error_m,
-    }
+    acc.metrics()
 }
 
 #[cfg(test)]
@@ -163,7 +253,7 @@ mod tests {
         let t = grid(10_001, 1e-3);
         let y: Vec<f64> = t.iter().map(|t| 1.0 - (-t / tau).exp()).collect();
         let r = vec![1.0; t.len()];
-        let m = axis_metrics(&t, &y, &r, 0.0);
+        let m = axis_metrics(&t, &y, &r);
         let want = tau * 50f64.ln();
         assert!((m.settling_s.unwrap() - want).abs() < 2e-3, "{m:?}");
         assert_eq!(m.overshoot_pct, Some(0.0));
@@ -186,10 +276,25 @@ mod tests {
             })
             .collect();
         let r = vec![1.0 + step; t.len()];
-        let m = axis_metrics(&t, &y, &r, 1.0);
+        let m = axis_metrics(&t, &y, &r);
         let want = 100.0 * (-std::f64::consts::PI * z / (1.0 - z * z).sqrt()).exp();
         assert!((m.overshoot_pct.unwrap() - want).abs() < 0.05, "{m:?} vs {want}");
         assert!(m.settling_s.unwrap() > 3.0 && m.settling_s.unwrap() < 5.0);
+    }
+
+    #[test]
+    fn a_step_still_outside_the_band_at_the_end_has_not_settled() {
+        let t = grid(4, 1.0);
+        // Step 0 → 1: inside the band at t = 2, outside again at the end.
+        let m = axis_metrics(&t, &[0.0, 0.5, 1.0, 1.1], &[1.0; 4]);
+        assert_eq!(m.settling_s, None);
+        assert!((m.overshoot_pct.unwrap() - 10.0).abs() < 1e-9);
+        // Back inside at the end: settled from the first of the last run inside.
+        let m = axis_metrics(&t, &[0.0, 1.1, 1.0, 1.01], &[1.0; 4]);
+        assert_eq!(m.settling_s, Some(2.0));
+        // A moving reference has no step.
+        let m = axis_metrics(&t, &[0.0; 4], &[1.0, 1.0, 1.0, 1.5]);
+        assert_eq!((m.settling_s, m.overshoot_pct), (None, None));
     }
 
     #[test]
@@ -197,7 +302,7 @@ mod tests {
         let t = grid(1000, 0.01);
         let r: Vec<f64> = t.iter().map(|t| 2.0 * t.sin()).collect();
         let y: Vec<f64> = r.iter().map(|v| v + 0.1).collect();
-        let m = axis_metrics(&t, &y, &r, 0.0);
+        let m = axis_metrics(&t, &y, &r);
         assert!((m.rmse_m - 0.1).abs() < 1e-12);
         let range = r.iter().cloned().fold(f64::MIN, f64::max) - r.iter().cloned().fold(f64::MAX, f64::min);
         assert!((m.rmse_pct - 10.0 / range).abs() < 1e-9);

@@ -1,7 +1,7 @@
 //! Open-loop flights: constant inputs from hover (thesis §3.5.3).
 
 use crate::plant::{Plant, PlantConfig};
-use crate::record::{state_row, RECORD_DT_S};
+use crate::record::{state_row, RowSink, RECORD_DT_S};
 use fc_core::{hover_quat_state, Input};
 use nalgebra::Vector3;
 
@@ -24,18 +24,26 @@ impl OpenLoop {
     /// Flies the run and returns one state row (see [`crate::record::STATE_COLUMNS`])
     /// per 10 ms, including t = 0 and the end.
     pub fn run(&self) -> Vec<[f64; 21]> {
+        let mut rows = Vec::with_capacity((self.duration_s / RECORD_DT_S).round() as usize + 1);
+        // A Vec takes every row; it cannot fail.
+        let _ = self.run_into(&mut rows);
+        rows
+    }
+
+    /// Flies the run, handing each row to `sink` as it is produced (memory
+    /// constant in the run's length); stops at the sink's first error.
+    pub fn run_into(&self, sink: &mut dyn RowSink) -> anyhow::Result<()> {
         let x0 = hover_quat_state(&Vector3::from(self.start_ned_m), self.start_yaw_rad);
         let mut plant = Plant::new(self.plant, &x0);
         let steps = (self.duration_s / RECORD_DT_S).round() as usize;
-        let mut rows = Vec::with_capacity(steps + 1);
         // Row 0 shows the input that acts from t = 0.
         let mut first = state_row(&plant);
         first[17..21].copy_from_slice(plant.inputs_realised_for(&self.u).as_slice());
-        rows.push(first);
+        sink.push(&first, None)?;
         for _ in 0..steps {
             plant.step(&self.u, RECORD_DT_S);
-            rows.push(state_row(&plant));
+            sink.push(&state_row(&plant), None)?;
         }
-        rows
+        Ok(())
     }
 }

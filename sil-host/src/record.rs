@@ -38,22 +38,104 @@ pub fn state_row(plant: &Plant) -> [f64; 21] {
     r
 }
 
-/// Writes recorded rows as CSV to `path` (numbers in shortest round-trip
-/// form): the state columns, plus the reference columns when `reference`
-/// gives one `[x, y, z, ψ]` per row (closed-loop flights).
+/// Where a flight's record rows go as they are produced, one every
+/// [`RECORD_DT_S`]: a file, memory, or nowhere. A flight written to a file
+/// never holds its trace in memory.
+pub trait RowSink {
+    /// Takes one row: the state part and, for closed-loop flights, the
+    /// reference `[x, y, z, ψ]` at the same time.
+    fn push(&mut self, row: &[f64; 21], reference: Option<&[f64; 4]>) -> anyhow::Result<()>;
+}
+
+/// A sink that drops every row (a flight whose metrics are all that is wanted).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Discard;
+
+impl RowSink for Discard {
+    fn push(&mut self, _: &[f64; 21], _: Option<&[f64; 4]>) -> anyhow::Result<()> {
+        Ok(())
+    }
+}
+
+/// Rows kept in memory (state part only).
+impl RowSink for Vec<[f64; 21]> {
+    fn push(&mut self, row: &[f64; 21], _: Option<&[f64; 4]>) -> anyhow::Result<()> {
+        Vec::push(self, *row);
+        Ok(())
+    }
+}
+
+/// Rows streamed to a CSV file as they come (numbers in shortest
+/// round-trip form): the state columns, plus the reference columns for
+/// closed-loop flights. Call [`CsvSink::finish`] to flush and learn the count.
+pub struct CsvSink {
+    w: csv::Writer<BufWriter<File>>,
+    path: std::path::PathBuf,
+    with_reference: bool,
+    rows: usize,
+    /// The last row, kept for the caller's summary.
+    last: Option<[f64; 21]>,
+}
+
+impl CsvSink {
+    /// Creates `path` and writes the header (`with_reference` adds
+    /// [`REFERENCE_COLUMNS`]).
+    pub fn create(path: &Path, with_reference: bool) -> anyhow::Result<Self> {
+        let f = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut w = csv::Writer::from_writer(BufWriter::new(f));
+        let mut header: Vec<&str> = STATE_COLUMNS.to_vec();
+        if with_reference {
+            header.extend_from_slice(&REFERENCE_COLUMNS);
+        }
+        w.write_record(&header)
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(CsvSink {
+            w,
+            path: path.to_path_buf(),
+            with_reference,
+            rows: 0,
+            last: None,
+        })
+    }
+
+    /// The last row written, if any.
+    pub fn last(&self) -> Option<&[f64; 21]> {
+        self.last.as_ref()
+    }
+
+    /// Flushes the file; returns the number of rows written.
+    pub fn finish(mut self) -> anyhow::Result<usize> {
+        self.w
+            .flush()
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        Ok(self.rows)
+    }
+}
+
+impl RowSink for CsvSink {
+    fn push(&mut self, row: &[f64; 21], reference: Option<&[f64; 4]>) -> anyhow::Result<()> {
+        let r: &[f64] = match (self.with_reference, reference) {
+            (true, Some(r)) => r.as_slice(),
+            (true, None) => anyhow::bail!("{}: a row without its reference", self.path.display()),
+            (false, _) => &[],
+        };
+        self.w
+            .write_record(row.iter().chain(r).map(|v| v.to_string()))
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        self.rows += 1;
+        self.last = Some(*row);
+        Ok(())
+    }
+}
+
+/// Writes stored rows as CSV to `path` (see [`CsvSink`]), with the reference
+/// columns when `reference` gives one `[x, y, z, ψ]` per row.
 pub fn write_csv(path: &Path, rows: &[[f64; 21]], reference: Option<&[[f64; 4]]>) -> anyhow::Result<()> {
-    let f = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut w = csv::Writer::from_writer(BufWriter::new(f));
-    let mut header: Vec<&str> = STATE_COLUMNS.to_vec();
-    if reference.is_some() {
-        header.extend_from_slice(&REFERENCE_COLUMNS);
-    }
-    w.write_record(&header)?;
+    let mut sink = CsvSink::create(path, reference.is_some())?;
     for (i, row) in rows.iter().enumerate() {
-        let r: &[f64] = reference.and_then(|refs| refs.get(i)).map_or(&[], |r| r.as_slice());
-        w.write_record(row.iter().chain(r).map(|v| v.to_string()))?;
+        sink.push(row, reference.and_then(|refs| refs.get(i)))?;
     }
-    w.flush()?;
+    sink.finish()?;
     Ok(())
 }
 
