@@ -47,7 +47,8 @@ enum Command {
     /// that hangs up or goes idle ends only its own session.
     Serve(ServeArgs),
     /// Fly a scenario with the MPC up to time T and print the QP of the step taken there as JSON:
-    /// {"H","g","lb","ub","solution","iterations","iteration_bound","residual","objective"}.
+    /// {"H","g","lb","ub","solution","iterations","iteration_bound","solve_bound","iterations_allowed",
+    /// "certified_accuracy","gap","residual","objective","status"}.
     MpcStep(MpcStepArgs),
     /// Fly the whole study (every controller x model x scenario x disturbance) in parallel and write
     /// DIR/index.md and a self-contained DIR/index.html: the thesis' tables with ours beside its

@@ -169,6 +169,12 @@ pub fn mpc_step_json(ctrl: &fc_core::control::AnyController<f32>, t: f64) -> Opt
         let v = |x: &nalgebra::SVector<f32, NZ>| Value::Array(x.iter().map(|v| json!(*v as f64)).collect());
         let h = m.hessian().map(|x| x as f64);
         let (force, moment) = m.disturbance_estimate();
+        let cfg = m.config();
+        // The accuracy in input units: f(z) − f* ≥ ½‖z − z*‖²_H, so
+        // |zᵢ − z*ᵢ| ≤ √(2ε·(H⁻¹)ᵢᵢ) (Cauchy–Schwarz in the H-norm).
+        let eps = cfg.qp_accuracy;
+        let hinv = h.try_inverse()?;
+        let input_acc: Vec<Value> = (0..NZ).map(|i| json!((2.0 * eps * hinv[(i, i)]).sqrt())).collect();
         Some(json!({
             "t": t,
             "horizon": N,
@@ -183,6 +189,14 @@ pub fn mpc_step_json(ctrl: &fc_core::control::AnyController<f32>, t: f64) -> Opt
             "solution": v(&qp.solution.z),
             "iterations": qp.solution.iterations,
             "iteration_bound": m.iteration_bound(),
+            "solve_bound": qp.solution.solve_bound,
+            "iterations_allowed": m.iteration_bound().min(cfg.qp_max_iterations),
+            "certified_accuracy": {
+                "objective": eps,
+                "input_units": input_acc,
+                "holds_for_every_solve": cfg.qp_max_iterations >= m.iteration_bound(),
+            },
+            "gap": qp.solution.gap as f64,
             "residual": qp.solution.residual as f64,
             "objective": qp.solution.objective as f64,
             "status": format!("{:?}", qp.solution.status),

@@ -89,11 +89,15 @@ pub struct MpcConfig {
     /// one horizon and destabilises a combined turn-and-translate. Capping the
     /// error turns at a bounded rate instead (π: no cap).
     pub max_heading_error_rad: f64,
-    /// QP early-exit tolerance (gradient mapping).
-    pub qp_tolerance: f64,
-    /// QP objective accuracy the iteration bound guarantees.
+    /// Stop each QP as soon as its accuracy is proved (`false`: run the
+    /// a-priori bound every time, a fixed-time solve).
+    pub qp_early_exit: bool,
+    /// QP objective accuracy every solve proves (the objective's units; see
+    /// [`crate::qp`]).
     pub qp_accuracy: f64,
-    /// Real-time cap on QP iterations (below the bound if needed).
+    /// Cap on QP iterations. At or above the a-priori bound
+    /// ([`Mpc::iteration_bound`]) every solve is certified; below it a solve
+    /// may stop unproved ([`crate::qp::QpStatus::IterationLimit`]).
     pub qp_max_iterations: u32,
 }
 
@@ -122,7 +126,7 @@ impl MpcConfig {
             disturbance_rate_filter_s: 0.1,
             reference: ReferenceMode::Thesis,
             max_heading_error_rad: core::f64::consts::PI,
-            qp_tolerance: 1e-5,
+            qp_early_exit: true,
             qp_accuracy: 1e-6,
             qp_max_iterations: 2000,
         }
@@ -183,13 +187,15 @@ impl MpcConfig {
             disturbance_rate_filter_s: 0.05,
             reference: ReferenceMode::Feedforward,
             max_heading_error_rad: 0.35,
-            qp_tolerance: 1e-4,
+            qp_early_exit: true,
             qp_accuracy: 1e-5,
-            // The Richter–Jones–Morari bound for this accuracy (327
-            // iterations; ≈ 750 before the rate weight went to 600) does
-            // not fit a 5 ms step on a 168 MHz Cortex-M4;
-            // 150 does with margin (examples/budget.rs), and flights stay
-            // below it (max 97 in the study; the report's QP column shows each flight's max).
+            // Every solve stops as soon as its accuracy is proved (its
+            // certificate or its own bound), at worst at the a-priori
+            // bound, 327 iterations — ≈ 533 k instructions on the M4,
+            // which fits 140 Hz, not 200. At 200 Hz the solve is capped
+            // at 150 (examples/budget.rs): a solve that reaches the cap
+            // unproved says so (`QpStatus::IterationLimit`); the study's
+            // flights need at most the QP column's maximum.
             qp_max_iterations: 150,
         }
     }
@@ -344,7 +350,7 @@ fn cast_into<T, const R: usize, const C: usize, S>(
 /// The QP settings `cfg` asks for (polish always on).
 fn qp_settings<T: RealField + Copy>(cfg: &MpcConfig) -> QpSettings<T> {
     QpSettings {
-        tolerance: lit(cfg.qp_tolerance),
+        early_exit: cfg.qp_early_exit,
         accuracy: lit(cfg.qp_accuracy),
         max_iterations: cfg.qp_max_iterations,
         polish: true,

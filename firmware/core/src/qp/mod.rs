@@ -4,22 +4,30 @@
 //!
 //! - **Fast gradient method** (Nesterov's constant-step scheme for strongly
 //!   convex functions) on the Jacobi-preconditioned problem (`z = D z̃`,
-//!   `D = diag(H)^{-1/2}`: the box stays a box), warm-started.
-//! - **Stopping rule** on a real optimality measure: the gradient mapping
-//!   `‖L(y − Π(y − ∇f(y)/L))‖∞` in the original variables, below a tolerance.
-//! - **A-priori iteration bound** (Richter, Jones & Morari, IEEE TAC 2012):
-//!   after a first projected-gradient step from any point of the box,
-//!   `f(z_i) − f* ≤ (1 − √(μ/L))^i · (L + μ)/2 · D²` with `D` the (scaled) box
-//!   diameter, so `i_max = ⌈ln(ε/((L+μ)D²/2)) / ln(1 − √(μ/L))⌉` iterations
-//!   reach objective accuracy `ε` whatever the data. Computed once from `H`
-//!   (its exact eigenvalues) and the box size.
-//! - **Active-set polish**: once the iterate has settled, the free variables
-//!   are solved exactly with the others fixed at their bounds (one LU); the
-//!   result is kept only if it is feasible and satisfies the KKT signs, which
-//!   closes the gap the bound leaves in practice.
+//!   `D = diag(H)^{-1/2}`: the box stays a box), warm-started. Each
+//!   iteration is one pass over the scaled Hessian's columns (`BoxQp::step`):
+//!   gradient, projected step and optimality certificate together.
+//! - **Certified accuracy.** Every iterate carries a certificate: an upper
+//!   bound on `f(z) − f*` from the prox-gradient inequality with strong
+//!   convexity (`f(w) ≥ f(x⁺) + ⟨G, w − y⟩ + ‖G‖²/2L + μ‖w − y‖²/2` for all
+//!   `w` in the box, minimised over the box coordinate by coordinate). The
+//!   solve stops when the certificate is at most `accuracy`.
+//! - **Iteration bounds** (Richter, Jones & Morari, IEEE TAC 2012): after a
+//!   first projected-gradient step `x₁`, `f(x_k) − f* ≤ (1 − √(μ/L))^(k−1) ·
+//!   2(f(x₁) − f*)`. With `f(x₁) − f*` bounded by the box's diameter this is
+//!   the **a-priori bound** `BoxQp::iteration_bound` (independent of the
+//!   data: the worst case); with it bounded by `x₁`'s certificate it is the
+//!   **solve's own bound**, never larger, which the solve runs in full when the
+//!   certificate has not stopped it first. Either way the configured accuracy is
+//!   proved, not hoped for; only a cap below the bound (`max_iterations`)
+//!   gives up the proof, and the status says so.
+//! - **Active-set polish**: the free variables are solved exactly with the
+//!   others fixed at their bounds (one LU); the result is kept only if it is
+//!   feasible and its certificate is no worse.
 //!
 //! Every solve returns a point inside the box, with its iteration count,
-//! residual and objective, even when stopped early. No allocation.
+//! residual, objective and certified gap, even when stopped early. No
+//! allocation.
 
 use crate::linalg::{lu_solve, symmetric_eigenvalues};
 use crate::lit;
@@ -50,11 +58,18 @@ impl core::error::Error for QpError {}
 /// How a solve ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum QpStatus {
-    /// The optimality measure fell below the tolerance.
+    /// The returned point's certificate proves `f(z) − f* ≤ accuracy`.
     Converged,
-    /// The active-set polish produced the exact solution.
+    /// The active-set polish produced a point whose certificate proves the
+    /// accuracy (usually the exact solution).
     Polished,
-    /// The iteration limit was reached; the point is feasible, not optimal.
+    /// The solve's iteration bound was run in full: the accuracy holds by the
+    /// bound's theorem (in exact arithmetic), while the certificate of the
+    /// returned point, computed in the solver's float type, is larger
+    /// ([`QpSolution::gap`] says by how much).
+    BoundReached,
+    /// Stopped by `max_iterations` below the bound: feasible, accuracy
+    /// not proved.
     IterationLimit,
     /// g, lb or ub had NaN/∞ or lb > ub: the returned point is the projection
     /// of the warm start (or the box centre) and no iteration was made.
@@ -68,9 +83,16 @@ pub struct QpSolution<T: RealField + Copy, const N: usize> {
     pub z: SVector<T, N>,
     /// FGM iterations taken.
     pub iterations: u32,
-    /// The a-priori bound this solve was capped at (objective accuracy
-    /// `QpSettings::accuracy` guaranteed once reached).
+    /// The a-priori bound (objective accuracy `QpSettings::accuracy`
+    /// guaranteed once reached, whatever the data).
     pub iteration_bound: u32,
+    /// This solve's own bound, from its first iterate's certificate (at
+    /// most `iteration_bound`): the iterations it would run without an early
+    /// stop.
+    pub solve_bound: u32,
+    /// Certified upper bound on `objective − f*` at `z` (same units as the
+    /// objective), computed in the solver's float type.
+    pub gap: T,
     /// Optimality measure at `z`: `‖z − Π(z − (Hz + g))‖∞`.
     pub residual: T,
     /// `½ zᵀHz + gᵀz`.
@@ -82,15 +104,16 @@ pub struct QpSolution<T: RealField + Copy, const N: usize> {
 /// Solver settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QpSettings<T> {
-    /// Stop early when the optimality measure is at most this (floored at the
-    /// float type's rounding of the gradient). Zero or less: never stop early,
-    /// run `min(max_iterations, bound)` iterations — a fixed-time solve, and
-    /// how the worst case is measured.
-    pub tolerance: T,
-    /// Objective accuracy (absolute) the a-priori bound guarantees; the
-    /// iterations are capped at that bound.
+    /// Stop as soon as the accuracy is proved (by the certificate or by the
+    /// solve's own bound). `false`: run `min(max_iterations, a-priori bound)`
+    /// iterations whatever happens — a fixed-time solve, and how the worst
+    /// case is measured.
+    pub early_exit: bool,
+    /// Objective accuracy (absolute, the objective's units) to prove.
     pub accuracy: T,
-    /// Hard cap on iterations, below the bound when real-time demands it.
+    /// Hard cap on iterations (at least one is always taken). Below the
+    /// a-priori bound it can stop a solve before its accuracy is proved
+    /// ([`QpStatus::IterationLimit`]).
     pub max_iterations: u32,
     /// Try the active-set polish.
     pub polish: bool,
@@ -99,7 +122,7 @@ pub struct QpSettings<T> {
 impl<T: RealField + Copy> Default for QpSettings<T> {
     fn default() -> Self {
         Self {
-            tolerance: lit(1e-6),
+            early_exit: true,
             accuracy: lit(1e-9),
             max_iterations: 100_000,
             polish: true,
@@ -125,18 +148,37 @@ impl<T: RealField + Copy> Default for QpSettings<T> {
 /// # Ok::<(), fc_core::qp::QpError>(())
 /// ```
 #[derive(Debug, Clone)]
+// `repr(C)` keeps the scaled Hessian first, so that the iteration's loads
+// of it are single instructions with an immediate offset (Thumb-2's VLDR
+// reaches 1020 bytes; a 16×16 f32 matrix is 1024).
+#[repr(C)]
 pub struct BoxQp<T: RealField + Copy, const N: usize> {
-    h: SMatrix<T, N, N>,
     /// Scaled Hessian D H D.
     hs: SMatrix<T, N, N>,
+    h: SMatrix<T, N, N>,
     /// Diagonal scaling D.
     d: SVector<T, N>,
     /// Largest / smallest eigenvalue of the scaled Hessian.
     l: T,
     mu: T,
     beta: T,
-    /// `L / dᵢ`: turns a scaled step into the gradient mapping in original units.
-    l_over_d: SVector<T, N>,
+    /// `ln(1 − √(μ/L))`, the bound's rate per iteration (< 0).
+    ln_rate: T,
+    /// 1 / L, the step size.
+    inv_l: T,
+}
+
+/// How often the early-exit test certifies the iterate (iterations).
+const CHECK_EVERY: u32 = 4;
+
+/// The scaled data and iterates of one solve (`z̃ = z / d`).
+struct Work<T, const N: usize> {
+    gs: [T; N],
+    lbs: [T; N],
+    ubs: [T; N],
+    /// Current iterate and momentum point.
+    x: [T; N],
+    y: [T; N],
 }
 
 impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
@@ -171,7 +213,8 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             l,
             mu,
             beta: (sl - smu) / (sl + smu),
-            l_over_d: d.map(|di| l / di),
+            ln_rate: Self::ln_rate_of(l, mu),
+            inv_l: T::one() / l,
         })
     }
 
@@ -186,8 +229,25 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             l: T::one(),
             mu: T::one(),
             beta: T::zero(),
-            l_over_d: one,
+            ln_rate: Self::ln_rate_of(T::one(), T::one()),
+            inv_l: T::one(),
         }
+    }
+
+    /// `ln(1 − √(μ/L))`; a very negative number when μ = L (one step solves).
+    fn ln_rate_of(l: T, mu: T) -> T {
+        let rate = T::one() - (mu / l).sqrt();
+        if rate > T::zero() {
+            rate.ln()
+        } else {
+            lit(-1e3)
+        }
+    }
+
+    /// Smallest eigenvalue μ of the scaled Hessian (the certificate's
+    /// strong-convexity modulus) and its largest, L.
+    pub fn eigen_range(&self) -> (T, T) {
+        (self.mu, self.l)
     }
 
     /// The Hessian.
@@ -210,15 +270,23 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             let w = (ub[i] - lb[i]) / self.d[i];
             d2 += w * w;
         }
+        // f(x₁) − f* + μ/2‖x₁ − x*‖² ≤ (L + μ)/2 · D² after the first step.
         let start = (self.l + self.mu) * lit::<T>(0.5) * d2;
-        if !eps.is_finite() || eps <= T::zero() || start <= eps {
+        self.iterations_for(start, eps)
+    }
+
+    /// Iterations (the first projected-gradient step included) that prove
+    /// accuracy `eps` when `f(x₁) − f* + μ/2‖x₁ − x*‖² ≤ start` after the
+    /// first step. Saturates at `u32::MAX`; 1 when `start ≤ eps`.
+    fn iterations_for(&self, start: T, eps: T) -> u32 {
+        let usable = eps.is_finite() && eps > T::zero() && start.is_finite() && start >= T::zero();
+        if !usable {
+            return u32::MAX;
+        }
+        if start <= eps {
             return 1;
         }
-        let rate = T::one() - (self.mu / self.l).sqrt();
-        if rate <= T::zero() {
-            return 1;
-        }
-        let i = (eps / start).ln() / rate.ln();
+        let i = (eps / start).ln() / self.ln_rate;
         let i = libm::ceil(nalgebra::try_convert::<T, f64>(i).unwrap_or(f64::INFINITY));
         // +1 for the first projected-gradient step the bound assumes.
         if i.is_finite() && i < (u32::MAX - 1) as f64 {
@@ -245,6 +313,11 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
     }
 
     /// Solves the QP from the warm start `z0` (projected into the box first).
+    ///
+    /// The loop, in named steps: `start` scales the data, `step` takes a
+    /// projected gradient step from the momentum point, certifies its result
+    /// and moves to the next momentum point; `finish` unscales, polishes and
+    /// certifies the returned point.
     pub fn solve(
         &self,
         g: &SVector<T, N>,
@@ -256,100 +329,202 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
         let data_ok =
             g.iter().chain(lb.iter()).chain(ub.iter()).all(|v| v.is_finite()) && (0..N).all(|i| lb[i] <= ub[i]);
         if !data_ok {
-            // Best effort inside whatever box is sane: clamp the warm start.
-            let mut z = SVector::<T, N>::zeros();
-            for i in 0..N {
-                let (lo, hi) = (lb[i], ub[i]);
-                let v = if z0[i].is_finite() { z0[i] } else { T::zero() };
-                z[i] = if lo.is_finite() && hi.is_finite() && lo <= hi {
-                    v.max(lo).min(hi)
-                } else {
-                    T::zero()
-                };
-            }
-            return QpSolution {
-                z,
-                iterations: 0,
-                iteration_bound: 0,
-                residual: T::max_value().unwrap_or(T::one()),
-                objective: T::max_value().unwrap_or(T::one()),
-                status: QpStatus::InvalidData,
+            return Self::invalid(lb, ub, z0);
+        }
+        let eps = settings.accuracy;
+        let bound = self.iteration_bound(lb, ub, eps);
+        let mut w = self.start(g, lb, ub, z0);
+        // The first step is a plain projected gradient step (y = x): its
+        // certificate bounds everything after it.
+        // (β = 0: the fast gradient method starts at x₁ without momentum.)
+        let gap1 = self.step::<true>(&mut w, T::zero());
+        let solve_bound = self.iterations_for(gap1 + gap1, eps).min(bound);
+        let run = if settings.early_exit { solve_bound } else { bound };
+        let cap = run.min(settings.max_iterations);
+        // The first step is always taken (also with `max_iterations` 0).
+        let mut iterations = 1u32;
+        let mut gap = gap1;
+        while iterations < cap && !(settings.early_exit && gap <= eps) {
+            // The certificate costs a fifth of an iteration: computed every
+            // CHECK_EVERY iterations, in a fixed-time solve too, so that the
+            // fixed-time solve is the worst case in instructions as well.
+            gap = if iterations.is_multiple_of(CHECK_EVERY) {
+                self.step::<true>(&mut w, self.beta)
+            } else {
+                self.step::<false>(&mut w, self.beta)
+            };
+            iterations += 1;
+        }
+        let proved_by_bound = iterations >= solve_bound;
+        self.finish(g, lb, ub, &w, settings, iterations, bound, solve_bound, proved_by_bound)
+    }
+
+    /// The answer to invalid data: the warm start clamped into whatever box is sane.
+    fn invalid(lb: &SVector<T, N>, ub: &SVector<T, N>, z0: &SVector<T, N>) -> QpSolution<T, N> {
+        let mut z = SVector::<T, N>::zeros();
+        for i in 0..N {
+            let (lo, hi) = (lb[i], ub[i]);
+            let v = if z0[i].is_finite() { z0[i] } else { T::zero() };
+            z[i] = if lo.is_finite() && hi.is_finite() && lo <= hi {
+                v.max(lo).min(hi)
+            } else {
+                T::zero()
             };
         }
-        // Scaled problem: z = D z̃, g̃ = D g, box / D.
-        let gs = g.component_mul(&self.d);
-        let lbs = lb.component_div(&self.d);
-        let ubs = ub.component_div(&self.d);
-        let proj = |v: &SVector<T, N>| {
-            let mut o = *v;
-            for i in 0..N {
-                o[i] = clamp(v[i], lbs[i], ubs[i]);
-            }
-            o
-        };
-        let inv_l = T::one() / self.l;
-        // The optimality measure cannot go below the rounding of the gradient
-        // Hz + g in this float type: floor the tolerance there (f32 and a
-        // Hessian of 1e4 put it near 1e-3; f64 near 1e-12).
-        let mut width = T::zero();
-        for i in 0..N {
-            width = width.max(ub[i].abs().max(lb[i].abs()));
+        let big = T::max_value().unwrap_or(T::one());
+        QpSolution {
+            z,
+            iterations: 0,
+            iteration_bound: 0,
+            solve_bound: 0,
+            gap: big,
+            residual: big,
+            objective: big,
+            status: QpStatus::InvalidData,
         }
-        let floor = lit::<T>(4.0 * N as f64) * T::default_epsilon() * (self.h.amax() * width + g.amax());
-        let tol = if settings.tolerance > T::zero() {
-            settings.tolerance.max(floor)
+    }
+
+    /// Scales the data (`g̃ = D g`, box / D) and projects the warm start.
+    fn start(&self, g: &SVector<T, N>, lb: &SVector<T, N>, ub: &SVector<T, N>, z0: &SVector<T, N>) -> Work<T, N> {
+        let zero = [T::zero(); N];
+        let mut w = Work {
+            gs: zero,
+            lbs: zero,
+            ubs: zero,
+            x: zero,
+            y: zero,
+        };
+        for i in 0..N {
+            let d = self.d[i];
+            w.gs[i] = g[i] * d;
+            w.lbs[i] = lb[i] / d;
+            w.ubs[i] = ub[i] / d;
+            let v = if z0[i].is_finite() { z0[i] / d } else { T::zero() };
+            w.x[i] = clamp(v, w.lbs[i], w.ubs[i]);
+        }
+        w.y = w.x;
+        w
+    }
+
+    /// One iteration from the momentum point `y`: gradient `∇ = H̃y + g̃`
+    /// (column by column, the sums held in registers), projected step
+    /// `x⁺ᵢ = Π(yᵢ − ∇ᵢ/L)`, the next momentum point `y ← x⁺ + β(x⁺ − x)`
+    /// (`beta` 0 restarts the momentum), and when `CERTIFY` the certificate
+    /// of `x⁺` from the gradient mapping `Gᵢ = L(yᵢ − x⁺ᵢ)`:
+    /// `f(x⁺) − f* ≤ −Σᵢ min_{wᵢ ∈ box} [Gᵢ(wᵢ − yᵢ) + μ/2 (wᵢ − yᵢ)²] − ‖G‖²/2L`.
+    /// Returns the certificate (≥ 0; `T::max_value()` when not `CERTIFY`).
+    // Out of line: inlined into a caller whose `self` is a field far into
+    // a larger struct, every load of H̃ would need its address computed.
+    #[inline(never)]
+    #[allow(clippy::needless_range_loop)] // five arrays indexed alike
+    fn step<const CERTIFY: bool>(&self, w: &mut Work<T, N>, beta: T) -> T {
+        let mut grad = w.gs;
+        for (col, &yj) in self.hs.as_slice().chunks_exact(N).zip(w.y.iter()) {
+            for (gi, &h) in grad.iter_mut().zip(col.iter()) {
+                *gi += h * yj;
+            }
+        }
+        let (l, inv_l) = (self.l, self.inv_l);
+        let inv_mu = T::one() / self.mu;
+        let half_mu = self.mu * lit::<T>(0.5);
+        let mut low = T::zero();
+        let mut g2 = T::zero();
+        for i in 0..N {
+            let yi = w.y[i];
+            let xi = clamp(yi - grad[i] * inv_l, w.lbs[i], w.ubs[i]);
+            if CERTIFY {
+                let gi = (yi - xi) * l;
+                let t = clamp(-gi * inv_mu, w.lbs[i] - yi, w.ubs[i] - yi);
+                low += t * (gi + half_mu * t);
+                g2 += gi * gi;
+            }
+            w.y[i] = xi + (xi - w.x[i]) * beta;
+            w.x[i] = xi;
+        }
+        if !CERTIFY {
+            return T::max_value().unwrap_or(T::one());
+        }
+        let gap = -low - g2 * inv_l * lit::<T>(0.5);
+        if gap > T::zero() {
+            gap
         } else {
-            -T::one()
-        };
-        let mut x = proj(&z0.component_div(&self.d));
-        let mut x_prev = x;
-        let mut iterations = 0u32;
-        let mut status = QpStatus::IterationLimit;
-        let bound = self.iteration_bound(lb, ub, settings.accuracy);
-        for it in 0..settings.max_iterations.min(bound) {
-            // Momentum point, gradient there, projected step.
-            let y = if it == 0 { x } else { x + (x - x_prev) * self.beta };
-            let grad = self.hs * y + gs;
-            let x_new = proj(&(y - grad * inv_l));
-            iterations = it + 1;
-            // Gradient mapping back in original units (interior: exactly ‖∇f‖).
-            let mut gm = T::zero();
-            for i in 0..N {
-                gm = fmax(gm, ((y[i] - x_new[i]) * self.l_over_d[i]).abs());
-            }
-            x_prev = x;
-            x = x_new;
-            if gm <= tol {
-                status = QpStatus::Converged;
-                break;
-            }
+            T::zero()
         }
-        // Unscaling can round a bound-active value one ulp outside: clamp.
-        let mut z = x.component_mul(&self.d);
+    }
+
+    /// Certificate of a feasible point `z` from its gradient `grad = Hz + g`
+    /// (original units): `f(z) − f* ≤ −Σᵢ min_{w̃ᵢ ∈ box} [∇̃ᵢ(w̃ᵢ − z̃ᵢ) + μ/2 (w̃ᵢ − z̃ᵢ)²]`
+    /// in the scaled coordinates.
+    fn certificate(&self, z: &SVector<T, N>, grad: &SVector<T, N>, lb: &SVector<T, N>, ub: &SVector<T, N>) -> T {
+        let inv_mu = T::one() / self.mu;
+        let half_mu = self.mu * lit::<T>(0.5);
+        let mut low = T::zero();
         for i in 0..N {
-            z[i] = z[i].max(lb[i]).min(ub[i]);
+            let d = self.d[i];
+            let (zi, gi) = (z[i] / d, grad[i] * d);
+            let t = clamp(-gi * inv_mu, lb[i] / d - zi, ub[i] / d - zi);
+            low += t * (gi + half_mu * t);
         }
-        let mut residual = self.residual(&z, g, lb, ub);
-        if settings.polish && residual > T::zero() {
+        if low < T::zero() {
+            -low
+        } else {
+            T::zero()
+        }
+    }
+
+    /// Unscales the last iterate, tries the polish, and certifies what is returned.
+    #[allow(clippy::too_many_arguments)]
+    fn finish(
+        &self,
+        g: &SVector<T, N>,
+        lb: &SVector<T, N>,
+        ub: &SVector<T, N>,
+        w: &Work<T, N>,
+        settings: &QpSettings<T>,
+        iterations: u32,
+        bound: u32,
+        solve_bound: u32,
+        proved_by_bound: bool,
+    ) -> QpSolution<T, N> {
+        // Unscaling can round a bound-active value one ulp outside: clamp.
+        let mut z = SVector::<T, N>::zeros();
+        for i in 0..N {
+            z[i] = clamp(w.x[i] * self.d[i], lb[i], ub[i]);
+        }
+        let mut grad = self.h * z + g;
+        let mut gap = self.certificate(&z, &grad, lb, ub);
+        let mut polished = false;
+        if settings.polish && gap > T::zero() {
             if let Some(zp) = self.polish(&z, g, lb, ub) {
-                let rp = self.residual(&zp, g, lb, ub);
-                if rp <= residual {
+                let gp = self.h * zp + g;
+                let cp = self.certificate(&zp, &gp, lb, ub);
+                if cp <= gap {
                     z = zp;
-                    residual = rp;
-                    if rp <= tol {
-                        status = QpStatus::Polished;
-                    }
+                    grad = gp;
+                    gap = cp;
+                    polished = true;
                 }
             }
         }
-        if status == QpStatus::IterationLimit && residual <= tol {
-            status = QpStatus::Converged;
+        let mut residual = T::zero();
+        for i in 0..N {
+            let p = clamp(z[i] - grad[i], lb[i], ub[i]);
+            residual = fmax(residual, (z[i] - p).abs());
         }
+        let status = match (gap <= settings.accuracy, polished) {
+            (true, true) => QpStatus::Polished,
+            (true, false) => QpStatus::Converged,
+            (false, _) if proved_by_bound => QpStatus::BoundReached,
+            (false, _) => QpStatus::IterationLimit,
+        };
         QpSolution {
-            objective: self.objective(&z, g),
+            // ½zᵀHz + gᵀz = ½zᵀ(∇ + g).
+            objective: z.dot(&(grad + g)) * lit::<T>(0.5),
             z,
             iterations,
             iteration_bound: bound,
+            solve_bound,
+            gap,
             residual,
             status,
         }
