@@ -41,6 +41,7 @@ fn regulation_config() -> MpcConfig {
     c.disturbance_trend_s = None;
     c.reference = ReferenceMode::Thesis;
     c.s = [1e-6; 4]; // TinyMPC has no input-rate cost
+    c.qp_max_iterations = u32::MAX; // every solve certified, as on the chip (bin `peer`)
     c
 }
 

@@ -96,6 +96,30 @@ fn every_controller_fits_its_cycle_budget() {
     assert!(ok, "budget example exited with failure");
 }
 
+/// The peer on the same chip: on the same hover regulation problem our MPC
+/// takes at least 3× fewer instructions per step than tinympc-rs (mean, and
+/// worst), at no higher closed-loop cost. Instruction counts under icount
+/// are deterministic, so this is a budget, not a timing.
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn ours_beats_tinympc_on_the_same_chip() {
+    let (out, ok) = run_harness_in_qemu("peer");
+    assert!(ok, "{out}");
+    // | solver | variables | iterations | mean | worst | cost |
+    let rows: Vec<Vec<&str>> = out
+        .lines()
+        .filter(|l| l.starts_with("| ours") || l.starts_with("| tinympc"))
+        .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
+        .collect();
+    assert_eq!(rows.len(), 4, "{out}");
+    let num = |r: &Vec<&str>, k: usize| -> f64 { r[k].parse().unwrap_or_else(|_| panic!("{r:?}")) };
+    let (ours, tiny) = (&rows[0], &rows[1]);
+    assert!(ours[0].starts_with("ours") && tiny[0].contains("1e-4"), "{out}");
+    assert!(num(tiny, 3) >= 3.0 * num(ours, 3), "mean: {out}");
+    assert!(num(tiny, 4) >= 3.0 * num(ours, 4), "worst: {out}");
+    assert!(num(ours, 5) <= num(tiny, 5) * 1.001, "cost: {out}");
+}
+
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn mcu_and_host_compute_the_same_closed_loop() {
