@@ -2,7 +2,7 @@
 //!
 //! The binary `firmware` (`src/main.rs`) is the image: board bring-up
 //! ([`clocks`]), then the flight loop of `fc-loop` on USART1. The harness
-//! programs `budget`, `equivalence` and `drivers` (`src/bin/`) run in QEMU.
+//! programs `budget`, `equivalence`, `drivers` and `peer` (`src/bin/`) run in QEMU.
 //! This library holds what they share; its clock plan is checked on the host.
 #![cfg_attr(target_os = "none", no_std)]
 #![deny(missing_docs)]
@@ -33,4 +33,37 @@ pub fn bring_up_clocks() -> Result<(), ClockError> {
     } else {
         CLOCKS.apply(CLOCK_POLLS)
     }
+}
+
+/// Ends a QEMU harness program: exits QEMU through semihosting with
+/// success (`ok`) or failure, which is the harness's verdict for its caller.
+#[cfg(target_os = "none")]
+pub fn harness_exit(ok: bool) -> ! {
+    use cortex_m_semihosting::debug;
+    debug::exit(if ok { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// The runtime glue every QEMU harness program that times itself needs:
+/// the SysTick handler that extends hal-shim's 64-bit clock, and a panic
+/// handler that names the program and exits QEMU with failure. Use once,
+/// inside the program's target module: `fc_stm32f405::harness_runtime!("budget");`.
+#[cfg(target_os = "none")]
+#[macro_export]
+macro_rules! harness_runtime {
+    ($name:literal) => {
+        /// SysTick reload: extends the counter (see hal-shim).
+        #[cortex_m_rt::exception]
+        fn SysTick() {
+            hal_shim::stm32f405::systick_isr();
+        }
+
+        #[panic_handler]
+        fn panic(_: &core::panic::PanicInfo) -> ! {
+            cortex_m_semihosting::hprintln!(concat!($name, ": panic"));
+            $crate::harness_exit(false)
+        }
+    };
 }

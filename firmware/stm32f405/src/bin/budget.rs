@@ -42,9 +42,8 @@
 
 #[cfg(target_os = "none")]
 mod target {
-    use core::panic::PanicInfo;
-    use cortex_m_rt::{entry, exception};
-    use cortex_m_semihosting::{debug, hprintln};
+    use cortex_m_rt::entry;
+    use cortex_m_semihosting::hprintln;
     use fc_core::control::{
         AnyController, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
         StateEstimate, SPECS,
@@ -442,26 +441,10 @@ mod target {
             ok = false;
         }
         hprintln!("budget: {}", if ok { "all fit" } else { "SOME DO NOT FIT" });
-        debug::exit(if ok { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
-        loop {
-            cortex_m::asm::wfi();
-        }
+        fc_stm32f405::harness_exit(ok)
     }
 
-    /// SysTick reload: extends the counter (see hal-shim).
-    #[exception]
-    fn SysTick() {
-        hal_shim::stm32f405::systick_isr();
-    }
-
-    #[panic_handler]
-    fn panic(_: &PanicInfo) -> ! {
-        hprintln!("budget: panic");
-        debug::exit(debug::EXIT_FAILURE);
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
+    fc_stm32f405::harness_runtime!("budget");
 }
 
 #[cfg(not(target_os = "none"))]

@@ -7,9 +7,8 @@
 
 #[cfg(target_os = "none")]
 mod target {
-    use core::panic::PanicInfo;
-    use cortex_m_rt::{entry, exception};
-    use cortex_m_semihosting::{debug, hprintln};
+    use cortex_m_rt::entry;
+    use cortex_m_semihosting::hprintln;
     use fc_stm32f405::{APB1_TIMER_CLK_HZ, SYSCLK_HZ};
     use hal_shim::stm32f405::{DwtClock, LoopTimer, PwmActuators, SysTickClock};
     use hal_shim::{ActuatorOutput, CycleClock};
@@ -44,25 +43,10 @@ mod target {
             "drivers: dwt cyccnt advanced {} (QEMU does not model DWT)",
             dwt.since(a)
         );
-        debug::exit(debug::EXIT_SUCCESS);
-        loop {
-            cortex_m::asm::wfi();
-        }
+        fc_stm32f405::harness_exit(true)
     }
 
-    /// SysTick reload: extends the counter (see hal-shim).
-    #[exception]
-    fn SysTick() {
-        hal_shim::stm32f405::systick_isr();
-    }
-
-    #[panic_handler]
-    fn panic(_: &PanicInfo) -> ! {
-        debug::exit(debug::EXIT_FAILURE);
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
+    fc_stm32f405::harness_runtime!("drivers");
 }
 
 #[cfg(not(target_os = "none"))]

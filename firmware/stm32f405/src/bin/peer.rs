@@ -7,7 +7,7 @@
 //! Euler hover model of the OS4, exact ZOH at 50 ms, the fast preset's Q and
 //! R (no input-rate cost: TinyMPC has none), the OS4's input box around
 //! hover, horizon 20 prediction steps, 60 closed-loop steps from a
-//! (1.5, −1, 0.8) m offset, no disturbance. Ours: 4 moves (16 QP variables),
+//! (1.5, −1, 0.8) m offset, no disturbance. Ours: 2 moves (8 QP variables),
 //! every solve certified to 1e-5 of the objective (no iteration cap).
 //! tinympc-rs: 19 free inputs (76 variables), primal and dual tolerance
 //! 1e-4, at most 500 ADMM iterations, its cached ρ schedule.
@@ -23,9 +23,8 @@
 
 #[cfg(target_os = "none")]
 mod target {
-    use core::panic::PanicInfo;
-    use cortex_m_rt::{entry, exception};
-    use cortex_m_semihosting::{debug, hprintln};
+    use cortex_m_rt::entry;
+    use cortex_m_semihosting::hprintln;
     use fc_core::control::{AttitudeForm, Controller, MpcConfig, MpcFast, ReferenceMode, Setpoint, StateEstimate};
     use fc_core::{euler_hover_model, euler_to_quat, hover_input, zoh, VehicleParams};
     use fc_stm32f405::SYSCLK_HZ;
@@ -177,7 +176,7 @@ mod target {
                 hprintln!("| solver | variables | iterations per step | mean instructions | worst instructions | closed-loop cost |");
                 hprintln!("|---|---|---|---|---|---|");
                 let rows = [
-                    ("ours (FGM, certified 1e-5)", 16, ours(&a, &b, &clock)),
+                    ("ours (FGM, certified 1e-5)", 8, ours(&a, &b, &clock)),
                     ("tinympc-rs 0.2 (ADMM, tol 1e-4)", 76, tiny(&a, &b, &clock, 1e-4)),
                     ("tinympc-rs 0.2 (ADMM, tol 1e-5)", 76, tiny(&a, &b, &clock, 1e-5)),
                     ("tinympc-rs 0.2 (ADMM, tol 1e-6)", 76, tiny(&a, &b, &clock, 1e-6)),
@@ -215,26 +214,10 @@ mod target {
                 false
             }
         };
-        debug::exit(if ok { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
-        loop {
-            cortex_m::asm::wfi();
-        }
+        fc_stm32f405::harness_exit(ok)
     }
 
-    /// SysTick reload: extends the counter (see hal-shim).
-    #[exception]
-    fn SysTick() {
-        hal_shim::stm32f405::systick_isr();
-    }
-
-    #[panic_handler]
-    fn panic(_: &PanicInfo) -> ! {
-        hprintln!("peer: panic");
-        debug::exit(debug::EXIT_FAILURE);
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
+    fc_stm32f405::harness_runtime!("peer");
 }
 
 #[cfg(not(target_os = "none"))]
