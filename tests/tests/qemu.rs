@@ -51,8 +51,8 @@ fn every_controller_fits_its_cycle_budget() {
         .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
         .collect();
     // 4 PD/LQR variants × (control, loop) + 4 MPC variants × (control,
-    // guaranteed, certified, loop).
-    assert_eq!(rows.len(), 24, "{out}");
+    // guaranteed, certified, 1 QP iteration, loop).
+    assert_eq!(rows.len(), 28, "{out}");
     for r in &rows {
         let instr: f64 = r[4].parse().unwrap_or_else(|_| panic!("row {r:?}"));
         let budget: f64 = r[5].parse().unwrap();

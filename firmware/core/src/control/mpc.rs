@@ -140,7 +140,7 @@ impl MpcConfig {
     ///
     /// Three moves, not four: the QP has 12 variables instead of 16, its
     /// a-priori bound falls 327 → 260 iterations and an iteration costs
-    /// ≈ 830 instructions on the M4 instead of 1 232, so every solve is
+    /// ≈ 800 instructions on the M4 instead of 1 232, so every solve is
     /// certified within 5 ms (QEMU: 330 k instructions, 88 % of the budget
     /// at CPI 1.5 × margin 1.5); and it tracks no worse (helix 28 mm calm,
     /// 35 mm under `wind,mismatch`, the robustness sweep 100 %). Two moves

@@ -17,7 +17,10 @@
 //!   the worst case of a solve that always proves its accuracy. Where the
 //!   cap is not below the bound (the thesis preset) it is the `guaranteed`
 //!   row; where it is (the fast preset: 150 of 327) it is reported, not
-//!   enforced, and says what rate a certified solve would fit.
+//!   enforced, and says what rate a certified solve would fit;
+//! - and `1 QP iteration, info`: the step with the QP stopped after its
+//!   first iteration — everything but the QP (preview, observer,
+//!   condensing, polish), so that the split is measured, not guessed.
 //!
 //! A controller fits when `worst instructions × CPI × margin ≤ 168 MHz / rate`
 //! with CPI 1.5 (Cortex-M4 from flash with the ART accelerator, FPU code;
@@ -394,7 +397,7 @@ mod target {
             };
             let form = r.form.name();
             let whats: &[&str] = if r.family == Family::Mpc {
-                &["control", "guaranteed", "certified"]
+                &["control", "guaranteed", "certified", "1 QP iteration, info"]
             } else {
                 &["control"]
             };
@@ -406,6 +409,12 @@ mod target {
             for &what in whats {
                 let m = with_stack(|| {
                     let mut mpc = spec.mpc_config();
+                    // Everything but the QP: the step with a single iteration
+                    // (the split between condensing and QP, reported only).
+                    if let (Some(c), "1 QP iteration, info") = (mpc.as_mut(), what) {
+                        c.qp_early_exit = false;
+                        c.qp_max_iterations = 1;
+                    }
                     if let (Some(c), "guaranteed" | "certified") = (mpc.as_mut(), what) {
                         c.qp_early_exit = false;
                         if what == "certified" {
@@ -421,8 +430,9 @@ mod target {
                         c => Some(control_worst(c, &clock, dt)),
                     }
                 });
-                if what == "certified" && capped {
-                    check(name, form, hz, "certified, info", m);
+                if (what == "certified" && capped) || what.ends_with("info") {
+                    let label = if what == "certified" { "certified, info" } else { what };
+                    check(name, form, hz, label, m);
                 } else {
                     ok &= check(name, form, hz, what, m);
                 }
