@@ -168,6 +168,14 @@ pub struct BoxQp<T: RealField + Copy, const N: usize> {
     inv_l: T,
 }
 
+/// One coordinate of a certificate: `min_{w ∈ [lo, hi]} [g(w − y) + μ/2 (w − y)²]`
+/// (scaled units), attained at `w − y = clamp(−g/μ, lo − y, hi − y)`.
+#[inline(always)]
+fn certificate_term<T: RealField + Copy>(g: T, y: T, lo: T, hi: T, inv_mu: T, half_mu: T) -> T {
+    let t = clamp(-g * inv_mu, lo - y, hi - y);
+    t * (g + half_mu * t)
+}
+
 /// How often the early-exit test certifies the iterate (iterations).
 const CHECK_EVERY: u32 = 4;
 
@@ -244,12 +252,6 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
         }
     }
 
-    /// Smallest eigenvalue μ of the scaled Hessian (the certificate's
-    /// strong-convexity modulus) and its largest, L.
-    pub fn eigen_range(&self) -> (T, T) {
-        (self.mu, self.l)
-    }
-
     /// The Hessian.
     pub fn hessian(&self) -> &SMatrix<T, N, N> {
         &self.h
@@ -303,7 +305,11 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
 
     /// Optimality measure `‖z − Π(z − (Hz + g))‖∞` (0 exactly at the solution).
     pub fn residual(&self, z: &SVector<T, N>, g: &SVector<T, N>, lb: &SVector<T, N>, ub: &SVector<T, N>) -> T {
-        let grad = self.h * z + g;
+        Self::residual_at(z, &(self.h * z + g), lb, ub)
+    }
+
+    /// [`BoxQp::residual`] with the gradient `Hz + g` at `z` already known.
+    fn residual_at(z: &SVector<T, N>, grad: &SVector<T, N>, lb: &SVector<T, N>, ub: &SVector<T, N>) -> T {
         let mut r = T::zero();
         for i in 0..N {
             let p = clamp(z[i] - grad[i], lb[i], ub[i]);
@@ -434,8 +440,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             let xi = clamp(yi - grad[i] * inv_l, w.lbs[i], w.ubs[i]);
             if CERTIFY {
                 let gi = (yi - xi) * l;
-                let t = clamp(-gi * inv_mu, w.lbs[i] - yi, w.ubs[i] - yi);
-                low += t * (gi + half_mu * t);
+                low += certificate_term(gi, yi, w.lbs[i], w.ubs[i], inv_mu, half_mu);
                 g2 += gi * gi;
             }
             w.y[i] = xi + (xi - w.x[i]) * beta;
@@ -461,9 +466,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
         let mut low = T::zero();
         for i in 0..N {
             let d = self.d[i];
-            let (zi, gi) = (z[i] / d, grad[i] * d);
-            let t = clamp(-gi * inv_mu, lb[i] / d - zi, ub[i] / d - zi);
-            low += t * (gi + half_mu * t);
+            low += certificate_term(grad[i] * d, z[i] / d, lb[i] / d, ub[i] / d, inv_mu, half_mu);
         }
         if low < T::zero() {
             -low
@@ -506,11 +509,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
                 }
             }
         }
-        let mut residual = T::zero();
-        for i in 0..N {
-            let p = clamp(z[i] - grad[i], lb[i], ub[i]);
-            residual = fmax(residual, (z[i] - p).abs());
-        }
+        let residual = Self::residual_at(&z, &grad, lb, ub);
         let status = match (gap <= settings.accuracy, polished) {
             (true, true) => QpStatus::Polished,
             (true, false) => QpStatus::Converged,
