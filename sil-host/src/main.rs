@@ -15,7 +15,7 @@ use sil_host::flight::Recording;
 use sil_host::flight::{FlightConfig, Target};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::PlantConfig;
-use sil_host::record::{CsvSink, Discard, RowSink, STATE_COLUMNS};
+use sil_host::record::{CsvSink, Discard, STATE_COLUMNS};
 use sil_host::scenario::{Scenario, ScenarioKind};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -457,29 +457,22 @@ fn open_loop(a: &OpenLoopArgs) -> Result<()> {
         start_yaw_rad: a.yaw_deg.to_radians(),
         duration_s: a.duration,
     };
-    // Rows go straight to the file (a long run never sits in memory); only
-    // the last one is kept for the summary.
+    // Rows go straight to the file (a long run never sits in memory); the
+    // run returns its last row for the summary.
     let last = match &a.csv {
         Some(path) => {
             let mut sink = CsvSink::create(path, false)?;
-            run.run_into(&mut sink)?;
-            let last = sink.last().copied();
+            let last = run.run_into(&mut sink)?;
             let n = sink.finish()?;
             eprintln!("wrote {n} rows to {}", path.display());
             last
         }
-        None => {
-            let mut last = LastRow(None);
-            run.run_into(&mut last)?;
-            last.0
-        }
+        None => run.run_into(&mut Discard)?,
     };
-    if let Some(last) = last {
-        for (name, v) in STATE_COLUMNS.iter().zip(last.iter()) {
-            print!("{name}={v:.6} ");
-        }
-        println!();
+    for (name, v) in STATE_COLUMNS.iter().zip(last.iter()) {
+        print!("{name}={v:.6} ");
     }
+    println!();
     Ok(())
 }
 
@@ -720,15 +713,5 @@ fn main() -> Result<()> {
                 },
             )
         }
-    }
-}
-
-/// Keeps only the last row of a run (the open-loop summary without a file).
-struct LastRow(Option<[f64; 21]>);
-
-impl RowSink for LastRow {
-    fn push(&mut self, row: &[f64; 21], _: Option<&[f64; 4]>) -> Result<()> {
-        self.0 = Some(*row);
-        Ok(())
     }
 }

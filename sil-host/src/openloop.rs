@@ -32,7 +32,8 @@ impl OpenLoop {
 
     /// Flies the run, handing each row to `sink` as it is produced (memory
     /// constant in the run's length); stops at the sink's first error.
-    pub fn run_into(&self, sink: &mut dyn RowSink) -> anyhow::Result<()> {
+    /// Returns the last row (the state at the end).
+    pub fn run_into(&self, sink: &mut dyn RowSink) -> anyhow::Result<[f64; 21]> {
         let x0 = hover_quat_state(&Vector3::from(self.start_ned_m), self.start_yaw_rad);
         let mut plant = Plant::new(self.plant, &x0);
         let steps = (self.duration_s / RECORD_DT_S).round() as usize;
@@ -40,10 +41,12 @@ impl OpenLoop {
         let mut first = state_row(&plant);
         first[17..21].copy_from_slice(plant.inputs_realised_for(&self.u).as_slice());
         sink.push(&first, None)?;
+        let mut last = first;
         for _ in 0..steps {
             plant.step(&self.u, RECORD_DT_S);
-            sink.push(&state_row(&plant), None)?;
+            last = state_row(&plant);
+            sink.push(&last, None)?;
         }
-        Ok(())
+        Ok(last)
     }
 }

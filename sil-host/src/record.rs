@@ -73,8 +73,6 @@ pub struct CsvSink {
     path: std::path::PathBuf,
     with_reference: bool,
     rows: usize,
-    /// The last row, kept for the caller's summary.
-    last: Option<[f64; 21]>,
 }
 
 impl CsvSink {
@@ -94,13 +92,7 @@ impl CsvSink {
             path: path.to_path_buf(),
             with_reference,
             rows: 0,
-            last: None,
         })
-    }
-
-    /// The last row written, if any.
-    pub fn last(&self) -> Option<&[f64; 21]> {
-        self.last.as_ref()
     }
 
     /// Flushes the file; returns the number of rows written.
@@ -123,7 +115,6 @@ impl RowSink for CsvSink {
             .write_record(row.iter().chain(r).map(|v| v.to_string()))
             .with_context(|| format!("writing {}", self.path.display()))?;
         self.rows += 1;
-        self.last = Some(*row);
         Ok(())
     }
 }
