@@ -14,6 +14,7 @@ pub mod observer;
 pub mod pd_euler;
 pub mod pd_quat;
 pub mod reference;
+pub mod regulation;
 pub mod spec;
 
 pub use crate::model::AttitudeForm;
