@@ -16,6 +16,8 @@
 //!   Jacobians and zero-order-hold discretisation.
 //! - [`linalg`]: LU, symmetric eigenvalues, DARE/CARE by doubling.
 //! - [`qp`]: the box-constrained QP solver of the MPC.
+//! - [`estimate`]: the error-state Kalman filter that turns an IMU and
+//!   position fixes into the controllers' state estimate.
 //! - [`control`]: PD, LQR and MPC behind [`control::Controller`], chosen by
 //!   a [`control::ControllerSpec`].
 //! - [`math`]: f32 trigonometry that stays in f32.
@@ -58,6 +60,7 @@
 #![forbid(unsafe_code)]
 
 pub mod control;
+pub mod estimate;
 pub mod linalg;
 pub mod math;
 pub mod model;
