@@ -3,9 +3,30 @@
 //! `crate::link::Remote` reaches one behind the wire protocol. Neither the
 //! flight loop nor the link imports the other: both import this.
 
+use crate::sensors::Readings;
 use fc_core::control::{Controller, Setpoint, StateEstimate};
+use fc_core::estimate::{EskfCounters, ERR};
 use fc_core::QuatState;
+use fc_loop::nav::{NavConfig, NavMode, Navigator};
+use nalgebra::{SMatrix, Vector3};
 use std::time::Instant;
+
+/// What the on-board estimator reported at one step (sensor flights).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavReport {
+    /// Aligning, navigating or in its failsafe.
+    pub mode: NavMode,
+    /// The estimate the controller flew on (`None` while aligning).
+    pub estimate: Option<StateEstimate<f32>>,
+    /// Gyro (rad/s) and accelerometer (m/s²) bias estimates, FRD.
+    pub biases: (Vector3<f32>, Vector3<f32>),
+    /// The error-state covariance `[δp δv δθ δb_g δb_a]`.
+    pub covariance: SMatrix<f32, ERR, ERR>,
+    /// What the estimator refused or repaired so far.
+    pub counters: EskfCounters,
+    /// Failsafe episodes so far.
+    pub failsafe_entries: u32,
+}
 
 /// What one control step gives back, wherever the controller ran.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,6 +45,8 @@ pub struct StepReport {
     pub failsafe: bool,
     /// The flight controller's frame and error counters (remote only).
     pub counters: Option<fc_proto::Counters>,
+    /// The estimator's report (sensor flights only).
+    pub nav: Option<NavReport>,
 }
 
 /// Where a flight's controller runs: called once per control step by the
@@ -46,6 +69,23 @@ pub trait Endpoint {
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
     ) -> anyhow::Result<StepReport>;
+
+    /// One control step flown from sensors at time `t` (s): the IMU sample
+    /// and the fixes that arrived, the setpoint and the preview points. The
+    /// endpoint estimates the state itself.
+    fn step_sensed(
+        &mut self,
+        t: f64,
+        readings: &Readings,
+        sp: &Setpoint<f32>,
+        preview: &[Setpoint<f32>],
+    ) -> anyhow::Result<StepReport> {
+        let _ = (t, readings, sp, preview);
+        anyhow::bail!(
+            "this target flies the true state only: sensor flights (--estimator ekf) run in-process \
+             until the wire protocol carries IMU and fix messages; use --estimator truth"
+        )
+    }
 }
 
 /// A controller called directly in this process.
@@ -55,12 +95,61 @@ pub struct InProcess<C> {
     pub ctrl: C,
     /// Time of the last step, s.
     last_t: Option<f64>,
+    /// The on-board estimator of sensor flights (made at the first sensed step).
+    nav: Option<Navigator>,
 }
 
 impl<C> InProcess<C> {
     /// The endpoint of `ctrl`.
     pub fn new(ctrl: C) -> Self {
-        Self { ctrl, last_t: None }
+        Self {
+            ctrl,
+            last_t: None,
+            nav: None,
+        }
+    }
+}
+
+impl<C: Controller<f32>> InProcess<C> {
+    /// Resumes after a gap (as the flight loop on the MCU does: the
+    /// controller forgets only the step before) and hands it the preview.
+    fn prepare(&mut self, t: f64, preview: &[Setpoint<f32>]) {
+        let period = self.ctrl.period_s().unwrap_or(0.0);
+        if self.last_t.is_some_and(|last| t - last > 1.5 * period && period > 0.0) {
+            self.ctrl.resume();
+        }
+        self.last_t = Some(t);
+        for (k, p) in preview.iter().enumerate() {
+            // The scenario defines the reference; a rejected point only
+            // means the controller extrapolates instead.
+            let _ = self.ctrl.set_preview(k + 1, p);
+        }
+    }
+
+    /// The controller's step on `est`, timed.
+    fn control(&mut self, est: &StateEstimate<f32>, sp: &Setpoint<f32>) -> StepReport {
+        let t0 = Instant::now();
+        let out = self.ctrl.update(est, sp);
+        let cost = t0.elapsed().as_nanos() as f64;
+        // A valid estimate always gives an output: on the impossible error
+        // the loop holds the last command (its fallback).
+        let (u, iterations, saturated) = match out {
+            Ok(o) => (
+                Some([o.u[0], o.u[1], o.u[2], o.u[3]]),
+                o.status.iterations,
+                o.status.saturated,
+            ),
+            Err(_) => (None, 0, false),
+        };
+        StepReport {
+            u,
+            cost,
+            iterations,
+            saturated,
+            failsafe: false,
+            counters: None,
+            nav: None,
+        }
     }
 }
 
@@ -81,39 +170,71 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
     ) -> anyhow::Result<StepReport> {
-        // After a gap in the steps (a sensor outage), as the flight loop on
-        // the MCU does: the controller forgets only the step before.
-        let period = self.ctrl.period_s().unwrap_or(0.0);
-        if self.last_t.is_some_and(|last| t - last > 1.5 * period && period > 0.0) {
-            self.ctrl.resume();
-        }
-        self.last_t = Some(t);
-        for (k, p) in preview.iter().enumerate() {
-            // The scenario defines the reference; a rejected point only
-            // means the controller extrapolates instead.
-            let _ = self.ctrl.set_preview(k + 1, p);
-        }
+        self.prepare(t, preview);
         let est = StateEstimate::from_quat_state(&state.cast::<f32>());
-        let t0 = Instant::now();
-        let out = self.ctrl.update(&est, sp);
-        let cost = t0.elapsed().as_nanos() as f64;
-        // An estimate built from a finite state is always valid: on the
-        // impossible error the loop holds the last command (its fallback).
-        let (u, iterations, saturated) = match out {
-            Ok(o) => (
-                Some([o.u[0], o.u[1], o.u[2], o.u[3]]),
-                o.status.iterations,
-                o.status.saturated,
-            ),
-            Err(_) => (None, 0, false),
+        Ok(self.control(&est, sp))
+    }
+
+    fn step_sensed(
+        &mut self,
+        t: f64,
+        readings: &Readings,
+        sp: &Setpoint<f32>,
+        preview: &[Setpoint<f32>],
+    ) -> anyhow::Result<StepReport> {
+        let dt = readings.dt_s;
+        let nav = match self.nav.as_mut() {
+            Some(n) => n,
+            None => self
+                .nav
+                .insert(Navigator::new(NavConfig::default()).map_err(|e| anyhow::anyhow!("{e}"))?),
         };
-        Ok(StepReport {
-            u,
-            cost,
-            iterations,
-            saturated,
-            failsafe: false,
-            counters: None,
-        })
+        let now_us = (t * 1e6).round() as u64;
+        let t0 = Instant::now();
+        let mode = nav
+            .step(now_us, dt as f32, &readings.imu, &readings.fixes)
+            .map_err(|e| anyhow::anyhow!("estimator step at t = {t:.3} s: {e}"))?;
+        let est = nav.estimate();
+        let nav_cost = t0.elapsed().as_nanos() as f64;
+        let fly_sp = nav.setpoint(now_us, sp);
+        let report = NavReport {
+            mode,
+            estimate: est,
+            biases: nav.estimator().biases(),
+            covariance: *nav.estimator().covariance(),
+            counters: nav.counters(),
+            failsafe_entries: nav.failsafe_entries(),
+        };
+        let mut step = match (mode, est) {
+            (NavMode::Navigating, Some(est)) => {
+                self.prepare(t, preview);
+                self.control(&est, &fly_sp)
+            }
+            (NavMode::Failsafe, Some(est)) => {
+                // The failsafe's own reference, previewed as it will be.
+                let ahead: Vec<Setpoint<f32>> = match self.ctrl.preview_request() {
+                    Some((n, h)) => (1..=n).map(|k| fly_sp.extrapolate((k as f64 * h) as f32)).collect(),
+                    None => Vec::new(),
+                };
+                self.prepare(t, &ahead);
+                let mut r = self.control(&est, &fly_sp);
+                r.failsafe = true;
+                r
+            }
+            // Aligning: no output; the flight holds its hover command (the
+            // vehicle is at rest).
+            _ => StepReport {
+                u: None,
+                cost: 0.0,
+                iterations: 0,
+                saturated: false,
+                failsafe: false,
+                counters: None,
+                nav: None,
+            },
+        };
+        step.cost += nav_cost;
+        step.nav = Some(report);
+        Ok(step)
     }
 }

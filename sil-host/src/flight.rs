@@ -38,6 +38,9 @@ pub struct FlightConfig {
     pub uncertainty: Option<Uncertainty>,
     /// Errors on the state the controller sees (`None`: the true state).
     pub noise: Option<crate::noise::SensorNoise>,
+    /// Fly from simulated sensors through the on-board estimator (`None`:
+    /// the controller is handed the true state, or `noise`'s version of it).
+    pub sensors: Option<crate::sensors::SensorConfig>,
     /// A sensor outage `(start s, duration s)`: no sensor frame reaches the
     /// controller in that window (the plant keeps the last input), as when
     /// the link or the sensors drop out. `None`: none.
@@ -85,6 +88,7 @@ impl FlightConfig {
             vehicle: VehicleParams::OS4,
             uncertainty: None,
             noise: None,
+            sensors: None,
             sensor_gap: None,
         }
     }
@@ -142,6 +146,8 @@ pub struct FlightResult {
     pub firmware_log: Vec<String>,
     /// The flight was stopped because the state left any sane range.
     pub diverged: bool,
+    /// The on-board estimator's errors and counts (sensor flights).
+    pub estimation: Option<crate::estimation::EstimationResult>,
 }
 
 /// The controller of a flight as `cfg` describes it (its vehicle, and its
@@ -339,6 +345,30 @@ pub fn fly_endpoint<E: Endpoint>(
     let ticks = (end / tick).round() as usize;
     let preview = ep.preview();
     let mut sensors = cfg.noise.map(|n| n.source());
+    let mut imu_fix = match cfg.sensors {
+        Some(sc) => {
+            if cfg.noise.is_some() {
+                anyhow::bail!(
+                    "--noise perturbs the true state; a sensor flight (--estimator ekf) has its own sensor noise"
+                );
+            }
+            if latency_ticks > 0 {
+                anyhow::bail!(
+                    "a state latency models a delayed true state; a sensor flight's latencies are its sensors'"
+                );
+            }
+            if ts > 0.02 {
+                anyhow::bail!(
+                    "the estimator runs at the controller's rate, here every {ts} s: above 0.02 s (50 Hz) it is too slow \
+                     to integrate an IMU; fly this controller with --estimator truth"
+                );
+            }
+            Some(crate::sensors::Sensors::new(sc, ts)?)
+        }
+        None => None,
+    };
+    let mut est_acc = crate::estimation::EstimationAccumulator::default();
+    let mut est_trace = Vec::new();
 
     let mut res = FlightResult {
         rows: Vec::new(),
@@ -355,12 +385,14 @@ pub fn fly_endpoint<E: Endpoint>(
         link_counters: None,
         firmware_log: Vec::new(),
         diverged: false,
+        estimation: None,
     };
     let mut metrics = MetricsAccumulator::new(&nominal);
     let mut total_cost = 0.0;
     let mut total_it = 0u64;
     let mut failing_since: Option<f64> = None;
-    let mut u = Vector4::<f64>::zeros();
+    // The plant starts in hover: until the first output, hold its inputs.
+    let mut u = fc_core::hover_input(&cfg.vehicle);
     for i in 0..=ticks {
         let t = i as f64 * tick;
         let r = sc.reference(t);
@@ -392,7 +424,17 @@ pub fn fly_endpoint<E: Endpoint>(
                 Some((n, dt)) => (1..=n).map(|k| setpoint(&sc.reference(t + k as f64 * dt))).collect(),
                 None => Vec::new(),
             };
-            let step = ep.step(t, &xq, &sp, &previews)?;
+            let step = match imu_fix.as_mut() {
+                Some(s) => {
+                    let readings = s.read(t, &plant);
+                    let step = ep.step_sensed(t, &readings, &sp, &previews)?;
+                    if let Some(nav) = &step.nav {
+                        est_acc.push(t, &plant.quat_state(), &s.true_biases(), nav);
+                    }
+                    step
+                }
+                None => ep.step(t, &xq, &sp, &previews)?,
+            };
             if let Some(v) = step.u {
                 u = Vector4::from(v).cast::<f64>();
                 failing_since = None;
@@ -400,6 +442,11 @@ pub fn fly_endpoint<E: Endpoint>(
                 // The loop holds the last command; a controller that fails
                 // for a whole second is a flight that cannot be reported.
                 let since = *failing_since.get_or_insert(t);
+                if step.nav.is_some_and(|n| n.mode == fc_loop::nav::NavMode::Aligning) && t - since >= 1.0 {
+                    anyhow::bail!(
+                        "the estimator did not align in 1 s (it needs IMU samples at rest, a position fix and a heading)"
+                    );
+                }
                 if t - since >= 1.0 {
                     anyhow::bail!(
                         "the controller produced no output at any step from t = {since:.3} s to {t:.3} s \
@@ -430,6 +477,9 @@ pub fn fly_endpoint<E: Endpoint>(
             metrics.push(t, &actual, &rref, &u_cmd);
             match &mut rec {
                 Recording::Keep => {
+                    if let Some(s) = est_acc.last().filter(|s| (s.t - t).abs() < 1e-9) {
+                        est_trace.push(s);
+                    }
                     res.trace.t.push(t);
                     res.trace.actual.push(actual);
                     res.trace.reference.push(rref);
@@ -449,5 +499,8 @@ pub fn fly_endpoint<E: Endpoint>(
         res.qp_iterations.0 = total_it as f64 / res.steps as f64;
     }
     res.metrics = metrics.metrics();
+    if imu_fix.is_some() {
+        res.estimation = Some(est_acc.result(est_trace));
+    }
     Ok((res, ep))
 }

@@ -8,6 +8,7 @@
 pub mod config;
 pub mod disturbance;
 pub mod endpoint;
+pub mod estimation;
 pub mod figures;
 pub mod flight;
 pub mod full_report;
@@ -20,6 +21,7 @@ pub mod plant;
 pub mod record;
 pub mod report;
 pub mod scenario;
+pub mod sensors;
 pub mod study;
 pub mod study_plots;
 pub mod sweep;

@@ -8,7 +8,7 @@
 use anyhow::{bail, Context, Result};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
-use fc_core::control::{Family, Preset, ReferenceMode, SPECS};
+use fc_core::control::{Controller, Family, Preset, ReferenceMode, SPECS};
 use fc_core::AttitudeForm;
 use sil_host::disturbance::DisturbanceSet;
 use sil_host::flight::Recording;
@@ -17,6 +17,7 @@ use sil_host::openloop::OpenLoop;
 use sil_host::plant::PlantConfig;
 use sil_host::record::{CsvSink, Discard, STATE_COLUMNS};
 use sil_host::scenario::{Scenario, ScenarioKind};
+use sil_host::sensors::{FixProfile, SensorConfig};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -194,9 +195,34 @@ struct FlyArgs {
     /// The metrics use the true state.
     #[arg(long, value_name = "SCALE")]
     noise: Option<f64>,
-    /// Seed of the sensor noise (same seed, same noise).
+    /// Seed of the sensor noise (same seed, same noise), for --noise and for the simulated sensors.
     #[arg(long, default_value_t = 1, value_name = "N")]
     noise_seed: u64,
+    /// What the controller flies on: `ekf` (simulated IMU and fixes through the on-board
+    /// error-state Kalman filter) or `truth` (the true state, or --noise's version of it).
+    /// Default: `ekf` in-process; `truth` where ekf cannot run (remote targets until the wire
+    /// protocol carries IMU and fix messages, controllers slower than 50 Hz, --noise), with a note.
+    #[arg(long, value_enum, value_name = "EST")]
+    estimator: Option<EstimatorArg>,
+    /// Position source of `--estimator ekf`: `mocap` (100 Hz, 2 mm, 10 ms, with heading) or `gps`
+    /// (10 Hz, 0.3/0.5 m, velocity, 100 ms; barometer and magnetometer).
+    #[arg(long, value_enum, default_value = "mocap")]
+    sensors: FixProfile,
+    /// Fault: no position fix in START,LENGTH (s).
+    #[arg(long, value_name = "START,LENGTH", value_parser = parse_window)]
+    fix_outage: Option<(f64, f64)>,
+    /// Fault: the first fix at or after S seconds is 5 m off.
+    #[arg(long, value_name = "S")]
+    fix_outlier_at: Option<f64>,
+    /// Fault: the first IMU sample at or after S seconds is NaN.
+    #[arg(long, value_name = "S")]
+    imu_nan_at: Option<f64>,
+    /// Fault: the IMU repeats one sample over START,LENGTH (s).
+    #[arg(long, value_name = "START,LENGTH", value_parser = parse_window)]
+    imu_stuck: Option<(f64, f64)>,
+    /// Fault: a 30 g shock on body z at S seconds clips the accelerometer.
+    #[arg(long, value_name = "S")]
+    accel_clip_at: Option<f64>,
     /// Circle/helix radius, m (default 2).
     #[arg(long, value_name = "M", allow_negative_numbers = true)]
     radius: Option<f64>,
@@ -513,6 +539,87 @@ fn write_json(path: &PathBuf, value: &serde_json::Value) -> Result<()> {
     Ok(())
 }
 
+/// What the controller flies on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum EstimatorArg {
+    /// Simulated sensors through the on-board estimator.
+    Ekf,
+    /// The true state.
+    Truth,
+}
+
+fn parse_window(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("'{x}': {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [a, b] if a.is_finite() && b.is_finite() && a >= 0.0 && b > 0.0 => Ok((a, b)),
+        _ => Err(format!("'{s}': need START,LENGTH in s with START ≥ 0 and LENGTH > 0")),
+    }
+}
+
+/// The sensors of a `fly`, or `None` for a truth flight (with a note when
+/// the default had to fall back to it).
+fn sensors_for(a: &FlyArgs, cfg: &FlightConfig, exec: &Target) -> Result<Option<SensorConfig>> {
+    let faults = sil_host::sensors::Faults {
+        outage: a.fix_outage,
+        outlier_at_s: a.fix_outlier_at,
+        imu_nan_at_s: a.imu_nan_at,
+        imu_stuck: a.imu_stuck,
+        accel_clip_at_s: a.accel_clip_at,
+    };
+    for (flag, v) in [
+        ("--fix-outlier-at", a.fix_outlier_at),
+        ("--imu-nan-at", a.imu_nan_at),
+        ("--accel-clip-at", a.accel_clip_at),
+    ] {
+        if v.is_some_and(|t| !(t.is_finite() && t >= 0.0)) {
+            bail!("{flag} must be a time ≥ 0 s");
+        }
+    }
+    let faulty = faults != sil_host::sensors::Faults::default();
+    let period = match cfg.spec.family {
+        Family::Mpc => cfg
+            .spec
+            .build::<f32>(cfg.vehicle.cast(), 1.0 / cfg.control_hz)
+            .ok()
+            .and_then(|c| c.period_s()),
+        _ => None,
+    }
+    .unwrap_or(1.0 / cfg.control_hz);
+    let why_not = if *exec != Target::InProcess {
+        Some("remote targets fly the true state until the wire protocol carries IMU and fix messages")
+    } else if cfg.noise.is_some() {
+        Some("--noise perturbs the true state")
+    } else if period > 0.02 {
+        Some("this controller runs slower than 50 Hz, too slow to integrate an IMU")
+    } else {
+        None
+    };
+    match (a.estimator, why_not) {
+        (Some(EstimatorArg::Truth), _) => {
+            if faulty {
+                bail!("sensor faults need --estimator ekf");
+            }
+            Ok(None)
+        }
+        (Some(EstimatorArg::Ekf), Some(why)) => bail!("--estimator ekf cannot fly here: {why}"),
+        (None, Some(why)) => {
+            if faulty {
+                bail!("sensor faults need --estimator ekf, which cannot fly here: {why}");
+            }
+            eprintln!("note: flying the true state: {why}");
+            Ok(None)
+        }
+        (_, None) => {
+            let mut sc = SensorConfig::new(a.sensors, a.noise_seed);
+            sc.faults = faults;
+            Ok(Some(sc))
+        }
+    }
+}
+
 fn fly_cmd(a: &FlyArgs) -> Result<()> {
     let mut cfg = FlightConfig::new(a.controller, a.model, scenario_from(a)?);
     cfg.disturbance = a.disturbance;
@@ -548,6 +655,7 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
             }
         })
         .unwrap_or(Target::InProcess);
+    cfg.sensors = sensors_for(a, &cfg, &exec)?;
     // Remote flights take real time (QEMU: milliseconds a step): show progress.
     let bar = sil_host::study::progress_bar(
         (cfg.scenario.duration_s * 10.0).round() as usize,

@@ -212,6 +212,22 @@ impl Plant {
         self.omega
     }
 
+    /// What an ideal accelerometer measures now: the specific force
+    /// (acceleration less gravity) in body FRD, m/s², from the same forces
+    /// the integrator uses (thrust, drag, wind, disturbance).
+    pub fn specific_force_frd(&self) -> Vector3<f64> {
+        let x = self.quat_state();
+        let p = &self.cfg.params;
+        let mut d = self.cfg.disturbance.at(self.t);
+        d.force_ned_n += Vector3::from(p.kt_nspm).component_mul(&self.cfg.wind_ned_mps);
+        let dx = self
+            .vehicle
+            .quat_derivative(&x, &self.realised_inputs(), gyro_speed(&self.omega), &d);
+        let acc = Vector3::new(dx[3], dx[4], dx[5]);
+        let r = fc_core::quat_to_rotation(&x.fixed_rows::<4>(6).into_owned());
+        r.transpose() * (acc - Vector3::new(0.0, 0.0, p.gravity_mps2))
+    }
+
     /// Inputs the rotors realise right now (after clamping and lag).
     pub fn realised_inputs(&self) -> Input<f64> {
         realised_inputs(&self.cfg.params, &self.omega)

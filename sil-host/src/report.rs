@@ -75,6 +75,37 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
                      step_time_ns then holds SysTick counts, not ns",
         });
     }
+    v["estimator"] = match (&cfg.sensors, &res.estimation) {
+        (Some(sc), Some(e)) => {
+            let c = &e.counters;
+            json!({
+                "kind": "ekf",
+                "sensors": sc.profile.name(),
+                "seed": sc.seed,
+                "faults": sc.faults,
+                "rms_attitude_deg": e.rms_att_deg,
+                "rms_position_m": e.rms_pos_m,
+                "rms_velocity_mps": e.rms_vel_mps,
+                "max_position_m": e.max_pos_m,
+                "nees_mean": e.nees_mean,
+                "nees_dof": fc_core::estimate::ERR,
+                "nees_blocks_mean": { "position": e.nees_blocks_mean[0], "velocity": e.nees_blocks_mean[1],
+                    "attitude": e.nees_blocks_mean[2], "gyro_bias": e.nees_blocks_mean[3],
+                    "accel_bias": e.nees_blocks_mean[4], "dof": 3 },
+                "aligning_steps": e.aligning_steps,
+                "failsafe_steps": e.failsafe_steps,
+                "failsafe_entries": e.failsafe_entries,
+                "counters": {
+                    "imu_rejected": c.imu_rejected, "imu_clipped": c.imu_clipped,
+                    "pos_rejected": c.pos_rejected, "vel_rejected": c.vel_rejected,
+                    "yaw_rejected": c.yaw_rejected, "alt_rejected": c.alt_rejected,
+                    "fix_invalid": c.fix_invalid, "pos_resets": c.pos_resets,
+                    "covariance_resets": c.covariance_resets, "fused": c.fused,
+                },
+            })
+        }
+        _ => json!({ "kind": "truth" }),
+    };
     if cfg.spec.family == fc_core::control::Family::Mpc {
         v["qp_iterations"] = json!({ "mean": res.qp_iterations.0, "max": res.qp_iterations.1 });
         v["qp_iteration_bound"] = json!(res.qp_iteration_bound);

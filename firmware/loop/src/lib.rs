@@ -24,6 +24,8 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod nav;
+
 use fc_core::control::{
     AnyController, ControlError, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
     StateEstimate,

@@ -317,6 +317,7 @@ impl Endpoint for Remote {
             saturated: false,
             failsafe: step.failsafe,
             counters: Some(step.counters),
+            nav: None,
         })
     }
 }

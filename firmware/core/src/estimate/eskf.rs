@@ -7,8 +7,8 @@ use crate::control::StateEstimate;
 use crate::model::{euler_to_quat, quat_mul, quat_normalize, quat_to_euler, quat_to_rotation, Quat};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3, Vector4};
 
-/// Size of the error state `[δp δv δθ δb_g δb_az]`.
-pub const ERR: usize = 13;
+/// Size of the error state `[δp δv δθ δb_g δb_a]`.
+pub const ERR: usize = 15;
 
 /// Error-state covariance.
 type Cov = SMatrix<f32, ERR, ERR>;
@@ -25,6 +25,10 @@ const IBA: usize = 12;
 /// Largest variance kept per error state (beyond it the number means
 /// "unknown" anyway, and f32 stays far from overflow while dead reckoning).
 const VAR_MAX: f32 = 1.0e8;
+/// 1σ of the velocity after a position reset, m/s.
+const RESET_VEL_SIGMA_MPS: f32 = 1.0;
+/// 1σ added to each attitude axis at a position reset, rad.
+const RESET_ATT_SIGMA_RAD: f32 = 0.1;
 /// Smallest variance kept per error state.
 const VAR_MIN: f32 = 1.0e-14;
 
@@ -64,6 +68,8 @@ pub struct EskfCounters {
     pub covariance_resets: u32,
     /// Fix parts fused (position, velocity, heading and altitude each count one).
     pub fused: u32,
+    /// Position fixes fused.
+    pub pos_fused: u32,
 }
 
 /// The nominal state at one past step, for delayed fixes.
@@ -98,11 +104,13 @@ pub struct Eskf<const H: usize> {
     q: Quat<f32>,
     /// Gyro bias, FRD, rad/s.
     bg: Vector3<f32>,
-    /// Accelerometer bias on body z, m/s².
-    baz: f32,
+    /// Accelerometer bias, FRD, m/s².
+    ba: Vector3<f32>,
     cov: Cov,
     /// The last good IMU sample (what replaces a bad one).
     last_imu: Option<ImuSample>,
+    /// The sample the previous step was flown on.
+    prev_imu: Option<ImuSample>,
     hist: [Past; H],
     /// Index of the newest history entry.
     head: usize,
@@ -132,9 +140,10 @@ impl<const H: usize> Eskf<H> {
             v: Vector3::zeros(),
             q: Vector4::new(1.0, 0.0, 0.0, 0.0),
             bg: Vector3::zeros(),
-            baz: 0.0,
+            ba: Vector3::zeros(),
             cov: Cov::identity(),
             last_imu: None,
+            prev_imu: None,
             hist: [PAST_ZERO; H],
             head: 0,
             len: 0,
@@ -166,7 +175,7 @@ impl<const H: usize> Eskf<H> {
         self.v = est.vel_ned_mps;
         self.q = quat_normalize(&est.att);
         self.bg = Vector3::zeros();
-        self.baz = 0.0;
+        self.ba = Vector3::zeros();
         self.cov = self.initial_cov(&Vector3::repeat(pos_sigma_m), vel_sigma_mps, att_sigma_rad);
         self.mode = Mode::Running;
         self.len = 0;
@@ -184,7 +193,7 @@ impl<const H: usize> Eskf<H> {
         self.counters
     }
 
-    /// The error-state covariance `[δp δv δθ δb_g δb_az]` (m, m/s, rad, rad/s, m/s²).
+    /// The error-state covariance `[δp δv δθ δb_g δb_a]` (m, m/s, rad, rad/s, m/s²).
     pub fn covariance(&self) -> &SMatrix<f32, ERR, ERR> {
         &self.cov
     }
@@ -200,9 +209,9 @@ impl<const H: usize> Eskf<H> {
         libm::sqrtf(d[IP].max(d[IP + 1]).max(d[IP + 2]))
     }
 
-    /// Gyro bias (FRD, rad/s) and accelerometer z bias (m/s²) estimates.
-    pub fn biases(&self) -> (Vector3<f32>, f32) {
-        (self.bg, self.baz)
+    /// Gyro bias (FRD, rad/s) and accelerometer bias (FRD, m/s²) estimates.
+    pub fn biases(&self) -> (Vector3<f32>, Vector3<f32>) {
+        (self.bg, self.ba)
     }
 
     /// The estimate the controllers read: position, velocity, attitude, and
@@ -245,11 +254,17 @@ impl<const H: usize> Eskf<H> {
         let Some(s) = self.last_imu else {
             return Ok(());
         };
+        // The sample is held over the step; how much the signal moved since
+        // the one before says how far the truth may have moved within it.
+        let df = match self.prev_imu.replace(s) {
+            Some(p) => (s.accel_frd_mps2 - p.accel_frd_mps2).norm_squared(),
+            None => 0.0,
+        };
         let w = s.gyro_frd_radps - self.bg;
-        let f = s.accel_frd_mps2 - Vector3::new(0.0, 0.0, self.baz);
+        let f = s.accel_frd_mps2 - self.ba;
         let r = quat_to_rotation(&self.q);
         let f_ned = r * f;
-        self.propagate_covariance(&r, &f_ned, dt_s);
+        self.propagate_covariance(&r, &f_ned, dt_s, df);
         let acc = f_ned + Vector3::new(0.0, 0.0, self.cfg.gravity_mps2);
         self.p += self.v * dt_s + acc * (0.5 * dt_s * dt_s);
         self.v += acc * dt_s;
@@ -333,7 +348,7 @@ impl<const H: usize> Eskf<H> {
             self.counters.imu_rejected += 1;
             return false;
         }
-        if imu.accel_frd_mps2.amax() >= self.cfg.accel_range_mps2 {
+        if imu.accel_frd_mps2.amax() >= 0.999 * self.cfg.accel_range_mps2 {
             self.counters.imu_clipped += 1;
             // The rates are good; the specific force is not.
             if let Some(last) = self.last_imu.as_mut() {
@@ -363,7 +378,7 @@ impl<const H: usize> Eskf<H> {
         self.p = pos;
         self.v = Vector3::zeros();
         self.bg = self.align_w / n;
-        self.baz = 0.0;
+        self.ba = Vector3::zeros();
         let c = self.cfg;
         self.cov = self.initial_cov(&pos_sigma, c.init_vel_sigma_mps, c.init_att_sigma_rad);
         self.mode = Mode::Running;
@@ -379,28 +394,41 @@ impl<const H: usize> Eskf<H> {
             d[IV + i] = vel_sigma * vel_sigma;
             d[ITH + i] = att_sigma * att_sigma;
             d[IBG + i] = c.init_gyro_bias_sigma * c.init_gyro_bias_sigma;
+            d[IBA + i] = c.init_accel_bias_sigma_xy * c.init_accel_bias_sigma_xy;
         }
-        d[IBA] = c.init_accel_bias_sigma * c.init_accel_bias_sigma;
+        d[IBA + 2] = c.init_accel_bias_sigma_z * c.init_accel_bias_sigma_z;
         Cov::from_diagonal(&d)
     }
 
     /// `P ← F P Fᵀ + Q` with `F = I + A·dt` applied as its four non-zero
-    /// blocks (`δṗ = δv`, `δv̇ = −[f]× δθ − R e₃ δb_az`, `δθ̇ = −R δb_g`):
+    /// blocks (`δṗ = δv`, `δv̇ = −[f]× δθ − R δb_a`, `δθ̇ = −R δb_g`):
     /// `F (F P)ᵀ` is `F P Fᵀ` for a symmetric `P`.
-    fn propagate_covariance(&mut self, r: &Matrix3<f32>, f_ned: &Vector3<f32>, dt: f32) {
+    ///
+    /// `Q` is the IMU's white noise and bias walks, plus the hold's own
+    /// error: the specific force may have moved within the step by as much
+    /// as it moved between the last two samples (`df`: the squared norm of
+    /// that change less what the white noise explains), a uniform
+    /// `(Δf·dt)²/3` on velocity. (Thrust steps of a controller land between
+    /// samples; the same term for the rates made the attitude worse, not
+    /// more consistent, and is not used.)
+    fn propagate_covariance(&mut self, r: &Matrix3<f32>, f_ned: &Vector3<f32>, dt: f32, df: f32) {
         apply_transition(&mut self.cov, r, f_ned, dt);
         self.cov.transpose_mut();
         apply_transition(&mut self.cov, r, f_ned, dt);
         let c = &self.cfg;
-        let qv = c.accel_noise * c.accel_noise * dt;
+        // The part of a change that the samples' own white noise explains
+        // (2 samples × 3 axes × density²/dt) is not a change of the signal.
+        let df = (df - 6.0 * c.accel_noise * c.accel_noise / dt).max(0.0);
+        let qv = c.accel_noise * c.accel_noise * dt + df * dt * dt / 3.0;
         let qth = c.gyro_noise * c.gyro_noise * dt;
         let qbg = c.gyro_bias_walk * c.gyro_bias_walk * dt;
+        let qba = c.accel_bias_walk * c.accel_bias_walk * dt;
         for i in 0..3 {
             self.cov[(IV + i, IV + i)] += qv;
             self.cov[(ITH + i, ITH + i)] += qth;
             self.cov[(IBG + i, IBG + i)] += qbg;
+            self.cov[(IBA + i, IBA + i)] += qba;
         }
-        self.cov[(IBA, IBA)] += c.accel_bias_walk * c.accel_bias_walk * dt;
         self.condition();
     }
 
@@ -460,6 +488,7 @@ impl<const H: usize> Eskf<H> {
         }
         if pos {
             self.rejected_run = 0;
+            self.counters.pos_fused += 1;
         }
         for i in 0..3 {
             let mut h = ErrVec::zeros();
@@ -470,16 +499,23 @@ impl<const H: usize> Eskf<H> {
         self.counters.fused += 1;
     }
 
-    /// Believes the fix: moves the position by the innovation and forgets
-    /// what the filter knew of its position (counted).
+    /// Believes the fix: moves the position by the innovation, forgets what
+    /// the filter knew of its position and velocity (a filter that lost its
+    /// fixes has lost both), and widens its attitude uncertainty so that the
+    /// fixes that follow can correct a tilt that caused the drift (counted).
     fn reset_position(&mut self, y: &Vector3<f32>, sigma: &Vector3<f32>) {
         self.p += y;
+        let vel_var = RESET_VEL_SIGMA_MPS * RESET_VEL_SIGMA_MPS;
         for i in 0..3 {
             for j in 0..ERR {
                 self.cov[(IP + i, j)] = 0.0;
                 self.cov[(j, IP + i)] = 0.0;
+                self.cov[(IV + i, j)] = 0.0;
+                self.cov[(j, IV + i)] = 0.0;
             }
             self.cov[(IP + i, IP + i)] = sigma[i] * sigma[i];
+            self.cov[(IV + i, IV + i)] = vel_var;
+            self.cov[(ITH + i, ITH + i)] += RESET_ATT_SIGMA_RAD * RESET_ATT_SIGMA_RAD;
         }
         self.rejected_run = 0;
         self.counters.pos_resets += 1;
@@ -525,7 +561,7 @@ impl<const H: usize> Eskf<H> {
         let dth: Vector3<f32> = dx.fixed_rows::<3>(ITH).into_owned();
         self.q = quat_normalize(&quat_mul(&rotation_quat(&dth), &self.q));
         self.bg += dx.fixed_rows::<3>(IBG);
-        self.baz += dx[IBA];
+        self.ba += dx.fixed_rows::<3>(IBA);
     }
 
     /// Symmetric, with its diagonal in `[VAR_MIN, VAR_MAX]`; re-initialised
@@ -557,12 +593,13 @@ fn apply_transition(m: &mut Cov, r: &Matrix3<f32>, f_ned: &Vector3<f32>, dt: f32
         let vel = Vector3::new(c[IV], c[IV + 1], c[IV + 2]);
         let th = Vector3::new(c[ITH], c[ITH + 1], c[ITH + 2]);
         let bg = Vector3::new(c[IBG], c[IBG + 1], c[IBG + 2]);
-        let ba = c[IBA];
+        let ba = Vector3::new(c[IBA], c[IBA + 1], c[IBA + 2]);
         let fxth = f_ned.cross(&th);
         let rbg = r * bg;
+        let rba = r * ba;
         for i in 0..3 {
             c[IP + i] += dt * vel[i];
-            c[IV + i] -= dt * (fxth[i] + r[(i, 2)] * ba);
+            c[IV + i] -= dt * (fxth[i] + rba[i]);
             c[ITH + i] -= dt * rbg[i];
         }
     }
@@ -636,7 +673,7 @@ mod transition_tests {
         d.fixed_rows_mut::<3>(ITH)
             .copy_from(&(Vector3::new(dq[1], dq[2], dq[3]) * s));
         d.fixed_rows_mut::<3>(IBG).copy_from(&(b.bg - a.bg));
-        d[IBA] = b.baz - a.baz;
+        d.fixed_rows_mut::<3>(IBA).copy_from(&(b.ba - a.ba));
         d
     }
 
@@ -654,7 +691,7 @@ mod transition_tests {
         };
         base.start_at(&est, 0.1, 0.1, 0.1).unwrap();
         base.bg = Vector3::new(0.01, -0.02, 0.03);
-        base.baz = 0.2;
+        base.ba = Vector3::new(0.05, -0.03, 0.2);
         let imu = ImuSample {
             gyro_frd_radps: Vector3::new(0.7, -0.4, 0.9),
             accel_frd_mps2: Vector3::new(1.5, -2.0, -11.0),
@@ -671,7 +708,7 @@ mod transition_tests {
             b.predict(&imu, dt).unwrap();
             let got = difference(&a, &b);
             let r = quat_to_rotation(&base.q);
-            let f_ned = r * (imu.accel_frd_mps2 - Vector3::new(0.0, 0.0, base.baz));
+            let f_ned = r * (imu.accel_frd_mps2 - base.ba);
             let mut m = Cov::zeros();
             m.set_column(0, &dx);
             apply_transition(&mut m, &r, &f_ned, dt);

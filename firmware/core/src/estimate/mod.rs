@@ -7,8 +7,9 @@
 //!
 //! - **nominal state**: position and velocity (NED, m, m/s), attitude (unit
 //!   quaternion body FRD → NED), gyro bias (FRD, rad/s), accelerometer bias
-//!   on the body z axis (m/s²);
-//! - **error state** (13): `[δp δv δθ δb_g δb_az]`, with the attitude error
+//!   (FRD, m/s²; its horizontal part is observable only as the vehicle
+//!   turns, and the filter says so: its tilt σ stays at that bias' σ/g);
+//! - **error state** (15): `[δp δv δθ δb_g δb_a]`, with the attitude error
 //!   a small rotation vector in NED (`q_true = exp(δθ) ⊗ q̂`), so that the
 //!   gyro and accelerometer noise are isotropic in it;
 //! - **propagation** with every IMU sample at the control rate (specific
@@ -90,11 +91,12 @@ pub struct EskfConfig {
     pub accel_noise: f32,
     /// Gyro bias random walk, rad/s/√s.
     pub gyro_bias_walk: f32,
-    /// Accelerometer (z) bias random walk, m/s²/√s.
+    /// Accelerometer bias random walk, m/s²/√s.
     pub accel_bias_walk: f32,
     /// Gyro range: a sample beyond it (any axis) is out of range, rad/s.
     pub gyro_range_radps: f32,
-    /// Accelerometer range: a sample at or beyond it has clipped, m/s².
+    /// Accelerometer range: a sample within 0.1 % of it (any axis) has
+    /// clipped (a saturated sensor reads its full scale), m/s².
     pub accel_range_mps2: f32,
     /// Innovation gate: a fix whose normalised innovation exceeds this
     /// many σ (per scalar; the position triple jointly) is rejected.
@@ -111,8 +113,11 @@ pub struct EskfConfig {
     pub init_vel_sigma_mps: f32,
     /// 1σ of the initial gyro bias, rad/s.
     pub init_gyro_bias_sigma: f32,
-    /// 1σ of the initial accelerometer z bias, m/s².
-    pub init_accel_bias_sigma: f32,
+    /// 1σ of the initial accelerometer bias on body x and y (the residual
+    /// after a level calibration), m/s².
+    pub init_accel_bias_sigma_xy: f32,
+    /// 1σ of the initial accelerometer bias on body z, m/s².
+    pub init_accel_bias_sigma_z: f32,
     /// Gravity, m/s².
     pub gravity_mps2: f32,
 }
@@ -126,14 +131,15 @@ impl EskfConfig {
         gyro_bias_walk: 2.0e-5,
         accel_bias_walk: 2.0e-4,
         gyro_range_radps: 2000.0 * core::f32::consts::PI / 180.0,
-        accel_range_mps2: 24.0 * 9.81,
+        accel_range_mps2: 24.0 * 9.80665,
         gate_sigma: 5.0,
-        reset_after_rejections: 100,
+        reset_after_rejections: 20,
         align_samples: 25,
         init_att_sigma_rad: 0.02,
         init_vel_sigma_mps: 0.1,
         init_gyro_bias_sigma: 0.01,
-        init_accel_bias_sigma: 0.2,
+        init_accel_bias_sigma_xy: 0.03,
+        init_accel_bias_sigma_z: 0.2,
         gravity_mps2: 9.81,
     };
 
@@ -150,7 +156,8 @@ impl EskfConfig {
             ("init_att_sigma_rad", self.init_att_sigma_rad),
             ("init_vel_sigma_mps", self.init_vel_sigma_mps),
             ("init_gyro_bias_sigma", self.init_gyro_bias_sigma),
-            ("init_accel_bias_sigma", self.init_accel_bias_sigma),
+            ("init_accel_bias_sigma_xy", self.init_accel_bias_sigma_xy),
+            ("init_accel_bias_sigma_z", self.init_accel_bias_sigma_z),
             ("gravity_mps2", self.gravity_mps2),
         ];
         for (name, v) in fields {
