@@ -217,6 +217,9 @@ pub struct Readings {
     pub dt_s: f64,
 }
 
+/// Gyro (rad/s) and accelerometer (m/s²) biases, FRD.
+pub type Biases = (Vector3<f64>, Vector3<f64>);
+
 /// The sensors of one flight.
 #[derive(Debug, Clone)]
 pub struct Sensors {
@@ -229,9 +232,9 @@ pub struct Sensors {
     baro_drift: f64,
     /// The sample taken at the previous step (delivered now) and the
     /// biases it was taken with.
-    prev: Option<(ImuSample, (Vector3<f64>, Vector3<f64>))>,
+    prev: Option<(ImuSample, Biases)>,
     /// The biases of the sample delivered last.
-    delivered_bias: (Vector3<f64>, Vector3<f64>),
+    delivered_bias: Biases,
     in_transit: VecDeque<(u64, Fix)>,
     step: u64,
     outlier_done: bool,
@@ -370,7 +373,7 @@ impl Sensors {
         let every = |p: f64| (p / dt).round() as u64;
         let faults = self.cfg.faults;
         let in_outage = faults.outage.is_some_and(|(s, l)| t >= s && t < s + l);
-        if self.step % every(fm.period_s) == 0 && !in_outage {
+        if self.step.is_multiple_of(every(fm.period_s)) && !in_outage {
             let sig = Vector3::new(fm.pos_sigma_h_m, fm.pos_sigma_h_m, fm.pos_sigma_v_m);
             let mut p = pos + self.noise3(sig);
             if faults.outlier_at_s.is_some_and(|at| t >= at) && !self.outlier_done {
@@ -397,13 +400,13 @@ impl Sensors {
         let mut side = Fix::EMPTY;
         if let Some(b) = fm.baro {
             self.baro_drift += b.drift_mpsqrts * dt.sqrt() * self.g.normal();
-            if self.step % every(b.period_s) == 0 {
+            if self.step.is_multiple_of(every(b.period_s)) {
                 side.alt_m = Some((-pos[2] + self.baro_drift + b.sigma_m * self.g.normal()) as f32);
                 side.alt_sigma_m = b.sigma_m as f32;
             }
         }
         if let Some(m) = fm.mag {
-            if self.step % every(m.period_s) == 0 {
+            if self.step.is_multiple_of(every(m.period_s)) {
                 side.yaw_rad = Some(fc_core::control::wrap_pi(yaw + m.sigma_rad * self.g.normal()) as f32);
                 side.yaw_sigma_rad = m.sigma_rad as f32;
             }

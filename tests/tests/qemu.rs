@@ -51,8 +51,16 @@ fn every_controller_fits_its_cycle_budget() {
         .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
         .collect();
     // 4 PD/LQR variants × (control, loop) + 4 MPC variants × (control,
-    // guaranteed, certified, 1 QP iteration, loop).
-    assert_eq!(rows.len(), 28, "{out}");
+    // guaranteed, certified, 1 QP iteration, loop) + the estimator.
+    assert_eq!(rows.len(), 29, "{out}");
+    // The estimator of sensor flights: one predict and one fix update per
+    // step at 1 kHz, within the 20 000 instructions.
+    let est = rows
+        .iter()
+        .find(|r| r[0] == "estimator (ESKF)")
+        .expect("the estimator row");
+    let est_instr: f64 = est[4].parse().unwrap_or_else(|_| panic!("{est:?}"));
+    assert!(est_instr <= 20_000.0, "estimator step {est_instr} instructions: {out}");
     for r in &rows {
         let instr: f64 = r[4].parse().unwrap_or_else(|_| panic!("row {r:?}"));
         let budget: f64 = r[5].parse().unwrap();

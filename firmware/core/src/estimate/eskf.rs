@@ -308,10 +308,7 @@ impl<const H: usize> Eskf<H> {
             let (r00, r10, r20) = (r[(0, 0)], r[(1, 0)], r[(2, 0)]);
             let n = (r00 * r00 + r10 * r10).max(1e-6);
             // ∂ψ/∂δθ for a rotation δθ in NED (docs/model.md §11).
-            let mut h = ErrVec::zeros();
-            h[ITH] = -r20 * r00 / n;
-            h[ITH + 1] = -r20 * r10 / n;
-            h[ITH + 2] = 1.0;
+            let h = [(ITH, -r20 * r00 / n), (ITH + 1, -r20 * r10 / n), (ITH + 2, 1.0)];
             let y = crate::control::wrap_pi(yaw - quat_to_euler(&past.q)[2]);
             let sig = fix.yaw_sigma_rad;
             if self.scalar_update(&mut dx, &h, y, sig * sig) {
@@ -321,8 +318,7 @@ impl<const H: usize> Eskf<H> {
             }
         }
         if let Some(alt) = fix.alt_m {
-            let mut h = ErrVec::zeros();
-            h[IP + 2] = -1.0;
+            let h = [(IP + 2, -1.0)];
             let sig = fix.alt_sigma_m;
             if self.scalar_update(&mut dx, &h, alt + past.p[2], sig * sig) {
                 self.counters.fused += 1;
@@ -491,10 +487,8 @@ impl<const H: usize> Eskf<H> {
             self.counters.pos_fused += 1;
         }
         for i in 0..3 {
-            let mut h = ErrVec::zeros();
-            h[at + i] = 1.0;
-            // Gated jointly above: the scalar gate is only a safety net.
-            let _ = self.scalar_update_ungated(dx, &h, y[i], sigma[i] * sigma[i]);
+            // Gated jointly above.
+            let _ = self.scalar_update_ungated(dx, &[(at + i, 1.0)], y[i], sigma[i] * sigma[i]);
         }
         self.counters.fused += 1;
     }
@@ -521,11 +515,21 @@ impl<const H: usize> Eskf<H> {
         self.counters.pos_resets += 1;
     }
 
-    /// One gated scalar update; `false` (nothing changed) if outside the gate.
-    fn scalar_update(&mut self, dx: &mut ErrVec, h: &ErrVec, y: f32, r: f32) -> bool {
-        let ph = self.cov * h;
-        let s = h.dot(&ph) + r;
-        let innov = y - h.dot(dx);
+    /// `P hᵀ` for a sparse measurement row `h` (index, coefficient).
+    fn cov_h(&self, h: &[(usize, f32)]) -> ErrVec {
+        let mut ph = ErrVec::zeros();
+        for &(j, c) in h {
+            ph += self.cov.column(j) * c;
+        }
+        ph
+    }
+
+    /// One gated scalar update with the sparse row `h`; `false` (nothing
+    /// changed) if outside the gate.
+    fn scalar_update(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32) -> bool {
+        let ph = self.cov_h(h);
+        let s = sparse_dot(h, &ph) + r;
+        let innov = y - sparse_dot(h, dx);
         let gate = self.cfg.gate_sigma;
         if !(s > 0.0 && innov * innov <= gate * gate * s) {
             return false;
@@ -533,21 +537,29 @@ impl<const H: usize> Eskf<H> {
         self.apply_gain(dx, &ph, s, innov)
     }
 
-    fn scalar_update_ungated(&mut self, dx: &mut ErrVec, h: &ErrVec, y: f32, r: f32) -> bool {
-        let ph = self.cov * h;
-        let s = h.dot(&ph) + r;
-        let innov = y - h.dot(dx);
+    fn scalar_update_ungated(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32) -> bool {
+        let ph = self.cov_h(h);
+        let s = sparse_dot(h, &ph) + r;
+        let innov = y - sparse_dot(h, dx);
         s > 0.0 && self.apply_gain(dx, &ph, s, innov)
     }
 
-    /// `K = P hᵀ / s`, `δx += K·innov`, `P −= K (P hᵀ)ᵀ`.
+    /// `K = P hᵀ / s`, `δx += K·innov`, `P −= K (P hᵀ)ᵀ` (symmetric: the
+    /// lower triangle is computed and mirrored).
     fn apply_gain(&mut self, dx: &mut ErrVec, ph: &ErrVec, s: f32, innov: f32) -> bool {
         if !(s.is_finite() && innov.is_finite()) {
             return false;
         }
         let k = ph / s;
         *dx += k * innov;
-        self.cov -= k * ph.transpose();
+        for j in 0..ERR {
+            let pj = ph[j];
+            for i in j..ERR {
+                let v = self.cov[(i, j)] - k[i] * pj;
+                self.cov[(i, j)] = v;
+                self.cov[(j, i)] = v;
+            }
+        }
         true
     }
 
@@ -583,6 +595,11 @@ impl<const H: usize> Eskf<H> {
             self.cov[(i, i)] = d.clamp(VAR_MIN, VAR_MAX);
         }
     }
+}
+
+/// `h · v` for a sparse row `h`.
+fn sparse_dot(h: &[(usize, f32)], v: &ErrVec) -> f32 {
+    h.iter().map(|&(j, c)| c * v[j]).sum()
 }
 
 /// `M ← F M` for `F = I + A·dt`, column by column, in place: each row

@@ -51,6 +51,7 @@ mod target {
         AnyController, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
         StateEstimate, SPECS,
     };
+    use fc_core::estimate::{Eskf, EskfConfig, Fix, ImuSample};
     use fc_core::{euler_to_quat, VehicleParams};
     use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
     use fc_proto::{encode, ToFc, MAX_FRAME, PROTOCOL_VERSION};
@@ -141,6 +142,60 @@ mod target {
         // SAFETY: as for `slot`.
         let s = unsafe { &mut *core::ptr::addr_of_mut!(CORE) };
         s.insert(FlightCore::unstarted(cfg))
+    }
+
+    /// The estimator of the `estimator` row, in static RAM as the image's would be.
+    static mut NAV: Option<Eskf<{ fc_loop::nav::HISTORY }>> = None;
+
+    /// Largest instructions of one estimator step allowed (the bound).
+    const ESTIMATOR_BUDGET: u32 = 20_000;
+
+    /// Worst instructions of one estimator step at 1 kHz: predict with an
+    /// IMU sample (pseudo-random rates up to 1 rad/s, specific force −g ± 2
+    /// m/s² per axis) and fuse a mocap fix (position and heading, 10 ms old)
+    /// at every step — the worst case: a real mocap fix arrives every tenth.
+    #[inline(never)]
+    fn estimator_worst(clock: &SysTickClock) -> Option<u32> {
+        // SAFETY: as for `slot`.
+        let nav = unsafe { &mut *core::ptr::addr_of_mut!(NAV) };
+        let f = nav.insert(Eskf::new(EskfConfig::BMI088).ok()?);
+        let rest = ImuSample {
+            gyro_frd_radps: Vector3::zeros(),
+            accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+        };
+        let fix = |p: Vector3<f32>, yaw: f32| Fix {
+            age_s: 0.01,
+            pos_ned_m: Some(p),
+            pos_sigma_m: Vector3::repeat(0.002),
+            yaw_rad: Some(yaw),
+            yaw_sigma_rad: 0.0087,
+            ..Fix::EMPTY
+        };
+        for _ in 0..30 {
+            f.predict(&rest, 0.001).ok()?;
+        }
+        f.fuse(&fix(Vector3::new(0.0, 0.0, -1.0), 0.2)).ok()?;
+        // History for the fixes' 10 ms of latency.
+        for _ in 0..20 {
+            f.predict(&rest, 0.001).ok()?;
+        }
+        let mut rng = Lcg(11);
+        let mut worst = 0u32;
+        for _ in 0..STEPS {
+            let v = |rng: &mut Lcg, s: f32| Vector3::new(s * rng.next(), s * rng.next(), s * rng.next());
+            let imu = ImuSample {
+                gyro_frd_radps: v(&mut rng, 1.0),
+                accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81) + v(&mut rng, 2.0),
+            };
+            let e = f.estimate().ok()?;
+            let z = e.pos_ned_m + v(&mut rng, 0.004);
+            let yaw = e.euler()[2] + 0.01 * rng.next();
+            let t0 = clock.now();
+            f.predict(&imu, 0.001).ok()?;
+            f.fuse(&fix(z, yaw)).ok()?;
+            worst = worst.max(clock.since(t0));
+        }
+        Some(instructions(worst))
     }
 
     /// The `loop` rows' byte link (its 4 KiB queue is static RAM, as the
@@ -439,6 +494,27 @@ mod target {
             }
             let m = with_stack(|| loop_worst(id, dt, spec.preview(), &clock));
             check(name, form, hz, "loop", m);
+        }
+        // The estimator of sensor flights: one predict and one fix update per
+        // 1 kHz step, against the whole budget and against its own bound.
+        let m = with_stack(|| estimator_worst(&clock));
+        ok &= check("estimator (ESKF)", "15 states", 1000, "predict + fix update", m);
+        match m.0 {
+            Some(w) if w <= ESTIMATOR_BUDGET => {
+                hprintln!(
+                    "budget: estimator {} instructions per step, within its {}",
+                    w,
+                    ESTIMATOR_BUDGET
+                )
+            }
+            w => {
+                hprintln!(
+                    "budget: estimator {:?} instructions per step, OVER its {}",
+                    w,
+                    ESTIMATOR_BUDGET
+                );
+                ok = false;
+            }
         }
         let static_ram = core::ptr::addr_of!(__sheap) as usize - core::ptr::addr_of!(__sdata) as usize;
         hprintln!(
