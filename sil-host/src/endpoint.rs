@@ -20,8 +20,10 @@ pub struct NavReport {
     pub estimate: Option<StateEstimate<f32>>,
     /// Gyro (rad/s) and accelerometer (m/s²) bias estimates, FRD.
     pub biases: (Vector3<f32>, Vector3<f32>),
-    /// The error-state covariance `[δp δv δθ δb_g δb_a]`.
-    pub covariance: SMatrix<f32, ERR, ERR>,
+    /// The error-state covariance `[δp δv δθ δb_g δb_a]` (in-process only).
+    pub covariance: Option<SMatrix<f32, ERR, ERR>>,
+    /// Its diagonal's square roots (NaN where the endpoint does not report them).
+    pub sigmas: [f32; ERR],
     /// What the estimator refused or repaired so far.
     pub counters: EskfCounters,
     /// Failsafe episodes so far.
@@ -182,7 +184,14 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
     ) -> anyhow::Result<StepReport> {
-        let dt = readings.dt_s;
+        // The step and the fixes' ages as the flight controller gets them
+        // over the wire (µs), so that both compute with the same numbers.
+        let dt = ((readings.dt_s * 1e6).round() as u64) as f32 * 1e-6;
+        let fixes: Vec<_> = readings
+            .fixes
+            .iter()
+            .map(|f| fc_loop::fix_from_wire(&fc_loop::fix_to_wire(f)))
+            .collect();
         let nav = match self.nav.as_mut() {
             Some(n) => n,
             None => self
@@ -192,7 +201,7 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
         let now_us = (t * 1e6).round() as u64;
         let t0 = Instant::now();
         let mode = nav
-            .step(now_us, dt as f32, &readings.imu, &readings.fixes)
+            .step(now_us, dt, &readings.imu, &fixes)
             .map_err(|e| anyhow::anyhow!("estimator step at t = {t:.3} s: {e}"))?;
         let est = nav.estimate();
         let nav_cost = t0.elapsed().as_nanos() as f64;
@@ -201,7 +210,8 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
             mode,
             estimate: est,
             biases: nav.estimator().biases(),
-            covariance: *nav.estimator().covariance(),
+            covariance: Some(*nav.estimator().covariance()),
+            sigmas: nav.estimator().sigmas().into(),
             counters: nav.counters(),
             failsafe_entries: nav.failsafe_entries(),
         };

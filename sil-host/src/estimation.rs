@@ -47,7 +47,7 @@ pub struct EstimationResult {
     pub rms_vel_mps: f64,
     /// Largest position error (3-D), m.
     pub max_pos_m: f64,
-    /// Mean NEES (15 for a consistent filter).
+    /// Mean NEES (15 for a consistent filter); NaN without a covariance (remote targets).
     pub nees_mean: f64,
     /// Mean NEES of each block: position, velocity, attitude, gyro bias,
     /// accelerometer bias (3 for a consistent filter).
@@ -96,18 +96,20 @@ pub fn sample(
     let qt = Vector4::new(truth[6], truth[7], truth[8], truth[9]);
     let dth = attitude_error(&qt, &e.att.cast());
     err.fixed_rows_mut::<3>(6).copy_from(&dth);
-    let p: SMatrix<f64, ERR, ERR> = r.covariance.cast();
-    let nees = match p.cholesky() {
-        Some(c) => err.dot(&c.solve(&err)),
-        None => f64::NAN,
-    };
-    let sigma = p.diagonal().map(|v| v.max(0.0).sqrt());
+    let sigma = SVector::<f64, ERR>::from(r.sigmas.map(f64::from));
+    let mut nees = f64::NAN;
     let mut nees_blocks = [f64::NAN; 5];
-    for (b, out) in nees_blocks.iter_mut().enumerate() {
-        let pb = p.fixed_view::<3, 3>(3 * b, 3 * b).into_owned();
-        let eb = err.fixed_rows::<3>(3 * b).into_owned();
-        if let Some(c) = pb.cholesky() {
-            *out = eb.dot(&c.solve(&eb));
+    if let Some(cov) = r.covariance {
+        let p: SMatrix<f64, ERR, ERR> = cov.cast();
+        if let Some(c) = p.cholesky() {
+            nees = err.dot(&c.solve(&err));
+        }
+        for (b, out) in nees_blocks.iter_mut().enumerate() {
+            let pb = p.fixed_view::<3, 3>(3 * b, 3 * b).into_owned();
+            let eb = err.fixed_rows::<3>(3 * b).into_owned();
+            if let Some(c) = pb.cholesky() {
+                *out = eb.dot(&c.solve(&eb));
+            }
         }
     }
     Some(EstSample {
@@ -166,8 +168,9 @@ impl EstimationAccumulator {
             rms_pos_m: (self.sum_pos / n).sqrt(),
             rms_vel_mps: (self.sum_vel / n).sqrt(),
             max_pos_m: self.max_pos,
-            nees_mean: self.sum_nees / self.n_nees.max(1) as f64,
-            nees_blocks_mean: self.sum_blocks.map(|v| v / self.n_nees.max(1) as f64),
+            // NaN (null in JSON) where the endpoint reports no covariance.
+            nees_mean: self.sum_nees / self.n_nees as f64,
+            nees_blocks_mean: self.sum_blocks.map(|v| v / self.n_nees as f64),
             trace,
             counters: self.counters,
         }

@@ -392,7 +392,9 @@ pub fn fly_endpoint<E: Endpoint>(
     let mut total_it = 0u64;
     let mut failing_since: Option<f64> = None;
     // The plant starts in hover: until the first output, hold its inputs.
-    let mut u = fc_core::hover_input(&cfg.vehicle);
+    // (In f32, as the flight controller computes it: an aligning estimator
+    // holds the same command in-process and on the image.)
+    let mut u = fc_core::hover_input(&cfg.vehicle.cast::<f32>()).cast::<f64>();
     for i in 0..=ticks {
         let t = i as f64 * tick;
         let r = sc.reference(t);

@@ -200,8 +200,8 @@ struct FlyArgs {
     noise_seed: u64,
     /// What the controller flies on: `ekf` (simulated IMU and fixes through the on-board
     /// error-state Kalman filter) or `truth` (the true state, or --noise's version of it).
-    /// Default: `ekf` in-process; `truth` where ekf cannot run (remote targets until the wire
-    /// protocol carries IMU and fix messages, controllers slower than 50 Hz, --noise), with a note.
+    /// Default: `ekf`, on every target (IMU and fix messages over the wire, protocol v4); `truth`
+    /// where ekf cannot run (controllers slower than 50 Hz, --noise), with a note.
     #[arg(long, value_enum, value_name = "EST")]
     estimator: Option<EstimatorArg>,
     /// Position source of `--estimator ekf`: `mocap` (100 Hz, 2 mm, 10 ms, with heading) or `gps`
@@ -588,9 +588,8 @@ fn sensors_for(a: &FlyArgs, cfg: &FlightConfig, exec: &Target) -> Result<Option<
         _ => None,
     }
     .unwrap_or(1.0 / cfg.control_hz);
-    let why_not = if *exec != Target::InProcess {
-        Some("remote targets fly the true state until the wire protocol carries IMU and fix messages")
-    } else if cfg.noise.is_some() {
+    let _ = exec;
+    let why_not = if cfg.noise.is_some() {
         Some("--noise perturbs the true state")
     } else if period > 0.02 {
         Some("this controller runs slower than 50 Hz, too slow to integrate an IMU")

@@ -30,10 +30,14 @@ use fc_core::control::{
     AnyController, ControlError, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
     StateEstimate,
 };
+use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::{AttitudeForm, Input, QuatState, VehicleParams};
-use fc_proto::{encode, Counters, FrameDecoder, FrameError, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
+use fc_proto::{
+    encode, Counters, FrameDecoder, FrameError, FromFc, ToFc, WireFix, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION,
+};
 use hal_shim::{ByteLink, CycleClock};
 use nalgebra::{Vector3, Vector4};
+use nav::{NavMode, Navigator};
 
 /// Loop settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -201,6 +205,46 @@ pub struct FlightCore {
     failsafe: bool,
     u: Input<f32>,
     selections: u32,
+    /// The estimator of `Imu` steps (sensor flights).
+    nav: Navigator,
+    /// Fixes received since the last `Imu` step, fused at the next.
+    fixes: heapless::Vec<Fix, MAX_PENDING_FIXES>,
+    /// The estimator's failsafe flew the last `Imu` step.
+    nav_failsafe: bool,
+}
+
+/// Fixes held for the next `Imu` step; more are dropped and counted as
+/// `unexpected` (a host sends one or two per step).
+pub const MAX_PENDING_FIXES: usize = 4;
+
+/// A wire fix as the estimator's type.
+pub fn fix_from_wire(w: &WireFix) -> Fix {
+    Fix {
+        age_s: w.age_us as f32 * 1e-6,
+        pos_ned_m: w.pos.map(Vector3::from),
+        pos_sigma_m: Vector3::from(w.pos_sigma),
+        vel_ned_mps: w.vel.map(Vector3::from),
+        vel_sigma_mps: w.vel_sigma,
+        yaw_rad: w.yaw,
+        yaw_sigma_rad: w.yaw_sigma,
+        alt_m: w.alt,
+        alt_sigma_m: w.alt_sigma,
+    }
+}
+
+/// An estimator's fix on the wire (ages rounded to the µs).
+pub fn fix_to_wire(f: &Fix) -> WireFix {
+    WireFix {
+        age_us: (f.age_s.max(0.0) * 1e6 + 0.5) as u32,
+        pos: f.pos_ned_m.map(Into::into),
+        pos_sigma: f.pos_sigma_m.into(),
+        vel: f.vel_ned_mps.map(Into::into),
+        vel_sigma: f.vel_sigma_mps,
+        yaw: f.yaw_rad,
+        yaw_sigma: f.yaw_sigma_rad,
+        alt: f.alt_m,
+        alt_sigma: f.alt_sigma_m,
+    }
 }
 
 impl FlightCore {
@@ -236,7 +280,15 @@ impl FlightCore {
             failsafe: false,
             u: Vector4::zeros(),
             selections: 0,
+            nav: Navigator::bmi088(),
+            fixes: heapless::Vec::new(),
+            nav_failsafe: false,
         }
+    }
+
+    /// The estimator of sensor flights.
+    pub fn navigator(&self) -> &Navigator {
+        &self.nav
     }
 
     /// Designs the boot controller ([`BOOT_CONTROLLER`]) in place. On error
@@ -420,6 +472,9 @@ impl FlightCore {
                     self.last_t_us = None;
                     self.last_valid_us = None;
                     self.last_pos = None;
+                    self.nav.reset();
+                    self.fixes.clear();
+                    self.nav_failsafe = false;
                 }
                 Self::send(
                     link,
@@ -461,6 +516,133 @@ impl FlightCore {
                 Ok(())
             }
             ToFc::Sensor { seq, t_us, state } => self.on_sensor(seq, t_us, &state, link, clock, now_us),
+            ToFc::Fix(w) => {
+                if self.fixes.push(fix_from_wire(&w)).is_err() {
+                    self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
+                }
+                Ok(())
+            }
+            ToFc::Imu { seq, t_us, gyro, accel } => {
+                let imu = ImuSample {
+                    gyro_frd_radps: Vector3::from(gyro),
+                    accel_frd_mps2: Vector3::from(accel),
+                };
+                self.on_imu(seq, t_us, &imu, link, clock, now_us)
+            }
+        }
+    }
+
+    /// The sequence and time checks of a control step (`Sensor` or `Imu`):
+    /// `Some(now)` on the loop's clock if it is to be flown; `None` (counted)
+    /// if its `seq` or, in lockstep, its time does not increase or jumps.
+    fn accept_step(&mut self, seq: u32, t_us: u64, now_us: u64) -> Option<u64> {
+        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
+        let absurd_time = lockstep
+            && self
+                .last_t_us
+                .is_some_and(|last| t_us <= last || t_us - last > self.cfg.max_time_step_us);
+        if self.last_seq.is_some_and(|last| seq <= last) || absurd_time {
+            self.counters.out_of_order = self.counters.out_of_order.wrapping_add(1);
+            return None;
+        }
+        self.last_seq = Some(seq);
+        Some(if lockstep {
+            self.last_t_us = Some(t_us);
+            // The simulated time since the last valid step: past the
+            // timeout it was a failsafe episode, even if this frame ends it.
+            self.timeout_at(t_us);
+            t_us
+        } else {
+            now_us
+        })
+    }
+
+    /// One control step flown from an IMU sample: the estimator steps (with
+    /// the fixes received since the last step), then the controller flies
+    /// its estimate — the mission's setpoint, or the estimator's failsafe
+    /// hold-and-descend; while aligning, hover thrust and no torque. The
+    /// reply adds a `Nav` message with the estimate.
+    fn on_imu<L: ByteLink, C: CycleClock>(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        imu: &ImuSample,
+        link: &mut L,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), L::Error> {
+        let Some(now) = self.accept_step(seq, t_us, now_us) else {
+            return self.reply(seq, 0, 0, link);
+        };
+        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
+        let dt = self.period_us() as f32 * 1e-6;
+        let t0 = clock.now();
+        let stepped = self.nav.step(now, dt, imu, &self.fixes);
+        self.fixes.clear();
+        let mut iterations = 0u16;
+        match (stepped, self.nav.estimate()) {
+            (Ok(mode @ (NavMode::Navigating | NavMode::Failsafe)), Some(est)) => {
+                if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
+                    self.ctrl.resume();
+                    self.failsafe = false;
+                }
+                self.nav_failsafe = mode == NavMode::Failsafe;
+                let sp = self.nav.setpoint(now, &self.sp);
+                if self.nav_failsafe {
+                    // The failsafe's own reference, previewed as it will be.
+                    if let Some((n, h)) = self.ctrl.preview_request() {
+                        for k in 1..=n {
+                            let _ = self.ctrl.set_preview(k, &sp.extrapolate((k as f64 * h) as f32));
+                        }
+                    }
+                }
+                match self.ctrl.update(&est, &sp) {
+                    Ok(o) => {
+                        self.u = o.u;
+                        iterations = o.status.iterations;
+                        self.last_valid_us = Some(now);
+                    }
+                    Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
+                }
+            }
+            (Ok(_), _) => {
+                // Aligning at rest: hold hover thrust, no torque.
+                self.u = Vector4::new(self.params.hover_thrust_n(), 0.0, 0.0, 0.0);
+                self.nav_failsafe = false;
+                self.failsafe = false;
+                self.last_valid_us = Some(now);
+            }
+            (Err(_), _) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
+        }
+        let cycles = clock.since(t0);
+        self.reply(seq, cycles, iterations, link)?;
+        Self::send(link, &self.nav_message(seq))
+    }
+
+    /// The `Nav` message of step `seq`.
+    fn nav_message(&self, seq: u32) -> FromFc {
+        let (mode, est) = match (self.nav.mode(), self.nav.estimate()) {
+            (NavMode::Navigating, Some(e)) => (1, Some(e)),
+            (NavMode::Failsafe, Some(e)) => (2, Some(e)),
+            _ => (0, None),
+        };
+        let s = self.nav.estimator().sigmas();
+        let c = self.nav.counters();
+        FromFc::Nav {
+            seq,
+            mode,
+            pos: est.map_or([0.0; 3], |e| e.pos_ned_m.into()),
+            vel: est.map_or([0.0; 3], |e| e.vel_ned_mps.into()),
+            att: est.map_or([0.0; 4], |e| e.att.into()),
+            sigma: [s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]],
+            imu_rejected: c.imu_rejected.wrapping_add(c.imu_clipped),
+            fixes_rejected: c
+                .pos_rejected
+                .wrapping_add(c.vel_rejected)
+                .wrapping_add(c.yaw_rejected)
+                .wrapping_add(c.alt_rejected)
+                .wrapping_add(c.fix_invalid),
+            failsafe_entries: self.nav.failsafe_entries(),
         }
     }
 
@@ -475,27 +657,13 @@ impl FlightCore {
         now_us: u64,
     ) -> Result<(), L::Error> {
         let lockstep = self.cfg.time_base == TimeBase::Lockstep;
-        let absurd_time = lockstep
-            && self
-                .last_t_us
-                .is_some_and(|last| t_us <= last || t_us - last > self.cfg.max_time_step_us);
-        if self.last_seq.is_some_and(|last| seq <= last) || absurd_time {
+        let Some(now) = self.accept_step(seq, t_us, now_us) else {
             // Not flown, but answered (the held output, the counter in the
             // telemetry), so that a lockstep client waiting on this `seq`
             // does not block.
-            self.counters.out_of_order = self.counters.out_of_order.wrapping_add(1);
             return self.reply(seq, 0, 0, link);
-        }
-        self.last_seq = Some(seq);
-        let now = if lockstep {
-            self.last_t_us = Some(t_us);
-            // The simulated time since the last valid step: past the
-            // timeout it was a failsafe episode, even if this frame ends it.
-            self.timeout_at(t_us);
-            t_us
-        } else {
-            now_us
         };
+        self.nav_failsafe = false;
         let est = StateEstimate::from_quat_state(&QuatState::from_column_slice(state));
         let mut cycles = 0u32;
         let mut iterations = 0u16;
@@ -532,7 +700,7 @@ impl FlightCore {
             &FromFc::Actuator {
                 seq,
                 u,
-                failsafe: self.failsafe,
+                failsafe: self.failsafe || self.nav_failsafe,
             },
         )?;
         Self::send(
@@ -542,7 +710,7 @@ impl FlightCore {
                 cycles,
                 qp_iterations: iterations,
                 counters: self.counters,
-                failsafe: self.failsafe,
+                failsafe: self.failsafe || self.nav_failsafe,
             },
         )
     }

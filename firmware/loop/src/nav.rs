@@ -112,6 +112,30 @@ impl Navigator {
         })
     }
 
+    /// The default navigator (BMI088, the default failsafe), which cannot
+    /// fail: its settings are valid (`tests::the_default_settings_are_valid`).
+    pub fn bmi088() -> Self {
+        let cfg = NavConfig::default();
+        Self {
+            cfg,
+            eskf: Eskf::new_unchecked(cfg.eskf),
+            mode: NavMode::Aligning,
+            last_pos_us: None,
+            over_since_us: None,
+            failsafe_from: None,
+            entries: 0,
+        }
+    }
+
+    /// Forgets the flight (a new session is a new time line), in place.
+    pub fn reset(&mut self) {
+        self.eskf.reset();
+        self.mode = NavMode::Aligning;
+        self.last_pos_us = None;
+        self.over_since_us = None;
+        self.failsafe_from = None;
+    }
+
     /// One control step at time `now_us` (µs, increasing) of `dt_s` seconds:
     /// the IMU sample and the fixes that arrived. A refused fix is counted by
     /// the estimator and changes nothing; `Err` only for a bad step length.
@@ -198,5 +222,28 @@ impl Navigator {
     /// Times the failsafe began since start.
     pub fn failsafe_entries(&self) -> u32 {
         self.entries
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_settings_are_valid() {
+        assert_eq!(NavConfig::default().check(), Ok(()));
+        assert!(Navigator::new(NavConfig::default()).is_ok());
+    }
+
+    #[test]
+    fn bad_settings_are_named() {
+        let cfg = NavConfig {
+            dead_reckoning_limit_s: f32::NAN,
+            ..NavConfig::default()
+        };
+        assert_eq!(
+            Navigator::new(cfg).err(),
+            Some(EstimatorError::Config("dead_reckoning_limit_s"))
+        );
     }
 }

@@ -161,6 +161,51 @@ mod tests {
         }
     }
 
+    /// The largest messages of protocol v4, every optional part present and
+    /// every varint at its longest, fit one frame.
+    #[test]
+    fn the_largest_v4_messages_fit_a_frame() {
+        use crate::{FromFc, WireFix};
+        let mut out = [0u8; MAX_FRAME];
+        let fix = ToFc::Fix(WireFix {
+            age_us: u32::MAX,
+            pos: Some([1.5; 3]),
+            pos_sigma: [0.002; 3],
+            vel: Some([0.5; 3]),
+            vel_sigma: 0.05,
+            yaw: Some(1.0),
+            yaw_sigma: 0.01,
+            alt: Some(5.0),
+            alt_sigma: 0.1,
+        });
+        let imu = ToFc::Imu {
+            seq: u32::MAX,
+            t_us: u64::MAX,
+            gyro: [1.0; 3],
+            accel: [-9.81; 3],
+        };
+        for msg in [fix, imu] {
+            let n = encode(&msg, &mut out).unwrap();
+            assert_eq!(decode_all(&out[..n]), vec![Ok(msg)]);
+        }
+        let nav = FromFc::Nav {
+            seq: u32::MAX,
+            mode: 2,
+            pos: [1.0; 3],
+            vel: [1.0; 3],
+            att: [1.0, 0.0, 0.0, 0.0],
+            sigma: [0.1; 9],
+            imu_rejected: u32::MAX,
+            fixes_rejected: u32::MAX,
+            failsafe_entries: u32::MAX,
+        };
+        let n = encode(&nav, &mut out).unwrap();
+        assert!(n <= MAX_FRAME);
+        let mut d = FrameDecoder::<MAX_FRAME>::new();
+        let got: Vec<_> = out[..n].iter().filter_map(|&b| d.push::<FromFc>(b)).collect();
+        assert_eq!(got, vec![Ok(nav)]);
+    }
+
     #[test]
     fn corrupt_truncated_oversized_and_garbage_are_dropped() {
         let mut out = [0u8; MAX_FRAME];

@@ -45,7 +45,7 @@ pub use frame::{encode, FrameDecoder, FrameError, MAX_FRAME};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version; both ends must agree in the handshake.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// A setpoint on the wire: NED position, velocity, acceleration, jerk (SI),
 /// heading and heading rate (rad, rad/s).
@@ -111,6 +111,46 @@ pub enum ToFc {
         /// Echoed back.
         seq: u32,
     },
+    /// One IMU sample, body FRD, for control step `seq` (since protocol v4):
+    /// the flight controller estimates its state from these and the fixes,
+    /// and answers as for `Sensor`.
+    Imu {
+        /// Step number, strictly increasing (shared with `Sensor`).
+        seq: u32,
+        /// Time of this step, µs (the lockstep clock, as for `Sensor`).
+        t_us: u64,
+        /// Body rates (p, q, r), rad/s.
+        gyro: [f32; 3],
+        /// Specific force, m/s² (`(0, 0, −g)` at rest).
+        accel: [f32; 3],
+    },
+    /// A slow-sensor measurement, fused at the next `Imu` step (since
+    /// protocol v4). Absent parts are `None`; sigmas are 1σ.
+    Fix(WireFix),
+}
+
+/// A position/velocity/heading/altitude fix on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WireFix {
+    /// Time from the measurement to the `Imu` step it is fused at, µs.
+    pub age_us: u32,
+    /// Position, NED, m.
+    pub pos: Option<[f32; 3]>,
+    /// 1σ per position axis, m.
+    pub pos_sigma: [f32; 3],
+    /// Velocity, NED, m/s.
+    pub vel: Option<[f32; 3]>,
+    /// 1σ per velocity axis, m/s.
+    pub vel_sigma: f32,
+    /// Heading, rad.
+    pub yaw: Option<f32>,
+    /// 1σ of the heading, rad.
+    pub yaw_sigma: f32,
+    /// Barometric altitude (up), m.
+    pub alt: Option<f32>,
+    /// 1σ of the altitude, m.
+    pub alt_sigma: f32,
 }
 
 /// Error and frame counters the flight controller reports.
@@ -175,5 +215,27 @@ pub enum FromFc {
     Heartbeat {
         /// The host's sequence number.
         seq: u32,
+    },
+    /// The on-board estimate after an `Imu` step (since protocol v4).
+    Nav {
+        /// The step this describes.
+        seq: u32,
+        /// 0 aligning (no estimate: the fields are zero), 1 navigating, 2 failsafe.
+        mode: u8,
+        /// Position, NED, m.
+        pos: [f32; 3],
+        /// Velocity, NED, m/s.
+        vel: [f32; 3],
+        /// Attitude, body FRD → NED, scalar first.
+        att: [f32; 4],
+        /// 1σ of the error state's first nine: position (m), velocity
+        /// (m/s), attitude (rad, NED rotation vector).
+        sigma: [f32; 9],
+        /// IMU samples the estimator refused (NaN/∞, out of range, clipped).
+        imu_rejected: u32,
+        /// Fix parts the estimator refused (gate, bad values).
+        fixes_rejected: u32,
+        /// Failsafe episodes of the estimator.
+        failsafe_entries: u32,
     },
 }

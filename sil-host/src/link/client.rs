@@ -3,10 +3,13 @@
 //! TCP stream (`tcp:HOST:PORT`, e.g. `sil-host serve`, or QEMU's USART) —
 //! and [`Remote`], the flight [`Endpoint`] built on it.
 
-use crate::endpoint::{Endpoint, StepReport};
+use crate::endpoint::{Endpoint, NavReport, StepReport};
+use crate::sensors::Readings;
 use anyhow::{bail, Context, Result};
+use fc_core::control::StateEstimate;
 use fc_core::control::{ControllerSpec, Setpoint};
 use fc_core::QuatState;
+use fc_loop::nav::NavMode;
 use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
 use fc_proto::{encode, FrameDecoder, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
 use hal_shim::host::{LoopbackLink, MonotonicClock};
@@ -27,6 +30,41 @@ pub struct RemoteStep {
     pub failsafe: bool,
     /// The flight controller's frame and error counters after this step.
     pub counters: fc_proto::Counters,
+    /// The on-board estimate (`Imu` steps only).
+    pub nav: Option<NavMessage>,
+}
+
+/// The `Nav` answer of an `Imu` step, as received.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavMessage {
+    /// 0 aligning, 1 navigating, 2 failsafe.
+    pub mode: u8,
+    /// Position (NED, m), velocity (NED, m/s), attitude (scalar first).
+    pub pos: [f32; 3],
+    /// See `pos`.
+    pub vel: [f32; 3],
+    /// See `pos`.
+    pub att: [f32; 4],
+    /// 1σ of position, velocity, attitude.
+    pub sigma: [f32; 9],
+    /// Refused IMU samples, refused fix parts, failsafe episodes.
+    pub counts: [u32; 3],
+}
+
+/// What one control step sends as its measurement.
+#[derive(Debug, Clone, Copy)]
+pub enum StepInput<'a> {
+    /// The state (`Sensor`).
+    State(&'a [f32; 13]),
+    /// An IMU sample and the fixes that arrived (`Fix` frames, then `Imu`).
+    Imu {
+        /// Body rates, rad/s.
+        gyro: [f32; 3],
+        /// Specific force, m/s².
+        accel: [f32; 3],
+        /// Fixes, sent before the sample.
+        fixes: &'a [fc_proto::WireFix],
+    },
 }
 
 fn frame(m: &ToFc) -> Result<Vec<u8>> {
@@ -208,6 +246,20 @@ impl FcClient {
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
     ) -> Result<RemoteStep> {
+        self.step_with(seq, t_us, StepInput::State(state), sp, preview)
+    }
+
+    /// One lockstep control step with either measurement: setpoint (and
+    /// preview), then the state or the fixes and IMU sample of step `seq`,
+    /// and the flight controller's answer (with its `Nav` for an IMU step).
+    pub fn step_with(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        input: StepInput<'_>,
+        sp: &Setpoint<f32>,
+        preview: &[Setpoint<f32>],
+    ) -> Result<RemoteStep> {
         // The flight controller holds its setpoint: send it only when it
         // changes (a fixed target then costs one frame a step, not two).
         let w = setpoint_to_wire(sp);
@@ -221,12 +273,25 @@ impl FcClient {
                 sp: setpoint_to_wire(p),
             })?;
         }
-        self.send(&ToFc::Sensor {
-            seq,
-            t_us,
-            state: *state,
-        })?;
-        let mut out = None;
+        let want_nav = match input {
+            StepInput::State(state) => {
+                self.send(&ToFc::Sensor {
+                    seq,
+                    t_us,
+                    state: *state,
+                })?;
+                false
+            }
+            StepInput::Imu { gyro, accel, fixes } => {
+                for f in fixes {
+                    self.send(&ToFc::Fix(*f))?;
+                }
+                self.send(&ToFc::Imu { seq, t_us, gyro, accel })?;
+                true
+            }
+        };
+        let mut out: Option<RemoteStep> = None;
+        let mut telemetry = false;
         for _ in 0..8 {
             match self.receive()? {
                 FromFc::Actuator { seq: s, u, failsafe } if s == seq => {
@@ -236,7 +301,33 @@ impl FcClient {
                         qp_iterations: 0,
                         failsafe,
                         counters: Default::default(),
+                        nav: None,
                     });
+                }
+                FromFc::Nav {
+                    seq: s,
+                    mode,
+                    pos,
+                    vel,
+                    att,
+                    sigma,
+                    imu_rejected,
+                    fixes_rejected,
+                    failsafe_entries,
+                } if s == seq && want_nav => {
+                    let r = out
+                        .as_mut()
+                        .filter(|_| telemetry)
+                        .ok_or_else(|| anyhow::anyhow!("nav before the actuator and telemetry frames"))?;
+                    r.nav = Some(NavMessage {
+                        mode,
+                        pos,
+                        vel,
+                        att,
+                        sigma,
+                        counts: [imu_rejected, fixes_rejected, failsafe_entries],
+                    });
+                    return out.ok_or_else(|| anyhow::anyhow!("no actuator frame"));
                 }
                 FromFc::Telemetry {
                     seq: s,
@@ -245,11 +336,16 @@ impl FcClient {
                     counters,
                     ..
                 } if s == seq => {
-                    let mut r = out.ok_or_else(|| anyhow::anyhow!("telemetry before the actuator frame"))?;
+                    let r = out
+                        .as_mut()
+                        .ok_or_else(|| anyhow::anyhow!("telemetry before the actuator frame"))?;
                     r.cycles = cycles;
                     r.qp_iterations = qp_iterations;
                     r.counters = counters;
-                    return Ok(r);
+                    telemetry = true;
+                    if !want_nav {
+                        return out.ok_or_else(|| anyhow::anyhow!("no actuator frame"));
+                    }
                 }
                 _ => {}
             }
@@ -309,16 +405,89 @@ impl Endpoint for Remote {
         });
         let sent: &[Setpoint<f32>] = if redundant { &[] } else { preview };
         let step = self.client.step(self.seq, (t * 1e6) as u64, &x, sp, sent)?;
-        Ok(StepReport {
-            u: Some(step.u),
-            // The flight controller reports its own time per step (ns on the host).
-            cost: f64::from(step.cycles),
-            iterations: step.qp_iterations,
-            saturated: false,
-            failsafe: step.failsafe,
-            counters: Some(step.counters),
-            nav: None,
-        })
+        Ok(report_of(&step))
+    }
+
+    fn step_sensed(
+        &mut self,
+        t: f64,
+        readings: &Readings,
+        sp: &Setpoint<f32>,
+        preview: &[Setpoint<f32>],
+    ) -> Result<StepReport> {
+        self.seq += 1;
+        let redundant = preview.iter().enumerate().all(|(k, p)| {
+            let e = sp.extrapolate(((k + 1) as f64 * self.preview_dt_s) as f32);
+            setpoints_equal(&e, p)
+        });
+        let sent: &[Setpoint<f32>] = if redundant { &[] } else { preview };
+        let fixes: Vec<_> = readings.fixes.iter().map(fc_loop::fix_to_wire).collect();
+        let input = StepInput::Imu {
+            gyro: readings.imu.gyro_frd_radps.into(),
+            accel: readings.imu.accel_frd_mps2.into(),
+            fixes: &fixes,
+        };
+        let step = self
+            .client
+            .step_with(self.seq, (t * 1e6).round() as u64, input, sp, sent)?;
+        let nav = step
+            .nav
+            .ok_or_else(|| anyhow::anyhow!("the flight controller sent no estimate for step {}", self.seq))?;
+        let mut r = report_of(&step);
+        // While aligning the flight controller holds hover thrust: the
+        // in-process endpoint gives no output then, and the flight holds the
+        // same hover command.
+        if nav.mode == 0 {
+            r.u = None;
+        }
+        r.nav = Some(nav_report(&nav));
+        Ok(r)
+    }
+}
+
+fn report_of(step: &RemoteStep) -> StepReport {
+    StepReport {
+        u: Some(step.u),
+        // The flight controller reports its own time per step (ns on the host).
+        cost: f64::from(step.cycles),
+        iterations: step.qp_iterations,
+        saturated: false,
+        failsafe: step.failsafe,
+        counters: Some(step.counters),
+        nav: None,
+    }
+}
+
+/// A received `Nav` as the flight's estimator report: the estimate and the
+/// σ the wire carries (position, velocity, attitude); no covariance, no
+/// biases (NaN), so no NEES.
+fn nav_report(n: &NavMessage) -> NavReport {
+    use nalgebra::{Vector3, Vector4};
+    let mode = match n.mode {
+        0 => NavMode::Aligning,
+        1 => NavMode::Navigating,
+        _ => NavMode::Failsafe,
+    };
+    let estimate = (n.mode != 0).then(|| StateEstimate {
+        pos_ned_m: Vector3::from(n.pos),
+        vel_ned_mps: Vector3::from(n.vel),
+        att: Vector4::from(n.att),
+        rates_frd_radps: Vector3::zeros(),
+    });
+    let mut sigmas = [f32::NAN; fc_core::estimate::ERR];
+    sigmas[..9].copy_from_slice(&n.sigma);
+    NavReport {
+        mode,
+        estimate,
+        biases: (Vector3::repeat(f32::NAN), Vector3::repeat(f32::NAN)),
+        covariance: None,
+        sigmas,
+        counters: fc_core::estimate::EskfCounters {
+            imu_rejected: n.counts[0],
+            pos_rejected: n.counts[1],
+            ..Default::default()
+        },
+        failsafe_entries: n.counts[2],
     }
 }
 

@@ -131,9 +131,14 @@ impl<const H: usize> Eskf<H> {
     /// A filter waiting to align. `Err` names a bad setting; `H` must be ≥ 1
     /// (checked at compile time).
     pub fn new(cfg: EskfConfig) -> Result<Self, EstimatorError> {
-        const { assert!(H >= 1, "the history needs at least one entry") };
         cfg.check()?;
-        Ok(Self {
+        Ok(Self::new_unchecked(cfg))
+    }
+
+    /// A filter with settings the caller has checked ([`EskfConfig::check`]).
+    pub fn new_unchecked(cfg: EskfConfig) -> Self {
+        const { assert!(H >= 1, "the history needs at least one entry") };
+        Self {
             cfg,
             mode: Mode::Aligning,
             p: Vector3::zeros(),
@@ -154,7 +159,29 @@ impl<const H: usize> Eskf<H> {
             align_yaw: None,
             rejected_run: 0,
             counters: EskfCounters::default(),
-        })
+        }
+    }
+
+    /// Back to aligning, everything learnt forgotten, in place (the filter
+    /// is large: no temporary copy of it is made); the counters stay.
+    pub fn reset(&mut self) {
+        self.mode = Mode::Aligning;
+        self.p = Vector3::zeros();
+        self.v = Vector3::zeros();
+        self.q = Vector4::new(1.0, 0.0, 0.0, 0.0);
+        self.bg = Vector3::zeros();
+        self.ba = Vector3::zeros();
+        self.cov = Cov::identity();
+        self.last_imu = None;
+        self.prev_imu = None;
+        self.head = 0;
+        self.len = 0;
+        self.align_n = 0;
+        self.align_f = Vector3::zeros();
+        self.align_w = Vector3::zeros();
+        self.align_pos = None;
+        self.align_yaw = None;
+        self.rejected_run = 0;
     }
 
     /// Starts running from a given estimate (skipping alignment), with 1σ
