@@ -46,6 +46,51 @@ fn framed_flight_is_identical_to_in_process() {
     }
 }
 
+/// A sensor flight behind the wire (protocol v4's `Fix` and `Imu` frames,
+/// the `Nav` answer) is the in-process sensor flight, row for row, over the
+/// framed loopback and over TCP to `sil-host serve`.
+#[test]
+fn sensor_flights_over_the_wire_are_identical_to_in_process() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    let o = sil_host::link::ServeOptions {
+        idle: Duration::from_secs(5),
+        // One flight over TCP (the other is framed).
+        max_clients: Some(1),
+        ..Default::default()
+    };
+    let server = std::thread::spawn(move || sil_host::link::serve(listener, &o));
+    for (family, profile) in [
+        (Family::Lqr, sil_host::sensors::FixProfile::Mocap),
+        (Family::Mpc, sil_host::sensors::FixProfile::Gps),
+    ] {
+        let mut cfg = FlightConfig::new(
+            family,
+            AttitudeForm::Quaternion,
+            Scenario::default_for(ScenarioKind::Helix),
+        );
+        cfg.scenario.duration_s = 3.0;
+        let mut sensors = sil_host::sensors::SensorConfig::new(profile, 4);
+        sensors.faults.outlier_at_s = Some(1.0);
+        cfg.sensors = Some(sensors);
+        let a = fly(&cfg).unwrap();
+        let target = if family == Family::Lqr {
+            Target::Framed
+        } else {
+            Target::Tcp(addr.clone())
+        };
+        let b = fly_target(&cfg, &target).unwrap();
+        assert_eq!(a.rows, b.rows, "{family:?} over {target:?}");
+        let (ea, eb) = (a.estimation.unwrap(), b.estimation.unwrap());
+        assert_eq!((ea.rms_pos_m, ea.aligning_steps), (eb.rms_pos_m, eb.aligning_steps));
+        // The refused outlier is counted on the flight controller and
+        // reported (the wire's one count of refused fix parts).
+        assert_eq!(ea.counters.pos_rejected, 1, "{:?}", ea.counters);
+        assert_eq!(eb.counters.pos_rejected, 1, "{:?}", eb.counters);
+    }
+    assert!(server.join().unwrap().is_ok());
+}
+
 #[test]
 fn serve_survives_hostile_clients_then_flies() {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();

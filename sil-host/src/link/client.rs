@@ -482,6 +482,9 @@ fn nav_report(n: &NavMessage) -> NavReport {
         biases: (Vector3::repeat(f32::NAN), Vector3::repeat(f32::NAN)),
         covariance: None,
         sigmas,
+        // The wire carries one count of refused IMU samples (rejected and
+        // clipped) and one of refused fix parts (every kind, and invalid
+        // fixes): they are reported as `imu_rejected` and `pos_rejected`.
         counters: fc_core::estimate::EskfCounters {
             imu_rejected: n.counts[0],
             pos_rejected: n.counts[1],

@@ -320,6 +320,11 @@ impl<const H: usize> Eskf<H> {
             return Ok(());
         }
         let Some(past) = self.past(fix.age_s) else {
+            if self.len < H {
+                // Taken before the filter started (in transit during the
+                // alignment): nothing to compare it with, nothing wrong.
+                return Ok(());
+            }
             self.counters.fix_invalid += 1;
             return Err(EstimatorError::FixAge);
         };
