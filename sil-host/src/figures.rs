@@ -257,8 +257,11 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> R
                 .draw_series(LineSeries::new(s.points.iter().copied(), style))
                 .map_err(err)?
         };
-        anno.label(s.name.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        // An unnamed series (the second edge of a band) has no legend entry.
+        if !s.name.is_empty() {
+            anno.label(s.name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        }
     }
     if p.series.len() + p.bounds.len() > 1 {
         legend!(chart, UpperRight);

@@ -9,6 +9,7 @@ pub mod config;
 pub mod disturbance;
 pub mod endpoint;
 pub mod estimation;
+pub mod estimation_report;
 pub mod figures;
 pub mod flight;
 pub mod full_report;

@@ -42,6 +42,16 @@ fn quick_report_is_complete_and_its_numbers_are_single_flights() {
     assert!(!html.contains("<img"));
     // QEMU was not requested: the table says so instead of silently vanishing.
     assert!(md.contains("not requested"));
+    // Flying from sensors: truth beside estimate for PD, LQR and the fast
+    // MPC, calm and wind,mismatch, and the five ±3σ figures.
+    let sensors = &md[md.find("## Flying from sensors").expect("the sensor section")..];
+    let rows = sensors
+        .lines()
+        .filter(|l| l.starts_with("| PD |") || l.starts_with("| LQR |") || l.starts_with("| MPC fast |"));
+    assert_eq!(rows.count(), 6, "{sensors}");
+    for g in ["position", "velocity", "attitude", "gyro_bias", "accel_bias"] {
+        assert!(sensors.contains(&format!("figures/estimate_{g}.svg")), "{g}");
+    }
 
     // Numbers in the tables are the metrics of the same flight flown alone.
     let cases = [
