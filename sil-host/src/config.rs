@@ -17,9 +17,22 @@
 //! period_s = 25.0
 //! climb_rate_mps = 0.1
 //! duration_s = 40.0
+//!
+//! [sensors]               # the sensors of --estimator ekf (all optional)
+//! profile = "gps"         # mocap | gps
+//! seed = 7
+//! gyro_noise_dps_rthz = 0.014
+//! accel_noise_ug_rthz = 175.0
+//! fix_outage_s = [10.0, 2.0]   # start, length
+//! fix_outlier_at_s = 5.0
+//! imu_nan_at_s = 3.0
+//! imu_stuck_s = [4.0, 0.05]
+//! accel_clip_at_s = 6.0
 //! ```
+//! Command-line flags override the file's `[sensors]`.
 
 use crate::scenario::{Scenario, ScenarioKind};
+use crate::sensors::{FixProfile, SensorConfig};
 use anyhow::{bail, Context, Result};
 use fc_core::VehicleParams;
 use serde::Deserialize;
@@ -56,6 +69,22 @@ struct ScenarioToml {
     period_s: Option<f64>,
     climb_rate_mps: Option<f64>,
     duration_s: Option<f64>,
+    sensors: Option<SensorsToml>,
+}
+
+/// A scenario file's `[sensors]` table.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorsToml {
+    profile: Option<FixProfile>,
+    seed: Option<u64>,
+    gyro_noise_dps_rthz: Option<f64>,
+    accel_noise_ug_rthz: Option<f64>,
+    fix_outage_s: Option<[f64; 2]>,
+    fix_outlier_at_s: Option<f64>,
+    imu_nan_at_s: Option<f64>,
+    imu_stuck_s: Option<[f64; 2]>,
+    accel_clip_at_s: Option<f64>,
 }
 
 fn read(path: &Path) -> Result<String> {
@@ -174,6 +203,48 @@ pub fn scenario_from_str(path: &Path, text: &str, default_kind: ScenarioKind) ->
     Ok(s)
 }
 
+/// The `[sensors]` table of a scenario file's text over `SensorConfig::new`
+/// (mocap, seed 1, a BMI088, no faults); `None` if the file has none.
+pub fn sensors_from_str(path: &Path, text: &str) -> Result<Option<SensorConfig>> {
+    let t: ScenarioToml = parse(path, text)?;
+    let Some(st) = t.sensors else { return Ok(None) };
+    let mut c = SensorConfig::new(st.profile.unwrap_or(FixProfile::Mocap), st.seed.unwrap_or(1));
+    let time = |f: &str, v: f64| -> Result<f64> {
+        if v.is_finite() && v >= 0.0 {
+            Ok(v)
+        } else {
+            bail!("{}: field `sensors.{f}` = {v} must be a time ≥ 0 s", path.display())
+        }
+    };
+    let window = |f: &str, w: [f64; 2]| -> Result<(f64, f64)> {
+        if w.iter().all(|v| v.is_finite()) && w[0] >= 0.0 && w[1] > 0.0 {
+            Ok((w[0], w[1]))
+        } else {
+            bail!(
+                "{}: field `sensors.{f}` = {w:?} must be [start ≥ 0, length > 0] s",
+                path.display()
+            )
+        }
+    };
+    if let Some(v) = st.gyro_noise_dps_rthz {
+        c.imu.gyro_noise = physical(path, "sensors.gyro_noise_dps_rthz", v, true)?.to_radians();
+    }
+    if let Some(v) = st.accel_noise_ug_rthz {
+        c.imu.accel_noise = physical(path, "sensors.accel_noise_ug_rthz", v, true)? * 1e-6 * 9.80665;
+    }
+    c.faults.outage = st.fix_outage_s.map(|w| window("fix_outage_s", w)).transpose()?;
+    c.faults.imu_stuck = st.imu_stuck_s.map(|w| window("imu_stuck_s", w)).transpose()?;
+    c.faults.outlier_at_s = st.fix_outlier_at_s.map(|v| time("fix_outlier_at_s", v)).transpose()?;
+    c.faults.imu_nan_at_s = st.imu_nan_at_s.map(|v| time("imu_nan_at_s", v)).transpose()?;
+    c.faults.accel_clip_at_s = st.accel_clip_at_s.map(|v| time("accel_clip_at_s", v)).transpose()?;
+    Ok(Some(c))
+}
+
+/// Reads a scenario file's `[sensors]` table (see the module docs).
+pub fn load_sensors(path: &Path) -> Result<Option<SensorConfig>> {
+    sensors_from_str(path, &read(path)?)
+}
+
 /// Reads a scenario file (see the module docs).
 pub fn load_scenario(path: &Path, default_kind: ScenarioKind) -> Result<Scenario> {
     scenario_from_str(path, &read(path)?, default_kind)
@@ -209,6 +280,20 @@ mod tests {
         )
         .unwrap();
         assert_eq!(s.kind, ScenarioKind::Helix);
+        let text = "kind = \"helix\"\n[sensors]\nprofile = \"gps\"\nseed = 7\nfix_outage_s = [10.0, 2.0]\n\
+                    gyro_noise_dps_rthz = 0.028\n";
+        let c = sensors_from_str(p(), text).unwrap().unwrap();
+        assert_eq!(
+            (c.profile, c.seed, c.faults.outage),
+            (FixProfile::Gps, 7, Some((10.0, 2.0)))
+        );
+        assert!((c.imu.gyro_noise - 2.0 * crate::sensors::ImuModel::BMI088.gyro_noise).abs() < 1e-12);
+        // The scenario part of the same file still parses, the table aside.
+        assert_eq!(
+            scenario_from_str(p(), text, ScenarioKind::Setpoint).unwrap().kind,
+            ScenarioKind::Helix
+        );
+        assert_eq!(sensors_from_str(p(), "kind = \"helix\"").unwrap(), None);
         assert_eq!(s.radius_m, 3.0);
         assert!((s.target_yaw_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
     }
@@ -232,7 +317,16 @@ mod tests {
             ("kind = \"spiral\"", "kind"),
             ("period_s = 0.0", "period_s"),
             ("duration_s = nan", "duration_s"),
+            ("[sensors]\nprofile = \"radar\"", "profile"),
+            ("[sensors]\nfix_outage_s = [1.0, -2.0]", "sensors.fix_outage_s"),
+            ("[sensors]\nimu_nan_at_s = -1.0", "sensors.imu_nan_at_s"),
+            ("[sensors]\ngyro_noise = 1.0", "gyro_noise"),
         ] {
+            if text.starts_with("[sensors]") {
+                let e = sensors_from_str(p(), text).unwrap_err().to_string();
+                assert!(e.contains(field), "{text:?}: {e}");
+                continue;
+            }
             let e = scenario_from_str(p(), text, ScenarioKind::Circle)
                 .unwrap_err()
                 .to_string();

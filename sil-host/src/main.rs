@@ -205,9 +205,11 @@ struct FlyArgs {
     #[arg(long, value_enum, value_name = "EST")]
     estimator: Option<EstimatorArg>,
     /// Position source of `--estimator ekf`: `mocap` (100 Hz, 2 mm, 10 ms, with heading) or `gps`
-    /// (10 Hz, 0.3/0.5 m, velocity, 100 ms; barometer and magnetometer).
-    #[arg(long, value_enum, default_value = "mocap")]
-    sensors: FixProfile,
+    /// (10 Hz, 0.3/0.5 m, velocity, 100 ms; barometer and magnetometer). Default: mocap, or the
+    /// scenario file's `[sensors]` table (profile, seed, IMU noise, faults), which these flags
+    /// override (`--noise-seed` when not 1).
+    #[arg(long, value_enum)]
+    sensors: Option<FixProfile>,
     /// Fault: no position fix in START,LENGTH (s).
     #[arg(long, value_name = "START,LENGTH", value_parser = parse_window)]
     fix_outage: Option<(f64, f64)>,
@@ -612,8 +614,24 @@ fn sensors_for(a: &FlyArgs, cfg: &FlightConfig, exec: &Target) -> Result<Option<
             Ok(None)
         }
         (_, None) => {
-            let mut sc = SensorConfig::new(a.sensors, a.noise_seed);
-            sc.faults = faults;
+            // The scenario file's [sensors] first, the flags over it.
+            let file = match &a.scenario_file {
+                Some(f) => sil_host::config::load_sensors(f)?,
+                None => None,
+            };
+            let mut sc = file.unwrap_or_else(|| SensorConfig::new(FixProfile::Mocap, a.noise_seed));
+            if let Some(p) = a.sensors {
+                sc.profile = p;
+            }
+            if a.noise_seed != 1 || file.is_none() {
+                sc.seed = a.noise_seed;
+            }
+            let f = &mut sc.faults;
+            f.outage = faults.outage.or(f.outage);
+            f.outlier_at_s = faults.outlier_at_s.or(f.outlier_at_s);
+            f.imu_nan_at_s = faults.imu_nan_at_s.or(f.imu_nan_at_s);
+            f.imu_stuck = faults.imu_stuck.or(f.imu_stuck);
+            f.accel_clip_at_s = faults.accel_clip_at_s.or(f.accel_clip_at_s);
             Ok(Some(sc))
         }
     }
