@@ -153,7 +153,9 @@ pub fn figures(out: &[Outcome]) -> Vec<Figure> {
         return Vec::new();
     };
     let t = &est.trace;
-    let groups: [(&str, &str, usize, &str, f64, [&str; 3]); 5] = [
+    // (file stem, title, first error-state index, unit, scale to the unit, axes)
+    type Group<'a> = (&'a str, &'a str, usize, &'a str, f64, [&'a str; 3]);
+    let groups: [Group; 5] = [
         ("position", "Position", 0, "mm", 1e3, ["north", "east", "down"]),
         ("velocity", "Velocity", 3, "cm/s", 1e2, ["north", "east", "down"]),
         (
