@@ -83,10 +83,7 @@ pub trait Endpoint {
         preview: &[Setpoint<f32>],
     ) -> anyhow::Result<StepReport> {
         let _ = (t, readings, sp, preview);
-        anyhow::bail!(
-            "this target flies the true state only: sensor flights (--estimator ekf) run in-process \
-             until the wire protocol carries IMU and fix messages; use --estimator truth"
-        )
+        anyhow::bail!("this endpoint flies the true state only; use --estimator truth")
     }
 }
 

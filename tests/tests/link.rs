@@ -46,20 +46,26 @@ fn framed_flight_is_identical_to_in_process() {
     }
 }
 
+/// `sil-host serve` on a free local port in a thread, for `clients`
+/// clients; its address and the thread.
+fn spawn_server(idle: Duration, clients: usize) -> (String, std::thread::JoinHandle<Result<(), impl std::fmt::Debug>>) {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    let o = sil_host::link::ServeOptions {
+        idle,
+        max_clients: Some(clients),
+        ..Default::default()
+    };
+    (addr, std::thread::spawn(move || sil_host::link::serve(listener, &o)))
+}
+
 /// A sensor flight behind the wire (protocol v4's `Fix` and `Imu` frames,
 /// the `Nav` answer) is the in-process sensor flight, row for row, over the
 /// framed loopback and over TCP to `sil-host serve`.
 #[test]
 fn sensor_flights_over_the_wire_are_identical_to_in_process() {
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = listener.local_addr().unwrap().to_string();
-    let o = sil_host::link::ServeOptions {
-        idle: Duration::from_secs(5),
-        // One flight over TCP (the other is framed).
-        max_clients: Some(1),
-        ..Default::default()
-    };
-    let server = std::thread::spawn(move || sil_host::link::serve(listener, &o));
+    // One flight over TCP (the other is framed).
+    let (addr, server) = spawn_server(Duration::from_secs(5), 1);
     for (family, profile) in [
         (Family::Lqr, sil_host::sensors::FixProfile::Mocap),
         (Family::Mpc, sil_host::sensors::FixProfile::Gps),
@@ -93,14 +99,7 @@ fn sensor_flights_over_the_wire_are_identical_to_in_process() {
 
 #[test]
 fn serve_survives_hostile_clients_then_flies() {
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = listener.local_addr().unwrap().to_string();
-    let o = sil_host::link::ServeOptions {
-        idle: Duration::from_secs(2),
-        max_clients: Some(6),
-        ..Default::default()
-    };
-    let server = std::thread::spawn(move || sil_host::link::serve(listener, &o));
+    let (addr, server) = spawn_server(Duration::from_secs(2), 6);
     let hostile: Vec<Vec<u8>> = vec![
         (0..5000u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8).collect(), // random bytes
         vec![0u8; 100],                                                           // empty frames

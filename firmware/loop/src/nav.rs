@@ -61,12 +61,7 @@ impl NavConfig {
             ("dead_reckoning_limit_s", self.dead_reckoning_limit_s),
             ("descent_mps", self.descent_mps),
         ];
-        for (name, v) in fields {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(EstimatorError::Config(name));
-            }
-        }
-        Ok(())
+        fc_core::estimate::check_positive(&fields)
     }
 }
 

@@ -380,6 +380,23 @@ impl Remote {
     }
 }
 
+impl Remote {
+    /// The preview points to send: none when the setpoint's own
+    /// extrapolation reproduces them (the controller extrapolates to the
+    /// same values, and a fixed target then costs 2 frames a step, not 22).
+    fn preview_to_send<'a>(&self, sp: &Setpoint<f32>, preview: &'a [Setpoint<f32>]) -> &'a [Setpoint<f32>] {
+        let redundant = preview.iter().enumerate().all(|(k, p)| {
+            let e = sp.extrapolate(((k + 1) as f64 * self.preview_dt_s) as f32);
+            setpoints_equal(&e, p)
+        });
+        if redundant {
+            &[]
+        } else {
+            preview
+        }
+    }
+}
+
 impl Endpoint for Remote {
     fn period_s(&self) -> Option<f64> {
         self.spec.own_period_s()
@@ -396,14 +413,7 @@ impl Endpoint for Remote {
     ) -> Result<StepReport> {
         self.seq += 1;
         let x: [f32; 13] = std::array::from_fn(|i| state[i] as f32);
-        // A preview the setpoint's own extrapolation reproduces is not
-        // sent: the controller extrapolates to the same values, and a
-        // fixed target then costs 2 frames a step instead of 22.
-        let redundant = preview.iter().enumerate().all(|(k, p)| {
-            let e = sp.extrapolate(((k + 1) as f64 * self.preview_dt_s) as f32);
-            setpoints_equal(&e, p)
-        });
-        let sent: &[Setpoint<f32>] = if redundant { &[] } else { preview };
+        let sent = self.preview_to_send(sp, preview);
         let step = self.client.step(self.seq, (t * 1e6) as u64, &x, sp, sent)?;
         Ok(report_of(&step))
     }
@@ -416,11 +426,7 @@ impl Endpoint for Remote {
         preview: &[Setpoint<f32>],
     ) -> Result<StepReport> {
         self.seq += 1;
-        let redundant = preview.iter().enumerate().all(|(k, p)| {
-            let e = sp.extrapolate(((k + 1) as f64 * self.preview_dt_s) as f32);
-            setpoints_equal(&e, p)
-        });
-        let sent: &[Setpoint<f32>] = if redundant { &[] } else { preview };
+        let sent = self.preview_to_send(sp, preview);
         let fixes: Vec<_> = readings.fixes.iter().map(fc_loop::fix_to_wire).collect();
         let input = StepInput::Imu {
             gyro: readings.imu.gyro_frd_radps.into(),

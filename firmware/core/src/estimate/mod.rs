@@ -160,15 +160,19 @@ impl EskfConfig {
             ("init_accel_bias_sigma_z", self.init_accel_bias_sigma_z),
             ("gravity_mps2", self.gravity_mps2),
         ];
-        for (name, v) in fields {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(EstimatorError::Config(name));
-            }
-        }
+        check_positive(&fields)?;
         if self.align_samples == 0 {
             return Err(EstimatorError::Config("align_samples"));
         }
         Ok(())
+    }
+}
+
+/// `Err` naming the first setting that is not finite and positive.
+pub fn check_positive(fields: &[(&'static str, f32)]) -> Result<(), EstimatorError> {
+    match fields.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
+        Some((name, _)) => Err(EstimatorError::Config(name)),
+        None => Ok(()),
     }
 }
 
