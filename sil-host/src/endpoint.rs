@@ -218,12 +218,8 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
                 self.control(&est, &fly_sp)
             }
             (NavMode::Failsafe, Some(est)) => {
-                // The failsafe's own reference, previewed as it will be.
-                let ahead: Vec<Setpoint<f32>> = match self.ctrl.preview_request() {
-                    Some((n, h)) => (1..=n).map(|k| fly_sp.extrapolate((k as f64 * h) as f32)).collect(),
-                    None => Vec::new(),
-                };
-                self.prepare(t, &ahead);
+                self.prepare(t, &[]);
+                Navigator::preview_along(&mut self.ctrl, &fly_sp);
                 let mut r = self.control(&est, &fly_sp);
                 r.failsafe = true;
                 r

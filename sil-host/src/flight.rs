@@ -47,6 +47,10 @@ pub struct FlightConfig {
     pub sensor_gap: Option<(f64, f64)>,
 }
 
+/// Longest control period a sensor flight accepts, s: the estimator runs
+/// at the controller's rate, and slower than 50 Hz it cannot integrate an IMU.
+pub const MAX_ESTIMATOR_PERIOD_S: f64 = 0.02;
+
 /// Fastest plant integration rate accepted, Hz.
 pub const MAX_INTEGRATION_HZ: f64 = 100_000.0;
 
@@ -357,10 +361,10 @@ pub fn fly_endpoint<E: Endpoint>(
                     "a state latency models a delayed true state; a sensor flight's latencies are its sensors'"
                 );
             }
-            if ts > 0.02 {
+            if ts > MAX_ESTIMATOR_PERIOD_S {
                 anyhow::bail!(
-                    "the estimator runs at the controller's rate, here every {ts} s: above 0.02 s (50 Hz) it is too slow \
-                     to integrate an IMU; fly this controller with --estimator truth"
+                    "the estimator runs at the controller's rate, here every {ts} s: above {MAX_ESTIMATOR_PERIOD_S} s \
+                     (50 Hz) it is too slow to integrate an IMU; fly this controller with --estimator truth"
                 );
             }
             Some(crate::sensors::Sensors::new(sc, ts)?)

@@ -8,7 +8,7 @@
 use anyhow::{bail, Context, Result};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
-use fc_core::control::{Controller, Family, Preset, ReferenceMode, SPECS};
+use fc_core::control::{Family, Preset, ReferenceMode, SPECS};
 use fc_core::AttitudeForm;
 use sil_host::disturbance::DisturbanceSet;
 use sil_host::flight::Recording;
@@ -563,7 +563,7 @@ fn parse_window(s: &str) -> Result<(f64, f64), String> {
 
 /// The sensors of a `fly`, or `None` for a truth flight (with a note when
 /// the default had to fall back to it).
-fn sensors_for(a: &FlyArgs, cfg: &FlightConfig, exec: &Target) -> Result<Option<SensorConfig>> {
+fn sensors_for(a: &FlyArgs, cfg: &FlightConfig) -> Result<Option<SensorConfig>> {
     let faults = sil_host::sensors::Faults {
         outage: a.fix_outage,
         outlier_at_s: a.fix_outlier_at,
@@ -581,19 +581,11 @@ fn sensors_for(a: &FlyArgs, cfg: &FlightConfig, exec: &Target) -> Result<Option<
         }
     }
     let faulty = faults != sil_host::sensors::Faults::default();
-    let period = match cfg.spec.family {
-        Family::Mpc => cfg
-            .spec
-            .build::<f32>(cfg.vehicle.cast(), 1.0 / cfg.control_hz)
-            .ok()
-            .and_then(|c| c.period_s()),
-        _ => None,
-    }
-    .unwrap_or(1.0 / cfg.control_hz);
-    let _ = exec;
+    // The MPC presets fix their own period; PD and LQR run at --control-hz.
+    let period = cfg.spec.period_s(1.0 / cfg.control_hz);
     let why_not = if cfg.noise.is_some() {
         Some("--noise perturbs the true state")
-    } else if period > 0.02 {
+    } else if period > sil_host::flight::MAX_ESTIMATOR_PERIOD_S {
         Some("this controller runs slower than 50 Hz, too slow to integrate an IMU")
     } else {
         None
@@ -672,7 +664,7 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
             }
         })
         .unwrap_or(Target::InProcess);
-    cfg.sensors = sensors_for(a, &cfg, &exec)?;
+    cfg.sensors = sensors_for(a, &cfg)?;
     // Remote flights take real time (QEMU: milliseconds a step): show progress.
     let bar = sil_host::study::progress_bar(
         (cfg.scenario.duration_s * 10.0).round() as usize,

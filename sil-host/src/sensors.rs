@@ -19,7 +19,7 @@ use crate::noise::SplitMix;
 use crate::plant::Plant;
 use anyhow::{bail, Result};
 use fc_core::estimate::{Fix, ImuSample};
-use fc_core::{quat_to_euler, quat_to_rotation};
+use fc_core::quat_to_euler;
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -430,11 +430,6 @@ pub fn attitude_error(truth: &Vector4<f64>, est: &Vector4<f64>) -> Vector3<f64> 
         return v * 2.0;
     }
     v * (2.0 * n.atan2(dq[0] * s) / n)
-}
-
-/// The rotation matrix of a state's attitude (for tests and plots).
-pub fn rotation_of(x: &fc_core::QuatState<f64>) -> nalgebra::Matrix3<f64> {
-    quat_to_rotation(&Vector4::new(x[6], x[7], x[8], x[9]))
 }
 
 #[cfg(test)]

@@ -589,12 +589,7 @@ impl FlightCore {
                 self.nav_failsafe = mode == NavMode::Failsafe;
                 let sp = self.nav.setpoint(now, &self.sp);
                 if self.nav_failsafe {
-                    // The failsafe's own reference, previewed as it will be.
-                    if let Some((n, h)) = self.ctrl.preview_request() {
-                        for k in 1..=n {
-                            let _ = self.ctrl.set_preview(k, &sp.extrapolate((k as f64 * h) as f32));
-                        }
-                    }
+                    Navigator::preview_along(&mut self.ctrl, &sp);
                 }
                 match self.ctrl.update(&est, &sp) {
                     Ok(o) => {

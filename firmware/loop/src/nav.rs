@@ -17,7 +17,7 @@
 //!   fused again and the position 1σ is back under the bound, the mission
 //!   resumes.
 
-use fc_core::control::{Setpoint, StateEstimate};
+use fc_core::control::{Controller, Setpoint, StateEstimate};
 use fc_core::estimate::{Eskf, EskfConfig, EskfCounters, EstimatorError, Fix, ImuSample, Mode};
 use nalgebra::Vector3;
 
@@ -201,6 +201,17 @@ impl Navigator {
                 s
             }
             _ => *sp,
+        }
+    }
+
+    /// Hands `ctrl` the preview of `sp` extrapolated along its own
+    /// derivatives (the failsafe's reference, previewed as it will be).
+    pub fn preview_along<C: Controller<f32> + ?Sized>(ctrl: &mut C, sp: &Setpoint<f32>) {
+        if let Some((n, h)) = ctrl.preview_request() {
+            for k in 1..=n {
+                // A rejected point only means the controller extrapolates itself.
+                let _ = ctrl.set_preview(k, &sp.extrapolate((k as f64 * h) as f32));
+            }
         }
     }
 

@@ -520,7 +520,7 @@ impl<const H: usize> Eskf<H> {
         }
         for i in 0..3 {
             // Gated jointly above.
-            let _ = self.scalar_update_ungated(dx, &[(at + i, 1.0)], y[i], sigma[i] * sigma[i]);
+            let _ = self.scalar_update_with(dx, &[(at + i, 1.0)], y[i], sigma[i] * sigma[i], false);
         }
         self.counters.fused += 1;
     }
@@ -559,21 +559,20 @@ impl<const H: usize> Eskf<H> {
     /// One gated scalar update with the sparse row `h`; `false` (nothing
     /// changed) if outside the gate.
     fn scalar_update(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32) -> bool {
+        self.scalar_update_with(dx, h, y, r, true)
+    }
+
+    /// One scalar update, behind the scalar gate when `gated` (a part
+    /// gated jointly beforehand is not).
+    fn scalar_update_with(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32, gated: bool) -> bool {
         let ph = self.cov_h(h);
         let s = sparse_dot(h, &ph) + r;
         let innov = y - sparse_dot(h, dx);
         let gate = self.cfg.gate_sigma;
-        if !(s > 0.0 && innov * innov <= gate * gate * s) {
+        if !(s > 0.0 && (!gated || innov * innov <= gate * gate * s)) {
             return false;
         }
         self.apply_gain(dx, &ph, s, innov)
-    }
-
-    fn scalar_update_ungated(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32) -> bool {
-        let ph = self.cov_h(h);
-        let s = sparse_dot(h, &ph) + r;
-        let innov = y - sparse_dot(h, dx);
-        s > 0.0 && self.apply_gain(dx, &ph, s, innov)
     }
 
     /// `K = P hᵀ / s`, `δx += K·innov`, `P −= K (P hᵀ)ᵀ` (symmetric: the
