@@ -160,9 +160,9 @@ def main():
         # That probe was client 1 (it hung up). Client 2: garbage, then a flight.
         c = Client(("127.0.0.1", port))
         c.s.sendall(bytes(range(1, 200)) + b"\x00\x00" + b"\x05\x01\x02\x00" + b"\xff" * 300 + b"\x00")
-        c.send(varint(0) + varint(4))  # Hello v4
+        c.send(varint(0) + varint(5))  # Hello v5
         ack = c.recv()
-        check(ack == ("HelloAck", 4, 1), f"handshake accepted: {ack}")
+        check(ack == ("HelloAck", 5, 1), f"handshake accepted: {ack}")
         c.send(varint(1) + varint(3) + b"\x01")  # Select LqrQuat, feed-forward
         c.send(varint(2) + sp((0.0, 0.0, -2.0), 0.0))  # Setpoint: hover at 2 m
         # A crude vertical model: the vehicle starts at 1 m, thrust U1 lifts it.

@@ -72,17 +72,23 @@ pub trait Endpoint {
         preview: &[Setpoint<f32>],
     ) -> anyhow::Result<StepReport>;
 
-    /// One control step flown from sensors at time `t` (s): the IMU sample
-    /// and the fixes that arrived, the setpoint and the preview points. The
-    /// endpoint estimates the state itself.
+    /// One IMU step of a sensor flight at time `t` (s): the IMU sample and
+    /// the fixes that arrived, the setpoint and, when `control` (the
+    /// controller is due: the flight loop's [`fc_loop::schedule::Schedule`]),
+    /// the preview points. The endpoint estimates the state itself at every
+    /// step. In this process the controller runs when `control`; a flight
+    /// controller over the wire decides by its own schedule, on the same
+    /// grid. The report's output and iterations are the controller's only
+    /// when `control` (its cost is the whole step's, estimator included).
     fn step_sensed(
         &mut self,
         t: f64,
         readings: &Readings,
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
+        control: bool,
     ) -> anyhow::Result<StepReport> {
-        let _ = (t, readings, sp, preview);
+        let _ = (t, readings, sp, preview, control);
         anyhow::bail!("this endpoint flies the true state only; use --estimator truth")
     }
 }
@@ -97,6 +103,17 @@ pub struct InProcess<C> {
     /// The on-board estimator of sensor flights (made at the first sensed step).
     nav: Option<Navigator>,
 }
+
+/// A step in which the controller gave nothing.
+const NO_OUTPUT: StepReport = StepReport {
+    u: None,
+    cost: 0.0,
+    iterations: 0,
+    saturated: false,
+    failsafe: false,
+    counters: None,
+    nav: None,
+};
 
 impl<C> InProcess<C> {
     /// The endpoint of `ctrl`.
@@ -180,10 +197,10 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
         readings: &Readings,
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
+        control: bool,
     ) -> anyhow::Result<StepReport> {
-        // The step and the fixes' ages as the flight controller gets them
-        // over the wire (µs), so that both compute with the same numbers.
-        let dt = ((readings.dt_s * 1e6).round() as u64) as f32 * 1e-6;
+        // The fixes' ages as the flight controller gets them over the wire
+        // (µs), so that both compute with the same numbers.
         let fixes: Vec<_> = readings
             .fixes
             .iter()
@@ -198,7 +215,7 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
         let now_us = (t * 1e6).round() as u64;
         let t0 = Instant::now();
         let mode = nav
-            .step(now_us, dt, &readings.imu, &fixes)
+            .step(now_us, &readings.imu, &fixes)
             .map_err(|e| anyhow::anyhow!("estimator step at t = {t:.3} s: {e}"))?;
         let est = nav.estimate();
         let nav_cost = t0.elapsed().as_nanos() as f64;
@@ -213,11 +230,11 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
             failsafe_entries: nav.failsafe_entries(),
         };
         let mut step = match (mode, est) {
-            (NavMode::Navigating, Some(est)) => {
+            (NavMode::Navigating, Some(est)) if control => {
                 self.prepare(t, preview);
                 self.control(&est, &fly_sp)
             }
-            (NavMode::Failsafe, Some(est)) => {
+            (NavMode::Failsafe, Some(est)) if control => {
                 self.prepare(t, &[]);
                 Navigator::preview_along(&mut self.ctrl, &fly_sp);
                 let mut r = self.control(&est, &fly_sp);
@@ -225,16 +242,8 @@ impl<C: Controller<f32>> Endpoint for InProcess<C> {
                 r
             }
             // Aligning: no output; the flight holds its hover command (the
-            // vehicle is at rest).
-            _ => StepReport {
-                u: None,
-                cost: 0.0,
-                iterations: 0,
-                saturated: false,
-                failsafe: false,
-                counters: None,
-                nav: None,
-            },
+            // vehicle is at rest). Between the controller's runs: nothing new.
+            _ => NO_OUTPUT,
         };
         step.cost += nav_cost;
         step.nav = Some(report);

@@ -31,11 +31,11 @@ pub struct EstSample {
 /// What a sensor flight's estimator did.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EstimationResult {
-    /// Steps with an estimate.
+    /// IMU steps with an estimate.
     pub samples: usize,
-    /// Steps spent aligning.
+    /// IMU steps spent aligning.
     pub aligning_steps: usize,
-    /// Steps flown in the estimator's failsafe.
+    /// IMU steps in the estimator's failsafe.
     pub failsafe_steps: usize,
     /// Failsafe episodes.
     pub failsafe_entries: u32,
@@ -122,7 +122,7 @@ pub fn sample(
 }
 
 impl EstimationAccumulator {
-    /// Adds one control step's report (with the truth at that time).
+    /// Adds one IMU step's report (with the truth at that time).
     pub fn push(&mut self, t: f64, truth: &QuatState<f64>, true_biases: &(Vector3<f64>, Vector3<f64>), r: &NavReport) {
         self.counters = r.counters;
         self.entries = r.failsafe_entries;

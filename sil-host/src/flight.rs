@@ -11,6 +11,7 @@ use crate::metrics::{FlightMetrics, MetricsAccumulator, Trace};
 use crate::plant::{Plant, PlantConfig};
 use crate::record::{state_row, RowSink, RECORD_DT_S};
 use crate::scenario::{Reference, Scenario};
+use crate::sensors::IMU_PERIOD_S;
 use fc_core::control::{wrap_pi, AnyController, Controller, ControllerSpec, Family, MpcConfig, Setpoint};
 use fc_core::{hover_quat_state, AttitudeForm, QuatState, VehicleParams};
 use nalgebra::{Vector3, Vector4};
@@ -46,10 +47,6 @@ pub struct FlightConfig {
     /// the link or the sensors drop out. `None`: none.
     pub sensor_gap: Option<(f64, f64)>,
 }
-
-/// Longest control period a sensor flight accepts, s: the estimator runs
-/// at the controller's rate, and slower than 50 Hz it cannot integrate an IMU.
-pub const MAX_ESTIMATOR_PERIOD_S: f64 = 0.02;
 
 /// Fastest plant integration rate accepted, Hz.
 pub const MAX_INTEGRATION_HZ: f64 = 100_000.0;
@@ -140,6 +137,11 @@ pub struct FlightResult {
     pub qp_iteration_bound: u32,
     /// Instructions per controller step under QEMU (mean, max); `None` elsewhere.
     pub instructions_per_step: Option<(f64, f64)>,
+    /// Sensor flights: the cost of the IMU steps between the controller's
+    /// runs (the estimator alone), in `step_time_ns`'s unit; `None` otherwise.
+    pub estimator_step_time: Option<StepTime>,
+    /// The same in instructions under QEMU (mean, max).
+    pub estimator_instructions_per_step: Option<(f64, f64)>,
     /// Control steps flown.
     pub steps: usize,
     /// Steps the flight controller answered from its failsafe (remote targets).
@@ -260,6 +262,7 @@ pub fn fly_target_with_progress(
         // The telemetry's cycles are SysTick counts; under icount they count instructions.
         let k = 1.0 / SYSTICK_PER_INSTRUCTION;
         res.instructions_per_step = Some((res.step_time_ns.mean * k, res.step_time_ns.max * k));
+        res.estimator_instructions_per_step = res.estimator_step_time.map(|e| (e.mean * k, e.max * k));
         res.firmware_log = q.finish()?;
     }
     Ok(res)
@@ -361,16 +364,21 @@ pub fn fly_endpoint<E: Endpoint>(
                     "a state latency models a delayed true state; a sensor flight's latencies are its sensors'"
                 );
             }
-            if ts > MAX_ESTIMATOR_PERIOD_S {
-                anyhow::bail!(
-                    "the estimator runs at the controller's rate, here every {ts} s: above {MAX_ESTIMATOR_PERIOD_S} s \
-                     (50 Hz) it is too slow to integrate an IMU; fly this controller with --estimator truth"
-                );
-            }
-            Some(crate::sensors::Sensors::new(sc, ts)?)
+            Some(crate::sensors::Sensors::new(sc, IMU_PERIOD_S)?)
         }
         None => None,
     };
+    // Sensor flights step at every IMU sample and run the controller on its
+    // schedule (whole IMU periods: its grid then falls on IMU steps).
+    let imu_every = per(IMU_PERIOD_S, "IMU")?;
+    if imu_fix.is_some() && ctrl_every % imu_every != 0 {
+        anyhow::bail!(
+            "a sensor flight runs the controller on IMU steps ({} ms): the control period {ts} s is not a whole number of them",
+            IMU_PERIOD_S * 1e3
+        );
+    }
+    let ctrl_period_us = fc_loop::schedule::period_us(ts);
+    let mut schedule = fc_loop::schedule::Schedule::new();
     let mut est_acc = crate::estimation::EstimationAccumulator::default();
     let mut est_trace = Vec::new();
 
@@ -384,6 +392,8 @@ pub fn fly_endpoint<E: Endpoint>(
         qp_iterations: (0.0, 0),
         qp_iteration_bound: ep.iteration_bound(),
         instructions_per_step: None,
+        estimator_step_time: None,
+        estimator_instructions_per_step: None,
         steps: 0,
         failsafe_steps: 0,
         link_counters: None,
@@ -395,6 +405,8 @@ pub fn fly_endpoint<E: Endpoint>(
     let mut total_cost = 0.0;
     let mut total_it = 0u64;
     let mut failing_since: Option<f64> = None;
+    // Sum, max and count of the estimator-only steps' costs.
+    let mut est_cost = (0.0, 0.0f64, 0usize);
     // The plant starts in hover: until the first output, hold its inputs.
     // (In f32, as the flight controller computes it: an aligning estimator
     // holds the same command in-process and on the image.)
@@ -409,68 +421,85 @@ pub fn fly_endpoint<E: Endpoint>(
             history.push_back(plant.quat_state());
         }
         let in_gap = cfg.sensor_gap.is_some_and(|(start, len)| t >= start && t < start + len);
-        if i % ctrl_every == 0 && !in_gap {
+        // A step of the endpoint: every control period on the true state;
+        // every IMU sample in a sensor flight, the controller on its schedule.
+        let stepped = !in_gap
+            && match imu_fix {
+                Some(_) => i % imu_every == 0,
+                None => i % ctrl_every == 0,
+            };
+        if stepped {
             let xq = plant.quat_state();
             if !xq.iter().all(|v| v.is_finite()) || xq.fixed_rows::<3>(0).amax() > 1e4 {
                 res.diverged = true;
                 break;
             }
-            let xq = if latency_ticks > 0 {
-                history.front().copied().unwrap_or(xq)
-            } else {
-                xq
-            };
-            // What the controller sees: the true state, or its noisy measurement.
-            let xq = match sensors.as_mut() {
-                Some(s) => s.measure(&xq),
-                None => xq,
-            };
+            let control = imu_fix.is_none() || schedule.due((t * 1e6).round() as u64, ctrl_period_us);
             let sp = setpoint(&r);
             let previews: Vec<Setpoint<f32>> = match preview {
-                Some((n, dt)) => (1..=n).map(|k| setpoint(&sc.reference(t + k as f64 * dt))).collect(),
-                None => Vec::new(),
+                Some((n, dt)) if control => (1..=n).map(|k| setpoint(&sc.reference(t + k as f64 * dt))).collect(),
+                _ => Vec::new(),
             };
             let step = match imu_fix.as_mut() {
                 Some(s) => {
                     let readings = s.read(t, &plant);
-                    let step = ep.step_sensed(t, &readings, &sp, &previews)?;
+                    let step = ep.step_sensed(t, &readings, &sp, &previews, control)?;
                     if let Some(nav) = &step.nav {
                         est_acc.push(t, &plant.quat_state(), &s.true_biases(), nav);
                     }
                     step
                 }
-                None => ep.step(t, &xq, &sp, &previews)?,
+                None => {
+                    let xq = if latency_ticks > 0 {
+                        history.front().copied().unwrap_or(xq)
+                    } else {
+                        xq
+                    };
+                    // What the controller sees: the true state, or its noisy measurement.
+                    let xq = match sensors.as_mut() {
+                        Some(s) => s.measure(&xq),
+                        None => xq,
+                    };
+                    ep.step(t, &xq, &sp, &previews)?
+                }
             };
-            if let Some(v) = step.u {
-                u = Vector4::from(v).cast::<f64>();
-                failing_since = None;
-            } else {
-                // The loop holds the last command; a controller that fails
-                // for a whole second is a flight that cannot be reported.
-                let since = *failing_since.get_or_insert(t);
-                if step.nav.is_some_and(|n| n.mode == fc_loop::nav::NavMode::Aligning) && t - since >= 1.0 {
-                    anyhow::bail!(
-                        "the estimator did not align in 1 s (it needs IMU samples at rest, a position fix and a heading)"
-                    );
+            if control {
+                if let Some(v) = step.u {
+                    u = Vector4::from(v).cast::<f64>();
+                    failing_since = None;
+                } else {
+                    // The loop holds the last command; a controller that fails
+                    // for a whole second is a flight that cannot be reported.
+                    let since = *failing_since.get_or_insert(t);
+                    if step.nav.is_some_and(|n| n.mode == fc_loop::nav::NavMode::Aligning) && t - since >= 1.0 {
+                        anyhow::bail!(
+                            "the estimator did not align in 1 s (it needs IMU samples at rest, a position fix and a heading)"
+                        );
+                    }
+                    if t - since >= 1.0 {
+                        anyhow::bail!(
+                            "the controller produced no output at any step from t = {since:.3} s to {t:.3} s \
+                             (it refuses its state or setpoint); the flight is abandoned"
+                        );
+                    }
                 }
-                if t - since >= 1.0 {
-                    anyhow::bail!(
-                        "the controller produced no output at any step from t = {since:.3} s to {t:.3} s \
-                         (it refuses its state or setpoint); the flight is abandoned"
-                    );
-                }
+                res.saturated_steps += usize::from(step.saturated);
+                res.failsafe_steps += usize::from(step.failsafe);
+                total_it += u64::from(step.iterations);
+                res.qp_iterations.1 = res.qp_iterations.1.max(u32::from(step.iterations));
+                total_cost += step.cost;
+                res.step_time_ns.max = res.step_time_ns.max.max(step.cost);
+                res.steps += 1;
+                inspect(t, &ep);
             }
-            res.saturated_steps += usize::from(step.saturated);
-            res.failsafe_steps += usize::from(step.failsafe);
             if step.counters.is_some() {
                 res.link_counters = step.counters;
             }
-            total_it += u64::from(step.iterations);
-            res.qp_iterations.1 = res.qp_iterations.1.max(u32::from(step.iterations));
-            total_cost += step.cost;
-            res.step_time_ns.max = res.step_time_ns.max.max(step.cost);
-            res.steps += 1;
-            inspect(t, &ep);
+            if !control {
+                est_cost.0 += step.cost;
+                est_cost.1 = est_cost.1.max(step.cost);
+                est_cost.2 += 1;
+            }
         }
         if i % rec_every == 0 {
             let mut row = state_row(&plant);
@@ -507,6 +536,12 @@ pub fn fly_endpoint<E: Endpoint>(
     res.metrics = metrics.metrics();
     if imu_fix.is_some() {
         res.estimation = Some(est_acc.result(est_trace));
+        if est_cost.2 > 0 {
+            res.estimator_step_time = Some(StepTime {
+                mean: est_cost.0 / est_cost.2 as f64,
+                max: est_cost.1,
+            });
+        }
     }
     Ok((res, ep))
 }

@@ -200,7 +200,7 @@ struct FlyArgs {
     noise_seed: u64,
     /// What the controller flies on: `ekf` (simulated IMU and fixes through the on-board
     /// error-state Kalman filter) or `truth` (the true state, or --noise's version of it).
-    /// Default: `ekf`, on every target (IMU and fix messages over the wire, protocol v4); `truth`
+    /// Default: `ekf`, on every target (IMU and fix messages over the wire, protocol v5); `truth`
     /// where ekf cannot run (controllers slower than 50 Hz, --noise), with a note.
     #[arg(long, value_enum, value_name = "EST")]
     estimator: Option<EstimatorArg>,
@@ -581,15 +581,7 @@ fn sensors_for(a: &FlyArgs, cfg: &FlightConfig) -> Result<Option<SensorConfig>> 
         }
     }
     let faulty = faults != sil_host::sensors::Faults::default();
-    // The MPC presets fix their own period; PD and LQR run at --control-hz.
-    let period = cfg.spec.period_s(1.0 / cfg.control_hz);
-    let why_not = if cfg.noise.is_some() {
-        Some("--noise perturbs the true state")
-    } else if period > sil_host::flight::MAX_ESTIMATOR_PERIOD_S {
-        Some("this controller runs slower than 50 Hz, too slow to integrate an IMU")
-    } else {
-        None
-    };
+    let why_not = cfg.noise.is_some().then_some("--noise perturbs the true state");
     match (a.estimator, why_not) {
         (Some(EstimatorArg::Truth), _) => {
             if faulty {

@@ -75,6 +75,15 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
                      step_time_ns then holds SysTick counts, not ns",
         });
     }
+    if let Some((mean, max)) = res.estimator_instructions_per_step {
+        v["estimator_instructions_per_step"] = json!({
+            "mean": mean,
+            "max": max,
+            "note": "the IMU steps between the controller's runs (the estimator alone), same units",
+        });
+    } else if let Some(e) = res.estimator_step_time {
+        v["estimator_step_time_ns"] = json!({ "mean": e.mean, "max": e.max });
+    }
     v["estimator"] = match (&cfg.sensors, &res.estimation) {
         (Some(sc), Some(e)) => {
             let c = &e.counters;

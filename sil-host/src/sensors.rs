@@ -1,11 +1,12 @@
 //! Simulated sensors, sampled from the true plant state: what a flight
 //! controller really gets instead of its state.
 //!
-//! - **IMU** (body FRD, at the control rate): gyro (rad/s) and accelerometer
+//! - **IMU** (body FRD, at [`IMU_PERIOD_S`], 1 kHz, whatever the
+//!   controller's rate): gyro (rad/s) and accelerometer
 //!   (specific force, m/s²), each with white noise from a datasheet noise
 //!   density (per-sample σ = density·√rate), a bias (a constant offset drawn
 //!   from the seed plus a random walk), range saturation, and a one-sample
-//!   delay (step k delivers the sample taken at step k − 1).
+//!   delay (sample k is delivered at k + 1, 1 ms later).
 //! - **Fixes**, one of two profiles ([`FixProfile`]): `mocap` (position and
 //!   heading) or `gps` (position and velocity, with a barometer and a
 //!   magnetometer heading), each measured on a fixed period and delivered
@@ -23,6 +24,10 @@ use fc_core::quat_to_euler;
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
+
+/// The IMU's sample period, s (1 kHz: a BMI088's gyro and accelerometer
+/// run at 1 kHz and more; the estimator steps at every sample).
+pub const IMU_PERIOD_S: f64 = 0.001;
 
 const DEG: f64 = std::f64::consts::PI / 180.0;
 /// Standard gravity, m/s² (for g-denominated datasheet figures).
@@ -206,14 +211,14 @@ impl SensorConfig {
     }
 }
 
-/// What the sensors deliver at one control step.
+/// What the sensors deliver at one IMU step.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Readings {
     /// The IMU sample (taken one step earlier).
     pub imu: ImuSample,
     /// Fixes arriving now, each stamped with its age.
     pub fixes: Vec<Fix>,
-    /// The control period the IMU is sampled at, s.
+    /// The IMU's sample period, s.
     pub dt_s: f64,
 }
 
@@ -246,14 +251,15 @@ pub struct Sensors {
 fn steps_of(period: f64, dt: f64, what: &str, min: u64) -> Result<u64> {
     let n = (period / dt).round();
     if !(n >= min as f64 && (n * dt - period).abs() < 1e-9) {
-        bail!("the {what} ({period} s) must be a whole number (≥ {min}) of control periods ({dt} s)");
+        bail!("the {what} ({period} s) must be a whole number (≥ {min}) of IMU periods ({dt} s)");
     }
     Ok(n as u64)
 }
 
 impl Sensors {
-    /// The sensors at a control period of `dt` s. `Err` if a sensor's period
-    /// or latency is not a whole number of control periods.
+    /// The sensors with the IMU sampled every `dt` s ([`IMU_PERIOD_S`] in
+    /// flights). `Err` if a sensor's period or latency is not a whole number
+    /// of IMU periods.
     pub fn new(cfg: SensorConfig, dt: f64) -> Result<Self> {
         let fix = cfg.profile.model();
         steps_of(fix.period_s, dt, "fix period", 1)?;
@@ -305,7 +311,7 @@ impl Sensors {
         )
     }
 
-    /// The readings of the control step at time `t` (s) of `plant`.
+    /// The readings of the IMU step at time `t` (s) of `plant`.
     pub fn read(&mut self, t: f64, plant: &Plant) -> Readings {
         let x = plant.quat_state();
         let bias_now = (self.gyro_bias, self.accel_bias);

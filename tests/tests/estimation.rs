@@ -11,7 +11,7 @@ use sil_host::disturbance::DisturbanceSet;
 use sil_host::estimation::EstimationResult;
 use sil_host::flight::{fly, FlightConfig, FlightResult};
 use sil_host::plant::{Plant, PlantConfig};
-use sil_host::sensors::{attitude_error, FixProfile, SensorConfig, Sensors};
+use sil_host::sensors::{attitude_error, FixProfile, SensorConfig, Sensors, IMU_PERIOD_S};
 use sil_host::{AttitudeForm, Scenario, ScenarioKind};
 
 fn sensed(family: Family, kind: ScenarioKind, profile: FixProfile, seed: u64) -> FlightConfig {
@@ -41,11 +41,11 @@ fn mocap_on_the_helix_estimates_within_the_issue_bounds() {
         assert!(e.rms_pos_m <= 0.005, "{d}: position {:.4} m", e.rms_pos_m);
         assert!(e.rms_vel_mps <= 0.02, "{d}: velocity {:.4} m/s", e.rms_vel_mps);
         let c = e.counters;
-        assert_eq!(
-            (c.pos_rejected, c.yaw_rejected, c.imu_rejected),
-            (0, 0, 0),
-            "{d}: {c:?}"
-        );
+        // A true fix fails the joint 5σ gate with probability 1.5e-5
+        // (χ²(3) > 25): of a flight's 10 000 mocap fixes, 0.15 on average.
+        // Two is already unlikely; more is a filter that believes itself.
+        assert!(c.pos_rejected <= 2, "{d}: {c:?}");
+        assert_eq!((c.yaw_rejected, c.imu_rejected), (0, 0), "{d}: {c:?}");
         assert_eq!(e.failsafe_steps, 0, "{d}");
         // It aligned at once: 25 samples at rest.
         assert!(e.aligning_steps <= 26, "{d}: {}", e.aligning_steps);
@@ -70,11 +70,16 @@ fn gps_holds_position_within_thirty_centimetres_for_ten_minutes() {
 /// with wind and a mismatched vehicle: PD within 1.5×, LQR within 1.3×.
 #[test]
 fn flying_on_the_estimate_tracks_nearly_as_well_as_on_the_truth() {
+    // The product controllers (the fast MPC at 200 Hz over the 1 kHz
+    // estimator) on the helix; the MPC's flights are 30 s (debug builds).
     for d in [DisturbanceSet::NONE, "wind,mismatch".parse::<DisturbanceSet>().unwrap()] {
-        for (family, bound) in [(Family::Pd, 1.5), (Family::Lqr, 1.3)] {
+        for (family, bound) in [(Family::Pd, 1.5), (Family::Lqr, 1.3), (Family::Mpc, 1.3)] {
             for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
                 let mut cfg = FlightConfig::new(family, form, Scenario::default_for(ScenarioKind::Helix));
                 cfg.disturbance = d;
+                if family == Family::Mpc {
+                    cfg.scenario.duration_s = 30.0;
+                }
                 let truth = rmse3(&fly(&cfg).unwrap());
                 cfg.sensors = Some(SensorConfig::new(FixProfile::Mocap, 1));
                 let ekf = rmse3(&fly(&cfg).unwrap());
@@ -218,8 +223,8 @@ fn a_ten_second_outage_enters_the_failsafe_and_recovers() {
     assert!(!r.diverged);
     assert_eq!(e.failsafe_entries, 1);
     // The failsafe begins 5 s into the outage (the dead-reckoning limit) and
-    // ends when fixes return: ≈ 5 s of a 500 Hz loop.
-    let fs = e.failsafe_steps as f64 * 0.002;
+    // ends when fixes return: ≈ 5 s of IMU steps.
+    let fs = e.failsafe_steps as f64 * IMU_PERIOD_S;
     assert!((4.8..5.3).contains(&fs), "failsafe for {fs:.2} s");
     // Recovered: back on the set-point by the end (12 s after the outage).
     assert!(

@@ -19,12 +19,18 @@
 //! real clock. Resuming after a gap keeps the controller's estimates (the
 //! MPC's disturbance estimate, its warm start) and drops only what links one
 //! step to the one before (`Controller::resume`).
+//!
+//! Sensor flights: every `Imu` frame (1 kHz) steps the estimator and is
+//! answered; the controller runs only when its [`schedule::Schedule`] is
+//! due (every 2 ms for PD/LQR, 5 ms for the fast MPC), and between its runs
+//! the answers repeat the output it gave last.
 
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 pub mod nav;
+pub mod schedule;
 
 use fc_core::control::{
     AnyController, ControlError, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
@@ -211,6 +217,8 @@ pub struct FlightCore {
     fixes: heapless::Vec<Fix, MAX_PENDING_FIXES>,
     /// The estimator's failsafe flew the last `Imu` step.
     nav_failsafe: bool,
+    /// When the controller runs under the `Imu` steps.
+    schedule: schedule::Schedule,
 }
 
 /// Fixes held for the next `Imu` step; more are dropped and counted as
@@ -283,6 +291,7 @@ impl FlightCore {
             nav: Navigator::bmi088(),
             fixes: heapless::Vec::new(),
             nav_failsafe: false,
+            schedule: schedule::Schedule::new(),
         }
     }
 
@@ -358,7 +367,7 @@ impl FlightCore {
 
     /// The running controller's period, µs.
     fn period_us(&self) -> u64 {
-        (self.ctrl.period_s().unwrap_or(self.cfg.control_period_s) * 1e6) as u64
+        schedule::period_us(self.ctrl.period_s().unwrap_or(self.cfg.control_period_s))
     }
 
     /// Enters the failsafe if the last valid step is more than the timeout
@@ -475,6 +484,7 @@ impl FlightCore {
                     self.nav.reset();
                     self.fixes.clear();
                     self.nav_failsafe = false;
+                    self.schedule.reset();
                 }
                 Self::send(
                     link,
@@ -557,11 +567,12 @@ impl FlightCore {
         })
     }
 
-    /// One control step flown from an IMU sample: the estimator steps (with
-    /// the fixes received since the last step), then the controller flies
-    /// its estimate — the mission's setpoint, or the estimator's failsafe
-    /// hold-and-descend; while aligning, hover thrust and no torque. The
-    /// reply adds a `Nav` message with the estimate.
+    /// One IMU step: the estimator integrates the sample (with the fixes
+    /// received since the last step); when the controller is due it flies
+    /// the estimate — the mission's setpoint, or the estimator's failsafe
+    /// hold-and-descend; while aligning, hover thrust and no torque. Every
+    /// step is answered (the output held since the controller last ran)
+    /// with a `Nav` message added.
     fn on_imu<L: ByteLink, C: CycleClock>(
         &mut self,
         seq: u32,
@@ -575,29 +586,32 @@ impl FlightCore {
             return self.reply(seq, 0, 0, link);
         };
         let lockstep = self.cfg.time_base == TimeBase::Lockstep;
-        let dt = self.period_us() as f32 * 1e-6;
         let t0 = clock.now();
-        let stepped = self.nav.step(now, dt, imu, &self.fixes);
+        let stepped = self.nav.step(now, imu, &self.fixes);
         self.fixes.clear();
+        // Asked at every step, so that the grid follows the steps' times.
+        let control = self.schedule.due(now, self.period_us());
         let mut iterations = 0u16;
         match (stepped, self.nav.estimate()) {
             (Ok(mode @ (NavMode::Navigating | NavMode::Failsafe)), Some(est)) => {
-                if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
-                    self.ctrl.resume();
-                    self.failsafe = false;
-                }
                 self.nav_failsafe = mode == NavMode::Failsafe;
-                let sp = self.nav.setpoint(now, &self.sp);
-                if self.nav_failsafe {
-                    Navigator::preview_along(&mut self.ctrl, &sp);
-                }
-                match self.ctrl.update(&est, &sp) {
-                    Ok(o) => {
-                        self.u = o.u;
-                        iterations = o.status.iterations;
-                        self.last_valid_us = Some(now);
+                if control {
+                    if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
+                        self.ctrl.resume();
+                        self.failsafe = false;
                     }
-                    Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
+                    let sp = self.nav.setpoint(now, &self.sp);
+                    if self.nav_failsafe {
+                        Navigator::preview_along(&mut self.ctrl, &sp);
+                    }
+                    match self.ctrl.update(&est, &sp) {
+                        Ok(o) => {
+                            self.u = o.u;
+                            iterations = o.status.iterations;
+                            self.last_valid_us = Some(now);
+                        }
+                        Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
+                    }
                 }
             }
             (Ok(_), _) => {
@@ -636,7 +650,8 @@ impl FlightCore {
                 .wrapping_add(c.vel_rejected)
                 .wrapping_add(c.yaw_rejected)
                 .wrapping_add(c.alt_rejected)
-                .wrapping_add(c.fix_invalid),
+                .wrapping_add(c.fix_invalid)
+                .wrapping_add(self.nav.fixes_dropped()),
             failsafe_entries: self.nav.failsafe_entries(),
         }
     }

@@ -2,8 +2,9 @@
 //! the controllers, its alignment, and the failsafe that trusts it only as
 //! far as it deserves.
 //!
-//! Per control step: predict with the IMU sample, fuse the fixes that
-//! arrived, then decide the mode:
+//! Per IMU sample (1 kHz; the controller runs on its own, slower
+//! [`crate::schedule::Schedule`]): predict over the time since the last
+//! sample, fuse the fixes that arrived, then decide the mode:
 //! - [`NavMode::Aligning`]: no estimate yet (waiting for samples at rest, a
 //!   position and a heading): the caller holds hover thrust, no torque;
 //! - [`NavMode::Navigating`]: the controllers fly the estimate and the
@@ -21,8 +22,52 @@ use fc_core::control::{Controller, Setpoint, StateEstimate};
 use fc_core::estimate::{Eskf, EskfConfig, EskfCounters, EstimatorError, Fix, ImuSample, Mode};
 use nalgebra::Vector3;
 
-/// Steps of estimator history for delayed fixes (256 ms at 500 Hz, 128 ms at 1 kHz).
+/// Steps of estimator history for delayed fixes (128 ms at 1 kHz).
 pub const HISTORY: usize = 128;
+
+/// Most scalar updates one fix part brings to a step: a fix with more (a
+/// mocap fix with position and heading, 4; a gps fix with position and
+/// velocity, 6) is split into parts of at most this many, fused one part
+/// per IMU step, so that the worst step is a predict and one such part
+/// (the budget's `navigator` row).
+pub const MAX_UPDATES_PER_STEP: usize = 3;
+
+/// Fix parts waiting for their step; more are dropped and counted
+/// ([`Navigator::fixes_dropped`]). Sensors deliver a few parts per 10 ms:
+/// the queue drains at one part per step.
+pub const PENDING_PARTS: usize = 8;
+
+/// The scalar updates a fix brings: 3 per triple, 1 per scalar.
+pub fn updates_of(f: &Fix) -> usize {
+    3 * usize::from(f.pos_ned_m.is_some())
+        + 3 * usize::from(f.vel_ned_mps.is_some())
+        + usize::from(f.yaw_rad.is_some())
+        + usize::from(f.alt_m.is_some())
+}
+
+/// `f` whole if it brings at most [`MAX_UPDATES_PER_STEP`] updates; else
+/// its position, its velocity, and its heading with its altitude, each
+/// part that has anything.
+fn parts_of(f: &Fix) -> [Option<Fix>; 3] {
+    if updates_of(f) <= MAX_UPDATES_PER_STEP {
+        return [Some(*f), None, None];
+    }
+    let only = |keep: [bool; 4]| {
+        let part = Fix {
+            pos_ned_m: f.pos_ned_m.filter(|_| keep[0]),
+            vel_ned_mps: f.vel_ned_mps.filter(|_| keep[1]),
+            yaw_rad: f.yaw_rad.filter(|_| keep[2]),
+            alt_m: f.alt_m.filter(|_| keep[3]),
+            ..*f
+        };
+        (updates_of(&part) > 0).then_some(part)
+    };
+    [
+        only([true, false, false, false]),
+        only([false, true, false, false]),
+        only([false, false, true, true]),
+    ]
+}
 
 /// The navigator's settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -37,6 +82,12 @@ pub struct NavConfig {
     pub dead_reckoning_limit_s: f32,
     /// Failsafe descent speed, m/s.
     pub descent_mps: f32,
+    /// The IMU's sample period, s: the step of the first sample (the later
+    /// ones are measured from the samples' times).
+    pub imu_period_s: f32,
+    /// Longest step integrated, s (from `imu_period_s` to 0.1): a longer gap between samples (a link or
+    /// sensor outage) is integrated as this long; the fixes correct the rest.
+    pub max_imu_gap_s: f32,
 }
 
 impl Default for NavConfig {
@@ -47,6 +98,8 @@ impl Default for NavConfig {
             sigma_grace_s: 0.5,
             dead_reckoning_limit_s: 5.0,
             descent_mps: 0.3,
+            imu_period_s: 0.001,
+            max_imu_gap_s: 0.02,
         }
     }
 }
@@ -60,8 +113,15 @@ impl NavConfig {
             ("sigma_grace_s", self.sigma_grace_s),
             ("dead_reckoning_limit_s", self.dead_reckoning_limit_s),
             ("descent_mps", self.descent_mps),
+            ("imu_period_s", self.imu_period_s),
+            ("max_imu_gap_s", self.max_imu_gap_s),
         ];
-        fc_core::estimate::check_positive(&fields)
+        fc_core::estimate::check_positive(&fields)?;
+        // The estimator integrates at most 0.1 s in one step.
+        if !(self.imu_period_s..=0.1).contains(&self.max_imu_gap_s) {
+            return Err(EstimatorError::Config("max_imu_gap_s"));
+        }
+        Ok(())
     }
 }
 
@@ -85,6 +145,12 @@ pub struct Navigator {
     mode: NavMode,
     /// Time of the last fused position fix, µs.
     last_pos_us: Option<u64>,
+    /// Time of the last IMU sample, µs.
+    last_imu_us: Option<u64>,
+    /// Fix parts waiting for a step, with when they arrived (µs).
+    pending: heapless::Deque<(Fix, u64), PENDING_PARTS>,
+    /// Fix parts dropped because the queue was full.
+    dropped: u32,
     /// Since when the position 1σ has been over the bound, µs.
     over_since_us: Option<u64>,
     /// Where and when the failsafe began: position (NED, m), heading, µs.
@@ -101,6 +167,9 @@ impl Navigator {
             eskf: Eskf::new(cfg.eskf)?,
             mode: NavMode::Aligning,
             last_pos_us: None,
+            last_imu_us: None,
+            pending: heapless::Deque::new(),
+            dropped: 0,
             over_since_us: None,
             failsafe_from: None,
             entries: 0,
@@ -116,6 +185,9 @@ impl Navigator {
             eskf: Eskf::new_unchecked(cfg.eskf),
             mode: NavMode::Aligning,
             last_pos_us: None,
+            last_imu_us: None,
+            pending: heapless::Deque::new(),
+            dropped: 0,
             over_since_us: None,
             failsafe_from: None,
             entries: 0,
@@ -127,19 +199,37 @@ impl Navigator {
         self.eskf.reset();
         self.mode = NavMode::Aligning;
         self.last_pos_us = None;
+        self.last_imu_us = None;
+        self.pending.clear();
         self.over_since_us = None;
         self.failsafe_from = None;
     }
 
-    /// One control step at time `now_us` (µs, increasing) of `dt_s` seconds:
-    /// the IMU sample and the fixes that arrived. A refused fix is counted by
-    /// the estimator and changes nothing; `Err` only for a bad step length.
-    pub fn step(&mut self, now_us: u64, dt_s: f32, imu: &ImuSample, fixes: &[Fix]) -> Result<NavMode, EstimatorError> {
+    /// One IMU sample taken at `now_us` (µs, increasing) and the fixes that
+    /// arrived since the last: the estimator integrates the time since the
+    /// previous sample ([`NavConfig::imu_period_s`] for the first, at most
+    /// [`NavConfig::max_imu_gap_s`]), then fuses one waiting fix part (aged
+    /// by its wait; see [`MAX_UPDATES_PER_STEP`]). A refused fix is counted
+    /// by the estimator and changes nothing; `Err` only for a time that does
+    /// not increase (nothing is integrated then).
+    pub fn step(&mut self, now_us: u64, imu: &ImuSample, fixes: &[Fix]) -> Result<NavMode, EstimatorError> {
+        let dt_s = match self.last_imu_us {
+            Some(last) if now_us <= last => return Err(EstimatorError::Step),
+            Some(last) => ((now_us - last) as f32 * 1e-6).min(self.cfg.max_imu_gap_s),
+            None => self.cfg.imu_period_s,
+        };
+        self.last_imu_us = Some(now_us);
         self.eskf.predict(imu, dt_s)?;
-        for fix in fixes {
+        for part in fixes.iter().flat_map(parts_of).flatten() {
+            if self.pending.push_back((part, now_us)).is_err() {
+                self.dropped = self.dropped.wrapping_add(1);
+            }
+        }
+        if let Some((mut part, at)) = self.pending.pop_front() {
+            part.age_s += (now_us - at) as f32 * 1e-6;
             let before = self.eskf.counters().pos_fused;
             // A refused fix is counted in the estimator's counters.
-            let _ = self.eskf.fuse(fix);
+            let _ = self.eskf.fuse(&part);
             if self.eskf.counters().pos_fused != before {
                 self.last_pos_us = Some(now_us);
             }
@@ -225,6 +315,11 @@ impl Navigator {
         self.eskf.counters()
     }
 
+    /// Fix parts dropped because more arrived than one a step drains.
+    pub fn fixes_dropped(&self) -> u32 {
+        self.dropped
+    }
+
     /// Times the failsafe began since start.
     pub fn failsafe_entries(&self) -> u32 {
         self.entries
@@ -251,5 +346,57 @@ mod tests {
             Navigator::new(cfg).err(),
             Some(EstimatorError::Config("dead_reckoning_limit_s"))
         );
+    }
+
+    #[test]
+    fn fixes_are_split_into_parts_of_at_most_three_updates() {
+        let gps = Fix {
+            pos_ned_m: Some(Vector3::zeros()),
+            vel_ned_mps: Some(Vector3::zeros()),
+            yaw_rad: Some(0.1),
+            alt_m: Some(1.0),
+            ..Fix::EMPTY
+        };
+        let parts = parts_of(&gps);
+        let n: heapless::Vec<usize, 3> = parts.iter().flatten().map(updates_of).collect();
+        assert_eq!(n.as_slice(), &[3, 3, 2]);
+        // Every measurement lands in exactly one part.
+        let p = |f: &Fix| f.pos_ned_m.is_some();
+        assert_eq!(parts.iter().flatten().filter(|f| p(f)).count(), 1);
+        let mocap = Fix {
+            pos_ned_m: Some(Vector3::zeros()),
+            yaw_rad: Some(0.1),
+            ..Fix::EMPTY
+        };
+        assert_eq!(parts_of(&mocap).iter().flatten().map(updates_of).sum::<usize>(), 4);
+        assert_eq!(parts_of(&mocap).iter().flatten().count(), 2);
+        let baro = Fix {
+            alt_m: Some(1.0),
+            ..Fix::EMPTY
+        };
+        assert_eq!(parts_of(&baro), [Some(baro), None, None]);
+    }
+
+    #[test]
+    fn a_flood_of_fixes_is_bounded_dropped_and_counted() {
+        let mut nav = Navigator::bmi088();
+        let rest = ImuSample {
+            gyro_frd_radps: Vector3::zeros(),
+            accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+        };
+        let fix = Fix {
+            pos_ned_m: Some(Vector3::new(0.0, 0.0, -1.0)),
+            pos_sigma_m: Vector3::repeat(0.01),
+            vel_ned_mps: Some(Vector3::zeros()),
+            vel_sigma_mps: 0.05,
+            ..Fix::EMPTY
+        };
+        // Two parts a step arrive and one is fused: the queue fills, then
+        // drops (it is full before the step's part leaves it).
+        for k in 1..=40u64 {
+            nav.step(k * 1_000, &rest, &[fix]).unwrap();
+        }
+        assert_eq!(nav.fixes_dropped(), 2 * 40 - 40 - (PENDING_PARTS as u32 - 1));
+        assert_eq!(nav.step(40_000, &rest, &[]), Err(EstimatorError::Step));
     }
 }

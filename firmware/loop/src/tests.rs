@@ -552,3 +552,70 @@ fn finite_but_absurd_sensor_frames_are_refused_not_flown() {
         "flown: the controller reacts to the 0.5 m offset"
     );
 }
+
+/// Sensor flights: every `Imu` frame (1 kHz) steps the estimator and is
+/// answered with its `Nav`; the fast MPC (5 ms) runs only on its grid, and
+/// between its runs the answers repeat its last output.
+#[test]
+fn imu_steps_run_the_estimator_every_millisecond_and_the_mpc_every_fifth() {
+    let mut rig = Rig::new();
+    rig.open();
+    let spec = ControllerSpec::new(Family::Mpc, AttitudeForm::Quaternion);
+    let (controller, feedforward) = spec.to_wire().unwrap();
+    rig.send(
+        &ToFc::Select {
+            controller,
+            feedforward,
+        },
+        0,
+    );
+    assert_eq!(rig.fc.period_us(), 5_000);
+    let mut sp = Setpoint::hold(Vector3::new(1.0, 0.0, -1.0), 0.0);
+    sp.vel_ned_mps = Vector3::zeros();
+    rig.send(&ToFc::Setpoint(setpoint_to_wire(&sp)), 0);
+    let fix = fc_proto::WireFix {
+        age_us: 0,
+        pos: Some([0.0, 0.0, -1.0]),
+        pos_sigma: [0.002; 3],
+        vel: None,
+        vel_sigma: 0.0,
+        yaw: Some(0.0),
+        yaw_sigma: 0.01,
+        alt: None,
+        alt_sigma: 0.0,
+    };
+    let (mut ran, mut last_u) = (Vec::new(), None);
+    for k in 1..=60u32 {
+        if k % 10 == 1 {
+            rig.send(&ToFc::Fix(fix), 0);
+        }
+        let t_us = u64::from(k) * 1_000;
+        let r = rig.send(
+            &ToFc::Imu {
+                seq: k,
+                t_us,
+                gyro: [0.0; 3],
+                accel: [0.0, 0.0, -9.81],
+            },
+            0,
+        );
+        let [FromFc::Actuator { u, .. }, FromFc::Telemetry { qp_iterations, .. }, FromFc::Nav { mode, .. }] = r[..]
+        else {
+            panic!("step {k}: {r:?}")
+        };
+        if mode == 1 {
+            if qp_iterations > 0 {
+                ran.push(t_us);
+            } else {
+                assert_eq!(Some(u), last_u, "step {k}: the output is held between runs");
+            }
+        }
+        last_u = Some(u);
+    }
+    // Aligned after 25 samples; then the MPC on the grid of the first step
+    // (1 ms + 5 ms·n), never between.
+    assert!(ran.len() >= 6, "{ran:?}");
+    assert!(ran.iter().all(|t| (t - 1_000) % 5_000 == 0), "{ran:?}");
+    assert_eq!(ran.windows(2).filter(|w| w[1] - w[0] != 5_000).count(), 0, "{ran:?}");
+    assert_eq!(rig.fc.counters().invalid_values, 0);
+}

@@ -45,7 +45,7 @@ pub use frame::{encode, FrameDecoder, FrameError, MAX_FRAME};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version; both ends must agree in the handshake.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// A setpoint on the wire: NED position, velocity, acceleration, jerk (SI),
 /// heading and heading rate (rad, rad/s).
@@ -111,9 +111,12 @@ pub enum ToFc {
         /// Echoed back.
         seq: u32,
     },
-    /// One IMU sample, body FRD, for control step `seq` (since protocol v4):
-    /// the flight controller estimates its state from these and the fixes,
-    /// and answers as for `Sensor`.
+    /// One IMU sample, body FRD, as step `seq` (since protocol v4): the
+    /// flight controller's estimator integrates it over the time since the
+    /// previous `Imu` (sent at the IMU's rate, 1 kHz in the SIL); its
+    /// controller runs on its own schedule (every 2 ms for PD/LQR, 5 ms for
+    /// the fast MPC, on the grid of the first step), and every `Imu` is
+    /// answered as a `Sensor` is, plus a `Nav`.
     Imu {
         /// Step number, strictly increasing (shared with `Sensor`).
         seq: u32,
@@ -233,7 +236,8 @@ pub enum FromFc {
         sigma: [f32; 9],
         /// IMU samples the estimator refused (NaN/∞, out of range, clipped).
         imu_rejected: u32,
-        /// Fix parts the estimator refused (gate, bad values).
+        /// Fix parts the estimator refused (gate, bad values) or dropped
+        /// (more arrived than its queue holds).
         fixes_rejected: u32,
         /// Failsafe episodes of the estimator.
         failsafe_entries: u32,

@@ -246,24 +246,24 @@ impl FcClient {
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
     ) -> Result<RemoteStep> {
-        self.step_with(seq, t_us, StepInput::State(state), sp, preview)
+        self.step_with(seq, t_us, StepInput::State(state), Some(sp), preview)
     }
 
-    /// One lockstep control step with either measurement: setpoint (and
-    /// preview), then the state or the fixes and IMU sample of step `seq`,
+    /// One lockstep step with either measurement: the setpoint (`None`: the
+    /// controller does not run at this step, the held one stays) and
+    /// preview, then the state or the fixes and IMU sample of step `seq`,
     /// and the flight controller's answer (with its `Nav` for an IMU step).
     pub fn step_with(
         &mut self,
         seq: u32,
         t_us: u64,
         input: StepInput<'_>,
-        sp: &Setpoint<f32>,
+        sp: Option<&Setpoint<f32>>,
         preview: &[Setpoint<f32>],
     ) -> Result<RemoteStep> {
         // The flight controller holds its setpoint: send it only when it
         // changes (a fixed target then costs one frame a step, not two).
-        let w = setpoint_to_wire(sp);
-        if self.last_setpoint != Some(w) {
+        if let Some(w) = sp.map(setpoint_to_wire).filter(|w| self.last_setpoint != Some(*w)) {
             self.send(&ToFc::Setpoint(w))?;
             self.last_setpoint = Some(w);
         }
@@ -424,7 +424,11 @@ impl Endpoint for Remote {
         readings: &Readings,
         sp: &Setpoint<f32>,
         preview: &[Setpoint<f32>],
+        control: bool,
     ) -> Result<StepReport> {
+        // The flight controller runs its controller on its own schedule, on
+        // the same grid: between its runs the setpoint is not read, and is
+        // not sent (over QEMU's USART every byte costs wall time).
         self.seq += 1;
         let sent = self.preview_to_send(sp, preview);
         let fixes: Vec<_> = readings.fixes.iter().map(fc_loop::fix_to_wire).collect();
@@ -435,7 +439,7 @@ impl Endpoint for Remote {
         };
         let step = self
             .client
-            .step_with(self.seq, (t * 1e6).round() as u64, input, sp, sent)?;
+            .step_with(self.seq, (t * 1e6).round() as u64, input, control.then_some(sp), sent)?;
         let nav = step
             .nav
             .ok_or_else(|| anyhow::anyhow!("the flight controller sent no estimate for step {}", self.seq))?;

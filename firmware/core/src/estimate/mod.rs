@@ -12,7 +12,7 @@
 //! - **error state** (15): `[δp δv δθ δb_g δb_a]`, with the attitude error
 //!   a small rotation vector in NED (`q_true = exp(δθ) ⊗ q̂`), so that the
 //!   gyro and accelerometer noise are isotropic in it;
-//! - **propagation** with every IMU sample at the control rate (specific
+//! - **propagation** with every IMU sample (1 kHz in the SIL; specific
 //!   force and body rates), the covariance through the sparse transition
 //!   matrix (no dense 13×13 products);
 //! - **updates** from [`Fix`]es (position, velocity, heading, barometric

@@ -53,6 +53,7 @@ mod target {
     };
     use fc_core::estimate::{Eskf, EskfConfig, Fix, ImuSample};
     use fc_core::{euler_to_quat, VehicleParams};
+    use fc_loop::nav::Navigator;
     use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
     use fc_proto::{encode, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use fc_stm32f405::SYSCLK_HZ;
@@ -150,19 +151,24 @@ mod target {
     /// Largest instructions of one estimator step allowed (the bound).
     const ESTIMATOR_BUDGET: u32 = 20_000;
 
+    /// An IMU at rest, level.
+    const REST: ImuSample = ImuSample {
+        gyro_frd_radps: Vector3::new(0.0, 0.0, 0.0),
+        accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+    };
+
     /// Worst instructions of one estimator step at 1 kHz: predict with an
     /// IMU sample (pseudo-random rates up to 1 rad/s, specific force −g ± 2
-    /// m/s² per axis) and fuse a mocap fix (position and heading, 10 ms old)
-    /// at every step — the worst case: a real mocap fix arrives every tenth.
+    /// m/s² per axis) and fuse a whole mocap fix (position and heading, 10
+    /// ms old: 4 scalar updates) at every step — more than the worst case:
+    /// the navigator fuses at most [`fc_loop::nav::MAX_UPDATES_PER_STEP`]
+    /// per step, and a real mocap fix arrives every tenth.
     #[inline(never)]
     fn estimator_worst(clock: &SysTickClock) -> Option<u32> {
         // SAFETY: as for `slot`.
         let nav = unsafe { &mut *core::ptr::addr_of_mut!(NAV) };
         let f = nav.insert(Eskf::new(EskfConfig::BMI088).ok()?);
-        let rest = ImuSample {
-            gyro_frd_radps: Vector3::zeros(),
-            accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
-        };
+        let rest = REST;
         let fix = |p: Vector3<f32>, yaw: f32| Fix {
             age_s: 0.01,
             pos_ned_m: Some(p),
@@ -179,20 +185,65 @@ mod target {
         for _ in 0..20 {
             f.predict(&rest, 0.001).ok()?;
         }
+        let noise = 0.004;
         let mut rng = Lcg(11);
         let mut worst = 0u32;
         for _ in 0..STEPS {
-            let v = |rng: &mut Lcg, s: f32| Vector3::new(s * rng.next(), s * rng.next(), s * rng.next());
-            let imu = ImuSample {
-                gyro_frd_radps: v(&mut rng, 1.0),
-                accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81) + v(&mut rng, 2.0),
-            };
+            let imu = rng.imu();
             let e = f.estimate().ok()?;
-            let z = e.pos_ned_m + v(&mut rng, 0.004);
+            let z = e.pos_ned_m + rng.vector(noise);
             let yaw = e.euler()[2] + 0.01 * rng.next();
             let t0 = clock.now();
             f.predict(&imu, 0.001).ok()?;
             f.fuse(&fix(z, yaw)).ok()?;
+            worst = worst.max(clock.since(t0));
+        }
+        Some(instructions(worst))
+    }
+
+    /// The navigator of the `gps` estimator row, in static RAM.
+    static mut NAVIGATOR: Option<Navigator> = None;
+
+    /// Worst instructions of one navigator step at 1 kHz on gps: predict
+    /// (as [`estimator_worst`]) with a whole gps fix arriving at *every*
+    /// step — position and velocity 100 ms old, barometer altitude and
+    /// magnetometer heading: 8 scalar updates, which the navigator splits
+    /// into three parts of at most 3 and fuses one part per step (the queue
+    /// overflows and counts its drops here; a real gps fix arrives every
+    /// hundredth step).
+    #[inline(never)]
+    fn navigator_gps_worst(clock: &SysTickClock) -> Option<u32> {
+        // SAFETY: as for `slot`.
+        let slot = unsafe { &mut *core::ptr::addr_of_mut!(NAVIGATOR) };
+        let nav = slot.insert(Navigator::bmi088());
+        let rest = REST;
+        let fix = |p: Vector3<f32>, yaw: f32| Fix {
+            age_s: 0.1,
+            pos_ned_m: Some(p),
+            pos_sigma_m: Vector3::new(0.3, 0.3, 0.5),
+            vel_ned_mps: Some(Vector3::zeros()),
+            vel_sigma_mps: 0.05,
+            yaw_rad: Some(yaw),
+            yaw_sigma_rad: 0.0175,
+            alt_m: Some(-p[2]),
+            alt_sigma_m: 0.1,
+        };
+        let mut now_us = 0u64;
+        // Aligned at rest, then 150 ms of history for the fixes' latency.
+        for k in 0..180 {
+            now_us += 1_000;
+            let fixes = [fix(Vector3::new(0.0, 0.0, -1.0), 0.2)];
+            nav.step(now_us, &rest, if k % 10 == 0 { &fixes } else { &[] }).ok()?;
+        }
+        let mut rng = Lcg(13);
+        let mut worst = 0u32;
+        for _ in 0..STEPS {
+            let imu = rng.imu();
+            let e = nav.estimate()?;
+            let fixes = [fix(e.pos_ned_m + rng.vector(0.3), e.euler()[2] + 0.01 * rng.next())];
+            now_us += 1_000;
+            let t0 = clock.now();
+            nav.step(now_us, &imu, &fixes).ok()?;
             worst = worst.max(clock.since(t0));
         }
         Some(instructions(worst))
@@ -221,6 +272,20 @@ mod target {
         fn next(&mut self) -> f32 {
             self.0 = self.0.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (self.0 >> 8) as f32 / (1u32 << 23) as f32 - 1.0
+        }
+
+        /// A vector with each component in [−s, s].
+        fn vector(&mut self, s: f32) -> Vector3<f32> {
+            Vector3::new(s * self.next(), s * self.next(), s * self.next())
+        }
+
+        /// An IMU sample: rates up to 1 rad/s, specific force −g ± 2 m/s² per axis.
+        fn imu(&mut self) -> ImuSample {
+            let gyro_frd_radps = self.vector(1.0);
+            ImuSample {
+                gyro_frd_radps,
+                accel_frd_mps2: REST.accel_frd_mps2 + self.vector(2.0),
+            }
         }
     }
 
@@ -497,23 +562,33 @@ mod target {
         }
         // The estimator of sensor flights: one predict and one fix update per
         // 1 kHz step, against the whole budget and against its own bound.
-        let m = with_stack(|| estimator_worst(&clock));
-        ok &= check("estimator (ESKF)", "15 states", 1000, "predict + fix update", m);
-        match m.0 {
-            Some(w) if w <= ESTIMATOR_BUDGET => {
-                hprintln!(
-                    "budget: estimator {} instructions per step, within its {}",
-                    w,
-                    ESTIMATOR_BUDGET
-                )
-            }
-            w => {
-                hprintln!(
-                    "budget: estimator {:?} instructions per step, OVER its {}",
-                    w,
-                    ESTIMATOR_BUDGET
-                );
-                ok = false;
+        for (what, run) in [
+            (
+                "predict + mocap fix",
+                estimator_worst as fn(&SysTickClock) -> Option<u32>,
+            ),
+            ("navigator + gps fix", navigator_gps_worst),
+        ] {
+            let m = with_stack(|| run(&clock));
+            ok &= check("estimator (ESKF)", "15 states", 1000, what, m);
+            match m.0 {
+                Some(w) if w <= ESTIMATOR_BUDGET => {
+                    hprintln!(
+                        "budget: estimator, {}: {} instructions per step, within its {}",
+                        what,
+                        w,
+                        ESTIMATOR_BUDGET
+                    )
+                }
+                w => {
+                    hprintln!(
+                        "budget: estimator, {}: {:?} instructions per step, OVER its {}",
+                        what,
+                        w,
+                        ESTIMATOR_BUDGET
+                    );
+                    ok = false;
+                }
             }
         }
         let static_ram = core::ptr::addr_of!(__sheap) as usize - core::ptr::addr_of!(__sdata) as usize;
