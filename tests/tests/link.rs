@@ -59,8 +59,8 @@ fn spawn_server(idle: Duration, clients: usize) -> (String, std::thread::JoinHan
     (addr, std::thread::spawn(move || sil_host::link::serve(listener, &o)))
 }
 
-/// A sensor flight behind the wire (protocol v4's `Fix` and `Imu` frames,
-/// the `Nav` answer) is the in-process sensor flight, row for row, over the
+/// A sensor flight behind the wire (the `Fix` and `Imu` frames, the `Nav`
+/// and `NavBias` answers) is the in-process sensor flight, row for row, over the
 /// framed loopback and over TCP to `sil-host serve`.
 #[test]
 fn sensor_flights_over_the_wire_are_identical_to_in_process() {
@@ -89,6 +89,10 @@ fn sensor_flights_over_the_wire_are_identical_to_in_process() {
         assert_eq!(a.rows, b.rows, "{family:?} over {target:?}");
         let (ea, eb) = (a.estimation.unwrap(), b.estimation.unwrap());
         assert_eq!((ea.rms_pos_m, ea.aligning_steps), (eb.rms_pos_m, eb.aligning_steps));
+        // The whole covariance diagonal (`Nav` and `NavBias`) and the bias
+        // errors arrive as the in-process estimator has them.
+        let (la, lb) = (ea.trace.last().unwrap(), eb.trace.last().unwrap());
+        assert_eq!((la.t, la.sigma, la.err), (lb.t, lb.sigma, lb.err), "{family:?}");
         // The refused outlier is counted on the flight controller and
         // reported (the wire's one count of refused fix parts).
         assert_eq!(ea.counters.pos_rejected, 1, "{:?}", ea.counters);

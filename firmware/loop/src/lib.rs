@@ -625,7 +625,18 @@ impl FlightCore {
         }
         let cycles = clock.since(t0);
         self.reply(seq, cycles, iterations, link)?;
-        Self::send(link, &self.nav_message(seq))
+        Self::send(link, &self.nav_message(seq))?;
+        let (bg, ba) = self.nav.estimator().biases();
+        let s = self.nav.estimator().sigmas();
+        Self::send(
+            link,
+            &FromFc::NavBias {
+                seq,
+                gyro_bias: bg.into(),
+                accel_bias: ba.into(),
+                sigma: [s[9], s[10], s[11], s[12], s[13], s[14]],
+            },
+        )
     }
 
     /// The `Nav` message of step `seq`.

@@ -599,10 +599,15 @@ fn imu_steps_run_the_estimator_every_millisecond_and_the_mpc_every_fifth() {
             },
             0,
         );
-        let [FromFc::Actuator { u, .. }, FromFc::Telemetry { qp_iterations, .. }, FromFc::Nav { mode, .. }] = r[..]
+        let [FromFc::Actuator { u, .. }, FromFc::Telemetry { qp_iterations, .. }, FromFc::Nav { mode, .. }, FromFc::NavBias { seq, sigma, .. }] =
+            r[..]
         else {
             panic!("step {k}: {r:?}")
         };
+        // The biases' σ complete the covariance diagonal on the wire.
+        assert_eq!(seq, k);
+        let diag = rig.fc.navigator().estimator().sigmas();
+        assert_eq!(sigma.as_slice(), &diag.as_slice()[9..], "step {k}");
         if mode == 1 {
             if qp_iterations > 0 {
                 ran.push(t_us);

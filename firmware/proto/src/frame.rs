@@ -161,10 +161,10 @@ mod tests {
         }
     }
 
-    /// The largest messages of protocol v4, every optional part present and
-    /// every varint at its longest, fit one frame.
+    /// The largest messages of protocols v4 and v5, every optional part
+    /// present and every varint at its longest, fit one frame.
     #[test]
-    fn the_largest_v4_messages_fit_a_frame() {
+    fn the_largest_v4_and_v5_messages_fit_a_frame() {
         use crate::{FromFc, WireFix};
         let mut out = [0u8; MAX_FRAME];
         let fix = ToFc::Fix(WireFix {
@@ -199,11 +199,19 @@ mod tests {
             fixes_rejected: u32::MAX,
             failsafe_entries: u32::MAX,
         };
-        let n = encode(&nav, &mut out).unwrap();
-        assert!(n <= MAX_FRAME);
-        let mut d = FrameDecoder::<MAX_FRAME>::new();
-        let got: Vec<_> = out[..n].iter().filter_map(|&b| d.push::<FromFc>(b)).collect();
-        assert_eq!(got, vec![Ok(nav)]);
+        let bias = FromFc::NavBias {
+            seq: u32::MAX,
+            gyro_bias: [0.01; 3],
+            accel_bias: [-0.1; 3],
+            sigma: [0.001; 6],
+        };
+        for msg in [nav, bias] {
+            let n = encode(&msg, &mut out).unwrap();
+            assert!(n <= MAX_FRAME);
+            let mut d = FrameDecoder::<MAX_FRAME>::new();
+            let got: Vec<_> = out[..n].iter().filter_map(|&b| d.push::<FromFc>(b)).collect();
+            assert_eq!(got, vec![Ok(msg)]);
+        }
     }
 
     #[test]

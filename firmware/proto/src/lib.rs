@@ -242,4 +242,17 @@ pub enum FromFc {
         /// Failsafe episodes of the estimator.
         failsafe_entries: u32,
     },
+    /// The estimator's sensor biases and their 1σ after an `Imu` step, sent
+    /// after its `Nav` (since protocol v5): with `Nav.sigma`, the whole
+    /// diagonal of the error-state covariance (it does not fit one frame).
+    NavBias {
+        /// The step this describes.
+        seq: u32,
+        /// Gyro bias, body FRD, rad/s.
+        gyro_bias: [f32; 3],
+        /// Accelerometer bias, body FRD, m/s².
+        accel_bias: [f32; 3],
+        /// 1σ of the error state's last six: gyro bias (rad/s), accelerometer bias (m/s²).
+        sigma: [f32; 6],
+    },
 }

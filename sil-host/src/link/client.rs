@@ -49,6 +49,10 @@ pub struct NavMessage {
     pub sigma: [f32; 9],
     /// Refused IMU samples, refused fix parts, failsafe episodes.
     pub counts: [u32; 3],
+    /// Gyro (rad/s) and accelerometer (m/s²) bias estimates, FRD (`NavBias`).
+    pub biases: [[f32; 3]; 2],
+    /// Their 1σ (`NavBias`): gyro, then accelerometer.
+    pub bias_sigma: [f32; 6],
 }
 
 /// What one control step sends as its measurement.
@@ -326,7 +330,22 @@ impl FcClient {
                         att,
                         sigma,
                         counts: [imu_rejected, fixes_rejected, failsafe_entries],
+                        biases: [[f32::NAN; 3]; 2],
+                        bias_sigma: [f32::NAN; 6],
                     });
+                }
+                FromFc::NavBias {
+                    seq: s,
+                    gyro_bias,
+                    accel_bias,
+                    sigma,
+                } if s == seq && want_nav => {
+                    let n = out
+                        .as_mut()
+                        .and_then(|r| r.nav.as_mut())
+                        .ok_or_else(|| anyhow::anyhow!("nav biases before the nav frame"))?;
+                    n.biases = [gyro_bias, accel_bias];
+                    n.bias_sigma = sigma;
                     return out.ok_or_else(|| anyhow::anyhow!("no actuator frame"));
                 }
                 FromFc::Telemetry {
@@ -468,9 +487,9 @@ fn report_of(step: &RemoteStep) -> StepReport {
     }
 }
 
-/// A received `Nav` as the flight's estimator report: the estimate and the
-/// σ the wire carries (position, velocity, attitude); no covariance, no
-/// biases (NaN), so no NEES.
+/// A received `Nav` and `NavBias` as the flight's estimator report: the
+/// estimate, the biases and the covariance's diagonal (as σ); no
+/// off-diagonal terms, so no NEES.
 fn nav_report(n: &NavMessage) -> NavReport {
     use nalgebra::{Vector3, Vector4};
     let mode = match n.mode {
@@ -486,10 +505,11 @@ fn nav_report(n: &NavMessage) -> NavReport {
     });
     let mut sigmas = [f32::NAN; fc_core::estimate::ERR];
     sigmas[..9].copy_from_slice(&n.sigma);
+    sigmas[9..].copy_from_slice(&n.bias_sigma);
     NavReport {
         mode,
         estimate,
-        biases: (Vector3::repeat(f32::NAN), Vector3::repeat(f32::NAN)),
+        biases: (Vector3::from(n.biases[0]), Vector3::from(n.biases[1])),
         covariance: None,
         sigmas,
         // The wire carries one count of refused IMU samples (rejected and
