@@ -3,8 +3,10 @@
 //! Split by concern, nalgebra style: [`params`] (construction), [`mixer`]
 //! (rotor speeds ↔ inputs), [`dynamics`] (nonlinear ODEs), [`attitude`]
 //! (Euler/quaternion conversion), [`trim`] (hover), [`linear`] (Jacobians),
-//! [`discretise`] (matrix exponential, ZOH).
+//! [`discretise`] (matrix exponential, ZOH), [`airframe`] (motor commands for
+//! any four-rotor layout).
 
+pub mod airframe;
 pub mod attitude;
 pub mod discretise;
 pub mod dynamics;
