@@ -22,6 +22,8 @@ echo "== clippy (host, all targets)"
 cargo clippy --workspace --all-targets -- -D warnings
 echo "== clippy + build (the STM32F405 image and its QEMU harness binaries, thumbv7em-none-eabihf)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --bins -- -D warnings
+# The MAVLink crate is no_std: it must build for the MCU before the image links it.
+cargo clippy -p fc-mavlink --target thumbv7em-none-eabihf -- -D warnings
 cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf
 echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run here)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings

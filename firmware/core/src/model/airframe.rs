@@ -360,7 +360,7 @@ mod tests {
         let c = m.commands(&Vector4::new(2.0, 0.0, 0.0, 0.0));
         assert!(c.clamped && c.commands == [1.0; 4], "{c:?}");
         let c = m.commands(&Vector4::new(0.3, 5.0, 0.0, 0.0));
-        assert!(c.clamped && c.commands.iter().any(|v| *v == 0.0), "{c:?}");
+        assert!(c.clamped && c.commands.contains(&0.0), "{c:?}");
         let c = m.commands(&Vector4::new(f64::NAN, 0.0, 0.0, 0.0));
         assert!(c.clamped && c.commands == [0.0; 4], "{c:?}");
     }

@@ -1,0 +1,214 @@
+#![doc = include_str!("../README.md")]
+#![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod hil;
+
+pub use mavlink::dialects::common::{self, MavMessage};
+pub use mavlink::MavHeader;
+use mavlink::{MAVLinkV2MessageRaw, Message};
+
+/// MAVLink 2's start byte.
+const STX_V2: u8 = 0xFD;
+/// Start byte, length, flags (2), sequence, system, component, id (3).
+const HEADER_LEN: usize = 10;
+/// The CRC after the payload.
+const CRC_LEN: usize = 2;
+/// Largest MAVLink 2 frame: header, 255 bytes of payload, CRC, 13 bytes of signature.
+pub const MAX_FRAME: usize = HEADER_LEN + 255 + CRC_LEN + 13;
+
+/// Why a frame was not delivered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MavError {
+    /// The checksum (with the message's CRC extra byte) did not match.
+    BadCrc,
+    /// A message id the common dialect does not have.
+    UnknownMessage(u32),
+    /// A frame this reader does not accept: signed, or with 32-bit system
+    /// ids (its incompatibility flags, given).
+    Unsupported(u8),
+    /// The payload did not decode as its message.
+    Malformed(u32),
+    /// A message addressed to another system (its target, given).
+    OtherSystem(u8),
+    /// The output buffer is smaller than the frame.
+    BufferTooSmall,
+}
+
+impl core::fmt::Display for MavError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            MavError::BadCrc => write!(f, "MAVLink frame with a bad checksum"),
+            MavError::UnknownMessage(id) => write!(f, "MAVLink message id {id} is not in the common dialect"),
+            MavError::Unsupported(flags) => {
+                write!(
+                    f,
+                    "MAVLink frame with incompatibility flags {flags:#04x} (signed or 32-bit ids) is not supported"
+                )
+            }
+            MavError::Malformed(id) => write!(f, "MAVLink message {id} did not decode"),
+            MavError::OtherSystem(t) => write!(f, "MAVLink message addressed to system {t}, not this one"),
+            MavError::BufferTooSmall => write!(f, "the buffer is smaller than the MAVLink frame"),
+        }
+    }
+}
+
+/// What the reader delivered and refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MavCounters {
+    /// Messages delivered.
+    pub ok: u32,
+    /// Frames with a bad checksum.
+    pub bad_crc: u32,
+    /// Frames of message ids the dialect does not have.
+    pub unknown: u32,
+    /// Signed or 32-bit-system-id frames.
+    pub unsupported: u32,
+    /// Payloads that did not decode.
+    pub malformed: u32,
+    /// Messages for other systems.
+    pub other_system: u32,
+    /// Bytes outside any frame (noise before a start byte).
+    pub skipped_bytes: u32,
+}
+
+/// MAVLink 2 frames from a byte stream, one byte at a time, in a fixed
+/// buffer: a frame is read to its length and then checked, decoded and
+/// delivered or refused (counted); a refused frame is dropped whole and the
+/// next start byte begins the next (as the reference C parser resumes).
+#[derive(Clone)]
+pub struct MavReader {
+    raw: MAVLinkV2MessageRaw,
+    len: usize,
+    need: usize,
+    system_id: u8,
+    counters: MavCounters,
+}
+
+impl core::fmt::Debug for MavReader {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("MavReader")
+            .field("len", &self.len)
+            .field("system_id", &self.system_id)
+            .field("counters", &self.counters)
+            .finish()
+    }
+}
+
+impl MavReader {
+    /// A reader for system `system_id`: messages addressed to another
+    /// system (target system not 0 and not this) are refused.
+    pub const fn new(system_id: u8) -> Self {
+        Self {
+            raw: MAVLinkV2MessageRaw::new(),
+            len: 0,
+            need: 0,
+            system_id,
+            counters: MavCounters {
+                ok: 0,
+                bad_crc: 0,
+                unknown: 0,
+                unsupported: 0,
+                malformed: 0,
+                other_system: 0,
+                skipped_bytes: 0,
+            },
+        }
+    }
+
+    /// What was delivered and refused so far.
+    pub fn counters(&self) -> MavCounters {
+        self.counters
+    }
+
+    /// Feeds one byte: `Some` when it completes a frame, with the message
+    /// or the reason it was refused (also counted).
+    pub fn push(&mut self, byte: u8) -> Option<Result<(MavHeader, MavMessage), MavError>> {
+        if self.len == 0 && byte != STX_V2 {
+            self.counters.skipped_bytes = self.counters.skipped_bytes.wrapping_add(1);
+            return None;
+        }
+        self.raw.as_mut_slice()[self.len] = byte;
+        self.len += 1;
+        if self.len == 3 {
+            let flags = self.raw.as_slice()[2];
+            if flags != 0 {
+                self.len = 0;
+                return Some(Err(self.count(MavError::Unsupported(flags))));
+            }
+            self.need = HEADER_LEN + usize::from(self.raw.as_slice()[1]) + CRC_LEN;
+        }
+        if self.len < 3 || self.len < self.need {
+            return None;
+        }
+        self.len = 0;
+        Some(self.decode().map_err(|e| self.count(e)))
+    }
+
+    fn count(&mut self, e: MavError) -> MavError {
+        let c = &mut self.counters;
+        let n = match e {
+            MavError::BadCrc => &mut c.bad_crc,
+            MavError::UnknownMessage(_) => &mut c.unknown,
+            MavError::Unsupported(_) => &mut c.unsupported,
+            MavError::Malformed(_) => &mut c.malformed,
+            MavError::OtherSystem(_) => &mut c.other_system,
+            MavError::BufferTooSmall => return e,
+        };
+        *n = n.wrapping_add(1);
+        e
+    }
+
+    /// The complete frame in `raw`, checked and decoded.
+    fn decode(&mut self) -> Result<(MavHeader, MavMessage), MavError> {
+        let raw = &self.raw;
+        let id = raw.message_id();
+        if !raw.has_valid_crc::<MavMessage>() {
+            // A known id with any payload decodes (MAVLink 2 truncates
+            // trailing zeros); an unknown one never does.
+            return Err(match MavMessage::parse(mavlink::MavlinkVersion::V2, id, &[]) {
+                Ok(_) => MavError::BadCrc,
+                Err(_) => MavError::UnknownMessage(id),
+            });
+        }
+        let msg =
+            MavMessage::parse(mavlink::MavlinkVersion::V2, id, raw.payload()).map_err(|_| MavError::Malformed(id))?;
+        if let Some(t) = msg.target_system_id() {
+            if t != 0 && t != self.system_id {
+                return Err(MavError::OtherSystem(t));
+            }
+        }
+        self.counters.ok = self.counters.ok.wrapping_add(1);
+        let header = MavHeader {
+            system_id: raw.system_id(),
+            component_id: raw.component_id(),
+            sequence: raw.sequence(),
+        };
+        Ok((header, msg))
+    }
+}
+
+/// Writes `msg` as one MAVLink 2 frame (unsigned) into `out`; returns its
+/// length. `Err` if `out` is too small or the header's system id does not
+/// fit a byte (32-bit ids are not supported).
+pub fn encode(header: MavHeader, msg: &MavMessage, out: &mut [u8]) -> Result<usize, MavError> {
+    if header.system_id > u32::from(u8::MAX) {
+        return Err(MavError::Unsupported(0x02));
+    }
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message(header, msg);
+    let bytes = raw.raw_bytes();
+    out.get_mut(..bytes.len())
+        .ok_or(MavError::BufferTooSmall)?
+        .copy_from_slice(bytes);
+    Ok(bytes.len())
+}
+
+/// The message id of `msg` (for logs and counters).
+pub fn message_id(msg: &MavMessage) -> u32 {
+    msg.message_id()
+}
+
+#[cfg(test)]
+mod tests;
