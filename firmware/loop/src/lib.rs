@@ -213,17 +213,11 @@ pub struct FlightCore {
     selections: u32,
     /// The estimator of `Imu` steps (sensor flights).
     nav: Navigator,
-    /// Fixes received since the last `Imu` step, fused at the next.
-    fixes: heapless::Vec<Fix, MAX_PENDING_FIXES>,
     /// The estimator's failsafe flew the last `Imu` step.
     nav_failsafe: bool,
     /// When the controller runs under the `Imu` steps.
     schedule: schedule::Schedule,
 }
-
-/// Fixes held for the next `Imu` step; more are dropped and counted as
-/// `unexpected` (a host sends one or two per step).
-pub const MAX_PENDING_FIXES: usize = 4;
 
 /// A wire fix as the estimator's type.
 pub fn fix_from_wire(w: &WireFix) -> Fix {
@@ -289,7 +283,6 @@ impl FlightCore {
             u: Vector4::zeros(),
             selections: 0,
             nav: Navigator::bmi088(),
-            fixes: heapless::Vec::new(),
             nav_failsafe: false,
             schedule: schedule::Schedule::new(),
         }
@@ -482,7 +475,6 @@ impl FlightCore {
                     self.last_valid_us = None;
                     self.last_pos = None;
                     self.nav.reset();
-                    self.fixes.clear();
                     self.nav_failsafe = false;
                     self.schedule.reset();
                 }
@@ -527,9 +519,9 @@ impl FlightCore {
             }
             ToFc::Sensor { seq, t_us, state } => self.on_sensor(seq, t_us, &state, link, clock, now_us),
             ToFc::Fix(w) => {
-                if self.fixes.push(fix_from_wire(&w)).is_err() {
-                    self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
-                }
+                // Queued in the navigator for the next `Imu` step; a full
+                // queue drops and counts it (`Nav.fixes_rejected`).
+                self.nav.push_fix(&fix_from_wire(&w));
                 Ok(())
             }
             ToFc::Imu { seq, t_us, gyro, accel } => {
@@ -587,8 +579,7 @@ impl FlightCore {
         };
         let lockstep = self.cfg.time_base == TimeBase::Lockstep;
         let t0 = clock.now();
-        let stepped = self.nav.step(now, imu, &self.fixes);
-        self.fixes.clear();
+        let stepped = self.nav.step(now, imu, &[]);
         // Asked at every step, so that the grid follows the steps' times.
         let control = self.schedule.due(now, self.period_us());
         let mut iterations = 0u16;

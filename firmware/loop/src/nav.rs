@@ -35,7 +35,10 @@ pub const MAX_UPDATES_PER_STEP: usize = 3;
 /// Fix parts waiting for their step; more are dropped and counted
 /// ([`Navigator::fixes_dropped`]). Sensors deliver a few parts per 10 ms:
 /// the queue drains at one part per step.
-pub const PENDING_PARTS: usize = 8;
+pub const PENDING_PARTS: usize = 6;
+
+/// The arrival time of a part queued between steps: stamped at the next.
+const UNSTAMPED: u64 = u64::MAX;
 
 /// The scalar updates a fix brings: 3 per triple, 1 per scalar.
 pub fn updates_of(f: &Fix) -> usize {
@@ -220,10 +223,11 @@ impl Navigator {
         };
         self.last_imu_us = Some(now_us);
         self.eskf.predict(imu, dt_s)?;
-        for part in fixes.iter().flat_map(parts_of).flatten() {
-            if self.pending.push_back((part, now_us)).is_err() {
-                self.dropped = self.dropped.wrapping_add(1);
-            }
+        for fix in fixes {
+            self.push_fix(fix);
+        }
+        for (_, at) in self.pending.iter_mut().filter(|(_, at)| *at == UNSTAMPED) {
+            *at = now_us;
         }
         if let Some((mut part, at)) = self.pending.pop_front() {
             part.age_s += (now_us - at) as f32 * 1e-6;
@@ -313,6 +317,20 @@ impl Navigator {
     /// The estimator's counters.
     pub fn counters(&self) -> EskfCounters {
         self.eskf.counters()
+    }
+
+    /// Queues a fix that arrived between steps, for the next step (whose
+    /// time its age counts from); split into parts as [`Navigator::step`]
+    /// does. `false` if (a part of) it was dropped, the queue being full.
+    pub fn push_fix(&mut self, fix: &Fix) -> bool {
+        let mut all = true;
+        for part in parts_of(fix).into_iter().flatten() {
+            if self.pending.push_back((part, UNSTAMPED)).is_err() {
+                self.dropped = self.dropped.wrapping_add(1);
+                all = false;
+            }
+        }
+        all
     }
 
     /// Fix parts dropped because more arrived than one a step drains.
