@@ -1,7 +1,7 @@
 //! LQR about hover, Euler form (thesis 3.91–3.100; weights Table 4.5),
 //! `U = Uss − K(ψ) δX`, scheduled on the current heading ψ.
 
-use super::lqr_table::{design_discrete, GainTable};
+use super::lqr_table::{design_discrete, inputs_weighted_for, GainTable};
 use super::{
     observer::AccelObserver, validate, wrap_pi, AttitudeRef, ControlError, ControlOutput, Controller, ReferenceMode,
     Setpoint, StateEstimate,
@@ -102,9 +102,12 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
             .redesign(|yaw| Ok(design_discrete(&euler_hover_model(&p64, yaw), q, r, ts)?.k))
     }
 
-    /// The thesis weights (Table 4.5).
+    /// The thesis weights (Table 4.5), the input weights kept relative to
+    /// this vehicle's input ranges ([`inputs_weighted_for`]; the thesis'
+    /// own on the OS4).
     pub fn thesis(params: VehicleParams<T>, ts: f64, mode: ReferenceMode) -> Result<Self, ControlError> {
         let (q, r) = euler_weights();
+        let r = inputs_weighted_for(&r, &params);
         Self::new(params, &q, &r, ts, mode)
     }
 
@@ -116,6 +119,7 @@ impl<T: RealField + Copy, const H: usize> LqrEuler<T, H> {
         mode: ReferenceMode,
     ) -> Result<(), ControlError> {
         let (q, r) = euler_weights();
+        let r = inputs_weighted_for(&r, &params);
         self.redesign(params, &q, &r, ts, mode)
     }
 

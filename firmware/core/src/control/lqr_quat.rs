@@ -10,7 +10,7 @@
 //! every heading, exactly (the dynamics are symmetric in yaw and Q weights x
 //! and y equally), so one gain serves all headings with no singularity.
 
-use super::lqr_table::{design_discrete, Gain};
+use super::lqr_table::{design_discrete, inputs_weighted_for, Gain};
 use super::{
     observer::AccelObserver, validate, AttitudeRef, ControlError, ControlOutput, Controller, HeadingFrame,
     ReferenceMode, Setpoint, StateEstimate,
@@ -81,9 +81,12 @@ impl<T: RealField + Copy> LqrQuat<T> {
         })
     }
 
-    /// The thesis weights (Table 4.7).
+    /// The thesis weights (Table 4.7), the input weights kept relative to
+    /// this vehicle's input ranges ([`inputs_weighted_for`]; the thesis'
+    /// own on the OS4).
     pub fn thesis(params: VehicleParams<T>, ts: f64, mode: ReferenceMode) -> Result<Self, ControlError> {
         let (q, r) = quat_weights();
+        let r = inputs_weighted_for(&r, &params);
         Self::new(params, &q, &r, ts, mode)
     }
 

@@ -4,7 +4,7 @@
 use super::ControlError;
 use crate::linalg::{solve_care, solve_dare, RiccatiSolution};
 use crate::lit;
-use crate::model::{zoh_into, LinearModel};
+use crate::model::{zoh_into, LinearModel, VehicleParams};
 use nalgebra::{RealField, SMatrix};
 
 /// LQR gain `K` (4 inputs × 12 states).
@@ -105,4 +105,52 @@ pub fn design_discrete(
     let mut rs = *r;
     rs.scale_mut(ts);
     Ok(solve_dare(&ad, &bd, &qs, &rs)?)
+}
+
+/// The thesis' input weights `r` (made for the OS4) for the vehicle `p`:
+/// each scaled by `(range on the OS4 / range on p)²`, the input ranges
+/// being the input box's upper limits, so that every input costs the same
+/// fraction of its range as on the OS4 (Bryson's rule, `R ∝ 1/u_max²`).
+/// On a 30 g vehicle whose thrust is 1/22 of the OS4's, the thesis' own
+/// weights would make the inputs ≈ 500× cheaper and the gains saturate
+/// them. The factors are exactly 1 on the OS4.
+pub fn inputs_weighted_for<T: RealField + Copy>(r: &SMatrix<f64, 4, 4>, p: &VehicleParams<T>) -> SMatrix<f64, 4, 4> {
+    // Both ranges in `p`'s float type: on the OS4 the ratio is exactly 1.
+    let os4 = VehicleParams::<f64>::OS4.cast::<T>().input_box().hi;
+    let this = p.input_box().hi;
+    let mut out = *r;
+    for i in 0..4 {
+        let k = nalgebra::try_convert::<T, f64>(os4[i] / this[i]).unwrap_or(f64::NAN);
+        if k.is_finite() && k > 0.0 {
+            for j in 0..4 {
+                out[(i, j)] *= k;
+                out[(j, i)] *= k;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod input_weight_tests {
+    use super::*;
+
+    #[test]
+    fn input_weights_follow_the_vehicles_input_ranges() {
+        let r = SMatrix::<f64, 4, 4>::from_diagonal(&nalgebra::Vector4::new(1.0, 2.0, 3.0, 4.0));
+        // The OS4 itself, in either float type: the thesis' weights unchanged.
+        assert_eq!(inputs_weighted_for(&r, &VehicleParams::<f64>::OS4), r);
+        assert_eq!(inputs_weighted_for(&r, &VehicleParams::<f32>::os4()), r);
+        // Half the thrust coefficient halves the force ranges (×4 on their
+        // weights); half the moment coefficient the yaw range.
+        let p = VehicleParams {
+            kf_ns2: VehicleParams::<f64>::OS4.kf_ns2 / 2.0,
+            km_nms2: VehicleParams::<f64>::OS4.km_nms2 / 2.0,
+            ..VehicleParams::OS4
+        };
+        let w = inputs_weighted_for(&r, &p);
+        for (i, want) in [4.0, 8.0, 12.0, 16.0].iter().enumerate() {
+            assert!((w[(i, i)] - want).abs() < 1e-9, "{w}");
+        }
+    }
 }

@@ -12,8 +12,8 @@
 //! loop on the MCU and the wire all go through here.
 
 use super::{
-    lqr_euler, lqr_quat, observer::AccelObserver, AnyController, ControlError, LqrQuat, MpcConfig, MpcFast, MpcThesis,
-    PdEuler, PdEulerGains, PdQuatGains, ReferenceMode,
+    lqr_euler, lqr_quat, lqr_table::inputs_weighted_for, observer::AccelObserver, AnyController, ControlError, LqrQuat,
+    MpcConfig, MpcFast, MpcThesis, PdEuler, PdEulerGains, PdQuatGains, ReferenceMode,
 };
 use crate::model::{AttitudeForm, VehicleParams};
 use core::fmt;
@@ -353,6 +353,8 @@ impl ControllerSpec {
                         Project => lqr_euler::tuned_weights(),
                         Thesis => lqr_euler::euler_weights(),
                     };
+                    // The weights are the OS4's; the inputs keep their relative cost.
+                    let r = inputs_weighted_for(&r, &p);
                     c.redesign(p, &q, &r, ts, mode)?;
                     c.set_observer(obs.smoothed());
                 }
@@ -362,6 +364,7 @@ impl ControllerSpec {
                     Project => lqr_quat::tuned_weights(),
                     Thesis => lqr_quat::quat_weights(),
                 };
+                let r = inputs_weighted_for(&r, &p);
                 slot.become_lqrquat(LqrQuat::new(p, &q, &r, ts, mode)?.with_observer(obs.smoothed()))
             }
             (Mpc, form, Project) => {
