@@ -52,4 +52,8 @@ echo "== the main job, quick: sil-host report --quick (index, HTML and every lin
 rm -rf target/report-quick
 cargo run -q --release -p sil-host -- report --quick --no-progress --out target/report-quick
 python3 tools/check_report.py target/report-quick | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+echo "== a flight against rotorpy, a simulator this project did not write (PX4 HIL over TCP 4560)"
+python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore rotorpy pymavlink
+python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
+    --duration 15 --json target/rotorpy-hil.json | grep "rotorpy check:" | tee -a "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

@@ -13,6 +13,7 @@ pub mod estimation_report;
 pub mod figures;
 pub mod flight;
 pub mod full_report;
+pub mod hil;
 pub mod html;
 pub mod link;
 pub mod metrics;

@@ -60,6 +60,51 @@ enum Command {
     /// rotor lag drawn from a seeded generator); writes DIR/sweep.md (success rate, RMSE
     /// percentiles), DIR/sweep.json (every flight) and the RMSE-distribution figure.
     Sweep(SweepArgs),
+    /// Fly the core against a simulator that speaks PX4's HIL interface (it listens on TCP 4560:
+    /// rotorpy's PX4Multirotor, jMAVSim, Gazebo's bridge): HIL_SENSOR in, HIL_ACTUATOR_CONTROLS
+    /// out, in lockstep; HIL_STATE_QUATERNION's position and heading as a mocap-like fix. Motors
+    /// off until the estimator has aligned at rest. Prints a JSON summary.
+    Px4Hil(Px4HilArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+struct Px4HilArgs {
+    /// The simulator's address.
+    #[arg(long, default_value = "127.0.0.1:4560", value_name = "HOST:PORT")]
+    connect: String,
+    /// Keep trying to connect for this long, s.
+    #[arg(long, default_value_t = 30.0, value_name = "S")]
+    connect_timeout: f64,
+    /// Controller: `pd`, `lqr` or `mpc`.
+    #[arg(long, value_parser = family_parser(), default_value = "lqr")]
+    controller: Family,
+    /// Form of the controller: `euler` or `quaternion`.
+    #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
+    model: AttitudeForm,
+    /// The vehicle (a TOML file, see `sil-host fly --help`); e.g. vehicles/crazyflie-rotorpy.toml.
+    #[arg(long, value_name = "FILE")]
+    vehicle: PathBuf,
+    /// Rotor layout in the simulator's motor order: `x-rotorpy` (hubs at --hub-m, 45°) or `plus` (the OS4's, at the vehicle's arm).
+    #[arg(long, default_value = "x-rotorpy")]
+    airframe: String,
+    /// Hub distance from the centre for `x-rotorpy`, m.
+    #[arg(long, default_value_t = 0.043, value_name = "M")]
+    hub_m: f64,
+    /// Motor command unit: `speed` (fraction of the maximum rotor speed, as rotorpy reads it), `thrust` (fraction of the maximum thrust) or `pwm` (1000–2000 µs, linear in speed).
+    #[arg(long, default_value = "speed")]
+    motor_unit: String,
+    /// Mission: `T,N,E,D` (from T s, hold N, E, D m about home; heading 0), repeatable, in time order.
+    #[arg(long = "waypoint", value_name = "T,N,E,D", required = true)]
+    waypoints: Vec<String>,
+    /// Stop after this much simulated time, s.
+    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    duration: f64,
+    /// Rate of the position fixes taken from HIL_STATE_QUATERNION, Hz.
+    #[arg(long, default_value_t = 100.0, value_name = "HZ")]
+    fix_hz: f64,
+    /// Write the trace (t, reported NED, estimated NED, set-point NED) as CSV.
+    #[arg(long, value_name = "PATH")]
+    csv: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -804,6 +849,7 @@ fn main() -> Result<()> {
         Command::Report(a) => report_cmd(a),
         Command::Sweep(a) => sweep_cmd(a),
         Command::MpcStep(a) => mpc_step_cmd(a),
+        Command::Px4Hil(a) => px4_hil(a.clone()),
         Command::Serve(a) => {
             for (flag, v) in [("--idle-timeout", a.idle_timeout), ("--max-session", a.max_session)] {
                 if !(v.is_finite() && v > 0.0 && v <= 1e6) {
@@ -823,4 +869,88 @@ fn main() -> Result<()> {
             )
         }
     }
+}
+
+fn px4_hil(a: Px4HilArgs) -> Result<()> {
+    use fc_core::model::airframe::{MotorUnit, RotorLayout};
+    let vehicle = sil_host::config::load_vehicle(&a.vehicle)?;
+    let layout = match a.airframe.as_str() {
+        "x-rotorpy" if a.hub_m.is_finite() && a.hub_m > 0.0 => RotorLayout::x_rotorpy(a.hub_m as f32),
+        "x-rotorpy" => bail!("--hub-m {} must be a positive length", a.hub_m),
+        "plus" => RotorLayout::plus(vehicle.arm_m as f32),
+        other => bail!("unknown --airframe '{other}': use x-rotorpy or plus"),
+    };
+    let unit = match a.motor_unit.as_str() {
+        "speed" => MotorUnit::SpeedFraction,
+        "thrust" => MotorUnit::ThrustFraction,
+        "pwm" => MotorUnit::PwmUs {
+            min_us: 1000,
+            max_us: 2000,
+        },
+        other => bail!("unknown --motor-unit '{other}': use speed, thrust or pwm"),
+    };
+    let mut mission = Vec::new();
+    for w in &a.waypoints {
+        let v: Vec<f64> = w
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| anyhow::anyhow!("--waypoint '{w}' is not T,N,E,D (numbers)"))?;
+        let [t, n, e, d] = v[..] else {
+            bail!("--waypoint '{w}' is not T,N,E,D (four numbers)");
+        };
+        if !v.iter().all(|x| x.is_finite()) || t < 0.0 || v[1..].iter().any(|x| x.abs() > 1000.0) {
+            bail!("--waypoint '{w}': time must be ≥ 0 and positions within 1 km");
+        }
+        if mission.last().is_some_and(|p: &sil_host::hil::Waypoint| p.at_s > t) {
+            bail!("--waypoint '{w}' is earlier than the one before: give them in time order");
+        }
+        mission.push(sil_host::hil::Waypoint {
+            at_s: t,
+            pos_ned_m: [n, e, d],
+            yaw_rad: 0.0,
+        });
+    }
+    for (flag, v) in [
+        ("--duration", a.duration),
+        ("--fix-hz", a.fix_hz),
+        ("--connect-timeout", a.connect_timeout),
+    ] {
+        if !(v.is_finite() && v > 0.0 && v <= 1e5) {
+            bail!("{flag} {v:?} is out of range: must be in (0, 1e5]");
+        }
+    }
+    let cfg = sil_host::hil::HilConfig {
+        addr: a.connect,
+        connect_timeout_s: a.connect_timeout,
+        spec: fc_core::control::ControllerSpec::new(a.controller, a.model),
+        vehicle,
+        layout,
+        unit,
+        fix_period_s: 1.0 / a.fix_hz,
+        mission,
+        duration_s: a.duration,
+    };
+    let res = sil_host::hil::run(&cfg)?;
+    if let Some(path) = &a.csv {
+        let mut w = csv::Writer::from_path(path)?;
+        w.write_record([
+            "t",
+            "north",
+            "east",
+            "down",
+            "est_north",
+            "est_east",
+            "est_down",
+            "sp_north",
+            "sp_east",
+            "sp_down",
+        ])?;
+        for r in &res.trace {
+            w.write_record(r.iter().map(|v| v.to_string()))?;
+        }
+        w.flush()?;
+    }
+    println!("{}", serde_json::to_string_pretty(&res)?);
+    Ok(())
 }

@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Fly the flight-controller core against rotorpy (PyPI `rotorpy`, MIT), a
+multirotor simulator this project did not write, over PX4's HIL interface.
+
+rotorpy's `PX4Multirotor` listens on tcpin:localhost:4560, sends
+HIL_STATE_QUATERNION and HIL_SENSOR every step and applies the
+HIL_ACTUATOR_CONTROLS it gets back (motor speeds as fractions of its
+maximum), with its own aerodynamics (rotor drag, induced inflow) and motor
+lag. `sil-host px4-hil` is the flight controller: it connects, aligns its
+estimator at rest on the ground, arms and flies the waypoints.
+
+    python3 tools/rotorpy_hil.py --sil-host target/release/sil-host \
+        --waypoint 0,0,0,-1 --waypoint 6,1,0,-1 --duration 12
+
+Prints the flight controller's JSON summary with this script's own
+measurements of the flight (from rotorpy's true state) added under
+"rotorpy"; exits non-zero if the vehicle diverged or ended further than
+--max-final-error from the last waypoint.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+# pymavlink speaks MAVLink 1 unless told otherwise before it is imported;
+# the flight controller reads MAVLink 2 only.
+os.environ["MAVLINK20"] = "1"
+
+import numpy as np  # noqa: E402
+from rotorpy.vehicles.crazyflie_params import quad_params  # noqa: E402
+from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
+
+
+class Lockstep(PX4Multirotor):
+    """rotorpy's vehicle, waiting as long as it takes for the flight
+    controller's answer (its own waits 10 ms of wall time and then flies
+    with the motors off: a flight controller in an emulator is slower)."""
+
+    def _fetch_latest_px4_control(self, blocking=True):
+        msg = self.conn.recv_match(type="HIL_ACTUATOR_CONTROLS", blocking=True, timeout=30.0)
+        if msg is None:
+            raise RuntimeError("no HIL_ACTUATOR_CONTROLS from the flight controller in 30 s")
+        return {"cmd_motor_speeds": [c * self.rotor_speed_max for c in msg.controls[: self.num_rotors]]}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sil-host", default="target/release/sil-host")
+    ap.add_argument("--controller", default="lqr")
+    ap.add_argument("--waypoint", action="append", required=True, help="T,N,E,D (NED about the start, m)")
+    ap.add_argument("--duration", type=float, default=12.0, help="simulated seconds")
+    ap.add_argument("--dt", type=float, default=0.002, help="rotorpy's step, s")
+    ap.add_argument("--port", type=int, default=4560)
+    ap.add_argument("--max-final-error", type=float, default=0.05, help="m")
+    ap.add_argument("--csv", help="the flight controller's trace")
+    ap.add_argument("--json", help="write the summary here too")
+    ap.add_argument("--seed", type=int, default=1, help="seeds rotorpy's IMU noise (numpy)")
+    a = ap.parse_args()
+
+    cmd = [a.sil_host, "px4-hil", "--connect", f"127.0.0.1:{a.port}", "--controller", a.controller,
+           "--vehicle", "vehicles/crazyflie-rotorpy.toml", "--airframe", "x-rotorpy", "--hub-m", "0.043",
+           "--motor-unit", "speed", "--duration", str(a.duration + 1.0)]
+    for w in a.waypoint:
+        cmd += ["--waypoint", w]
+    if a.csv:
+        cmd += ["--csv", a.csv]
+    np.random.seed(a.seed)
+    fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    vehicle = Lockstep(quad_params, mavlink_url=f"tcpin:localhost:{a.port}")
+    state = dict(vehicle.initial_state)
+    zero = {"cmd_motor_speeds": np.zeros(4)}
+    track = []
+    steps = int(round(a.duration / a.dt))
+    for k in range(steps):
+        state = vehicle.step(state, zero, a.dt)
+        x = np.asarray(state["x"], dtype=float)  # ENU
+        track.append([k * a.dt, x[1], x[0], -x[2]])  # t, north, east, down
+        if not np.all(np.isfinite(x)) or np.abs(x).max() > 100:
+            break
+    # Hanging up ends the flight controller's session (and its summary).
+    vehicle.conn.close()
+    out, _ = fc.communicate(timeout=60)
+    if fc.returncode != 0:
+        print(f"sil-host px4-hil failed ({fc.returncode})", file=sys.stderr)
+        return 1
+    res = json.loads(out)
+    track = np.array(track)
+    n, e, d = (float(v) for v in a.waypoint[-1].split(",")[1:4])
+    final = track[-1, 1:4]
+    err = float(np.linalg.norm(final - np.array([n, e, d])))
+    res["rotorpy"] = {
+        "steps": len(track),
+        "dt_s": a.dt,
+        "final_ned_m": final.tolist(),
+        "final_error_m": err,
+        "max_altitude_m": float(-track[:, 3].min()),
+    }
+    text = json.dumps(res, indent=2)
+    print(text)
+    if a.json:
+        with open(a.json, "w") as f:
+            f.write(text + "\n")
+    ok = bool(np.all(np.isfinite(track))) and err <= a.max_final_error
+    if not ok:
+        print(f"FAIL: final error {err:.3f} m (bound {a.max_final_error} m)", file=sys.stderr)
+    print(f"rotorpy check: {int(ok)} passed, {int(not ok)} failed (final error {err:.3f} m)")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
