@@ -56,4 +56,6 @@ echo "== a flight against rotorpy, a simulator this project did not write (PX4 H
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore rotorpy pymavlink
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
     --duration 15 --json target/rotorpy-hil.json | grep "rotorpy check:" | tee -a "$log"
+python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --scenario circle --duration 25 \
+    --json target/rotorpy-hil-circle.json | grep "rotorpy check:" | tee -a "$log"
 awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

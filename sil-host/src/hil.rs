@@ -41,6 +41,44 @@ pub struct Waypoint {
     pub yaw_rad: f64,
 }
 
+/// What the vehicle flies once armed.
+#[derive(Debug, Clone)]
+pub enum Mission {
+    /// Set-points to hold, in time order (the first from t = 0).
+    Waypoints(Vec<Waypoint>),
+    /// Hold the scenario's start until `from_s`, then follow its reference
+    /// (position, velocity, acceleration and jerk feed-forward) from its
+    /// t = 0; positions NED about home.
+    Scenario {
+        /// The trajectory.
+        scenario: crate::scenario::Scenario,
+        /// When it starts, s after the first sample.
+        from_s: f64,
+    },
+}
+
+impl Mission {
+    /// The set-point at `t` (s after the first sample), and whether a
+    /// trajectory is being tracked (for the RMSE).
+    pub fn setpoint_at(&self, t: f64) -> (Setpoint<f32>, bool) {
+        match self {
+            Mission::Waypoints(w) => (setpoint_at(w, t), false),
+            Mission::Scenario { scenario, from_s } => {
+                let tracking = t >= *from_s;
+                let r = scenario.reference((t - from_s).max(0.0));
+                let mut sp = Setpoint::hold(r.pos.cast(), r.yaw as f32);
+                if tracking {
+                    sp.vel_ned_mps = r.vel.cast();
+                    sp.acc_ned_mps2 = r.acc.cast();
+                    sp.jerk_ned_mps3 = r.jerk.cast();
+                    sp.yaw_rate_radps = r.yaw_rate as f32;
+                }
+                (sp, tracking)
+            }
+        }
+    }
+}
+
 /// Everything a HIL flight needs.
 #[derive(Debug, Clone)]
 pub struct HilConfig {
@@ -58,8 +96,8 @@ pub struct HilConfig {
     pub unit: MotorUnit,
     /// Period of the fixes taken from `HIL_STATE_QUATERNION`, s.
     pub fix_period_s: f64,
-    /// The mission, in time order (the first from t = 0).
-    pub mission: Vec<Waypoint>,
+    /// What to fly.
+    pub mission: Mission,
     /// Stop after this much simulated time, s.
     pub duration_s: f64,
 }
@@ -79,6 +117,8 @@ pub struct HilResult {
     pub final_pos_ned_m: [f64; 3],
     /// Its distance from the last set-point, m.
     pub final_error_m: f64,
+    /// RMS distance from the reference while tracking a scenario, m (3-D).
+    pub tracking_rmse_m: Option<f64>,
     /// Largest distance between the estimate and the reported position, m.
     pub max_estimate_error_m: f64,
     /// Motor commands clamped by the mixer (steps).
@@ -135,9 +175,10 @@ fn setpoint_at(mission: &[Waypoint], t: f64) -> Setpoint<f32> {
 /// Flies `cfg` against the simulator at `cfg.addr` until `cfg.duration_s`
 /// of simulated time or until it hangs up.
 pub fn run(cfg: &HilConfig) -> Result<HilResult> {
-    if cfg.mission.is_empty() {
+    if matches!(&cfg.mission, Mission::Waypoints(w) if w.is_empty()) {
         bail!("the mission has no set-point");
     }
+    let (mut sq_sum, mut sq_n) = (0.0, 0usize);
     let vehicle = cfg.vehicle;
     vehicle.check().map_err(|e| anyhow::anyhow!("{e}"))?;
     let mixer = Mixer::new(&cfg.layout, &vehicle.cast::<f32>(), cfg.unit).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -205,7 +246,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                     let now_us = s.time_us.saturating_sub(t0);
                     let t = now_us as f64 * 1e-6;
                     let control = schedule.due(now_us, ctrl_period);
-                    let sp = setpoint_at(&cfg.mission, t);
+                    let (sp, tracking) = cfg.mission.setpoint_at(t);
                     let readings = Readings {
                         imu: s.imu,
                         fixes: std::mem::take(&mut fixes),
@@ -234,6 +275,10 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                     }
                     res.steps += 1;
                     res.duration_s = t;
+                    if tracking {
+                        sq_sum += (truth - sp.pos_ned_m.cast::<f64>()).norm_squared();
+                        sq_n += 1;
+                    }
                     if let Some(e) = nav.estimate {
                         let est = e.pos_ned_m.cast::<f64>();
                         res.max_estimate_error_m = res.max_estimate_error_m.max((est - truth).norm());
@@ -255,7 +300,8 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         c.bad_crc + c.unknown + c.unsupported + c.malformed + c.other_system
     };
     res.final_pos_ned_m = truth.into();
-    let last = setpoint_at(&cfg.mission, res.duration_s).pos_ned_m.cast::<f64>();
+    res.tracking_rmse_m = (sq_n > 0).then(|| (sq_sum / sq_n as f64).sqrt());
+    let last = cfg.mission.setpoint_at(res.duration_s).0.pos_ned_m.cast::<f64>();
     res.final_error_m = (truth - last).norm();
     Ok(res)
 }

@@ -94,8 +94,15 @@ struct Px4HilArgs {
     #[arg(long, default_value = "speed")]
     motor_unit: String,
     /// Mission: `T,N,E,D` (from T s, hold N, E, D m about home; heading 0), repeatable, in time order.
-    #[arg(long = "waypoint", value_name = "T,N,E,D", required = true)]
+    #[arg(long = "waypoint", value_name = "T,N,E,D", required_unless_present = "scenario")]
     waypoints: Vec<String>,
+    /// Or a scenario's trajectory (`circle`, `helix`, `setpoint`; docs/model.md §9, starting 1 m
+    /// above home), flown from --scenario-start s after holding its start point.
+    #[arg(long, value_enum, conflicts_with = "waypoints")]
+    scenario: Option<ScenarioKind>,
+    /// When the scenario starts, s.
+    #[arg(long, default_value_t = 3.0, value_name = "S")]
+    scenario_start: f64,
     /// Stop after this much simulated time, s.
     #[arg(long, default_value_t = 10.0, value_name = "S")]
     duration: f64,
@@ -911,6 +918,21 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
             yaw_rad: 0.0,
         });
     }
+    let mission = match a.scenario {
+        Some(kind) => {
+            if !(a.scenario_start.is_finite() && (0.0..=1e5).contains(&a.scenario_start)) {
+                bail!("--scenario-start {:?} must be in [0, 1e5] s", a.scenario_start);
+            }
+            let sc = Scenario::default_for(kind);
+            sc.validate().map_err(anyhow::Error::msg)?;
+            sc.check_feasible(&vehicle).map_err(anyhow::Error::msg)?;
+            sil_host::hil::Mission::Scenario {
+                scenario: sc,
+                from_s: a.scenario_start,
+            }
+        }
+        None => sil_host::hil::Mission::Waypoints(mission),
+    };
     for (flag, v) in [
         ("--duration", a.duration),
         ("--fix-hz", a.fix_hz),
