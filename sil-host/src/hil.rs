@@ -182,12 +182,14 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     let vehicle = cfg.vehicle;
     vehicle.check().map_err(|e| anyhow::anyhow!("{e}"))?;
     let mixer = Mixer::new(&cfg.layout, &vehicle.cast::<f32>(), cfg.unit).map_err(|e| anyhow::anyhow!("{e}"))?;
+    // PD and LQR at the flight controller's default control period.
+    let ts = fc_loop::FcConfig::default().control_period_s;
     let ctrl = cfg
         .spec
-        .build_with(vehicle.cast(), 0.002, None)
+        .build_with(vehicle.cast(), ts, None)
         .map_err(|e| anyhow::anyhow!("designing {} failed: {e}", cfg.spec))?;
     let mut ep = InProcess::new(ctrl);
-    let ctrl_period = period_us(ep.period_s().unwrap_or(0.002));
+    let ctrl_period = period_us(ep.period_s().unwrap_or(ts));
     let mut schedule = Schedule::new();
     let stream = connect(&cfg.addr, cfg.connect_timeout_s)?;
     stream.set_nodelay(true)?;
@@ -250,7 +252,6 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                     let readings = Readings {
                         imu: s.imu,
                         fixes: std::mem::take(&mut fixes),
-                        dt_s: 0.0,
                     };
                     let step = ep.step_sensed(t, &readings, &sp, &[], control)?;
                     let nav = step.nav.expect("an in-process sensed step reports its estimator");

@@ -218,8 +218,6 @@ pub struct Readings {
     pub imu: ImuSample,
     /// Fixes arriving now, each stamped with its age.
     pub fixes: Vec<Fix>,
-    /// The IMU's sample period, s.
-    pub dt_s: f64,
 }
 
 /// Gyro (rad/s) and accelerometer (m/s²) biases, FRD.
@@ -326,11 +324,7 @@ impl Sensors {
             }
         }
         self.step += 1;
-        Readings {
-            imu,
-            fixes,
-            dt_s: self.dt,
-        }
+        Readings { imu, fixes }
     }
 
     fn sample_imu(&mut self, t: f64, x: &fc_core::QuatState<f64>, plant: &Plant) -> ImuSample {

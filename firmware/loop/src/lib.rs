@@ -616,9 +616,40 @@ impl FlightCore {
         }
         let cycles = clock.since(t0);
         self.reply(seq, cycles, iterations, link)?;
-        Self::send(link, &self.nav_message(seq))?;
-        let (bg, ba) = self.nav.estimator().biases();
+        self.send_nav(seq, link)
+    }
+
+    /// Sends the `Nav` and `NavBias` messages of step `seq` (one covariance
+    /// diagonal for both, one message on the stack at a time).
+    fn send_nav<L: ByteLink>(&self, seq: u32, link: &mut L) -> Result<(), L::Error> {
+        let (mode, est) = match (self.nav.mode(), self.nav.estimate()) {
+            (NavMode::Navigating, Some(e)) => (1, Some(e)),
+            (NavMode::Failsafe, Some(e)) => (2, Some(e)),
+            _ => (0, None),
+        };
         let s = self.nav.estimator().sigmas();
+        let c = self.nav.counters();
+        Self::send(
+            link,
+            &FromFc::Nav {
+                seq,
+                mode,
+                pos: est.map_or([0.0; 3], |e| e.pos_ned_m.into()),
+                vel: est.map_or([0.0; 3], |e| e.vel_ned_mps.into()),
+                att: est.map_or([0.0; 4], |e| e.att.into()),
+                sigma: [s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]],
+                imu_rejected: c.imu_rejected.wrapping_add(c.imu_clipped),
+                fixes_rejected: c
+                    .pos_rejected
+                    .wrapping_add(c.vel_rejected)
+                    .wrapping_add(c.yaw_rejected)
+                    .wrapping_add(c.alt_rejected)
+                    .wrapping_add(c.fix_invalid)
+                    .wrapping_add(self.nav.fixes_dropped()),
+                failsafe_entries: self.nav.failsafe_entries(),
+            },
+        )?;
+        let (bg, ba) = self.nav.estimator().biases();
         Self::send(
             link,
             &FromFc::NavBias {
@@ -628,34 +659,6 @@ impl FlightCore {
                 sigma: [s[9], s[10], s[11], s[12], s[13], s[14]],
             },
         )
-    }
-
-    /// The `Nav` message of step `seq`.
-    fn nav_message(&self, seq: u32) -> FromFc {
-        let (mode, est) = match (self.nav.mode(), self.nav.estimate()) {
-            (NavMode::Navigating, Some(e)) => (1, Some(e)),
-            (NavMode::Failsafe, Some(e)) => (2, Some(e)),
-            _ => (0, None),
-        };
-        let s = self.nav.estimator().sigmas();
-        let c = self.nav.counters();
-        FromFc::Nav {
-            seq,
-            mode,
-            pos: est.map_or([0.0; 3], |e| e.pos_ned_m.into()),
-            vel: est.map_or([0.0; 3], |e| e.vel_ned_mps.into()),
-            att: est.map_or([0.0; 4], |e| e.att.into()),
-            sigma: [s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]],
-            imu_rejected: c.imu_rejected.wrapping_add(c.imu_clipped),
-            fixes_rejected: c
-                .pos_rejected
-                .wrapping_add(c.vel_rejected)
-                .wrapping_add(c.yaw_rejected)
-                .wrapping_add(c.alt_rejected)
-                .wrapping_add(c.fix_invalid)
-                .wrapping_add(self.nav.fixes_dropped()),
-            failsafe_entries: self.nav.failsafe_entries(),
-        }
     }
 
     #[allow(clippy::too_many_arguments)]

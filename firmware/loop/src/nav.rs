@@ -165,27 +165,23 @@ impl Navigator {
     /// A navigator waiting to align. `Err` names a bad setting.
     pub fn new(cfg: NavConfig) -> Result<Self, EstimatorError> {
         cfg.check()?;
-        Ok(Self {
-            cfg,
-            eskf: Eskf::new(cfg.eskf)?,
-            mode: NavMode::Aligning,
-            last_pos_us: None,
-            last_imu_us: None,
-            pending: heapless::Deque::new(),
-            dropped: 0,
-            over_since_us: None,
-            failsafe_from: None,
-            entries: 0,
-        })
+        Ok(Self::with(cfg, Eskf::new(cfg.eskf)?))
     }
 
     /// The default navigator (BMI088, the default failsafe), which cannot
     /// fail: its settings are valid (`tests::the_default_settings_are_valid`).
     pub fn bmi088() -> Self {
         let cfg = NavConfig::default();
+        Self::with(cfg, Eskf::new_unchecked(cfg.eskf))
+    }
+
+    /// A navigator of `cfg` around `eskf`, waiting to align (inlined: the
+    /// firmware builds it in its static home, not on the stack).
+    #[inline(always)]
+    fn with(cfg: NavConfig, eskf: Eskf<HISTORY>) -> Self {
         Self {
             cfg,
-            eskf: Eskf::new_unchecked(cfg.eskf),
+            eskf,
             mode: NavMode::Aligning,
             last_pos_us: None,
             last_imu_us: None,

@@ -57,26 +57,7 @@ impl<T: RealField + Copy> RotorLayout<T> {
     pub fn plus(arm_m: T) -> Self {
         let z = T::zero();
         let (a, c) = (Spin::Anticlockwise, Spin::Clockwise);
-        Self {
-            rotors: [
-                Rotor {
-                    pos_frd_m: [arm_m, z],
-                    spin: a,
-                },
-                Rotor {
-                    pos_frd_m: [z, arm_m],
-                    spin: c,
-                },
-                Rotor {
-                    pos_frd_m: [-arm_m, z],
-                    spin: a,
-                },
-                Rotor {
-                    pos_frd_m: [z, -arm_m],
-                    spin: c,
-                },
-            ],
-        }
+        Self::from_hubs([[arm_m, z], [z, arm_m], [-arm_m, z], [z, -arm_m]], [a, c, a, c])
     }
 
     /// An "X" with hubs `hub_m` from the centre at 45° in rotorpy's motor
@@ -85,25 +66,17 @@ impl<T: RealField + Copy> RotorLayout<T> {
     pub fn x_rotorpy(hub_m: T) -> Self {
         let h = hub_m / lit::<T>(2.0).sqrt();
         let (a, c) = (Spin::Anticlockwise, Spin::Clockwise);
+        Self::from_hubs([[h, -h], [h, h], [-h, h], [-h, -h]], [c, a, c, a])
+    }
+
+    /// Motors 1 to 4 at the hub positions `pos_frd_m` (x forward, y right,
+    /// m) with the spins `spin`.
+    pub fn from_hubs(pos_frd_m: [[T; 2]; 4], spin: [Spin; 4]) -> Self {
         Self {
-            rotors: [
-                Rotor {
-                    pos_frd_m: [h, -h],
-                    spin: c,
-                },
-                Rotor {
-                    pos_frd_m: [h, h],
-                    spin: a,
-                },
-                Rotor {
-                    pos_frd_m: [-h, h],
-                    spin: c,
-                },
-                Rotor {
-                    pos_frd_m: [-h, -h],
-                    spin: a,
-                },
-            ],
+            rotors: core::array::from_fn(|i| Rotor {
+                pos_frd_m: pos_frd_m[i],
+                spin: spin[i],
+            }),
         }
     }
 
