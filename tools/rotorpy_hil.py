@@ -59,13 +59,23 @@ def main():
     ap.add_argument("--csv", help="the flight controller's trace")
     ap.add_argument("--json", help="write the summary here too")
     ap.add_argument("--seed", type=int, default=1, help="seeds rotorpy's IMU noise (numpy)")
+    ap.add_argument("--gcs", action="store_true",
+                    help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
+                         "sets parameters, arms and flies the vehicle; the flight ends when it is done")
+    ap.add_argument("--gcs-port", type=int, default=14550)
     a = ap.parse_args()
 
     cmd = [a.sil_host, "px4-hil", "--connect", f"127.0.0.1:{a.port}", "--controller", a.controller,
            "--vehicle", "vehicles/crazyflie-rotorpy.toml", "--airframe", "x-rotorpy", "--hub-m", "0.043",
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0)]
-    if bool(a.waypoint) == bool(a.scenario):
-        ap.error("give --waypoint(s) or --scenario")
+    if (bool(a.waypoint) + bool(a.scenario) + a.gcs) != 1:
+        ap.error("give --waypoint(s), --scenario or --gcs")
+    gcs = None
+    if a.gcs:
+        # The ground station listens first, as QGroundControl does.
+        gcs = subprocess.Popen([sys.executable, os.path.join(os.path.dirname(__file__), "mav_gcs.py"),
+                                "--url", f"udpin:127.0.0.1:{a.gcs_port}"], stdout=subprocess.PIPE, text=True)
+        cmd += ["--gcs", f"127.0.0.1:{a.gcs_port}", "--gcs-only"]
     for w in a.waypoint or []:
         cmd += ["--waypoint", w]
     if a.scenario:
@@ -85,6 +95,8 @@ def main():
         track.append([k * a.dt, x[1], x[0], -x[2]])  # t, north, east, down
         if not np.all(np.isfinite(x)) or np.abs(x).max() > 100:
             break
+        if gcs is not None and k % 50 == 0 and gcs.poll() is not None:
+            break
     # Hanging up ends the flight controller's session (and its summary).
     vehicle.conn.close()
     out, _ = fc.communicate(timeout=60)
@@ -93,6 +105,16 @@ def main():
         return 1
     res = json.loads(out)
     track = np.array(track)
+    if gcs is not None:
+        if gcs.poll() is None:
+            gcs.kill()
+        gcs_out, _ = gcs.communicate(timeout=60)
+        sys.stderr.write(gcs_out)
+        line = [ln for ln in gcs_out.splitlines() if ln.startswith("gcs check:")]
+        res["gcs"] = line[-1] if line else "gcs check: 0 passed, 1 failed (the ground station did not finish)"
+        print(json.dumps(res, indent=2))
+        print(res["gcs"])
+        return 0 if gcs.returncode == 0 and line else 1
     final = track[-1, 1:4]
     if a.waypoint:
         n, e, d = (float(v) for v in a.waypoint[-1].split(",")[1:4])

@@ -63,7 +63,9 @@ enum Command {
     /// Fly the core against a simulator that speaks PX4's HIL interface (it listens on TCP 4560:
     /// rotorpy's PX4Multirotor, jMAVSim, Gazebo's bridge): HIL_SENSOR in, HIL_ACTUATOR_CONTROLS
     /// out, in lockstep; HIL_STATE_QUATERNION's position and heading as a mocap-like fix. Motors
-    /// off until the estimator has aligned at rest. Prints a JSON summary.
+    /// off until armed (refused until the estimator has aligned at rest); the mission is sent in
+    /// as a ground station's commands, or a real ground station (--gcs) flies it. Prints a JSON
+    /// summary.
     Px4Hil(Px4HilArgs),
 }
 
@@ -93,8 +95,15 @@ struct Px4HilArgs {
     /// Motor command unit: `speed` (fraction of the maximum rotor speed, as rotorpy reads it), `thrust` (fraction of the maximum thrust) or `pwm` (1000–2000 µs, linear in speed).
     #[arg(long, default_value = "speed")]
     motor_unit: String,
+    /// A ground station's UDP address (QGroundControl's is 127.0.0.1:14550): telemetry is sent
+    /// there and its commands, set-points and parameter writes are obeyed.
+    #[arg(long, value_name = "HOST:PORT")]
+    gcs: Option<std::net::SocketAddr>,
+    /// Fly only what the ground station (--gcs) commands: no mission of our own.
+    #[arg(long, requires = "gcs", conflicts_with_all = ["waypoints", "scenario"])]
+    gcs_only: bool,
     /// Mission: `T,N,E,D` (from T s, hold N, E, D m about home; heading 0), repeatable, in time order.
-    #[arg(long = "waypoint", value_name = "T,N,E,D", required_unless_present = "scenario")]
+    #[arg(long = "waypoint", value_name = "T,N,E,D", required_unless_present_any = ["scenario", "gcs_only"])]
     waypoints: Vec<String>,
     /// Or a scenario's trajectory (`circle`, `helix`, `setpoint`; docs/model.md §9, starting 1 m
     /// above home), flown from --scenario-start s after holding its start point.
@@ -879,15 +888,17 @@ fn main() -> Result<()> {
 }
 
 fn px4_hil(a: Px4HilArgs) -> Result<()> {
-    use fc_core::model::airframe::{MotorUnit, RotorLayout};
+    use fc_core::model::airframe::MotorUnit;
+    use fc_mavlink::params::{Airframe, Settings};
     let vehicle = sil_host::config::load_vehicle(&a.vehicle)?;
-    let layout = match a.airframe.as_str() {
-        "x-rotorpy" if a.hub_m.is_finite() && a.hub_m > 0.0 => RotorLayout::x_rotorpy(a.hub_m as f32),
-        "x-rotorpy" => bail!("--hub-m {} must be a positive length", a.hub_m),
-        "plus" => RotorLayout::plus(vehicle.arm_m as f32),
+    let mut settings = Settings::os4();
+    settings.vehicle = vehicle.cast();
+    (settings.airframe, settings.hub_m) = match a.airframe.as_str() {
+        "x-rotorpy" => (Airframe::XRotorpy, a.hub_m as f32),
+        "plus" => (Airframe::Plus, vehicle.arm_m as f32),
         other => bail!("unknown --airframe '{other}': use x-rotorpy or plus"),
     };
-    let unit = match a.motor_unit.as_str() {
+    settings.unit = match a.motor_unit.as_str() {
         "speed" => MotorUnit::SpeedFraction,
         "thrust" => MotorUnit::ThrustFraction,
         "pwm" => MotorUnit::PwmUs {
@@ -896,6 +907,14 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
         },
         other => bail!("unknown --motor-unit '{other}': use speed, thrust or pwm"),
     };
+    settings.controller = fc_core::control::ControllerSpec::new(a.controller, a.model);
+    if !(a.fix_hz.is_finite() && (1.0..=1000.0).contains(&a.fix_hz)) {
+        bail!("--fix-hz {:?} is out of range: must be in [1, 1000]", a.fix_hz);
+    }
+    settings.fix_period_ms = (1000.0 / a.fix_hz).round() as u32;
+    settings
+        .check()
+        .map_err(|e| anyhow::anyhow!("the vehicle's settings are refused: {e} (--hub-m, --vehicle)"))?;
     let mut mission = Vec::new();
     for w in &a.waypoints {
         let v: Vec<f64> = w
@@ -919,6 +938,7 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
         });
     }
     let mission = match a.scenario {
+        _ if a.gcs_only => None,
         Some(kind) => {
             if !(a.scenario_start.is_finite() && (0.0..=1e5).contains(&a.scenario_start)) {
                 bail!("--scenario-start {:?} must be in [0, 1e5] s", a.scenario_start);
@@ -926,18 +946,14 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
             let sc = Scenario::default_for(kind);
             sc.validate().map_err(anyhow::Error::msg)?;
             sc.check_feasible(&vehicle).map_err(anyhow::Error::msg)?;
-            sil_host::hil::Mission::Scenario {
+            Some(sil_host::hil::Mission::Scenario {
                 scenario: sc,
                 from_s: a.scenario_start,
-            }
+            })
         }
-        None => sil_host::hil::Mission::Waypoints(mission),
+        None => Some(sil_host::hil::Mission::Waypoints(mission)),
     };
-    for (flag, v) in [
-        ("--duration", a.duration),
-        ("--fix-hz", a.fix_hz),
-        ("--connect-timeout", a.connect_timeout),
-    ] {
+    for (flag, v) in [("--duration", a.duration), ("--connect-timeout", a.connect_timeout)] {
         if !(v.is_finite() && v > 0.0 && v <= 1e5) {
             bail!("{flag} {v:?} is out of range: must be in (0, 1e5]");
         }
@@ -945,12 +961,9 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
     let cfg = sil_host::hil::HilConfig {
         addr: a.connect,
         connect_timeout_s: a.connect_timeout,
-        spec: fc_core::control::ControllerSpec::new(a.controller, a.model),
-        vehicle,
-        layout,
-        unit,
-        fix_period_s: 1.0 / a.fix_hz,
+        settings,
         mission,
+        gcs: a.gcs,
         duration_s: a.duration,
     };
     let res = sil_host::hil::run(&cfg)?;

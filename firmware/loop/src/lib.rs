@@ -131,6 +131,30 @@ pub const BOOT_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Lqr, Att
 /// one can be designed: the tuned Euler PD (no design step, cannot fail).
 pub const FALLBACK_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Pd, AttitudeForm::Euler);
 
+/// Where the flight loop's answers go: encoded into frames on a
+/// [`ByteLink`] ([`Framed`]), or to a front end that translates them.
+pub trait Outbox {
+    /// What sending can fail with.
+    type Error;
+    /// Sends one message.
+    fn send(&mut self, msg: &FromFc) -> Result<(), Self::Error>;
+}
+
+/// Our own protocol's frames on a byte link.
+pub struct Framed<'a, L>(pub &'a mut L);
+
+impl<L: ByteLink> Outbox for Framed<'_, L> {
+    type Error = L::Error;
+    fn send(&mut self, msg: &FromFc) -> Result<(), L::Error> {
+        let mut out = [0u8; MAX_FRAME];
+        match encode(msg, &mut out) {
+            Ok(n) => self.0.write_all(&out[..n]),
+            // Our own messages always fit MAX_FRAME (tested); nothing to send otherwise.
+            Err(_) => Ok(()),
+        }
+    }
+}
+
 /// A controllers' setpoint as sent on the wire.
 pub fn setpoint_to_wire(sp: &Setpoint<f32>) -> WireSetpoint {
     WireSetpoint {
@@ -325,6 +349,57 @@ impl FlightCore {
         self.session
     }
 
+    /// The vehicle the controllers are designed for.
+    pub fn vehicle(&self) -> &VehicleParams<f32> {
+        &self.params
+    }
+
+    /// The controller flying (or the one that flies once designed).
+    pub fn spec(&self) -> ControllerSpec {
+        self.spec
+    }
+
+    /// The loop's settings.
+    pub fn config(&self) -> &FcConfig {
+        &self.cfg
+    }
+
+    /// The set-point being flown (the estimator's failsafe may override it).
+    pub fn setpoint(&self) -> &Setpoint<f32> {
+        &self.sp
+    }
+
+    /// Replaces the failsafe timer's settings (the caller validates them).
+    pub fn set_failsafe(&mut self, timeout_us: u64, descent_thrust_fraction: f32) {
+        self.cfg.failsafe_timeout_us = timeout_us;
+        self.cfg.descent_thrust_fraction = descent_thrust_fraction;
+    }
+
+    /// Designs `spec` in place of the running controller (as a `Select`
+    /// does); on failure the running one keeps flying and the error is
+    /// returned. Not in flight: a design takes milliseconds to tens of them.
+    pub fn try_select(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
+        self.install(spec)?;
+        self.selections = self.selections.wrapping_add(1);
+        Ok(())
+    }
+
+    /// Designs the running controller for vehicle `params`. A vehicle
+    /// [`VehicleParams::check`] refuses, or one the controller cannot be
+    /// designed for, is refused and the previous one stays (redesigned).
+    pub fn set_vehicle(&mut self, params: VehicleParams<f32>) -> Result<(), ControlError> {
+        params.check().map_err(|_| ControlError::InvalidParameter)?;
+        let old = self.params;
+        self.params = params;
+        let spec = self.spec;
+        if let Err(e) = self.install(spec) {
+            self.params = old;
+            let _ = self.install(spec);
+            return Err(e);
+        }
+        Ok(())
+    }
+
     /// Reads what the link has (bounded), handles every complete frame,
     /// writes replies, then applies the failsafe timer at time `now_us`.
     pub fn service<L: ByteLink, C: CycleClock>(
@@ -341,7 +416,7 @@ impl FlightCore {
             }
             for &b in &buf[..n.min(buf.len())] {
                 if let Some(frame) = self.decoder.push::<ToFc>(b) {
-                    self.handle(frame, link, clock, now_us)?;
+                    self.handle(frame, &mut Framed(link), clock, now_us)?;
                 }
             }
         }
@@ -433,24 +508,15 @@ impl FlightCore {
             .is_some_and(|t| now_us.saturating_sub(t) > period_us.saturating_add(period_us / 2))
     }
 
-    fn send<L: ByteLink>(link: &mut L, msg: &FromFc) -> Result<(), L::Error> {
-        let mut out = [0u8; MAX_FRAME];
-        match encode(msg, &mut out) {
-            Ok(n) => link.write_all(&out[..n]),
-            // Our own messages always fit MAX_FRAME (tested); nothing to send otherwise.
-            Err(_) => Ok(()),
-        }
-    }
-
-    fn handle<L: ByteLink, C: CycleClock>(
+    fn handle<O: Outbox, C: CycleClock>(
         &mut self,
         frame: Result<ToFc, FrameError>,
-        link: &mut L,
+        link: &mut O,
         clock: &C,
         now_us: u64,
-    ) -> Result<(), L::Error> {
-        let msg = match frame {
-            Ok(m) => m,
+    ) -> Result<(), O::Error> {
+        match frame {
+            Ok(m) => self.handle_message(m, link, clock, now_us),
             Err(e) => {
                 match e {
                     FrameError::Oversized => self.counters.oversized = self.counters.oversized.wrapping_add(1),
@@ -460,9 +526,21 @@ impl FlightCore {
                         self.counters.bad_message = self.counters.bad_message.wrapping_add(1)
                     }
                 }
-                return Ok(());
+                Ok(())
             }
-        };
+        }
+    }
+
+    /// Handles one decoded message as if it had arrived on the link at
+    /// `now_us`, its answers to `out`: the entry of front ends that speak
+    /// another protocol (MAVLink) and translate into this one.
+    pub fn handle_message<O: Outbox, C: CycleClock>(
+        &mut self,
+        msg: ToFc,
+        link: &mut O,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), O::Error> {
         self.counters.ok = self.counters.ok.wrapping_add(1);
         match msg {
             ToFc::Hello { version } => {
@@ -478,19 +556,16 @@ impl FlightCore {
                     self.nav_failsafe = false;
                     self.schedule.reset();
                 }
-                Self::send(
-                    link,
-                    &FromFc::HelloAck {
-                        version: PROTOCOL_VERSION,
-                        accepted,
-                    },
-                )
+                link.send(&FromFc::HelloAck {
+                    version: PROTOCOL_VERSION,
+                    accepted,
+                })
             }
             _ if !self.session => {
                 self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
                 Ok(())
             }
-            ToFc::Heartbeat { seq } => Self::send(link, &FromFc::Heartbeat { seq }),
+            ToFc::Heartbeat { seq } => link.send(&FromFc::Heartbeat { seq }),
             ToFc::Select {
                 controller,
                 feedforward,
@@ -565,15 +640,15 @@ impl FlightCore {
     /// hold-and-descend; while aligning, hover thrust and no torque. Every
     /// step is answered (the output held since the controller last ran)
     /// with a `Nav` message added.
-    fn on_imu<L: ByteLink, C: CycleClock>(
+    fn on_imu<O: Outbox, C: CycleClock>(
         &mut self,
         seq: u32,
         t_us: u64,
         imu: &ImuSample,
-        link: &mut L,
+        link: &mut O,
         clock: &C,
         now_us: u64,
-    ) -> Result<(), L::Error> {
+    ) -> Result<(), O::Error> {
         let Some(now) = self.accept_step(seq, t_us, now_us) else {
             return self.reply(seq, 0, 0, link);
         };
@@ -621,7 +696,7 @@ impl FlightCore {
 
     /// Sends the `Nav` and `NavBias` messages of step `seq` (one covariance
     /// diagonal for both, one message on the stack at a time).
-    fn send_nav<L: ByteLink>(&self, seq: u32, link: &mut L) -> Result<(), L::Error> {
+    fn send_nav<O: Outbox>(&self, seq: u32, link: &mut O) -> Result<(), O::Error> {
         let (mode, est) = match (self.nav.mode(), self.nav.estimate()) {
             (NavMode::Navigating, Some(e)) => (1, Some(e)),
             (NavMode::Failsafe, Some(e)) => (2, Some(e)),
@@ -629,48 +704,42 @@ impl FlightCore {
         };
         let s = self.nav.estimator().sigmas();
         let c = self.nav.counters();
-        Self::send(
-            link,
-            &FromFc::Nav {
-                seq,
-                mode,
-                pos: est.map_or([0.0; 3], |e| e.pos_ned_m.into()),
-                vel: est.map_or([0.0; 3], |e| e.vel_ned_mps.into()),
-                att: est.map_or([0.0; 4], |e| e.att.into()),
-                sigma: [s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]],
-                imu_rejected: c.imu_rejected.wrapping_add(c.imu_clipped),
-                fixes_rejected: c
-                    .pos_rejected
-                    .wrapping_add(c.vel_rejected)
-                    .wrapping_add(c.yaw_rejected)
-                    .wrapping_add(c.alt_rejected)
-                    .wrapping_add(c.fix_invalid)
-                    .wrapping_add(self.nav.fixes_dropped()),
-                failsafe_entries: self.nav.failsafe_entries(),
-            },
-        )?;
+        link.send(&FromFc::Nav {
+            seq,
+            mode,
+            pos: est.map_or([0.0; 3], |e| e.pos_ned_m.into()),
+            vel: est.map_or([0.0; 3], |e| e.vel_ned_mps.into()),
+            att: est.map_or([0.0; 4], |e| e.att.into()),
+            sigma: [s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]],
+            imu_rejected: c.imu_rejected.wrapping_add(c.imu_clipped),
+            fixes_rejected: c
+                .pos_rejected
+                .wrapping_add(c.vel_rejected)
+                .wrapping_add(c.yaw_rejected)
+                .wrapping_add(c.alt_rejected)
+                .wrapping_add(c.fix_invalid)
+                .wrapping_add(self.nav.fixes_dropped()),
+            failsafe_entries: self.nav.failsafe_entries(),
+        })?;
         let (bg, ba) = self.nav.estimator().biases();
-        Self::send(
-            link,
-            &FromFc::NavBias {
-                seq,
-                gyro_bias: bg.into(),
-                accel_bias: ba.into(),
-                sigma: [s[9], s[10], s[11], s[12], s[13], s[14]],
-            },
-        )
+        link.send(&FromFc::NavBias {
+            seq,
+            gyro_bias: bg.into(),
+            accel_bias: ba.into(),
+            sigma: [s[9], s[10], s[11], s[12], s[13], s[14]],
+        })
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn on_sensor<L: ByteLink, C: CycleClock>(
+    fn on_sensor<O: Outbox, C: CycleClock>(
         &mut self,
         seq: u32,
         t_us: u64,
         state: &[f32; 13],
-        link: &mut L,
+        link: &mut O,
         clock: &C,
         now_us: u64,
-    ) -> Result<(), L::Error> {
+    ) -> Result<(), O::Error> {
         let lockstep = self.cfg.time_base == TimeBase::Lockstep;
         let Some(now) = self.accept_step(seq, t_us, now_us) else {
             // Not flown, but answered (the held output, the counter in the
@@ -708,26 +777,20 @@ impl FlightCore {
     }
 
     /// Answers sensor frame `seq`: the output now held, then the telemetry.
-    fn reply<L: ByteLink>(&self, seq: u32, cycles: u32, iterations: u16, link: &mut L) -> Result<(), L::Error> {
+    fn reply<O: Outbox>(&self, seq: u32, cycles: u32, iterations: u16, link: &mut O) -> Result<(), O::Error> {
         let u = [self.u[0], self.u[1], self.u[2], self.u[3]];
-        Self::send(
-            link,
-            &FromFc::Actuator {
-                seq,
-                u,
-                failsafe: self.failsafe || self.nav_failsafe,
-            },
-        )?;
-        Self::send(
-            link,
-            &FromFc::Telemetry {
-                seq,
-                cycles,
-                qp_iterations: iterations,
-                counters: self.counters,
-                failsafe: self.failsafe || self.nav_failsafe,
-            },
-        )
+        link.send(&FromFc::Actuator {
+            seq,
+            u,
+            failsafe: self.failsafe || self.nav_failsafe,
+        })?;
+        link.send(&FromFc::Telemetry {
+            seq,
+            cycles,
+            qp_iterations: iterations,
+            counters: self.counters,
+            failsafe: self.failsafe || self.nav_failsafe,
+        })
     }
 }
 

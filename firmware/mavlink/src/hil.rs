@@ -117,9 +117,10 @@ impl Home {
     pub fn ned_m(&self, lat_e7: i32, lon_e7: i32, alt_mm: i32) -> Vector3<f64> {
         let deg = core::f64::consts::PI / 180.0 * 1e-7;
         let lat0 = f64::from(self.lat_e7) * deg;
-        let north = f64::from(lat_e7 - self.lat_e7) * deg * EARTH_RADIUS_M;
-        let east = f64::from(lon_e7 - self.lon_e7) * deg * EARTH_RADIUS_M * libm::cos(lat0);
-        let down = -f64::from(alt_mm - self.alt_mm) * 1e-3;
+        // In f64: the differences of two i32 may not fit an i32.
+        let north = (f64::from(lat_e7) - f64::from(self.lat_e7)) * deg * EARTH_RADIUS_M;
+        let east = (f64::from(lon_e7) - f64::from(self.lon_e7)) * deg * EARTH_RADIUS_M * libm::cos(lat0);
+        let down = -(f64::from(alt_mm) - f64::from(self.alt_mm)) * 1e-3;
         Vector3::new(north, east, down)
     }
 }
@@ -146,9 +147,18 @@ impl StateFixSigmas {
     };
 }
 
+/// The message's latitude is within ±90° and its longitude within ±180°.
+pub fn on_earth(m: &HIL_STATE_QUATERNION_DATA) -> bool {
+    m.lat.unsigned_abs() <= 900_000_000 && m.lon.unsigned_abs() <= 1_800_000_000
+}
+
 /// `HIL_STATE_QUATERNION` → a position, velocity and heading fix about
-/// `home`, taken now (age 0). `Err` for a non-unit quaternion.
+/// `home`, taken now (age 0). `Err` for a non-unit quaternion or a
+/// position off the globe.
 pub fn fix_from_hil_state(m: &HIL_STATE_QUATERNION_DATA, home: &Home, s: &StateFixSigmas) -> Result<Fix, HilError> {
+    if !on_earth(m) {
+        return Err(HilError::Invalid("lat/lon"));
+    }
     let q = Vector4::from(m.attitude_quaternion);
     if !q.iter().all(|v| v.is_finite()) || (q.norm() - 1.0).abs() > 1e-3 {
         return Err(HilError::Invalid("attitude_quaternion"));

@@ -4,6 +4,8 @@
 #![forbid(unsafe_code)]
 
 pub mod hil;
+pub mod params;
+pub mod vehicle;
 
 pub use mavlink::dialects::common::{self, MavMessage};
 pub use mavlink::MavHeader;

@@ -1,0 +1,431 @@
+//! The flight controller's parameters, as MAVLink's parameter protocol
+//! (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET / PARAM_VALUE) and
+//! a ground station see them: one table, [`PARAMS`], of named values, each
+//! with its unit, how to read and write it in [`Settings`], and whether a
+//! change re-designs the controller (allowed only while disarmed).
+//!
+//! Every value is a `MAV_PARAM_TYPE_REAL32`; the integer-valued ones
+//! (choices, bit masks, milliseconds) must be whole numbers. A write is
+//! applied to a copy of the settings and the copy is checked as a whole
+//! ([`Settings::check`]): the vehicle against its plausible ranges, the
+//! rotor layout for a mixer that can produce every wrench, the controller
+//! id against the controllers this firmware has. A refused write leaves
+//! the settings as they were and says why ([`Refusal`], short enough for a
+//! `STATUSTEXT`).
+
+use fc_core::control::ControlError;
+use fc_core::control::{ControllerSpec, SpecError};
+use fc_core::model::airframe::{Mixer, MixerError, MotorUnit, RotorLayout, Spin};
+use fc_core::model::VehicleParams;
+
+/// The rotor layouts a parameter can choose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Airframe {
+    /// The thesis' OS4 "+" ([`RotorLayout::plus`]): `MOT_FRAME` 0.
+    Plus,
+    /// An "X" in rotorpy's (and its Crazyflie's) motor order
+    /// ([`RotorLayout::x_rotorpy`]): `MOT_FRAME` 1.
+    XRotorpy,
+}
+
+/// Everything the parameters set: the vehicle, its motors, the controller
+/// and the failsafe.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// The vehicle the controller is designed for (and the mixer uses).
+    pub vehicle: VehicleParams<f32>,
+    /// Where the rotors are, in motor order.
+    pub airframe: Airframe,
+    /// Distance of each hub from the centre, m.
+    pub hub_m: f32,
+    /// Motors whose spin is the reverse of the airframe's (bit i: motor i+1).
+    pub reversed: u8,
+    /// What a motor command means.
+    pub unit: MotorUnit,
+    /// The controller.
+    pub controller: ControllerSpec,
+    /// No `HIL_SENSOR` for this long → failsafe, ms.
+    pub failsafe_timeout_ms: u32,
+    /// Failsafe thrust as a fraction of hover thrust.
+    pub failsafe_descent: f32,
+    /// Period of the position fixes taken from `HIL_STATE_QUATERNION`, ms.
+    pub fix_period_ms: u32,
+}
+
+impl Settings {
+    /// The OS4 of the thesis on its "+" frame, motor speeds as fractions,
+    /// the boot controller (quaternion LQR), the loop's failsafe defaults,
+    /// fixes at 100 Hz.
+    pub fn os4() -> Self {
+        let vehicle = VehicleParams::<f32>::os4();
+        let loop_cfg = fc_loop::FcConfig::default();
+        Self {
+            vehicle,
+            airframe: Airframe::Plus,
+            hub_m: vehicle.arm_m,
+            reversed: 0,
+            unit: MotorUnit::SpeedFraction,
+            controller: fc_loop::BOOT_CONTROLLER,
+            failsafe_timeout_ms: (loop_cfg.failsafe_timeout_us / 1000) as u32,
+            failsafe_descent: loop_cfg.descent_thrust_fraction,
+            fix_period_ms: 10,
+        }
+    }
+
+    /// The rotors in motor order, with `reversed` applied.
+    pub fn layout(&self) -> RotorLayout<f32> {
+        let mut l = match self.airframe {
+            Airframe::Plus => RotorLayout::plus(self.hub_m),
+            Airframe::XRotorpy => RotorLayout::x_rotorpy(self.hub_m),
+        };
+        for (i, r) in l.rotors.iter_mut().enumerate() {
+            if self.reversed & (1 << i) != 0 {
+                r.spin = match r.spin {
+                    Spin::Clockwise => Spin::Anticlockwise,
+                    Spin::Anticlockwise => Spin::Clockwise,
+                };
+            }
+        }
+        l
+    }
+
+    /// The mixer these settings give.
+    pub fn mixer(&self) -> Result<Mixer<f32>, Refusal> {
+        Mixer::new(&self.layout(), &self.vehicle, self.unit).map_err(Refusal::Mixer)
+    }
+
+    /// Checks the settings as a whole (see the module's documentation).
+    pub fn check(&self) -> Result<(), Refusal> {
+        self.vehicle.check().map_err(|e| Refusal::Range {
+            lo: e.range.lo as f32,
+            hi: e.range.hi as f32,
+        })?;
+        self.mixer()?;
+        if !(10..=5_000).contains(&self.failsafe_timeout_ms) {
+            return Err(Refusal::Range { lo: 10.0, hi: 5_000.0 });
+        }
+        if !(0.5..=1.0).contains(&self.failsafe_descent) {
+            return Err(Refusal::Range { lo: 0.5, hi: 1.0 });
+        }
+        if !(1..=1_000).contains(&self.fix_period_ms) {
+            return Err(Refusal::Range { lo: 1.0, hi: 1_000.0 });
+        }
+        Ok(())
+    }
+}
+
+/// Why a parameter write was refused (each short enough for a 50-character
+/// `STATUSTEXT` after the parameter's name).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Refusal {
+    /// No parameter has this name (or index).
+    Unknown,
+    /// The value is outside `[lo, hi]` (or not finite).
+    Range {
+        /// Smallest accepted.
+        lo: f32,
+        /// Largest accepted.
+        hi: f32,
+    },
+    /// An integer-valued parameter was given a fraction.
+    NotInteger,
+    /// The controller id names no controller of this firmware.
+    Controller(SpecError),
+    /// The motors cannot be mixed with these settings.
+    Mixer(MixerError),
+    /// The controller could not be designed for the new settings.
+    Design(ControlError),
+    /// The change re-designs the controller: only while disarmed.
+    Armed,
+}
+
+impl core::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Refusal::Unknown => f.write_str("no such parameter"),
+            Refusal::Range { lo, hi } => write!(f, "out of [{lo}, {hi}]"),
+            Refusal::NotInteger => f.write_str("must be a whole number"),
+            Refusal::Controller(_) => f.write_str("no controller has this id"),
+            Refusal::Mixer(MixerError::Singular) => f.write_str("rotor layout is singular"),
+            Refusal::Mixer(MixerError::PwmRange) => f.write_str("PWM max must exceed min"),
+            Refusal::Mixer(MixerError::Parameter(_)) => f.write_str("mixer needs a positive value"),
+            Refusal::Design(_) => f.write_str("controller design failed"),
+            Refusal::Armed => f.write_str("disarm first"),
+        }
+    }
+}
+
+/// One parameter: its MAVLink name, what it is, and where it lives.
+#[derive(Clone, Copy)]
+pub struct Param {
+    /// The name a ground station shows (at most 16 characters).
+    pub id: &'static str,
+    /// What it is, with its unit.
+    pub doc: &'static str,
+    /// Its value in `Settings`.
+    pub get: fn(&Settings) -> f32,
+    /// Writes `value` into `Settings` (the whole is checked afterwards).
+    pub set: fn(&mut Settings, f32) -> Result<(), Refusal>,
+    /// A change re-designs the controller (refused while armed).
+    pub redesign: bool,
+}
+
+impl core::fmt::Debug for Param {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.id)
+    }
+}
+
+/// `value` as a whole number in `[lo, hi]`.
+fn whole(value: f32, lo: u32, hi: u32) -> Result<u32, Refusal> {
+    if !(value >= lo as f32 && value <= hi as f32) {
+        return Err(Refusal::Range {
+            lo: lo as f32,
+            hi: hi as f32,
+        });
+    }
+    if libm::truncf(value) != value {
+        return Err(Refusal::NotInteger);
+    }
+    Ok(value as u32)
+}
+
+/// `value` unless it is not finite (the whole is range-checked later).
+fn finite(value: f32) -> Result<f32, Refusal> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(Refusal::Range {
+            lo: f32::MIN,
+            hi: f32::MAX,
+        })
+    }
+}
+
+macro_rules! real {
+    ($id:literal, $doc:literal, $redesign:literal, $($field:tt)+) => {
+        Param {
+            id: $id,
+            doc: $doc,
+            get: |s| s.$($field)+,
+            set: |s, v| {
+                s.$($field)+ = finite(v)?;
+                Ok(())
+            },
+            redesign: $redesign,
+        }
+    };
+}
+
+/// The PWM range of `s` (the default 1000–2000 µs if its unit is not PWM).
+fn pwm(s: &Settings) -> (u16, u16) {
+    match s.unit {
+        MotorUnit::PwmUs { min_us, max_us } => (min_us, max_us),
+        _ => (1000, 2000),
+    }
+}
+
+/// Every parameter, in `param_index` order.
+pub const PARAMS: [Param; 27] = [
+    real!("VEH_MASS", "mass, kg", true, vehicle.mass_kg),
+    real!(
+        "VEH_IXX",
+        "inertia about body x (FRD), kg m^2",
+        true,
+        vehicle.inertia_kgm2[0]
+    ),
+    real!(
+        "VEH_IYY",
+        "inertia about body y (FRD), kg m^2",
+        true,
+        vehicle.inertia_kgm2[1]
+    ),
+    real!(
+        "VEH_IZZ",
+        "inertia about body z (FRD), kg m^2",
+        true,
+        vehicle.inertia_kgm2[2]
+    ),
+    real!(
+        "VEH_ARM",
+        "arm of the roll and pitch inputs U2, U3, m",
+        true,
+        vehicle.arm_m
+    ),
+    real!("VEH_JR", "rotor inertia, kg m^2", true, vehicle.rotor_inertia_kgm2),
+    real!("VEH_KF", "rotor thrust coefficient, N s^2", true, vehicle.kf_ns2),
+    real!(
+        "VEH_KM",
+        "rotor drag-moment coefficient, N m s^2",
+        true,
+        vehicle.km_nms2
+    ),
+    real!(
+        "VEH_KT_X",
+        "translational drag along x, N s/m",
+        true,
+        vehicle.kt_nspm[0]
+    ),
+    real!(
+        "VEH_KT_Y",
+        "translational drag along y, N s/m",
+        true,
+        vehicle.kt_nspm[1]
+    ),
+    real!(
+        "VEH_KT_Z",
+        "translational drag along z, N s/m",
+        true,
+        vehicle.kt_nspm[2]
+    ),
+    real!("VEH_KR_X", "rotational drag about x, N m s", true, vehicle.kr_nms[0]),
+    real!("VEH_KR_Y", "rotational drag about y, N m s", true, vehicle.kr_nms[1]),
+    real!("VEH_KR_Z", "rotational drag about z, N m s", true, vehicle.kr_nms[2]),
+    real!("VEH_WMAX", "largest rotor speed, rad/s", true, vehicle.omega_max_radps),
+    real!("VEH_TAU_M", "rotor time constant, s", true, vehicle.rotor_tau_s),
+    Param {
+        id: "MOT_FRAME",
+        doc: "rotor layout and motor order: 0 plus (OS4), 1 X (rotorpy)",
+        get: |s| match s.airframe {
+            Airframe::Plus => 0.0,
+            Airframe::XRotorpy => 1.0,
+        },
+        set: |s, v| {
+            s.airframe = if whole(v, 0, 1)? == 0 {
+                Airframe::Plus
+            } else {
+                Airframe::XRotorpy
+            };
+            Ok(())
+        },
+        redesign: false,
+    },
+    real!("MOT_HUB_M", "distance of each hub from the centre, m", false, hub_m),
+    Param {
+        id: "MOT_REV",
+        doc: "motors spinning against the frame's default (bit i: motor i+1)",
+        get: |s| f32::from(s.reversed),
+        set: |s, v| {
+            s.reversed = whole(v, 0, 15)? as u8;
+            Ok(())
+        },
+        redesign: false,
+    },
+    Param {
+        id: "MOT_UNIT",
+        doc: "motor command: 0 speed fraction, 1 thrust fraction, 2 PWM us",
+        get: |s| match s.unit {
+            MotorUnit::SpeedFraction => 0.0,
+            MotorUnit::ThrustFraction => 1.0,
+            MotorUnit::PwmUs { .. } => 2.0,
+        },
+        set: |s, v| {
+            let (min_us, max_us) = pwm(s);
+            s.unit = match whole(v, 0, 2)? {
+                0 => MotorUnit::SpeedFraction,
+                1 => MotorUnit::ThrustFraction,
+                _ => MotorUnit::PwmUs { min_us, max_us },
+            };
+            Ok(())
+        },
+        redesign: false,
+    },
+    Param {
+        id: "MOT_PWM_MIN",
+        doc: "PWM at zero rotor speed, us (MOT_UNIT 2)",
+        get: |s| f32::from(pwm(s).0),
+        set: |s, v| {
+            let min_us = whole(v, 500, 2500)? as u16;
+            if let MotorUnit::PwmUs { max_us, .. } = s.unit {
+                s.unit = MotorUnit::PwmUs { min_us, max_us };
+            }
+            Ok(())
+        },
+        redesign: false,
+    },
+    Param {
+        id: "MOT_PWM_MAX",
+        doc: "PWM at the largest rotor speed, us (MOT_UNIT 2)",
+        get: |s| f32::from(pwm(s).1),
+        set: |s, v| {
+            let max_us = whole(v, 500, 2500)? as u16;
+            if let MotorUnit::PwmUs { min_us, .. } = s.unit {
+                s.unit = MotorUnit::PwmUs { min_us, max_us };
+            }
+            Ok(())
+        },
+        redesign: false,
+    },
+    Param {
+        id: "CTL_ID",
+        doc: "controller (the wire ids of README's controller table)",
+        get: |s| s.controller.to_wire().map_or(-1.0, |(id, _)| f32::from(id)),
+        set: |s, v| {
+            let ff = s.controller.reference == fc_core::control::ReferenceMode::Feedforward;
+            s.controller = ControllerSpec::from_wire(whole(v, 0, 255)? as u8, ff).map_err(Refusal::Controller)?;
+            Ok(())
+        },
+        redesign: true,
+    },
+    Param {
+        id: "CTL_FF",
+        doc: "feed the reference's derivatives forward: 1 yes, 0 no",
+        get: |s| {
+            f32::from(u8::from(
+                s.controller.reference == fc_core::control::ReferenceMode::Feedforward,
+            ))
+        },
+        set: |s, v| {
+            s.controller.reference = if whole(v, 0, 1)? == 1 {
+                fc_core::control::ReferenceMode::Feedforward
+            } else {
+                fc_core::control::ReferenceMode::Thesis
+            };
+            Ok(())
+        },
+        redesign: true,
+    },
+    Param {
+        id: "FS_TIMEOUT_MS",
+        doc: "no sensor data for this long: failsafe, ms",
+        get: |s| s.failsafe_timeout_ms as f32,
+        set: |s, v| {
+            s.failsafe_timeout_ms = whole(v, 10, 5_000)?;
+            Ok(())
+        },
+        redesign: false,
+    },
+    real!(
+        "FS_DESCENT",
+        "failsafe thrust, fraction of hover",
+        false,
+        failsafe_descent
+    ),
+    Param {
+        id: "HIL_FIX_MS",
+        doc: "period of the fixes taken from HIL_STATE_QUATERNION, ms",
+        get: |s| s.fix_period_ms as f32,
+        set: |s, v| {
+            s.fix_period_ms = whole(v, 1, 1_000)?;
+            Ok(())
+        },
+        redesign: false,
+    },
+];
+
+/// The index of the parameter named `id` (a MAVLink `param_id`: up to 16
+/// bytes, NUL-padded when shorter).
+pub fn index_of(id: &[u8]) -> Option<usize> {
+    let len = id.iter().position(|&b| b == 0).unwrap_or(id.len());
+    PARAMS.iter().position(|p| p.id.as_bytes() == &id[..len])
+}
+
+/// Writes parameter `index` = `value` into a copy of `s` and checks the
+/// copy; the new settings, or why not.
+pub fn write(s: &Settings, index: usize, value: f32) -> Result<Settings, Refusal> {
+    let p = PARAMS.get(index).ok_or(Refusal::Unknown)?;
+    let mut next = *s;
+    (p.set)(&mut next, value)?;
+    next.check()?;
+    Ok(next)
+}

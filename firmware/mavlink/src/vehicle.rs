@@ -1,0 +1,711 @@
+//! The flight controller as a MAVLink vehicle: [`MavVehicle`] takes the
+//! messages of a simulator (PX4's HIL interface) and of a ground station,
+//! runs the flight loop ([`fc_loop::FlightCore`]) on them, and answers.
+//!
+//! - `HIL_SENSOR` → one estimator step (the controller on its schedule),
+//!   answered by one `HIL_ACTUATOR_CONTROLS` (lockstep): the motor
+//!   commands of the mixer the parameters describe, zero while disarmed.
+//!   Its time (`time_usec`) is the loop's clock (lockstep): a gap longer
+//!   than `FS_TIMEOUT_MS` is a failsafe episode, as on our own protocol.
+//! - `HIL_STATE_QUATERNION` → a position and heading fix every
+//!   `HIL_FIX_MS` (a mocap-like source; its velocity is not used). Its
+//!   first position is home, the origin of the local NED frame.
+//! - `COMMAND_LONG` `MAV_CMD_COMPONENT_ARM_DISARM` → arm (refused while the
+//!   estimator aligns or is in its failsafe) or disarm; `COMMAND_ACK` and a
+//!   `STATUSTEXT` answer. Arming designs the controller afresh (no state
+//!   wound up on the ground) and, unless a set-point came first, holds the
+//!   position armed at. Disarming in the air (more than [`IN_AIR_M`] above
+//!   where it armed) is refused unless forced (`param2` = 21196), as PX4 does.
+//! - `SET_POSITION_TARGET_LOCAL_NED` (`MAV_FRAME_LOCAL_NED`, position
+//!   given; velocity, acceleration, yaw and yaw rate when not masked) → the
+//!   set-point (feed-forward as given).
+//! - The parameter protocol over [`params::PARAMS`]; a refused
+//!   `PARAM_SET` is answered with the unchanged value and a `STATUSTEXT`
+//!   saying why.
+//! - Telemetry on simulated time: `HEARTBEAT` 1 Hz (to both peers),
+//!   `SYS_STATUS` 2 Hz, `ATTITUDE` and `LOCAL_POSITION_NED` 50 Hz.
+//!
+//! Anything else (other systems' messages, unknown commands) is counted
+//! and answered where MAVLink expects an answer (`MAV_RESULT_UNSUPPORTED`).
+
+use crate::hil::{self, Home, StateFixSigmas};
+use crate::params::{self, Refusal, Settings, PARAMS};
+use crate::MavMessage;
+use core::convert::Infallible;
+use fc_core::control::Setpoint;
+use fc_core::model::airframe::Mixer;
+#[cfg(test)]
+use fc_core::model::airframe::MixerError;
+use fc_loop::nav::NavMode;
+use fc_loop::{fix_to_wire, setpoint_to_wire, FcConfig, FlightCore, Outbox};
+use fc_proto::{FromFc, ToFc, PROTOCOL_VERSION};
+use hal_shim::CycleClock;
+use mavlink::dialects::common::*;
+use nalgebra::{Vector3, Vector4};
+
+/// Who a message is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Peer {
+    /// The simulator (HIL_ACTUATOR_CONTROLS).
+    Simulator,
+    /// The ground station (telemetry, acknowledgements, parameters).
+    GroundStation,
+}
+
+/// Where [`MavVehicle`]'s messages go (one link for both peers on the
+/// image; a TCP and a UDP socket on the host).
+pub trait MavSink {
+    /// What sending can fail with.
+    type Error;
+    /// Sends `msg` to `to`.
+    fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<(), Self::Error>;
+}
+
+/// What the vehicle did with what it got.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct VehicleCounters {
+    /// `HIL_SENSOR` steps flown.
+    pub steps: u32,
+    /// `HIL_SENSOR`s refused (inertial fields not flagged, not finite).
+    pub sensors_refused: u32,
+    /// `HIL_STATE_QUATERNION`s refused (non-unit attitude).
+    pub states_refused: u32,
+    /// Steps on which the mixer clamped a motor (armed).
+    pub clamped_steps: u32,
+    /// Set-points refused (frame, mask, not finite).
+    pub setpoints_refused: u32,
+    /// Commands refused or not supported.
+    pub commands_refused: u32,
+    /// Parameter writes refused.
+    pub params_refused: u32,
+    /// Messages this vehicle has no use for.
+    pub ignored: u32,
+}
+
+/// Height above the arming point from which the vehicle is in the air, m.
+pub const IN_AIR_M: f32 = 0.15;
+/// `param2` of a disarm that is obeyed in the air too (MAVLink's magic number).
+const FORCE: f32 = 21196.0;
+
+/// Telemetry rates, Hz of simulated time.
+const HEARTBEAT_HZ: u64 = 1;
+const SYS_STATUS_HZ: u64 = 2;
+const ATTITUDE_HZ: u64 = 50;
+
+/// The flight loop's answers to one `Imu` step, kept.
+#[derive(Default)]
+struct Answer {
+    u: Option<[f32; 4]>,
+    cycles: u32,
+}
+
+impl Outbox for Answer {
+    type Error = Infallible;
+    fn send(&mut self, msg: &FromFc) -> Result<(), Infallible> {
+        match msg {
+            FromFc::Actuator { u, .. } => self.u = Some(*u),
+            FromFc::Telemetry { cycles, .. } => self.cycles = *cycles,
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+/// A 50-byte `STATUSTEXT` being written.
+struct Text {
+    buf: [u8; 50],
+    len: usize,
+}
+
+impl core::fmt::Write for Text {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        for &b in s.as_bytes() {
+            if self.len < self.buf.len() {
+                self.buf[self.len] = b;
+                self.len += 1;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The flight controller behind MAVLink (see the module's documentation).
+pub struct MavVehicle {
+    core: FlightCore,
+    settings: Settings,
+    mixer: Mixer<f32>,
+    armed: bool,
+    /// Where it armed (estimated), down, m.
+    armed_down_m: f32,
+    /// A set-point arrived since boot (arming then keeps it).
+    setpoint_given: bool,
+    home: Option<Home>,
+    /// Time of the last fix taken, µs.
+    last_fix_us: Option<u64>,
+    /// Time of the last `HIL_SENSOR`, µs.
+    last_sensor_us: Option<u64>,
+    /// The `Imu` sequence number.
+    seq: u32,
+    /// Motor commands of the last step.
+    motors: [f32; 4],
+    /// Cycles of the last step, and the clock's rate.
+    cycles: (u32, u32),
+    /// Next telemetry times, µs: heartbeat, status, attitude/position.
+    next_us: [u64; 3],
+    /// Frames the links' readers refused (for `SYS_STATUS.errors_comm`).
+    link_errors: u32,
+    /// Position last reported by the simulator, NED about home, m.
+    reported_ned_m: Option<Vector3<f64>>,
+    counters: VehicleCounters,
+    system_id: u8,
+}
+
+/// Milliseconds since boot of simulated time `t_us` (MAVLink's `time_boot_ms`).
+fn boot_ms(t_us: u64) -> u32 {
+    (t_us / 1000) as u32
+}
+
+impl MavVehicle {
+    /// A vehicle with `settings` (checked; the controller designed), MAVLink
+    /// system `system_id`, disarmed, its estimator waiting for samples.
+    pub fn new(settings: Settings, system_id: u8) -> Result<Self, Refusal> {
+        settings.check()?;
+        let cfg = FcConfig {
+            failsafe_timeout_us: u64::from(settings.failsafe_timeout_ms) * 1000,
+            descent_thrust_fraction: settings.failsafe_descent,
+            ..FcConfig::default()
+        };
+        let mut core = FlightCore::unstarted(cfg);
+        core.set_vehicle(settings.vehicle).map_err(Refusal::Design)?;
+        core.try_select(settings.controller).map_err(Refusal::Design)?;
+        // The session is open from boot (set-points may come before samples).
+        let hello = ToFc::Hello {
+            version: PROTOCOL_VERSION,
+        };
+        let _ = core.handle_message(hello, &mut Answer::default(), &NoClock, 0);
+        Ok(Self {
+            core,
+            mixer: settings.mixer()?,
+            settings,
+            armed: false,
+            armed_down_m: 0.0,
+            setpoint_given: false,
+            home: None,
+            last_fix_us: None,
+            last_sensor_us: None,
+            seq: 0,
+            motors: [0.0; 4],
+            cycles: (0, 1),
+            next_us: [0; 3],
+            link_errors: 0,
+            reported_ned_m: None,
+            counters: VehicleCounters::default(),
+            system_id,
+        })
+    }
+
+    /// Armed (the motors turn).
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// The settings in force (the parameters' values).
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The flight loop (its estimator, set-point, counters).
+    pub fn core(&self) -> &FlightCore {
+        &self.core
+    }
+
+    /// What was done with what arrived.
+    pub fn counters(&self) -> VehicleCounters {
+        self.counters
+    }
+
+    /// The motor commands of the last step (zero while disarmed).
+    pub fn motors(&self) -> [f32; 4] {
+        self.motors
+    }
+
+    /// Where the simulator last said the vehicle is (NED about home, m):
+    /// for the host's measurements, not used in flight.
+    pub fn reported_position(&self) -> Option<Vector3<f64>> {
+        self.reported_ned_m
+    }
+
+    /// Records how many frames the links' readers have refused in all
+    /// (reported in `SYS_STATUS.errors_comm`).
+    pub fn set_link_errors(&mut self, refused: u32) {
+        self.link_errors = refused;
+    }
+
+    /// Handles one message from system `from_system`; answers go to `out`.
+    /// `now_us` is the caller's clock (only a free-running loop uses it).
+    pub fn handle<S: MavSink, C: CycleClock>(
+        &mut self,
+        msg: &MavMessage,
+        out: &mut S,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), S::Error> {
+        match msg {
+            MavMessage::HIL_SENSOR(m) => self.on_sensor(m, out, clock, now_us),
+            MavMessage::HIL_STATE_QUATERNION(m) => {
+                self.on_state(m, clock, now_us);
+                Ok(())
+            }
+            MavMessage::COMMAND_LONG(m) => self.on_command(m, out),
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out, clock, now_us),
+            MavMessage::PARAM_REQUEST_LIST(m) if self.for_me(m.target_system) => {
+                for i in 0..PARAMS.len() {
+                    self.send_param(i, out)?;
+                }
+                Ok(())
+            }
+            MavMessage::PARAM_REQUEST_READ(m) if self.for_me(m.target_system) => {
+                let index = if m.param_index >= 0 {
+                    Some(m.param_index as usize).filter(|&i| i < PARAMS.len())
+                } else {
+                    params::index_of(&m.param_id[..])
+                };
+                match index {
+                    Some(i) => self.send_param(i, out),
+                    None => self.status(
+                        out,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &m.param_id[..],
+                        Refusal::Unknown,
+                    ),
+                }
+            }
+            MavMessage::PARAM_SET(m) if self.for_me(m.target_system) => self.on_param_set(m, out),
+            MavMessage::HEARTBEAT(_) => Ok(()),
+            _ => {
+                self.counters.ignored = self.counters.ignored.wrapping_add(1);
+                Ok(())
+            }
+        }
+    }
+
+    /// `target` is this system (0: broadcast).
+    fn for_me(&self, target: u8) -> bool {
+        target == 0 || target == self.system_id
+    }
+
+    fn on_sensor<S: MavSink, C: CycleClock>(
+        &mut self,
+        m: &HIL_SENSOR_DATA,
+        out: &mut S,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), S::Error> {
+        let Ok(s) = hil::imu_from_hil_sensor(m) else {
+            self.counters.sensors_refused = self.counters.sensors_refused.wrapping_add(1);
+            return Ok(());
+        };
+        let mut answer = Answer::default();
+        if self.last_sensor_us.is_none_or(|t| s.time_us < t) {
+            // The first sample, or a simulator that started again: a new time line.
+            let _ = self.core.handle_message(
+                ToFc::Hello {
+                    version: PROTOCOL_VERSION,
+                },
+                &mut answer,
+                clock,
+                now_us,
+            );
+            self.home = None;
+            self.last_fix_us = None;
+            self.next_us = [s.time_us; 3];
+        }
+        self.last_sensor_us = Some(s.time_us);
+        self.seq = self.seq.wrapping_add(1);
+        let imu = ToFc::Imu {
+            seq: self.seq,
+            t_us: s.time_us,
+            gyro: s.imu.gyro_frd_radps.into(),
+            accel: s.imu.accel_frd_mps2.into(),
+        };
+        let _ = self.core.handle_message(imu, &mut answer, clock, now_us);
+        self.cycles = (answer.cycles, clock.hz());
+        self.counters.steps = self.counters.steps.wrapping_add(1);
+        let u = Vector4::from(answer.u.unwrap_or([0.0; 4]));
+        let cmd = self.mixer.commands(&u);
+        self.motors = if self.armed { cmd.commands } else { [0.0; 4] };
+        if self.armed && cmd.clamped {
+            self.counters.clamped_steps = self.counters.clamped_steps.wrapping_add(1);
+        }
+        out.send(
+            Peer::Simulator,
+            &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.armed)),
+        )?;
+        self.telemetry(s.time_us, out)
+    }
+
+    fn on_state<C: CycleClock>(&mut self, m: &HIL_STATE_QUATERNION_DATA, clock: &C, now_us: u64) {
+        if !hil::on_earth(m) {
+            self.counters.states_refused = self.counters.states_refused.wrapping_add(1);
+            return;
+        }
+        let home = *self.home.get_or_insert(Home::of(m));
+        self.reported_ned_m = Some(home.ned_m(m.lat, m.lon, m.alt));
+        let period_us = u64::from(self.settings.fix_period_ms) * 1000;
+        if self.last_fix_us.is_some_and(|t| m.time_usec < t + period_us) {
+            return;
+        }
+        match hil::fix_from_hil_state(m, &home, &StateFixSigmas::MOCAP_LIKE) {
+            Ok(mut f) => {
+                // A mocap gives position and heading, not velocity.
+                f.vel_ned_mps = None;
+                let _ = self
+                    .core
+                    .handle_message(ToFc::Fix(fix_to_wire(&f)), &mut Answer::default(), clock, now_us);
+                self.last_fix_us = Some(m.time_usec);
+            }
+            Err(_) => self.counters.states_refused = self.counters.states_refused.wrapping_add(1),
+        }
+    }
+
+    fn on_command<S: MavSink>(&mut self, m: &COMMAND_LONG_DATA, out: &mut S) -> Result<(), S::Error> {
+        if !self.for_me(m.target_system) {
+            self.counters.ignored = self.counters.ignored.wrapping_add(1);
+            return Ok(());
+        }
+        let result = match m.command {
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if m.param1 == 1.0 => match self.arm() {
+                Ok(()) => {
+                    self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
+                    MavResult::MAV_RESULT_ACCEPTED
+                }
+                Err(why) => {
+                    self.say(
+                        out,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        format_args!("arming refused: {why}"),
+                    )?;
+                    MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+                }
+            },
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if m.param1 == 0.0 && self.in_air() && m.param2 != FORCE => {
+                self.say(
+                    out,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    format_args!("disarm refused: in the air (force: 21196)"),
+                )?;
+                MavResult::MAV_RESULT_DENIED
+            }
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if m.param1 == 0.0 => {
+                if self.armed {
+                    self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("disarmed"))?;
+                }
+                self.armed = false;
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => MavResult::MAV_RESULT_DENIED,
+            _ => MavResult::MAV_RESULT_UNSUPPORTED,
+        };
+        if result != MavResult::MAV_RESULT_ACCEPTED {
+            self.counters.commands_refused = self.counters.commands_refused.wrapping_add(1);
+        }
+        out.send(
+            Peer::GroundStation,
+            &MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+                command: m.command,
+                result,
+            }),
+        )
+    }
+
+    /// Armed and more than [`IN_AIR_M`] above where it armed (estimated):
+    /// disarming would drop it.
+    fn in_air(&self) -> bool {
+        let down = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        self.armed && down.is_some_and(|d| d < self.armed_down_m - IN_AIR_M)
+    }
+
+    /// Arms if the estimator navigates; the controller is designed afresh.
+    fn arm(&mut self) -> Result<(), &'static str> {
+        if self.armed {
+            return Ok(());
+        }
+        let est = match (self.core.navigator().mode(), self.core.navigator().estimate()) {
+            (NavMode::Navigating, Some(e)) => e,
+            (NavMode::Aligning, _) => return Err("estimator aligning"),
+            _ => return Err("estimator failsafe"),
+        };
+        self.core
+            .try_select(self.settings.controller)
+            .map_err(|_| "controller design failed")?;
+        if !self.setpoint_given {
+            let yaw = fc_core::quat_to_euler(&est.att)[2];
+            let hold = Setpoint::hold(est.pos_ned_m, yaw);
+            let _ = self.core.handle_message(
+                ToFc::Setpoint(setpoint_to_wire(&hold)),
+                &mut Answer::default(),
+                &NoClock,
+                0,
+            );
+        }
+        self.armed_down_m = est.pos_ned_m[2];
+        self.armed = true;
+        Ok(())
+    }
+
+    fn on_setpoint<S: MavSink, C: CycleClock>(
+        &mut self,
+        m: &SET_POSITION_TARGET_LOCAL_NED_DATA,
+        out: &mut S,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), S::Error> {
+        if !self.for_me(m.target_system) {
+            self.counters.ignored = self.counters.ignored.wrapping_add(1);
+            return Ok(());
+        }
+        match setpoint_from_target(m, self.core.setpoint().yaw_rad) {
+            Some(sp) => {
+                let _ = self.core.handle_message(
+                    ToFc::Setpoint(setpoint_to_wire(&sp)),
+                    &mut Answer::default(),
+                    clock,
+                    now_us,
+                );
+                self.setpoint_given = true;
+                Ok(())
+            }
+            None => {
+                self.counters.setpoints_refused = self.counters.setpoints_refused.wrapping_add(1);
+                self.say(
+                    out,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    format_args!("set-point refused: LOCAL_NED, position, finite"),
+                )
+            }
+        }
+    }
+
+    fn on_param_set<S: MavSink>(&mut self, m: &PARAM_SET_DATA, out: &mut S) -> Result<(), S::Error> {
+        let Some(i) = params::index_of(&m.param_id[..]) else {
+            self.counters.params_refused = self.counters.params_refused.wrapping_add(1);
+            return self.status(
+                out,
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &m.param_id[..],
+                Refusal::Unknown,
+            );
+        };
+        if let Err(why) = self.apply(i, m.param_value) {
+            self.counters.params_refused = self.counters.params_refused.wrapping_add(1);
+            let id = PARAMS[i].id;
+            self.say(
+                out,
+                MavSeverity::MAV_SEVERITY_WARNING,
+                format_args!("{id}={} refused: {why}", m.param_value),
+            )?;
+        }
+        // The value in force, changed or not, as the protocol asks.
+        self.send_param(i, out)
+    }
+
+    /// Sets parameter `index` to `value`: checked, and applied to the
+    /// controller (re-designed while disarmed), the mixer and the failsafe.
+    pub fn apply(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
+        let next = params::write(&self.settings, index, value)?;
+        if next == self.settings {
+            return Ok(());
+        }
+        let redesign = next.vehicle != self.settings.vehicle || next.controller != self.settings.controller;
+        if redesign && self.armed {
+            return Err(Refusal::Armed);
+        }
+        let mixer = next.mixer()?;
+        if next.vehicle != self.settings.vehicle {
+            self.core.set_vehicle(next.vehicle).map_err(Refusal::Design)?;
+        }
+        if next.controller != self.settings.controller {
+            if let Err(e) = self.core.try_select(next.controller) {
+                // The vehicle may have changed above: design the old
+                // controller for it again (it was designed for it before).
+                let _ = self.core.set_vehicle(self.settings.vehicle);
+                return Err(Refusal::Design(e));
+            }
+        }
+        self.core
+            .set_failsafe(u64::from(next.failsafe_timeout_ms) * 1000, next.failsafe_descent);
+        self.mixer = mixer;
+        self.settings = next;
+        Ok(())
+    }
+
+    fn send_param<S: MavSink>(&self, index: usize, out: &mut S) -> Result<(), S::Error> {
+        let p = &PARAMS[index];
+        out.send(
+            Peer::GroundStation,
+            &MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+                param_value: (p.get)(&self.settings),
+                param_count: PARAMS.len() as u16,
+                param_index: index as u16,
+                param_id: p.id.into(),
+                param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
+            }),
+        )
+    }
+
+    /// A `STATUSTEXT` naming parameter `id` and why it was refused.
+    fn status<S: MavSink>(&self, out: &mut S, sev: MavSeverity, id: &[u8], why: Refusal) -> Result<(), S::Error> {
+        let len = id.iter().position(|&b| b == 0).unwrap_or(id.len());
+        let name = core::str::from_utf8(&id[..len]).unwrap_or("?");
+        self.say(out, sev, format_args!("{name}: {why}"))
+    }
+
+    /// Sends a `STATUSTEXT` (cut at 50 characters).
+    fn say<S: MavSink>(&self, out: &mut S, severity: MavSeverity, text: core::fmt::Arguments) -> Result<(), S::Error> {
+        let mut t = Text { buf: [0; 50], len: 0 };
+        let _ = core::fmt::write(&mut t, text);
+        out.send(
+            Peer::GroundStation,
+            &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                severity,
+                text: t.buf.into(),
+            }),
+        )
+    }
+
+    /// Sends the telemetry due at simulated time `t_us`.
+    fn telemetry<S: MavSink>(&mut self, t_us: u64, out: &mut S) -> Result<(), S::Error> {
+        if t_us >= self.next_us[0] {
+            self.next_us[0] = t_us + 1_000_000 / HEARTBEAT_HZ;
+            let hb = MavMessage::HEARTBEAT(hil::heartbeat(self.armed));
+            out.send(Peer::Simulator, &hb)?;
+            out.send(Peer::GroundStation, &hb)?;
+        }
+        if t_us >= self.next_us[1] {
+            self.next_us[1] = t_us + 1_000_000 / SYS_STATUS_HZ;
+            out.send(Peer::GroundStation, &MavMessage::SYS_STATUS(self.sys_status()))?;
+        }
+        if t_us >= self.next_us[2] {
+            self.next_us[2] = t_us + 1_000_000 / ATTITUDE_HZ;
+            if let Some(e) = self.core.navigator().estimate() {
+                let rpy = fc_core::quat_to_euler(&e.att);
+                out.send(
+                    Peer::GroundStation,
+                    &MavMessage::ATTITUDE(ATTITUDE_DATA {
+                        time_boot_ms: boot_ms(t_us),
+                        roll: rpy[0],
+                        pitch: rpy[1],
+                        yaw: rpy[2],
+                        rollspeed: e.rates_frd_radps[0],
+                        pitchspeed: e.rates_frd_radps[1],
+                        yawspeed: e.rates_frd_radps[2],
+                    }),
+                )?;
+                out.send(
+                    Peer::GroundStation,
+                    &MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+                        time_boot_ms: boot_ms(t_us),
+                        x: e.pos_ned_m[0],
+                        y: e.pos_ned_m[1],
+                        z: e.pos_ned_m[2],
+                        vx: e.vel_ned_mps[0],
+                        vy: e.vel_ned_mps[1],
+                        vz: e.vel_ned_mps[2],
+                    }),
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    fn sys_status(&self) -> SYS_STATUS_DATA {
+        use MavSysStatusSensor as S;
+        let present = S::MAV_SYS_STATUS_SENSOR_3D_GYRO
+            | S::MAV_SYS_STATUS_SENSOR_3D_ACCEL
+            | S::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+            | S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+            | S::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+            | S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
+        let mut healthy = present;
+        if self.core.navigator().mode() != NavMode::Navigating || self.core.failsafe() {
+            healthy.remove(S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | S::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL);
+        }
+        // Load: the last step's time against a 1 kHz step, per mille.
+        let per_step = u64::from(self.cycles.1) / 1000;
+        let load = (u64::from(self.cycles.0) * 1000).checked_div(per_step).unwrap_or(0);
+        SYS_STATUS_DATA {
+            onboard_control_sensors_present: present,
+            onboard_control_sensors_enabled: present,
+            onboard_control_sensors_health: healthy,
+            load: load.min(1000) as u16,
+            voltage_battery: u16::MAX,
+            current_battery: -1,
+            drop_rate_comm: 0,
+            errors_comm: self.link_errors.min(u32::from(u16::MAX)) as u16,
+            errors_count1: self.counters.sensors_refused.min(u32::from(u16::MAX)) as u16,
+            errors_count2: self.counters.params_refused.min(u32::from(u16::MAX)) as u16,
+            errors_count3: self.counters.commands_refused.min(u32::from(u16::MAX)) as u16,
+            errors_count4: self.core.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
+            battery_remaining: -1,
+        }
+    }
+}
+
+/// A clock for steps whose cycles nobody reads.
+struct NoClock;
+
+impl CycleClock for NoClock {
+    fn now(&self) -> u32 {
+        0
+    }
+    fn hz(&self) -> u32 {
+        1
+    }
+}
+
+/// `SET_POSITION_TARGET_LOCAL_NED` as a set-point: `None` unless the frame
+/// is `MAV_FRAME_LOCAL_NED`, the position is given and everything used is
+/// finite. A masked yaw keeps `yaw_rad`.
+pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32) -> Option<Setpoint<f32>> {
+    use PositionTargetTypemask as T;
+    let mask = m.type_mask;
+    let pos_masked = T::POSITION_TARGET_TYPEMASK_X_IGNORE
+        | T::POSITION_TARGET_TYPEMASK_Y_IGNORE
+        | T::POSITION_TARGET_TYPEMASK_Z_IGNORE;
+    if m.coordinate_frame != MavFrame::MAV_FRAME_LOCAL_NED
+        || mask.intersects(pos_masked)
+        || mask.contains(T::POSITION_TARGET_TYPEMASK_FORCE_SET)
+    {
+        return None;
+    }
+    let vel_masked = mask.intersects(
+        T::POSITION_TARGET_TYPEMASK_VX_IGNORE
+            | T::POSITION_TARGET_TYPEMASK_VY_IGNORE
+            | T::POSITION_TARGET_TYPEMASK_VZ_IGNORE,
+    );
+    let acc_masked = mask.intersects(
+        T::POSITION_TARGET_TYPEMASK_AX_IGNORE
+            | T::POSITION_TARGET_TYPEMASK_AY_IGNORE
+            | T::POSITION_TARGET_TYPEMASK_AZ_IGNORE,
+    );
+    let yaw = if mask.contains(T::POSITION_TARGET_TYPEMASK_YAW_IGNORE) {
+        yaw_rad
+    } else {
+        m.yaw
+    };
+    let mut sp = Setpoint::hold(Vector3::new(m.x, m.y, m.z), yaw);
+    if !vel_masked {
+        sp.vel_ned_mps = Vector3::new(m.vx, m.vy, m.vz);
+    }
+    if !acc_masked {
+        sp.acc_ned_mps2 = Vector3::new(m.afx, m.afy, m.afz);
+    }
+    if !mask.contains(T::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE) {
+        sp.yaw_rate_radps = m.yaw_rate;
+    }
+    fc_loop::setpoint_from_wire(&setpoint_to_wire(&sp))
+}
+
+#[cfg(test)]
+#[path = "vehicle_tests.rs"]
+mod tests;

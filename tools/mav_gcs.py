@@ -1,0 +1,219 @@
+#!/usr/bin/env python3
+"""A ground station in a page of pymavlink, written from the MAVLink
+specification (the parameter protocol, the command protocol, offboard
+set-points), not from this project's code: it checks that the flight
+controller can be operated as QGroundControl or a MAVSDK script would.
+
+It listens on UDP (as QGroundControl does on 14550) for the vehicle's
+heartbeat, then:
+
+1. lists every parameter (PARAM_REQUEST_LIST → PARAM_VALUE × param_count)
+   and reads one back by name (PARAM_REQUEST_READ);
+2. writes a non-physical value (a negative mass): the write must be
+   refused — the old value echoed in PARAM_VALUE and a STATUSTEXT naming
+   the parameter —, then a valid one (failsafe timeout) and a controller
+   change (which re-designs the controller on board), both accepted;
+3. arms (COMMAND_LONG MAV_CMD_COMPONENT_ARM_DISARM), retrying while the
+   vehicle answers "temporarily rejected" (its estimator aligns first);
+4. checks that a re-designing parameter is refused while armed;
+5. streams SET_POSITION_TARGET_LOCAL_NED: 1 m up, then a step of
+   --step m north; reads LOCAL_POSITION_NED, ATTITUDE and SYS_STATUS;
+   the position must end within --tolerance of the set-point;
+6. disarms: refused in the air, accepted when forced (param2 = 21196).
+
+Prints one line `gcs check: P passed, F failed` (and what failed) and
+exits non-zero if anything failed. Used by tools/rotorpy_hil.py --gcs.
+"""
+import argparse
+import os
+import sys
+import time
+
+os.environ["MAVLINK20"] = "1"
+from pymavlink import mavutil  # noqa: E402
+
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_TEMPORARILY_REJECTED = 1
+MAV_RESULT_DENIED = 2
+MAV_FRAME_LOCAL_NED = 1
+REAL32 = 9
+
+
+class Gcs:
+    def __init__(self, url, timeout):
+        self.m = mavutil.mavlink_connection(url, source_system=254, source_component=190)
+        self.timeout = timeout
+        self.results = []
+        self.texts = []
+        self.seen = {}
+        self.boot_ms = 0
+        self.position = None
+
+    def check(self, ok, what):
+        self.results.append((bool(ok), what))
+        print(("ok   " if ok else "FAIL ") + what, flush=True)
+        return ok
+
+    def recv(self, types, timeout=None):
+        """The next message of one of `types`, keeping note of everything else."""
+        end = time.time() + (timeout or self.timeout)
+        while time.time() < end:
+            msg = self.m.recv_match(blocking=True, timeout=0.2)
+            if msg is None:
+                continue
+            t = msg.get_type()
+            self.seen[t] = self.seen.get(t, 0) + 1
+            if t == "STATUSTEXT":
+                self.texts.append(msg.text)
+            if hasattr(msg, "time_boot_ms"):
+                self.boot_ms = max(self.boot_ms, msg.time_boot_ms)
+            if t == "LOCAL_POSITION_NED":
+                self.position = (msg.x, msg.y, msg.z)
+            if t in types:
+                return msg
+        return None
+
+    def param_id(self, msg):
+        pid = msg.param_id
+        return pid.decode() if isinstance(pid, bytes) else pid
+
+    def params(self):
+        self.m.mav.param_request_list_send(self.sys, self.comp)
+        values, count = {}, None
+        end = time.time() + self.timeout
+        while time.time() < end and (count is None or len(values) < count):
+            msg = self.recv(["PARAM_VALUE"], timeout=2.0)
+            if msg is None:
+                break
+            count = msg.param_count
+            values[msg.param_index] = (self.param_id(msg), msg.param_value, msg.param_type)
+        return count, values
+
+    def set_param(self, name, value):
+        """Writes `name` and returns the PARAM_VALUE the vehicle answers with."""
+        self.m.mav.param_set_send(self.sys, self.comp, name.encode(), value, REAL32)
+        end = time.time() + self.timeout
+        while time.time() < end:
+            msg = self.recv(["PARAM_VALUE"], timeout=2.0)
+            if msg is not None and self.param_id(msg) == name:
+                return msg
+        return None
+
+    def command(self, cmd, *params):
+        p = list(params) + [0.0] * (7 - len(params))
+        self.m.mav.command_long_send(self.sys, self.comp, cmd, 0, *p)
+        end = time.time() + self.timeout
+        while time.time() < end:
+            ack = self.recv(["COMMAND_ACK"], timeout=2.0)
+            if ack is not None and ack.command == cmd:
+                return ack.result
+        return None
+
+    def setpoint(self, n, e, d):
+        # Position only: velocity, acceleration and yaw rate ignored (bits 3-8, 11).
+        mask = 0b0000_1001_1111_1000
+        self.m.mav.set_position_target_local_ned_send(
+            self.boot_ms, self.sys, self.comp, MAV_FRAME_LOCAL_NED, mask, n, e, d, 0, 0, 0, 0, 0, 0, 0.0, 0.0)
+
+    def fly_to(self, target, sim_s):
+        """Streams `target` at 20 Hz (wall) for `sim_s` of the vehicle's time."""
+        start = None
+        last = 0.0
+        while True:
+            if time.time() - last > 0.05:
+                self.setpoint(*target)
+                last = time.time()
+            msg = self.recv(["LOCAL_POSITION_NED"], timeout=5.0)
+            if msg is None:
+                return False
+            start = msg.time_boot_ms if start is None else start
+            if msg.time_boot_ms - start >= sim_s * 1000:
+                return True
+
+    def run(self, step_m, tolerance_m):
+        hb = self.recv(["HEARTBEAT"])
+        if not self.check(hb is not None and hb.type == mavutil.mavlink.MAV_TYPE_QUADROTOR,
+                          "a quadrotor's HEARTBEAT arrives"):
+            return
+        self.sys, self.comp = hb.get_srcSystem(), hb.get_srcComponent()
+
+        count, values = self.params()
+        names = [v[0] for v in values.values()]
+        self.check(count and len(values) == count and len(set(names)) == count
+                   and all(v[2] == REAL32 for v in values.values()),
+                   f"PARAM_REQUEST_LIST: {len(values)} of {count} distinct REAL32 parameters")
+        by_name = {v[0]: v[1] for v in values.values()}
+        mass = by_name.get("VEH_MASS")
+        self.m.mav.param_request_read_send(self.sys, self.comp, b"VEH_MASS", -1)
+        msg = None
+        for _ in range(20):
+            msg = self.recv(["PARAM_VALUE"], timeout=2.0)
+            if msg is None or self.param_id(msg) == "VEH_MASS":
+                break
+        self.check(msg is not None and mass is not None and msg.param_value == mass,
+                   f"PARAM_REQUEST_READ VEH_MASS = {mass} kg")
+
+        n_texts = len(self.texts)
+        msg = self.set_param("VEH_MASS", -1.0)
+        self.recv(["STATUSTEXT"], timeout=2.0)
+        why = [t for t in self.texts[n_texts:] if "VEH_MASS" in t]
+        self.check(msg is not None and msg.param_value == mass and why,
+                   f"VEH_MASS = -1 refused, old value echoed, reason: {why[:1]}")
+        msg = self.set_param("FS_TIMEOUT_MS", 80.0)
+        self.check(msg is not None and msg.param_value == 80.0, "FS_TIMEOUT_MS = 80 accepted")
+        ctl = by_name.get("CTL_ID")
+        msg = self.set_param("CTL_ID", 2.0)
+        ok = msg is not None and msg.param_value == 2.0
+        msg = self.set_param("CTL_ID", ctl)
+        self.check(ok and msg is not None and msg.param_value == ctl,
+                   f"CTL_ID 2 then {ctl}: re-designed on board while disarmed")
+
+        result = None
+        end = time.time() + self.timeout
+        while time.time() < end:
+            result = self.command(MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+            if result != MAV_RESULT_TEMPORARILY_REJECTED:
+                break
+            time.sleep(0.2)
+        self.check(result == MAV_RESULT_ACCEPTED, f"arm accepted (result {result})")
+        hb = self.recv(["HEARTBEAT"])
+        self.check(hb is not None and hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED,
+                   "HEARTBEAT says armed")
+        msg = self.set_param("VEH_MASS", mass * 1.1)
+        self.check(msg is not None and msg.param_value == mass, "VEH_MASS refused while armed")
+
+        up, step = (0.0, 0.0, -1.0), (step_m, 0.0, -1.0)
+        self.check(self.fly_to(up, 4.0), "1 m up, held 4 s of vehicle time")
+        self.check(self.fly_to(step, 6.0), f"{step_m} m north, held 6 s")
+        err = None
+        if self.position is not None:
+            err = sum((a - b) ** 2 for a, b in zip(self.position, step)) ** 0.5
+        self.check(err is not None and err <= tolerance_m,
+                   f"LOCAL_POSITION_NED {self.position} within {tolerance_m} m of {step} (error {err})")
+        span_s = max(self.boot_ms, 1) / 1000.0
+        for t, lo in (("ATTITUDE", 20.0), ("LOCAL_POSITION_NED", 20.0), ("SYS_STATUS", 0.5)):
+            rate = self.seen.get(t, 0) / span_s
+            self.check(rate >= lo, f"{t} at {rate:.1f} Hz of vehicle time (at least {lo})")
+        self.check(self.command(MAV_CMD_COMPONENT_ARM_DISARM, 0.0) == MAV_RESULT_DENIED, "disarm in the air denied")
+        self.check(self.command(MAV_CMD_COMPONENT_ARM_DISARM, 0.0, 21196.0) == MAV_RESULT_ACCEPTED,
+                   "forced disarm (21196) accepted")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--url", default="udpin:127.0.0.1:14550")
+    ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per exchange")
+    ap.add_argument("--step", type=float, default=0.5, help="m north")
+    ap.add_argument("--tolerance", type=float, default=0.05, help="m")
+    a = ap.parse_args()
+    g = Gcs(a.url, a.timeout)
+    g.run(a.step, a.tolerance)
+    failed = [w for ok, w in g.results if not ok]
+    passed = len(g.results) - len(failed)
+    print(f"gcs check: {passed} passed, {len(failed)} failed" + (f" ({'; '.join(failed)})" if failed else ""))
+    return 1 if failed or not g.results else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
