@@ -58,4 +58,7 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --waypoint 0,0,0
     --duration 15 --json target/rotorpy-hil.json | grep "rotorpy check:" | tee -a "$log"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --scenario circle --duration 25 \
     --json target/rotorpy-hil-circle.json | grep "rotorpy check:" | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+echo "== a pymavlink ground station (tools/mav_gcs.py) lists, reads and sets parameters, arms and flies it against rotorpy"
+python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration 60 \
+    --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy|gcs) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

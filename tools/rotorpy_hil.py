@@ -112,7 +112,11 @@ def main():
         sys.stderr.write(gcs_out)
         line = [ln for ln in gcs_out.splitlines() if ln.startswith("gcs check:")]
         res["gcs"] = line[-1] if line else "gcs check: 0 passed, 1 failed (the ground station did not finish)"
-        print(json.dumps(res, indent=2))
+        text = json.dumps(res, indent=2)
+        print(text)
+        if a.json:
+            with open(a.json, "w") as f:
+                f.write(text + "\n")
         print(res["gcs"])
         return 0 if gcs.returncode == 0 and line else 1
     final = track[-1, 1:4]
