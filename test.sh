@@ -22,7 +22,7 @@ echo "== clippy (host, all targets)"
 cargo clippy --workspace --all-targets -- -D warnings
 echo "== clippy + build (the STM32F405 image and its QEMU harness binaries, thumbv7em-none-eabihf)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --bins -- -D warnings
-# The MAVLink crate is no_std: it must build for the MCU before the image links it.
+# The MAVLink crate is no_std (the firmware-mavlink image links it), linted on the MCU target too.
 cargo clippy -p fc-mavlink --target thumbv7em-none-eabihf -- -D warnings
 cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf
 echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run here)"
@@ -58,6 +58,9 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --waypoint 0,0,0
     --duration 15 --json target/rotorpy-hil.json | grep "rotorpy check:" | tee -a "$log"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --scenario circle --duration 25 \
     --json target/rotorpy-hil-circle.json | grep "rotorpy check:" | tee -a "$log"
+echo "== the same step flight on the real image: firmware-mavlink in QEMU, USART1 bridged to rotorpy (about 4 min)"
+python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
+    --duration 15 --json target/rotorpy-hil-qemu.json | grep "rotorpy check:" | tee -a "$log"
 echo "== a pymavlink ground station (tools/mav_gcs.py) lists, reads and sets parameters, arms and flies it against rotorpy"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration 60 \
     --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"

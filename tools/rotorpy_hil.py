@@ -48,6 +48,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sil-host", default="target/release/sil-host")
     ap.add_argument("--controller", default="lqr")
+    ap.add_argument("--target", default="in-process", help="in-process | qemu (the firmware-mavlink image)")
     ap.add_argument("--waypoint", action="append", help="T,N,E,D (NED about the start, m)")
     ap.add_argument("--scenario", help="circle | helix: its trajectory from --scenario-start s (RMSE reported)")
     ap.add_argument("--scenario-start", type=float, default=3.0)
@@ -67,7 +68,7 @@ def main():
 
     cmd = [a.sil_host, "px4-hil", "--connect", f"127.0.0.1:{a.port}", "--controller", a.controller,
            "--vehicle", "vehicles/crazyflie-rotorpy.toml", "--airframe", "x-rotorpy", "--hub-m", "0.043",
-           "--motor-unit", "speed", "--duration", str(a.duration + 1.0)]
+           "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
     if (bool(a.waypoint) + bool(a.scenario) + a.gcs) != 1:
         ap.error("give --waypoint(s), --scenario or --gcs")
     gcs = None

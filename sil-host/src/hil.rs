@@ -30,6 +30,8 @@ use std::time::{Duration, Instant};
 pub const SYSTEM_ID: u8 = 1;
 /// Its component id (MAV_COMP_ID_AUTOPILOT1).
 pub const COMPONENT_ID: u8 = 1;
+/// Shortest interval between two set-points sent for a mission, s (100 Hz).
+pub const SETPOINT_PERIOD_S: f64 = 0.01;
 /// The system id of the ground station this process plays for a mission.
 pub const MISSION_GCS_ID: u8 = 255;
 
@@ -83,6 +85,17 @@ impl Mission {
     }
 }
 
+/// Where the flight controller runs.
+#[derive(Debug, Clone)]
+pub enum Target {
+    /// In this process ([`MavVehicle`]).
+    InProcess,
+    /// The `firmware-mavlink` image in QEMU's netduinoplus2, its USART1 on
+    /// a local TCP socket (both the simulator's and the ground station's
+    /// messages on that one link; this process routes them).
+    Qemu(std::path::PathBuf),
+}
+
 /// Everything a HIL flight needs.
 #[derive(Debug, Clone)]
 pub struct HilConfig {
@@ -90,7 +103,9 @@ pub struct HilConfig {
     pub addr: String,
     /// How long to keep trying to connect, s.
     pub connect_timeout_s: f64,
-    /// The parameters the vehicle boots with (vehicle, motors, controller, failsafe).
+    /// The parameters the vehicle flies with (vehicle, motors, controller,
+    /// failsafe): the boot parameters in process; written with PARAM_SET
+    /// (and each echo checked) before the flight on the image.
     pub settings: Settings,
     /// What to fly; `None`: whatever the ground station commands.
     pub mission: Option<Mission>,
@@ -99,33 +114,41 @@ pub struct HilConfig {
     pub gcs: Option<SocketAddr>,
     /// Stop after this much simulated time, s.
     pub duration_s: f64,
+    /// Where the flight controller runs.
+    pub target: Target,
 }
 
-/// What a HIL flight did.
+/// What a HIL flight did, measured from the messages that crossed the
+/// links (the same for every target).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct HilResult {
+    /// Where the flight controller ran: `in-process` or `qemu`.
+    pub target: String,
     /// `HIL_SENSOR` steps answered.
     pub steps: u64,
     /// Simulated time flown, s.
     pub duration_s: f64,
-    /// When the vehicle armed, s.
+    /// When the vehicle armed (its `COMMAND_ACK` or `HEARTBEAT`), s.
     pub armed_at_s: Option<f64>,
     /// The last position the simulator reported (NED about home, m).
     pub final_pos_ned_m: [f64; 3],
-    /// Its distance from the last set-point, m.
-    pub final_error_m: f64,
+    /// Its distance from the mission's last set-point, m.
+    pub final_error_m: Option<f64>,
     /// RMS distance from the reference while tracking a scenario, m (3-D).
     pub tracking_rmse_m: Option<f64>,
-    /// Largest distance between the estimate and the reported position, m.
+    /// Largest distance, while armed, between the vehicle's estimate
+    /// (`LOCAL_POSITION_NED`, 50 Hz) and the simulator's position at that step, m.
     pub max_estimate_error_m: f64,
-    /// Steps on which the mixer clamped a motor (armed).
-    pub clamped_steps: u64,
-    /// MAVLink frames the readers refused (every kind).
+    /// MAVLink frames this process's readers refused (every kind).
     pub refused_frames: u32,
-    /// `HIL_SENSOR`s refused (no inertial data, NaN).
-    pub refused_sensors: u64,
+    /// The vehicle's last `SYS_STATUS`: `errors_count1..4` (refused
+    /// sensor samples, parameter writes, commands, invalid values).
+    pub vehicle_errors: [u16; 4],
     /// The vehicle's `STATUSTEXT`s, in order.
     pub status_texts: Vec<String>,
+    /// The image's defmt log (QEMU).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub firmware_log: Vec<String>,
     /// Rows `[t, north, east, down (reported), north, east, down (estimate), setpoint n, e, d]`.
     #[serde(skip)]
     pub trace: Vec<[f64; 10]>,
@@ -144,40 +167,194 @@ fn connect(addr: &str, timeout_s: f64) -> Result<TcpStream> {
     }
 }
 
-/// The vehicle's two links: the simulator's TCP stream and, if any, the
-/// ground station's UDP socket. Ground-station messages without a ground
-/// station are dropped, except the status texts, which are kept.
-struct Links {
-    sim: TcpStream,
-    gcs: Option<(UdpSocket, SocketAddr)>,
-    seq: u8,
-    texts: Vec<String>,
+/// Who gets a message the vehicle sent: the simulator its motor commands,
+/// both its heartbeat, the ground station everything else (as PX4 routes
+/// them; the image has one link for both).
+fn route(msg: &MavMessage) -> (bool, bool) {
+    match msg {
+        MavMessage::HIL_ACTUATOR_CONTROLS(_) => (true, false),
+        MavMessage::HEARTBEAT(_) => (true, true),
+        _ => (false, true),
+    }
 }
 
-impl MavSink for Links {
-    type Error = anyhow::Error;
-    fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<()> {
-        if let MavMessage::STATUSTEXT(t) = msg {
-            let len = t.text.iter().position(|&b| b == 0).unwrap_or(t.text.len());
-            self.texts.push(String::from_utf8_lossy(&t.text[..len]).into_owned());
+/// The flight controller, wherever it runs: messages in, what it sent back out.
+trait Vehicle {
+    /// Hands `msg` to the vehicle; what it sent in answer is appended to
+    /// `out`. A `HIL_SENSOR` returns with its `HIL_ACTUATOR_CONTROLS`.
+    fn deliver(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>) -> Result<()>;
+    /// Frames its readers refused.
+    fn refused(&self) -> u32;
+    /// Ends it; the image's log.
+    fn finish(self: Box<Self>) -> Result<Vec<String>>;
+}
+
+fn refused(c: fc_mavlink::MavCounters) -> u32 {
+    c.bad_crc + c.unknown + c.unsupported + c.malformed + c.other_system
+}
+
+/// [`MavVehicle`] in this process.
+struct InProcess {
+    v: MavVehicle,
+    clock: hal_shim::host::MonotonicClock,
+    wall: Instant,
+}
+
+struct Collect<'a>(&'a mut Vec<MavMessage>);
+
+impl MavSink for Collect<'_> {
+    type Error = std::convert::Infallible;
+    fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<(), Self::Error> {
+        // The heartbeat goes to both peers; one copy is enough here (routed by type).
+        if !(to == Peer::GroundStation && matches!(msg, MavMessage::HEARTBEAT(_))) {
+            self.0.push(msg.clone());
         }
+        Ok(())
+    }
+}
+
+impl Vehicle for InProcess {
+    fn deliver(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>) -> Result<()> {
+        let now_us = self.wall.elapsed().as_micros() as u64;
+        let Ok(()) = self.v.handle(msg, &mut Collect(out), &self.clock, now_us);
+        Ok(())
+    }
+    fn refused(&self) -> u32 {
+        0
+    }
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+        Ok(Vec::new())
+    }
+}
+
+/// The `firmware-mavlink` image in QEMU.
+struct InQemu {
+    qemu: crate::link::Qemu,
+    usart: TcpStream,
+    reader: MavReader,
+    seq: u8,
+    buf: Vec<u8>,
+}
+
+impl InQemu {
+    fn start(elf: &std::path::Path) -> Result<Self> {
+        let mut qemu = crate::link::Qemu::start(elf)?;
+        let usart = qemu.connect()?;
+        Ok(Self {
+            qemu,
+            usart,
+            reader: MavReader::new(MISSION_GCS_ID),
+            seq: 0,
+            buf: vec![0u8; 4096],
+        })
+    }
+}
+
+impl Vehicle for InQemu {
+    fn deliver(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>) -> Result<()> {
         let header = MavHeader {
-            system_id: u32::from(SYSTEM_ID),
-            component_id: COMPONENT_ID,
+            system_id: u32::from(MISSION_GCS_ID),
+            component_id: 190,
             sequence: self.seq,
         };
         self.seq = self.seq.wrapping_add(1);
-        let mut out = [0u8; MAX_FRAME];
-        let n = encode(header, msg, &mut out).map_err(|e| anyhow::anyhow!("{e}"))?;
-        match (to, &self.gcs) {
-            (Peer::Simulator, _) => self.sim.write_all(&out[..n]).context("writing to the simulator"),
-            (Peer::GroundStation, Some((sock, addr))) => {
-                // A ground station that has gone away is not an error of the flight.
-                let _ = sock.send_to(&out[..n], addr);
-                Ok(())
+        let mut frame = [0u8; MAX_FRAME];
+        let n = encode(header, msg, &mut frame).map_err(|e| anyhow::anyhow!("{e}"))?;
+        self.usart
+            .write_all(&frame[..n])
+            .context("writing to the image's USART1")?;
+        // In lockstep a sample is answered by its motor commands: read up
+        // to them (whatever else the image sent comes first). After any
+        // other message, take what has arrived without waiting.
+        let lockstep = matches!(msg, MavMessage::HIL_SENSOR(_));
+        self.usart.set_nonblocking(!lockstep)?;
+        let mut waiting = true;
+        while waiting {
+            let n = match self.usart.read(&mut self.buf) {
+                Ok(0) => bail!("the image closed its USART1"),
+                Ok(n) => n,
+                Err(e) if !lockstep && e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Err(e) => return Err(e).context("reading the image's USART1"),
+            };
+            waiting = lockstep;
+            for &b in &self.buf[..n] {
+                if let Some(Ok((_, m))) = self.reader.push(b) {
+                    waiting &= !matches!(m, MavMessage::HIL_ACTUATOR_CONTROLS(_));
+                    out.push(m);
+                }
             }
-            (Peer::GroundStation, None) => Ok(()),
         }
+        Ok(())
+    }
+    fn refused(&self) -> u32 {
+        refused(self.reader.counters())
+    }
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+        drop(self.usart);
+        self.qemu.finish()
+    }
+}
+
+/// Writes the parameters of `s` that differ from the vehicle's boot values
+/// and checks each echo; refusals are errors with the vehicle's reason.
+fn write_parameters(v: &mut dyn Vehicle, s: &Settings) -> Result<()> {
+    use fc_mavlink::params::PARAMS;
+    let boot = Settings::os4();
+    for p in PARAMS.iter() {
+        let value = (p.get)(s);
+        if value == (p.get)(&boot) {
+            continue;
+        }
+        let set = MavMessage::PARAM_SET(common::PARAM_SET_DATA {
+            param_value: value,
+            target_system: SYSTEM_ID,
+            target_component: COMPONENT_ID,
+            param_id: p.id.into(),
+            param_type: common::MavParamType::MAV_PARAM_TYPE_REAL32,
+        });
+        let mut out = Vec::new();
+        v.deliver(&set, &mut out)?;
+        // The echo may still be on its way over a link: ask again until it is here.
+        let echo = |out: &[MavMessage]| {
+            out.iter().find_map(|m| match m {
+                MavMessage::PARAM_VALUE(e) if e.param_id.to_str().is_ok_and(|id| id.trim_end_matches('\0') == p.id) => {
+                    Some(e.param_value)
+                }
+                _ => None,
+            })
+        };
+        let t0 = Instant::now();
+        while echo(&out).is_none() && t0.elapsed() < Duration::from_secs(10) {
+            let read = MavMessage::PARAM_REQUEST_READ(common::PARAM_REQUEST_READ_DATA {
+                param_index: -1,
+                target_system: SYSTEM_ID,
+                target_component: COMPONENT_ID,
+                param_id: p.id.into(),
+            });
+            std::thread::sleep(Duration::from_millis(20));
+            v.deliver(&read, &mut out)?;
+        }
+        let texts: Vec<String> = out.iter().filter_map(status_text).collect();
+        match echo(&out) {
+            Some(e) if e == value => {}
+            Some(e) => bail!(
+                "the vehicle refused {} = {value} (kept {e}): {}",
+                p.id,
+                texts.join("; ")
+            ),
+            None => bail!("no answer to PARAM_SET {}", p.id),
+        }
+    }
+    Ok(())
+}
+
+fn status_text(m: &MavMessage) -> Option<String> {
+    match m {
+        MavMessage::STATUSTEXT(t) => {
+            let len = t.text.iter().position(|&b| b == 0).unwrap_or(t.text.len());
+            Some(String::from_utf8_lossy(&t.text[..len]).into_owned())
+        }
+        _ => None,
     }
 }
 
@@ -232,12 +409,31 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     if cfg.mission.is_none() && cfg.gcs.is_none() {
         bail!("nothing would fly the vehicle: give a mission or a ground station");
     }
-    let mut v = MavVehicle::new(cfg.settings, SYSTEM_ID)
+    cfg.settings
+        .check()
         .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?;
-    let (mut sq_sum, mut sq_n) = (0.0, 0usize);
+    let mut res = HilResult::default();
+    let mut v: Box<dyn Vehicle> = match &cfg.target {
+        Target::InProcess => {
+            res.target = "in-process".into();
+            Box::new(InProcess {
+                v: MavVehicle::new(cfg.settings, SYSTEM_ID)
+                    .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?,
+                clock: hal_shim::host::MonotonicClock::default(),
+                wall: Instant::now(),
+            })
+        }
+        Target::Qemu(elf) => {
+            res.target = "qemu".into();
+            let mut q = InQemu::start(elf)?;
+            write_parameters(&mut q, &cfg.settings)?;
+            Box::new(q)
+        }
+    };
     let stream = connect(&cfg.addr, cfg.connect_timeout_s)?;
     stream.set_nodelay(true)?;
-    stream.set_read_timeout(Some(Duration::from_secs(10)))?;
+    stream.set_read_timeout(Some(Duration::from_secs(60)))?;
+    let mut sim = stream.try_clone()?;
     let gcs = match cfg.gcs {
         Some(addr) => {
             let sock = UdpSocket::bind("0.0.0.0:0").context("opening the ground station's UDP socket")?;
@@ -246,34 +442,54 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         }
         None => None,
     };
-    let mut links = Links {
-        sim: stream.try_clone()?,
-        gcs,
-        seq: 0,
-        texts: Vec::new(),
+    let (mut sim_seq, mut gcs_seq) = (0u8, 0u8);
+    let mut send = |to_sim: bool, msg: &MavMessage, sim: &mut TcpStream| -> Result<()> {
+        let seq = if to_sim { &mut sim_seq } else { &mut gcs_seq };
+        let header = MavHeader {
+            system_id: u32::from(SYSTEM_ID),
+            component_id: COMPONENT_ID,
+            sequence: *seq,
+        };
+        *seq = seq.wrapping_add(1);
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode(header, msg, &mut out).map_err(|e| anyhow::anyhow!("{e}"))?;
+        if to_sim {
+            sim.write_all(&out[..n]).context("writing to the simulator")
+        } else {
+            if let Some((sock, addr)) = &gcs {
+                // A ground station that has gone away is not an error of the flight.
+                let _ = sock.send_to(&out[..n], addr);
+            }
+            Ok(())
+        }
     };
-    links.send(
-        Peer::Simulator,
+    send(
+        true,
         &MavMessage::HEARTBEAT(fc_mavlink::hil::heartbeat(false)),
+        &mut sim,
     )?;
-    let clock = hal_shim::host::MonotonicClock::default();
-    let wall = Instant::now();
-    let now_us = || wall.elapsed().as_micros() as u64;
     let mut input = stream;
     let mut sim_reader = MavReader::new(SYSTEM_ID);
     let mut gcs_reader = MavReader::new(SYSTEM_ID);
-    let mut res = HilResult::default();
-    let (mut t0_us, mut next_arm_s) = (None::<u64>, 0.0);
+    let (mut sq_sum, mut sq_n) = (0.0, 0usize);
+    let (mut t0_us, mut next_arm_s, mut next_sp_s, mut armed) = (None::<u64>, 0.0, 0.0, false);
+    // The set-point last sent, and the mission's reference now.
+    let (mut home, mut truth, mut sp) = (None, Vector3::<f64>::zeros(), None::<Setpoint<f32>>);
+    let mut reference = None::<Setpoint<f32>>;
     let mut buf = [0u8; 4096];
     let mut dgram = [0u8; 2048];
+    let mut out = Vec::new();
+    let gcs_sock = match &gcs {
+        Some((sock, _)) => Some(sock.try_clone()?),
+        None => None,
+    };
     'flight: loop {
         // The ground station's datagrams first (never blocks).
-        if let Some((sock, _)) = &links.gcs {
-            let sock = sock.try_clone()?;
+        if let Some(sock) = &gcs_sock {
             while let Ok(n) = sock.recv(&mut dgram) {
                 for &b in &dgram[..n] {
                     if let Some(Ok((_, msg))) = gcs_reader.push(b) {
-                        v.handle(&msg, &mut links, &clock, now_us())?;
+                        v.deliver(&msg, &mut out)?;
                     }
                 }
             }
@@ -295,62 +511,92 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             let Some(Ok((_, msg))) = sim_reader.push(b) else {
                 continue;
             };
+            if let MavMessage::HIL_STATE_QUATERNION(m) = &msg {
+                if fc_mavlink::hil::on_earth(m) {
+                    let h = *home.get_or_insert(fc_mavlink::hil::Home::of(m));
+                    truth = h.ned_m(m.lat, m.lon, m.alt);
+                }
+            }
             let MavMessage::HIL_SENSOR(m) = &msg else {
-                v.handle(&msg, &mut links, &clock, now_us())?;
+                v.deliver(&msg, &mut out)?;
                 continue;
             };
             let t0 = *t0_us.get_or_insert(m.time_usec);
             let t = m.time_usec.saturating_sub(t0) as f64 * 1e-6;
-            // The mission, sent as a ground station sends it.
+            // The mission, sent as a ground station sends it: the set-point
+            // when it changes, at most at 100 Hz (a trajectory's moves, with
+            // its velocity and acceleration), and at least every second;
+            // arming every 0.5 s until armed.
             let mut tracking = false;
             if let Some(mission) = &cfg.mission {
-                let (sp, track) = mission.setpoint_at(t);
+                let (s, track) = mission.setpoint_at(t);
                 tracking = track;
-                v.handle(&position_target(&sp, (t * 1e3) as u32), &mut links, &clock, now_us())?;
-                if !v.armed() && t >= next_arm_s {
-                    v.handle(&arm_command(true), &mut links, &clock, now_us())?;
+                reference = Some(s);
+                let changed = sp.is_none_or(|old| old != s);
+                if (changed && t >= next_sp_s - 1e-9) || t >= next_sp_s + 1.0 {
+                    v.deliver(&position_target(&s, (t * 1e3) as u32), &mut out)?;
+                    next_sp_s = t + SETPOINT_PERIOD_S;
+                    sp = Some(s);
+                }
+                if !armed && t >= next_arm_s {
+                    v.deliver(&arm_command(true), &mut out)?;
                     next_arm_s = t + 0.5;
                 }
             }
-            let was_armed = v.armed();
-            v.handle(&msg, &mut links, &clock, now_us())?;
-            if v.armed() && !was_armed || (v.armed() && res.armed_at_s.is_none()) {
-                res.armed_at_s = Some(t);
-            }
+            v.deliver(&msg, &mut out)?;
             res.steps += 1;
             res.duration_s = t;
-            let truth = v.reported_position().unwrap_or_default();
-            let sp = v.core().setpoint().pos_ned_m.cast::<f64>();
+            let spn = reference.map_or(Vector3::repeat(f64::NAN), |s| s.pos_ned_m.cast::<f64>());
             if tracking {
-                sq_sum += (truth - sp).norm_squared();
+                sq_sum += (truth - spn).norm_squared();
                 sq_n += 1;
             }
-            if let Some(e) = v.core().navigator().estimate() {
-                let est = e.pos_ned_m.cast::<f64>();
-                if v.armed() {
-                    res.max_estimate_error_m = res.max_estimate_error_m.max((est - truth).norm());
+            for m in out.drain(..) {
+                match &m {
+                    MavMessage::HEARTBEAT(h) => {
+                        armed = h.base_mode.contains(common::MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                    }
+                    MavMessage::LOCAL_POSITION_NED(p) => {
+                        let est = Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z));
+                        if armed {
+                            res.max_estimate_error_m = res.max_estimate_error_m.max((est - truth).norm());
+                        }
+                        res.trace.push([
+                            t, truth[0], truth[1], truth[2], est[0], est[1], est[2], spn[0], spn[1], spn[2],
+                        ]);
+                    }
+                    MavMessage::SYS_STATUS(st) => {
+                        res.vehicle_errors = [st.errors_count1, st.errors_count2, st.errors_count3, st.errors_count4];
+                    }
+                    MavMessage::STATUSTEXT(_) => {
+                        let text = status_text(&m).unwrap_or_default();
+                        if text == "armed" {
+                            armed = true;
+                        }
+                        res.status_texts.push(text);
+                    }
+                    _ => {}
                 }
-                res.trace.push([
-                    t, truth[0], truth[1], truth[2], est[0], est[1], est[2], sp[0], sp[1], sp[2],
-                ]);
+                if armed && res.armed_at_s.is_none() {
+                    res.armed_at_s = Some(t);
+                }
+                let (to_sim, to_gcs) = route(&m);
+                if to_sim {
+                    send(true, &m, &mut sim)?;
+                }
+                if to_gcs {
+                    send(false, &m, &mut sim)?;
+                }
             }
             if t >= cfg.duration_s {
                 break 'flight;
             }
         }
-        let refused = |c: fc_mavlink::MavCounters| c.bad_crc + c.unknown + c.unsupported + c.malformed + c.other_system;
-        v.set_link_errors(refused(sim_reader.counters()) + refused(gcs_reader.counters()));
     }
-    let c = v.counters();
-    let refused = |c: fc_mavlink::MavCounters| c.bad_crc + c.unknown + c.unsupported + c.malformed + c.other_system;
-    res.refused_frames = refused(sim_reader.counters()) + refused(gcs_reader.counters());
-    res.refused_sensors = u64::from(c.sensors_refused);
-    res.clamped_steps = u64::from(c.clamped_steps);
-    res.status_texts = std::mem::take(&mut links.texts);
-    let truth = v.reported_position().unwrap_or_default();
+    res.refused_frames = refused(sim_reader.counters()) + refused(gcs_reader.counters()) + v.refused();
+    res.firmware_log = v.finish()?;
     res.final_pos_ned_m = truth.into();
     res.tracking_rmse_m = (sq_n > 0).then(|| (sq_sum / sq_n as f64).sqrt());
-    let last = v.core().setpoint().pos_ned_m.cast::<f64>();
-    res.final_error_m = (truth - last).norm();
+    res.final_error_m = reference.map(|s| (truth - s.pos_ned_m.cast::<f64>()).norm());
     Ok(res)
 }

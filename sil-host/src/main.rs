@@ -95,6 +95,11 @@ struct Px4HilArgs {
     /// Motor command unit: `speed` (fraction of the maximum rotor speed, as rotorpy reads it), `thrust` (fraction of the maximum thrust) or `pwm` (1000–2000 µs, linear in speed).
     #[arg(long, default_value = "speed")]
     motor_unit: String,
+    /// Where the flight controller runs: `in-process`, or `qemu` (the `firmware-mavlink` image in
+    /// QEMU's netduinoplus2, USART1 bridged to the simulator and the ground station; its
+    /// parameters are written with PARAM_SET before the flight).
+    #[arg(long, default_value = "in-process")]
+    target: String,
     /// A ground station's UDP address (QGroundControl's is 127.0.0.1:14550): telemetry is sent
     /// there and its commands, set-points and parameter writes are obeyed.
     #[arg(long, value_name = "HOST:PORT")]
@@ -965,6 +970,11 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
         mission,
         gcs: a.gcs,
         duration_s: a.duration,
+        target: match a.target.as_str() {
+            "in-process" => sil_host::hil::Target::InProcess,
+            "qemu" => sil_host::hil::Target::Qemu(sil_host::link::firmware_mavlink_elf()?),
+            other => bail!("unknown --target '{other}': use in-process or qemu"),
+        },
     };
     let res = sil_host::hil::run(&cfg)?;
     if let Some(path) = &a.csv {

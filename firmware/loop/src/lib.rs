@@ -369,6 +369,59 @@ impl FlightCore {
         &self.sp
     }
 
+    /// Opens a session, as an accepted `Hello` does: a new time line (a
+    /// simulation restarts at t = 0), the estimator starts over.
+    pub fn open_session(&mut self) {
+        self.session = true;
+        self.last_seq = None;
+        self.last_t_us = None;
+        self.last_valid_us = None;
+        self.last_pos = None;
+        self.nav.reset();
+        self.nav_failsafe = false;
+        self.schedule.reset();
+    }
+
+    /// Flies `sp` from now on, as a `Setpoint` message does; a set-point
+    /// with NaN/∞ is refused (counted) and `false` returned.
+    pub fn set_setpoint(&mut self, sp: &Setpoint<f32>) -> bool {
+        match setpoint_from_wire(&setpoint_to_wire(sp)) {
+            Some(sp) => {
+                self.sp = sp;
+                true
+            }
+            None => {
+                self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
+                false
+            }
+        }
+    }
+
+    /// One IMU sample `imu` taken at `t_us`, as an `Imu` message of
+    /// sequence `seq` is handled (answers to `out`): for front ends that
+    /// need nothing else of the protocol (the image links only this path).
+    pub fn imu_step<O: Outbox, C: CycleClock>(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        imu: &ImuSample,
+        out: &mut O,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), O::Error> {
+        if !self.session {
+            self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
+            return Ok(());
+        }
+        self.counters.ok = self.counters.ok.wrapping_add(1);
+        self.on_imu(seq, t_us, imu, out, clock, now_us)
+    }
+
+    /// Queues a position fix for the next `Imu` step, as a `Fix` message does.
+    pub fn push_fix(&mut self, fix: &Fix) {
+        self.nav.push_fix(fix);
+    }
+
     /// Replaces the failsafe timer's settings (the caller validates them).
     pub fn set_failsafe(&mut self, timeout_us: u64, descent_thrust_fraction: f32) {
         self.cfg.failsafe_timeout_us = timeout_us;
@@ -546,15 +599,7 @@ impl FlightCore {
             ToFc::Hello { version } => {
                 let accepted = version == PROTOCOL_VERSION;
                 if accepted {
-                    // A new session is a new time line (a simulation restarts at t = 0).
-                    self.session = true;
-                    self.last_seq = None;
-                    self.last_t_us = None;
-                    self.last_valid_us = None;
-                    self.last_pos = None;
-                    self.nav.reset();
-                    self.nav_failsafe = false;
-                    self.schedule.reset();
+                    self.open_session();
                 }
                 link.send(&FromFc::HelloAck {
                     version: PROTOCOL_VERSION,

@@ -37,8 +37,8 @@ use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
 use fc_loop::nav::NavMode;
-use fc_loop::{fix_to_wire, setpoint_to_wire, FcConfig, FlightCore, Outbox};
-use fc_proto::{FromFc, ToFc, PROTOCOL_VERSION};
+use fc_loop::{setpoint_to_wire, FcConfig, FlightCore, Outbox};
+use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
 use nalgebra::{Vector3, Vector4};
@@ -133,7 +133,8 @@ impl core::fmt::Write for Text {
 pub struct MavVehicle {
     core: FlightCore,
     settings: Settings,
-    mixer: Mixer<f32>,
+    /// `None` until started.
+    mixer: Option<Mixer<f32>>,
     armed: bool,
     /// Where it armed (estimated), down, m.
     armed_down_m: f32,
@@ -169,23 +170,19 @@ impl MavVehicle {
     /// A vehicle with `settings` (checked; the controller designed), MAVLink
     /// system `system_id`, disarmed, its estimator waiting for samples.
     pub fn new(settings: Settings, system_id: u8) -> Result<Self, Refusal> {
-        settings.check()?;
-        let cfg = FcConfig {
-            failsafe_timeout_us: u64::from(settings.failsafe_timeout_ms) * 1000,
-            descent_thrust_fraction: settings.failsafe_descent,
-            ..FcConfig::default()
-        };
-        let mut core = FlightCore::unstarted(cfg);
-        core.set_vehicle(settings.vehicle).map_err(Refusal::Design)?;
-        core.try_select(settings.controller).map_err(Refusal::Design)?;
-        // The session is open from boot (set-points may come before samples).
-        let hello = ToFc::Hello {
-            version: PROTOCOL_VERSION,
-        };
-        let _ = core.handle_message(hello, &mut Answer::default(), &NoClock, 0);
-        Ok(Self {
-            core,
-            mixer: settings.mixer()?,
+        let mut v = Self::unstarted(settings, system_id);
+        v.start()?;
+        Ok(v)
+    }
+
+    /// The vehicle with nothing designed yet (motors off until
+    /// [`MavVehicle::start`] succeeds). The firmware constructs it this way,
+    /// in its static home, so that the design does not run beneath a stack
+    /// copy of the whole vehicle (its controller is ≈ 7 KiB).
+    pub fn unstarted(settings: Settings, system_id: u8) -> Self {
+        Self {
+            core: FlightCore::unstarted(FcConfig::default()),
+            mixer: None,
             settings,
             armed: false,
             armed_down_m: 0.0,
@@ -201,7 +198,21 @@ impl MavVehicle {
             reported_ned_m: None,
             counters: VehicleCounters::default(),
             system_id,
-        })
+        }
+    }
+
+    /// Checks the settings and designs the controller in place; the
+    /// session is open from then on (set-points may come before samples).
+    pub fn start(&mut self) -> Result<(), Refusal> {
+        let s = self.settings;
+        s.check()?;
+        self.core
+            .set_failsafe(u64::from(s.failsafe_timeout_ms) * 1000, s.failsafe_descent);
+        self.core.set_vehicle(s.vehicle).map_err(Refusal::Design)?;
+        self.core.try_select(s.controller).map_err(Refusal::Design)?;
+        self.core.open_session();
+        self.mixer = Some(s.mixer()?);
+        Ok(())
     }
 
     /// Armed (the motors turn).
@@ -253,11 +264,11 @@ impl MavVehicle {
         match msg {
             MavMessage::HIL_SENSOR(m) => self.on_sensor(m, out, clock, now_us),
             MavMessage::HIL_STATE_QUATERNION(m) => {
-                self.on_state(m, clock, now_us);
+                self.on_state(m);
                 Ok(())
             }
             MavMessage::COMMAND_LONG(m) => self.on_command(m, out),
-            MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out, clock, now_us),
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
             MavMessage::PARAM_REQUEST_LIST(m) if self.for_me(m.target_system) => {
                 for i in 0..PARAMS.len() {
                     self.send_param(i, out)?;
@@ -308,33 +319,26 @@ impl MavVehicle {
         let mut answer = Answer::default();
         if self.last_sensor_us.is_none_or(|t| s.time_us < t) {
             // The first sample, or a simulator that started again: a new time line.
-            let _ = self.core.handle_message(
-                ToFc::Hello {
-                    version: PROTOCOL_VERSION,
-                },
-                &mut answer,
-                clock,
-                now_us,
-            );
+            self.core.open_session();
             self.home = None;
             self.last_fix_us = None;
             self.next_us = [s.time_us; 3];
         }
         self.last_sensor_us = Some(s.time_us);
         self.seq = self.seq.wrapping_add(1);
-        let imu = ToFc::Imu {
-            seq: self.seq,
-            t_us: s.time_us,
-            gyro: s.imu.gyro_frd_radps.into(),
-            accel: s.imu.accel_frd_mps2.into(),
-        };
-        let _ = self.core.handle_message(imu, &mut answer, clock, now_us);
+        let _ = self
+            .core
+            .imu_step(self.seq, s.time_us, &s.imu, &mut answer, clock, now_us);
         self.cycles = (answer.cycles, clock.hz());
         self.counters.steps = self.counters.steps.wrapping_add(1);
         let u = Vector4::from(answer.u.unwrap_or([0.0; 4]));
-        let cmd = self.mixer.commands(&u);
-        self.motors = if self.armed { cmd.commands } else { [0.0; 4] };
-        if self.armed && cmd.clamped {
+        let cmd = self.mixer.map(|m| m.commands(&u));
+        let armed = self.armed && cmd.is_some();
+        self.motors = match cmd {
+            Some(c) if armed => c.commands,
+            _ => [0.0; 4],
+        };
+        if armed && cmd.is_some_and(|c| c.clamped) {
             self.counters.clamped_steps = self.counters.clamped_steps.wrapping_add(1);
         }
         out.send(
@@ -344,7 +348,7 @@ impl MavVehicle {
         self.telemetry(s.time_us, out)
     }
 
-    fn on_state<C: CycleClock>(&mut self, m: &HIL_STATE_QUATERNION_DATA, clock: &C, now_us: u64) {
+    fn on_state(&mut self, m: &HIL_STATE_QUATERNION_DATA) {
         if !hil::on_earth(m) {
             self.counters.states_refused = self.counters.states_refused.wrapping_add(1);
             return;
@@ -359,9 +363,7 @@ impl MavVehicle {
             Ok(mut f) => {
                 // A mocap gives position and heading, not velocity.
                 f.vel_ned_mps = None;
-                let _ = self
-                    .core
-                    .handle_message(ToFc::Fix(fix_to_wire(&f)), &mut Answer::default(), clock, now_us);
+                self.core.push_fix(&f);
                 self.last_fix_us = Some(m.time_usec);
             }
             Err(_) => self.counters.states_refused = self.counters.states_refused.wrapping_add(1),
@@ -430,6 +432,9 @@ impl MavVehicle {
         if self.armed {
             return Ok(());
         }
+        if self.mixer.is_none() {
+            return Err("not started");
+        }
         let est = match (self.core.navigator().mode(), self.core.navigator().estimate()) {
             (NavMode::Navigating, Some(e)) => e,
             (NavMode::Aligning, _) => return Err("estimator aligning"),
@@ -440,38 +445,21 @@ impl MavVehicle {
             .map_err(|_| "controller design failed")?;
         if !self.setpoint_given {
             let yaw = fc_core::quat_to_euler(&est.att)[2];
-            let hold = Setpoint::hold(est.pos_ned_m, yaw);
-            let _ = self.core.handle_message(
-                ToFc::Setpoint(setpoint_to_wire(&hold)),
-                &mut Answer::default(),
-                &NoClock,
-                0,
-            );
+            self.core.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
         }
         self.armed_down_m = est.pos_ned_m[2];
         self.armed = true;
         Ok(())
     }
 
-    fn on_setpoint<S: MavSink, C: CycleClock>(
-        &mut self,
-        m: &SET_POSITION_TARGET_LOCAL_NED_DATA,
-        out: &mut S,
-        clock: &C,
-        now_us: u64,
-    ) -> Result<(), S::Error> {
+    fn on_setpoint<S: MavSink>(&mut self, m: &SET_POSITION_TARGET_LOCAL_NED_DATA, out: &mut S) -> Result<(), S::Error> {
         if !self.for_me(m.target_system) {
             self.counters.ignored = self.counters.ignored.wrapping_add(1);
             return Ok(());
         }
         match setpoint_from_target(m, self.core.setpoint().yaw_rad) {
             Some(sp) => {
-                let _ = self.core.handle_message(
-                    ToFc::Setpoint(setpoint_to_wire(&sp)),
-                    &mut Answer::default(),
-                    clock,
-                    now_us,
-                );
+                self.core.set_setpoint(&sp);
                 self.setpoint_given = true;
                 Ok(())
             }
@@ -502,7 +490,7 @@ impl MavVehicle {
             self.say(
                 out,
                 MavSeverity::MAV_SEVERITY_WARNING,
-                format_args!("{id}={} refused: {why}", m.param_value),
+                format_args!("{id}={} refused: {why}", params::Num(m.param_value)),
             )?;
         }
         // The value in force, changed or not, as the protocol asks.
@@ -534,7 +522,7 @@ impl MavVehicle {
         }
         self.core
             .set_failsafe(u64::from(next.failsafe_timeout_ms) * 1000, next.failsafe_descent);
-        self.mixer = mixer;
+        self.mixer = Some(mixer);
         self.settings = next;
         Ok(())
     }
@@ -648,18 +636,6 @@ impl MavVehicle {
             errors_count4: self.core.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
             battery_remaining: -1,
         }
-    }
-}
-
-/// A clock for steps whose cycles nobody reads.
-struct NoClock;
-
-impl CycleClock for NoClock {
-    fn now(&self) -> u32 {
-        0
-    }
-    fn hz(&self) -> u32 {
-        1
     }
 }
 

@@ -143,6 +143,41 @@ fn the_parameter_table_is_well_formed_and_every_value_reads_back() {
 }
 
 #[test]
+fn numbers_print_in_six_significant_digits_and_parse_back() {
+    use params::Num;
+    for (x, want) in [
+        (0.01, "0.01"),
+        (100.0, "100"),
+        (-1.0, "-1"),
+        (0.65, "0.65"),
+        (1e-7, "1e-7"),
+        (1.5e-7, "1.5e-7"),
+        (2.5e6, "2.5e6"),
+        (123456.0, "123456"),
+        (0.00123, "0.00123"),
+        (0.000123, "1.23e-4"),
+        (9.999999, "10"),
+        (0.0, "0"),
+        (f32::NAN, "NaN"),
+        (f32::NEG_INFINITY, "-inf"),
+        (f32::MAX, "3.40282e38"),
+    ] {
+        assert_eq!(Num(x).to_string(), want, "{x}");
+    }
+    // Parsed back (by Rust), within half a unit of the sixth digit.
+    let mut rng = Rng(7);
+    for _ in 0..10_000 {
+        let x = f32::from_bits(rng.next() as u32);
+        if !x.is_finite() {
+            continue;
+        }
+        let ours: f64 = Num(x).to_string().parse().unwrap();
+        let rel = ((ours - f64::from(x)) / f64::from(x)).abs();
+        assert!(x == 0.0 || rel <= 5e-6, "{x:e}: {}", Num(x));
+    }
+}
+
+#[test]
 fn non_physical_settings_are_refused_with_the_reason() {
     let s = Settings::os4();
     let i = |id: &str| params::index_of(id.as_bytes()).unwrap();

@@ -8,6 +8,8 @@
 #![deny(missing_docs)]
 
 pub mod clocks;
+#[cfg(target_os = "none")]
+pub mod stack;
 
 pub use clocks::{ClockError, ClockPlan};
 

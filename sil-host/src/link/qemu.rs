@@ -18,13 +18,23 @@ pub const SYSTICK_PER_INSTRUCTION: f64 = 0.168;
 /// rebuilt whenever the firmware's sources change). An error says why there
 /// is none (e.g. the thumbv7em target is not installed).
 pub fn firmware_elf() -> Result<std::path::PathBuf> {
-    if let Some(p) = std::env::var_os("SIL_FIRMWARE_ELF") {
+    built_elf("SIL_FIRMWARE_ELF", env!("SIL_FIRMWARE_ELF_BUILT"))
+}
+
+/// The image that speaks MAVLink (binary `firmware-mavlink`):
+/// `$SIL_FIRMWARE_MAVLINK_ELF` if set, else the one the build script built.
+pub fn firmware_mavlink_elf() -> Result<std::path::PathBuf> {
+    built_elf("SIL_FIRMWARE_MAVLINK_ELF", env!("SIL_FIRMWARE_MAVLINK_ELF_BUILT"))
+}
+
+fn built_elf(var: &str, built: &str) -> Result<std::path::PathBuf> {
+    if let Some(p) = std::env::var_os(var) {
         return Ok(p.into());
     }
-    match env!("SIL_FIRMWARE_ELF_BUILT") {
+    match built {
         "" => bail!(
             "no firmware image: sil-host's build could not build it ({}); \
-             `rustup target add thumbv7em-none-eabihf` and rebuild, or set SIL_FIRMWARE_ELF",
+             `rustup target add thumbv7em-none-eabihf` and rebuild, or set {var}",
             env!("SIL_FIRMWARE_BUILD_ERROR")
         ),
         p => {
@@ -118,11 +128,17 @@ impl Qemu {
         })
     }
 
-    /// A protocol client on the emulated USART. Connects only once QEMU says
-    /// it is waiting for the connection, plus a short settle: connecting the
-    /// moment the socket opens was seen to leave the guest's link silent
-    /// (not understood yet; see the README).
+    /// A protocol client on the emulated USART (see [`Qemu::connect`]).
     pub fn client(&mut self) -> Result<FcClient> {
+        Ok(FcClient::over(self.connect()?))
+    }
+
+    /// The emulated USART as a TCP stream. Connects only once QEMU says it
+    /// is waiting for the connection, plus a short settle: connecting the
+    /// moment the socket opens was seen to leave the guest's link silent
+    /// (not understood yet; see the README). Returns once the firmware has
+    /// logged that it is up.
+    pub fn connect(&mut self) -> Result<TcpStream> {
         let t0 = Instant::now();
         while !std::fs::read_to_string(&self.log)
             .unwrap_or_default()
@@ -146,10 +162,10 @@ impl Qemu {
                 s.set_nodelay(true)?;
                 s.set_read_timeout(Some(Duration::from_secs(30)))?;
                 // The guest starts when we connect (`wait=on`); bytes sent
-                // before its USART is up are dropped, and a Hello cut in half
+                // before its USART is up are dropped, and a frame cut in half
                 // is counted as a link error. Wait for its "up" log line.
                 self.wait_until_up(t0)?;
-                return Ok(FcClient::over(s));
+                return Ok(s);
             }
             if let Ok(Some(st)) = self.child.try_wait() {
                 bail!("qemu exited before the link opened: {st}");
@@ -164,14 +180,14 @@ impl Qemu {
 
 impl Qemu {
     /// Waits (up to 10 s from `t0`) until the firmware has logged that its
-    /// USART is up (`up: protocol vN, waiting on USART1`).
+    /// USART is up (`up: protocol vN, waiting on USART1`, or `up: MAVLink 2, …`).
     fn wait_until_up(&mut self, t0: Instant) -> Result<()> {
         loop {
             let bytes = std::fs::read(&self.out).unwrap_or_default();
             if !bytes.is_empty()
                 && decode_defmt(&self.elf, &bytes)?
                     .iter()
-                    .any(|l| l.contains("up: protocol"))
+                    .any(|l| l.contains("up: protocol") || l.contains("up: MAVLink"))
             {
                 return Ok(());
             }

@@ -71,47 +71,13 @@ mod target {
     /// Stack allowed for designing and flying any controller (a quarter of
     /// the SRAM), enforced like the cycle budgets.
     const STACK_BUDGET: usize = 32 * 1024;
-    const PAINT: u32 = 0xA5A5_A5A5;
-
-    extern "C" {
-        static __sheap: u32;
-        static __sdata: u32;
-        static _stack_start: u32;
-    }
-
-    /// Fills the free RAM between the statics and the current stack pointer
-    /// (less a small guard) with a pattern.
-    fn paint_stack() {
-        let bottom = core::ptr::addr_of!(__sheap) as usize;
-        let sp = cortex_m::register::msp::read() as usize;
-        let mut a = bottom;
-        while a + 64 < sp {
-            // SAFETY: free RAM below the live stack, above every static.
-            unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
-            a += 4;
-        }
-    }
-
-    /// Bytes of stack ever used: from the top down to the lowest word that
-    /// lost its paint.
-    fn stack_high_water() -> usize {
-        let bottom = core::ptr::addr_of!(__sheap) as usize;
-        let top = core::ptr::addr_of!(_stack_start) as usize;
-        let mut a = bottom;
-        // SAFETY: reads of RAM between the statics and the stack top.
-        while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
-            a += 4;
-        }
-        top - a
-    }
-
     /// Runs `f` and returns its result with the stack high-water mark it
     /// reached (bytes from the top of RAM, so including the callers' frames).
     #[inline(never)]
     fn with_stack<R>(f: impl FnOnce() -> R) -> (R, usize) {
-        paint_stack();
+        fc_stm32f405::stack::paint();
         let r = f();
-        (r, stack_high_water())
+        (r, fc_stm32f405::stack::high_water())
     }
 
     /// The controller under test, in static RAM and designed in place, as
@@ -591,7 +557,7 @@ mod target {
                 }
             }
         }
-        let static_ram = core::ptr::addr_of!(__sheap) as usize - core::ptr::addr_of!(__sdata) as usize;
+        let static_ram = fc_stm32f405::stack::static_ram();
         hprintln!(
             "budget: stack high-water {} bytes, static RAM {} bytes, of 131072",
             stack_max,

@@ -1,0 +1,154 @@
+//! The STM32F405 image speaking MAVLink 2 on USART1 (`thumbv7em-none-eabihf`).
+//!
+//! The same board and flight loop as `firmware`, behind
+//! [`fc_mavlink::vehicle::MavVehicle`]: PX4's simulator interface
+//! (`HIL_SENSOR` in, one `HIL_ACTUATOR_CONTROLS` out per sample, in
+//! lockstep), a ground station's parameters, arming and set-points, and
+//! telemetry — both peers on the one link (the host routes them). It boots
+//! with the OS4's parameters; a ground station sets the vehicle's
+//! (`sil-host px4-hil --target qemu --vehicle FILE` does). Logs through
+//! defmt: boot, arming, refusals, and the stack's high-water mark as it
+//! grows (checked every 1 000 samples).
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
+
+#[cfg(target_os = "none")]
+#[path = "../board.rs"]
+mod board;
+
+#[cfg(target_os = "none")]
+mod target {
+    use crate::board;
+    use cortex_m_rt::entry;
+    use fc_mavlink::params::Settings;
+    use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer, VehicleCounters};
+    use fc_mavlink::{encode, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
+    use hal_shim::stm32f405::{TxTimeout, Usart1};
+    use hal_shim::ByteLink;
+
+    /// This vehicle's MAVLink system id (component: MAV_COMP_ID_AUTOPILOT1).
+    const SYSTEM_ID: u8 = 1;
+
+    /// Both peers on USART1.
+    struct Link<'a> {
+        usart: &'a mut Usart1,
+        seq: u8,
+    }
+
+    impl MavSink for Link<'_> {
+        type Error = TxTimeout;
+        fn send(&mut self, _to: Peer, msg: &MavMessage) -> Result<(), TxTimeout> {
+            let header = MavHeader {
+                system_id: u32::from(SYSTEM_ID),
+                component_id: 1,
+                sequence: self.seq,
+            };
+            self.seq = self.seq.wrapping_add(1);
+            let mut out = [0u8; MAX_FRAME];
+            match encode(header, msg, &mut out) {
+                Ok(n) => self.usart.write_all(&out[..n]),
+                // Every message fits MAX_FRAME; nothing to send otherwise.
+                Err(_) => Ok(()),
+            }
+        }
+    }
+
+    fn refused(c: &MavCounters) -> u32 {
+        c.bad_crc + c.unknown + c.unsupported + c.malformed + c.other_system
+    }
+
+    /// Logs what changed since the last call.
+    fn log_changes(v: &MavVehicle, reader: &MavCounters, last: &mut (bool, VehicleCounters, u32, usize)) {
+        let c = v.counters();
+        if v.armed() != last.0 {
+            if v.armed() {
+                defmt::info!("armed");
+            } else {
+                defmt::info!("disarmed");
+            }
+        }
+        if c.params_refused != last.1.params_refused || c.commands_refused != last.1.commands_refused {
+            defmt::warn!(
+                "refused: {=u32} parameter writes, {=u32} commands",
+                c.params_refused,
+                c.commands_refused
+            );
+        }
+        if refused(reader) != last.2 {
+            defmt::warn!(
+                "MAVLink frames refused: crc {=u32} unknown {=u32} unsupported {=u32} malformed {=u32} other system {=u32}",
+                reader.bad_crc,
+                reader.unknown,
+                reader.unsupported,
+                reader.malformed,
+                reader.other_system
+            );
+        }
+        if c.steps / 1000 != last.1.steps / 1000 {
+            let hw = fc_stm32f405::stack::high_water();
+            if hw > last.3 {
+                defmt::info!("stack high-water {=usize} bytes", hw);
+                last.3 = hw;
+            }
+        }
+        (last.0, last.1, last.2) = (v.armed(), c, refused(reader));
+    }
+
+    #[entry]
+    fn main() -> ! {
+        fc_stm32f405::stack::paint();
+        let (clock, mut usart) = board::bring_up();
+        let Some(v) = vehicle() else {
+            board::fail("vehicle already taken");
+        };
+        if v.start().is_err() {
+            board::fail("boot parameters refused or design failed");
+        }
+        defmt::info!(
+            "up: MAVLink 2, system {=u8}, waiting on USART1; static RAM {=usize} bytes",
+            SYSTEM_ID,
+            fc_stm32f405::stack::static_ram()
+        );
+        let mut reader = MavReader::new(SYSTEM_ID);
+        let mut link = Link {
+            usart: &mut usart,
+            seq: 0,
+        };
+        let mut buf = [0u8; 64];
+        let mut last = (false, VehicleCounters::default(), 0u32, 0usize);
+        let mut tx_errors: u32 = 0;
+        loop {
+            let now_us = board::now_us(&clock);
+            // Bounded work per pass: at most 16 reads of 64 bytes.
+            for _ in 0..16 {
+                let Ok(n) = link.usart.read(&mut buf) else { break };
+                if n == 0 {
+                    break;
+                }
+                for &b in &buf[..n.min(buf.len())] {
+                    if let Some(Ok((_, msg))) = reader.push(b) {
+                        if v.handle(&msg, &mut link, &clock, now_us).is_err() {
+                            tx_errors = tx_errors.wrapping_add(1);
+                            defmt::warn!("USART1 transmit timed out ({=u32} so far)", tx_errors);
+                        }
+                    }
+                }
+            }
+            v.set_link_errors(refused(&reader.counters()));
+            log_changes(v, &reader.counters(), &mut last);
+            board::idle();
+        }
+    }
+
+    /// The vehicle, in static RAM, built unstarted: its controller is
+    /// designed in place by `start`, not beneath a stack copy.
+    #[inline(never)]
+    fn vehicle() -> Option<&'static mut MavVehicle> {
+        cortex_m::singleton!(: MavVehicle = MavVehicle::unstarted(Settings::os4(), SYSTEM_ID))
+    }
+}
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    println!("firmware-mavlink: this binary is the STM32F405 image; build it with --target thumbv7em-none-eabihf");
+}
