@@ -119,6 +119,10 @@ def parse(payload):
         return ("Telemetry", seq, cycles, iters, counters, r.byte())
     if tag == 3:
         return ("Heartbeat", r.varint())
+    if tag == 6:
+        index, count = r.varint(), r.varint()
+        name = bytes(r.byte() for _ in range(16)).rstrip(b"\x00").decode()
+        return ("Param", index, count, name, r.f32(), r.byte())
     return ("?", tag)
 
 
@@ -160,9 +164,17 @@ def main():
         # That probe was client 1 (it hung up). Client 2: garbage, then a flight.
         c = Client(("127.0.0.1", port))
         c.s.sendall(bytes(range(1, 200)) + b"\x00\x00" + b"\x05\x01\x02\x00" + b"\xff" * 300 + b"\x00")
-        c.send(varint(0) + varint(5))  # Hello v5
+        c.send(varint(0) + varint(6))  # Hello v6
         ack = c.recv()
-        check(ack == ("HelloAck", 5, 1), f"handshake accepted: {ack}")
+        check(ack == ("HelloAck", 6, 1), f"handshake accepted: {ack}")
+        c.send(varint(9) + varint(0))  # ParamRead 0
+        p = c.recv()
+        check(p[:4] == ("Param", 0, p[2], "VEH_MASS") and abs(p[4] - 0.65) < 1e-6 and p[5] == 0 and p[2] > 16,
+              f"parameter 0 is the OS4's mass: {p}")
+        c.send(varint(8) + varint(0) + f32s(-1.0))  # ParamSet VEH_MASS = -1
+        p = c.recv()
+        check(p[0] == "Param" and abs(p[4] - 0.65) < 1e-6 and p[5] == 2,
+              f"a negative mass is refused (out of range), the old value kept: {p}")
         c.send(varint(1) + varint(3) + b"\x01")  # Select LqrQuat, feed-forward
         c.send(varint(2) + sp((0.0, 0.0, -2.0), 0.0))  # Setpoint: hover at 2 m
         # A crude vertical model: the vehicle starts at 1 m, thrust U1 lifts it.

@@ -237,11 +237,6 @@ pub fn fly_target_with_progress(
         let ep = InProcess::new(build_for(cfg)?);
         return fly_endpoint(cfg, ep, None, |t, _| tick(t), rec).map(|(r, _)| r);
     }
-    if cfg.vehicle != VehicleParams::OS4 {
-        anyhow::bail!(
-            "over the link the flight controller flies its built-in vehicle (the OS4); --vehicle works in-process only"
-        );
-    }
     if cfg.mpc_override.is_some()
         || (cfg.spec.family != fc_core::control::Family::Mpc && (cfg.control_hz - 500.0).abs() > 1e-9)
     {
@@ -256,7 +251,8 @@ pub fn fly_target_with_progress(
         Target::Tcp(addr) => FcClient::tcp(addr)?,
         Target::Qemu => qemu.insert(Qemu::start(&firmware_elf()?)?).client()?,
     };
-    let remote = Remote::open(client, cfg.spec)?;
+    // The vehicle's parameters are written over the link (ParamSet) before the selection.
+    let remote = Remote::open(client, cfg.spec, &cfg.vehicle)?;
     let (mut res, _) = fly_endpoint(cfg, remote, None, |t, _| tick(t), rec)?;
     if let Some(q) = qemu {
         // The telemetry's cycles are SysTick counts; under icount they count instructions.

@@ -46,6 +46,28 @@ fn framed_flight_is_identical_to_in_process() {
     }
 }
 
+#[test]
+fn a_vehicle_file_flies_over_the_wire_as_in_process() {
+    // rotorpy's Crazyflie (22× lighter than the OS4): the flight controller
+    // designs for it only if the vehicle's parameters reached it
+    // (ParamSet); designed for the OS4 it would fly another trajectory.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../vehicles/crazyflie-rotorpy.toml");
+    let mut cfg = FlightConfig::new(
+        Family::Lqr,
+        AttitudeForm::Quaternion,
+        Scenario::default_for(ScenarioKind::Setpoint),
+    );
+    cfg.vehicle = sil_host::config::load_vehicle(&path).unwrap();
+    cfg.scenario.duration_s = 3.0;
+    let a = fly(&cfg).unwrap();
+    let b = fly_target(&cfg, &Target::Framed).unwrap();
+    assert_eq!(a.rows.len(), b.rows.len());
+    for (ra, rb) in a.rows.iter().zip(&b.rows) {
+        assert_eq!(ra, rb);
+    }
+    assert!(a.metrics.position_rmse_m().is_finite());
+}
+
 /// `sil-host serve` on a free local port in a thread, for `clients`
 /// clients; its address and the thread.
 fn spawn_server(idle: Duration, clients: usize) -> (String, std::thread::JoinHandle<Result<(), impl std::fmt::Debug>>) {

@@ -30,6 +30,7 @@
 #![forbid(unsafe_code)]
 
 pub mod nav;
+pub mod params;
 pub mod schedule;
 
 use fc_core::control::{
@@ -217,7 +218,10 @@ pub fn setpoint_from_wire(w: &WireSetpoint) -> Option<Setpoint<f32>> {
 #[derive(Debug)]
 pub struct FlightCore {
     cfg: FcConfig,
-    params: VehicleParams<f32>,
+    /// The parameters (vehicle, controller, failsafe; the motor settings
+    /// are a front end's): `settings.vehicle` is what the controllers are
+    /// designed for.
+    settings: params::Settings,
     ctrl: AnyController<f32>,
     /// What `ctrl` was built from (rebuilt when a new selection fails).
     spec: ControllerSpec,
@@ -289,10 +293,22 @@ impl FlightCore {
     /// its static home, so that the boot design does not run beneath a
     /// stack copy of the whole loop (the controller is ≈ 7 KiB).
     pub fn unstarted(cfg: FcConfig) -> Self {
-        let params = VehicleParams::<f32>::os4();
+        let mut settings = params::Settings::os4();
+        settings.failsafe_timeout_ms = (cfg.failsafe_timeout_us / 1000).min(u64::from(u32::MAX)) as u32;
+        settings.failsafe_descent = cfg.descent_thrust_fraction;
+        Self::unstarted_with(cfg, settings)
+    }
+
+    /// The flight loop with `settings` (the failsafe's replacing `cfg`'s),
+    /// nothing designed yet: [`FlightCore::start`] checks the settings and
+    /// designs their controller for their vehicle, in place.
+    pub fn unstarted_with(mut cfg: FcConfig, settings: params::Settings) -> Self {
+        cfg.failsafe_timeout_us = u64::from(settings.failsafe_timeout_ms) * 1000;
+        cfg.descent_thrust_fraction = settings.failsafe_descent;
+        let params = settings.vehicle;
         Self {
             cfg,
-            params,
+            settings,
             ctrl: AnyController::PdEuler(PdEuler::new(params, PdEulerGains::tuned(), ReferenceMode::Feedforward)),
             spec: FALLBACK_CONTROLLER,
             sp: Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0),
@@ -317,11 +333,14 @@ impl FlightCore {
         &self.nav
     }
 
-    /// Designs the boot controller ([`BOOT_CONTROLLER`]) in place. On error
-    /// the loop keeps flying the fallback PD.
+    /// Designs the settings' controller (by default the boot controller,
+    /// [`BOOT_CONTROLLER`]) in place for their vehicle. On error (settings
+    /// [`params::Settings::check`] refuses, or a failed design) the loop
+    /// keeps flying the fallback PD.
     pub fn start(&mut self) -> Result<(), ControlError> {
+        self.settings.check().map_err(|_| ControlError::InvalidParameter)?;
         // Unstarted, the previous controller is the fallback PD.
-        self.install(BOOT_CONTROLLER)
+        self.install(self.settings.controller)
     }
 
     /// The inputs to apply now `[U1 N, U2 N, U3 N, U4 N·m]`.
@@ -351,7 +370,7 @@ impl FlightCore {
 
     /// The vehicle the controllers are designed for.
     pub fn vehicle(&self) -> &VehicleParams<f32> {
-        &self.params
+        &self.settings.vehicle
     }
 
     /// The controller flying (or the one that flies once designed).
@@ -422,10 +441,64 @@ impl FlightCore {
         self.nav.push_fix(fix);
     }
 
-    /// Replaces the failsafe timer's settings (the caller validates them).
-    pub fn set_failsafe(&mut self, timeout_us: u64, descent_thrust_fraction: f32) {
-        self.cfg.failsafe_timeout_us = timeout_us;
-        self.cfg.descent_thrust_fraction = descent_thrust_fraction;
+    /// The parameters in force.
+    pub fn settings(&self) -> &params::Settings {
+        &self.settings
+    }
+
+    /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
+    /// settings checked; a change of the vehicle or the controller
+    /// re-designs it, which only `allow_redesign` permits (a front end says
+    /// whether the vehicle is disarmed). A refusal leaves everything as it
+    /// was.
+    pub fn apply_param(&mut self, index: usize, value: f32, allow_redesign: bool) -> Result<(), params::Refusal> {
+        use params::Refusal;
+        let next = params::write(&self.settings, index, value)?;
+        if next == self.settings {
+            return Ok(());
+        }
+        let vehicle = next.vehicle != self.settings.vehicle;
+        let controller = next.controller != self.settings.controller;
+        if (vehicle || controller) && !allow_redesign {
+            return Err(Refusal::Armed);
+        }
+        let old = self.settings;
+        if vehicle {
+            self.set_vehicle(next.vehicle).map_err(Refusal::Design)?;
+        }
+        if controller {
+            if let Err(e) = self.try_select(next.controller) {
+                // The vehicle may have changed above: back to the old one
+                // (its controller was designed for it before).
+                let _ = self.set_vehicle(old.vehicle);
+                return Err(Refusal::Design(e));
+            }
+        }
+        self.settings = next;
+        self.cfg.failsafe_timeout_us = u64::from(next.failsafe_timeout_ms) * 1000;
+        self.cfg.descent_thrust_fraction = next.failsafe_descent;
+        Ok(())
+    }
+
+    /// Answers a parameter request of our protocol: parameter `index`'s
+    /// value, and why a write was refused (0: it was not).
+    fn send_param<O: Outbox>(&self, index: u16, refusal: Option<params::Refusal>, out: &mut O) -> Result<(), O::Error> {
+        let p = params::PARAMS.get(usize::from(index));
+        let mut id = [0u8; 16];
+        if let Some(p) = p {
+            id[..p.id.len()].copy_from_slice(p.id.as_bytes());
+        }
+        out.send(&FromFc::Param {
+            index,
+            count: params::PARAMS.len() as u16,
+            id,
+            value: p.map_or(f32::NAN, |p| (p.get)(&self.settings)),
+            refusal: match (p, refusal) {
+                (None, _) => params::Refusal::Unknown.code(),
+                (_, Some(r)) => r.code(),
+                (_, None) => 0,
+            },
+        })
     }
 
     /// Designs `spec` in place of the running controller (as a `Select`
@@ -442,11 +515,11 @@ impl FlightCore {
     /// designed for, is refused and the previous one stays (redesigned).
     pub fn set_vehicle(&mut self, params: VehicleParams<f32>) -> Result<(), ControlError> {
         params.check().map_err(|_| ControlError::InvalidParameter)?;
-        let old = self.params;
-        self.params = params;
+        let old = self.settings.vehicle;
+        self.settings.vehicle = params;
         let spec = self.spec;
         if let Err(e) = self.install(spec) {
-            self.params = old;
+            self.settings.vehicle = old;
             let _ = self.install(spec);
             return Err(e);
         }
@@ -500,7 +573,7 @@ impl FlightCore {
                 self.failsafe = true;
                 self.counters.failsafe_entries = self.counters.failsafe_entries.wrapping_add(1);
                 self.u = Vector4::new(
-                    self.cfg.descent_thrust_fraction * self.params.hover_thrust_n(),
+                    self.cfg.descent_thrust_fraction * self.settings.vehicle.hover_thrust_n(),
                     0.0,
                     0.0,
                     0.0,
@@ -525,13 +598,18 @@ impl FlightCore {
     /// fallback PD if even that fails, and the error is returned.
     fn install(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
         let ts = self.cfg.control_period_s;
-        let result = spec.build_in(&mut self.ctrl, self.params, ts, None);
+        let result = spec.build_in(&mut self.ctrl, self.settings.vehicle, ts, None);
         if result.is_ok() {
             self.spec = spec;
-        } else if self.spec.build_in(&mut self.ctrl, self.params, ts, None).is_err() {
+            self.settings.controller = spec;
+        } else if self
+            .spec
+            .build_in(&mut self.ctrl, self.settings.vehicle, ts, None)
+            .is_err()
+        {
             self.spec = FALLBACK_CONTROLLER;
             // PD designs cannot fail: nothing to check.
-            let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.params, ts, None);
+            let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.settings.vehicle, ts, None);
         }
         result
     }
@@ -638,6 +716,16 @@ impl FlightCore {
                 Ok(())
             }
             ToFc::Sensor { seq, t_us, state } => self.on_sensor(seq, t_us, &state, link, clock, now_us),
+            ToFc::ParamRead { index } => self.send_param(index, None, link),
+            ToFc::ParamSet { index, value } => {
+                // Re-designs only before the session's first step: a
+                // controller is not re-designed under a flying vehicle.
+                let r = self.apply_param(usize::from(index), value, self.last_seq.is_none());
+                if r.is_err() {
+                    self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
+                }
+                self.send_param(index, r.err(), link)
+            }
             ToFc::Fix(w) => {
                 // Queued in the navigator for the next `Imu` step; a full
                 // queue drops and counts it (`Nav.fixes_rejected`).
@@ -727,7 +815,7 @@ impl FlightCore {
             }
             (Ok(_), _) => {
                 // Aligning at rest: hold hover thrust, no torque.
-                self.u = Vector4::new(self.params.hover_thrust_n(), 0.0, 0.0, 0.0);
+                self.u = Vector4::new(self.settings.vehicle.hover_thrust_n(), 0.0, 0.0, 0.0);
                 self.nav_failsafe = false;
                 self.failsafe = false;
                 self.last_valid_us = Some(now);

@@ -624,3 +624,75 @@ fn imu_steps_run_the_estimator_every_millisecond_and_the_mpc_every_fifth() {
     assert_eq!(ran.windows(2).filter(|w| w[1] - w[0] != 5_000).count(), 0, "{ran:?}");
     assert_eq!(rig.fc.counters().invalid_values, 0);
 }
+
+#[test]
+fn parameters_over_the_wire_are_checked_echoed_and_redesign_only_before_the_first_step() {
+    let mut rig = Rig::new();
+    rig.open();
+    let mass = params::index_of(b"VEH_MASS").unwrap() as u16;
+    let param = |r: &[FromFc]| match r {
+        [FromFc::Param {
+            index,
+            count,
+            id,
+            value,
+            refusal,
+        }] => (*index, *count, *id, *value, *refusal),
+        other => panic!("{other:?}"),
+    };
+    // Read: the OS4's mass, named as MAVLink names it.
+    let (i, count, id, value, refusal) = param(&rig.send(&ToFc::ParamRead { index: mass }, 0));
+    assert_eq!(
+        (i, count as usize, value, refusal),
+        (mass, params::PARAMS.len(), 0.65, 0)
+    );
+    assert_eq!(&id[..9], b"VEH_MASS\0");
+    // Non-physical: refused (code 2, out of range), the old value in force.
+    let (_, _, _, value, refusal) = param(&rig.send(
+        &ToFc::ParamSet {
+            index: mass,
+            value: -1.0,
+        },
+        0,
+    ));
+    assert_eq!((value, refusal), (0.65, 2));
+    // Accepted before the first step: the controller is designed for it.
+    let (_, _, _, value, refusal) = param(&rig.send(
+        &ToFc::ParamSet {
+            index: mass,
+            value: 0.8,
+        },
+        0,
+    ));
+    assert_eq!((value, refusal), (0.8, 0));
+    assert_eq!(rig.fc.vehicle().mass_kg, 0.8);
+    // Hover now needs 0.8 g of thrust: the first step's output says so.
+    let r = rig.send(
+        &ToFc::Sensor {
+            seq: 1,
+            t_us: 2_000,
+            state: hover_state(),
+        },
+        2_000,
+    );
+    let FromFc::Actuator { u, .. } = r[0] else {
+        panic!("{r:?}")
+    };
+    assert!((u[0] - 0.8 * 9.81).abs() < 1e-3, "{u:?}");
+    // In flight: a re-design is refused (code 7); a failsafe setting is not.
+    let (_, _, _, value, refusal) = param(&rig.send(
+        &ToFc::ParamSet {
+            index: mass,
+            value: 0.9,
+        },
+        2_000,
+    ));
+    assert_eq!((value, refusal), (0.8, 7));
+    let fs = params::index_of(b"FS_TIMEOUT_MS").unwrap() as u16;
+    let (_, _, _, value, refusal) = param(&rig.send(&ToFc::ParamSet { index: fs, value: 80.0 }, 2_000));
+    assert_eq!((value, refusal), (80.0, 0));
+    assert_eq!(rig.fc.config().failsafe_timeout_us, 80_000);
+    // No such parameter.
+    let (_, _, id, value, refusal) = param(&rig.send(&ToFc::ParamRead { index: 999 }, 2_000));
+    assert!(value.is_nan() && refusal == 1 && id == [0; 16]);
+}

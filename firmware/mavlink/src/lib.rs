@@ -4,7 +4,8 @@
 #![forbid(unsafe_code)]
 
 pub mod hil;
-pub mod params;
+/// The parameter table (it lives with the flight loop, which both protocols drive).
+pub use fc_loop::params;
 pub mod vehicle;
 
 pub use mavlink::dialects::common::{self, MavMessage};

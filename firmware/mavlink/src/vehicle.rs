@@ -132,7 +132,6 @@ impl core::fmt::Write for Text {
 /// The flight controller behind MAVLink (see the module's documentation).
 pub struct MavVehicle {
     core: FlightCore,
-    settings: Settings,
     /// `None` until started.
     mixer: Option<Mixer<f32>>,
     armed: bool,
@@ -181,9 +180,8 @@ impl MavVehicle {
     /// copy of the whole vehicle (its controller is ≈ 7 KiB).
     pub fn unstarted(settings: Settings, system_id: u8) -> Self {
         Self {
-            core: FlightCore::unstarted(FcConfig::default()),
+            core: FlightCore::unstarted_with(FcConfig::default(), settings),
             mixer: None,
-            settings,
             armed: false,
             armed_down_m: 0.0,
             setpoint_given: false,
@@ -204,14 +202,10 @@ impl MavVehicle {
     /// Checks the settings and designs the controller in place; the
     /// session is open from then on (set-points may come before samples).
     pub fn start(&mut self) -> Result<(), Refusal> {
-        let s = self.settings;
-        s.check()?;
-        self.core
-            .set_failsafe(u64::from(s.failsafe_timeout_ms) * 1000, s.failsafe_descent);
-        self.core.set_vehicle(s.vehicle).map_err(Refusal::Design)?;
-        self.core.try_select(s.controller).map_err(Refusal::Design)?;
+        self.core.settings().check()?;
+        self.core.start().map_err(Refusal::Design)?;
         self.core.open_session();
-        self.mixer = Some(s.mixer()?);
+        self.mixer = Some(self.core.settings().mixer()?);
         Ok(())
     }
 
@@ -222,7 +216,7 @@ impl MavVehicle {
 
     /// The settings in force (the parameters' values).
     pub fn settings(&self) -> &Settings {
-        &self.settings
+        self.core.settings()
     }
 
     /// The flight loop (its estimator, set-point, counters).
@@ -355,7 +349,7 @@ impl MavVehicle {
         }
         let home = *self.home.get_or_insert(Home::of(m));
         self.reported_ned_m = Some(home.ned_m(m.lat, m.lon, m.alt));
-        let period_us = u64::from(self.settings.fix_period_ms) * 1000;
+        let period_us = u64::from(self.core.settings().fix_period_ms) * 1000;
         if self.last_fix_us.is_some_and(|t| m.time_usec < t + period_us) {
             return;
         }
@@ -441,7 +435,7 @@ impl MavVehicle {
             _ => return Err("estimator failsafe"),
         };
         self.core
-            .try_select(self.settings.controller)
+            .try_select(self.core.settings().controller)
             .map_err(|_| "controller design failed")?;
         if !self.setpoint_given {
             let yaw = fc_core::quat_to_euler(&est.att)[2];
@@ -500,30 +494,8 @@ impl MavVehicle {
     /// Sets parameter `index` to `value`: checked, and applied to the
     /// controller (re-designed while disarmed), the mixer and the failsafe.
     pub fn apply(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
-        let next = params::write(&self.settings, index, value)?;
-        if next == self.settings {
-            return Ok(());
-        }
-        let redesign = next.vehicle != self.settings.vehicle || next.controller != self.settings.controller;
-        if redesign && self.armed {
-            return Err(Refusal::Armed);
-        }
-        let mixer = next.mixer()?;
-        if next.vehicle != self.settings.vehicle {
-            self.core.set_vehicle(next.vehicle).map_err(Refusal::Design)?;
-        }
-        if next.controller != self.settings.controller {
-            if let Err(e) = self.core.try_select(next.controller) {
-                // The vehicle may have changed above: design the old
-                // controller for it again (it was designed for it before).
-                let _ = self.core.set_vehicle(self.settings.vehicle);
-                return Err(Refusal::Design(e));
-            }
-        }
-        self.core
-            .set_failsafe(u64::from(next.failsafe_timeout_ms) * 1000, next.failsafe_descent);
-        self.mixer = Some(mixer);
-        self.settings = next;
+        self.core.apply_param(index, value, !self.armed)?;
+        self.mixer = Some(self.core.settings().mixer()?);
         Ok(())
     }
 
@@ -532,7 +504,7 @@ impl MavVehicle {
         out.send(
             Peer::GroundStation,
             &MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
-                param_value: (p.get)(&self.settings),
+                param_value: (p.get)(self.core.settings()),
                 param_count: PARAMS.len() as u16,
                 param_index: index as u16,
                 param_id: p.id.into(),

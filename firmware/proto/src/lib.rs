@@ -45,7 +45,7 @@ pub use frame::{encode, FrameDecoder, FrameError, MAX_FRAME};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version; both ends must agree in the handshake.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// A setpoint on the wire: NED position, velocity, acceleration, jerk (SI),
 /// heading and heading rate (rad, rad/s).
@@ -130,6 +130,22 @@ pub enum ToFc {
     /// A slow-sensor measurement, fused at the next `Imu` step (since
     /// protocol v4). Absent parts are `None`; sigmas are 1σ.
     Fix(WireFix),
+    /// Set parameter `index` of the flight controller's table (since
+    /// protocol v6; the table is `fc_loop::params::PARAMS`, MAVLink's
+    /// names). Answered with a `Param`: the value in force and, if the
+    /// write was refused, why. A change of the vehicle or the controller
+    /// is accepted only before the session's first `Sensor`/`Imu` step.
+    ParamSet {
+        /// The parameter's index.
+        index: u16,
+        /// Its new value (every parameter is an `f32`).
+        value: f32,
+    },
+    /// Read parameter `index` (since protocol v6): answered with a `Param`.
+    ParamRead {
+        /// The parameter's index.
+        index: u16,
+    },
 }
 
 /// A position/velocity/heading/altitude fix on the wire.
@@ -254,5 +270,22 @@ pub enum FromFc {
         accel_bias: [f32; 3],
         /// 1σ of the error state's last six: gyro bias (rad/s), accelerometer bias (m/s²).
         sigma: [f32; 6],
+    },
+    /// A parameter's value in force, the answer to `ParamSet` and
+    /// `ParamRead` (since protocol v6).
+    Param {
+        /// Its index.
+        index: u16,
+        /// How many parameters there are.
+        count: u16,
+        /// Its name, NUL-padded (MAVLink's `param_id`); all zero for an unknown index.
+        id: [u8; 16],
+        /// Its value (NaN for an unknown index).
+        value: f32,
+        /// 0: read, or written as asked; else why not: 1 no such
+        /// parameter, 2 out of range, 3 not a whole number, 4 no such
+        /// controller, 5 the motors cannot be mixed, 6 the controller could
+        /// not be designed, 7 re-design refused in flight.
+        refusal: u8,
     },
 }

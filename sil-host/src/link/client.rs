@@ -179,8 +179,71 @@ impl FcClient {
         }
     }
 
+    /// Writes parameter `index` = `value` (`ParamSet`) and returns the
+    /// flight controller's answer: the value in force, or an error naming
+    /// the parameter and why it was refused.
+    pub fn set_param(&mut self, index: usize, value: f32) -> Result<f32> {
+        use fc_loop::params::PARAMS;
+        let name = PARAMS.get(index).map_or("?", |p| p.id);
+        self.send(&ToFc::ParamSet {
+            index: index as u16,
+            value,
+        })?;
+        // (Late acknowledgements of repeated Hellos may come first.)
+        for _ in 0..64 {
+            if let FromFc::Param {
+                index: i,
+                value: v,
+                refusal,
+                ..
+            } = self.receive()?
+            {
+                if usize::from(i) != index {
+                    continue;
+                }
+                if refusal != 0 {
+                    bail!("the flight controller refused {name} = {value} (refusal code {refusal}; it keeps {v})");
+                }
+                return Ok(v);
+            }
+        }
+        bail!("no answer to ParamSet {name}")
+    }
+
+    /// Writes the vehicle's parameters that differ from what the flight
+    /// controller has (as read back), so that its controllers are
+    /// designed for `vehicle` (`--vehicle` over a link).
+    pub fn set_vehicle(&mut self, vehicle: &fc_core::VehicleParams<f64>) -> Result<()> {
+        use fc_loop::params::{Settings, PARAMS};
+        let os4 = fc_core::VehicleParams::<f64>::OS4;
+        if vehicle.gravity_mps2 != os4.gravity_mps2 || vehicle.rotor_gain != os4.rotor_gain {
+            bail!(
+                "gravity_mps2 and rotor_gain are not parameters of the flight controller: \
+                 a vehicle file that sets them flies in-process only"
+            );
+        }
+        let mut wanted = Settings::os4();
+        wanted.vehicle = vehicle.cast();
+        for (i, p) in PARAMS.iter().enumerate().filter(|(_, p)| p.id.starts_with("VEH_")) {
+            let value = (p.get)(&wanted);
+            if value != (p.get)(&Settings::os4()) {
+                let got = self.set_param(i, value)?;
+                if got != value {
+                    bail!("{} reads back as {got}, not {value}", p.id);
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Handshake and controller selection (`spec` must have a wire id).
     pub fn open(&mut self, spec: ControllerSpec) -> Result<()> {
+        self.open_for(spec, &fc_core::VehicleParams::OS4)
+    }
+
+    /// Handshake, the vehicle's parameters, and controller selection
+    /// (`spec` must have a wire id).
+    pub fn open_for(&mut self, spec: ControllerSpec, vehicle: &fc_core::VehicleParams<f64>) -> Result<()> {
         let (controller, feedforward) = spec.to_wire().map_err(|e| anyhow::anyhow!("{e}"))?;
         // Hello is repeated until answered: a flight controller that is still
         // booting drops what arrives before its UART is up.
@@ -222,6 +285,7 @@ impl FcClient {
         // Acknowledgements of repeated Hellos may still be queued: drop them.
         self.pending.retain(|m| !matches!(m, FromFc::HelloAck { .. }));
         self.last_setpoint = None;
+        self.set_vehicle(vehicle)?;
         self.send(&ToFc::Select {
             controller,
             feedforward,
@@ -386,9 +450,10 @@ pub struct Remote {
 }
 
 impl Remote {
-    /// Opens the session on `client` and selects `spec`.
-    pub fn open(mut client: FcClient, spec: ControllerSpec) -> Result<Self> {
-        client.open(spec)?;
+    /// Opens the session on `client`, sets the vehicle's parameters and
+    /// selects `spec` (designed on board for `vehicle`).
+    pub fn open(mut client: FcClient, spec: ControllerSpec, vehicle: &fc_core::VehicleParams<f64>) -> Result<Self> {
+        client.open_for(spec, vehicle)?;
         let preview_dt_s = spec.preview().map_or(0.0, |(_, dt)| dt);
         Ok(Self {
             client,

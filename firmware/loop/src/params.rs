@@ -1,6 +1,6 @@
 //! The flight controller's parameters, as MAVLink's parameter protocol
-//! (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET / PARAM_VALUE) and
-//! a ground station see them: one table, [`PARAMS`], of named values, each
+//! (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET / PARAM_VALUE), a
+//! ground station and our own protocol (`ParamSet`/`ParamRead` → `Param`) see them: one table, [`PARAMS`], of named values, each
 //! with its unit, how to read and write it in [`Settings`], and whether a
 //! change re-designs the controller (allowed only while disarmed).
 //!
@@ -58,14 +58,14 @@ impl Settings {
     /// fixes at 100 Hz.
     pub fn os4() -> Self {
         let vehicle = VehicleParams::<f32>::os4();
-        let loop_cfg = fc_loop::FcConfig::default();
+        let loop_cfg = crate::FcConfig::default();
         Self {
             vehicle,
             airframe: Airframe::Plus,
             hub_m: vehicle.arm_m,
             reversed: 0,
             unit: MotorUnit::SpeedFraction,
-            controller: fc_loop::BOOT_CONTROLLER,
+            controller: crate::BOOT_CONTROLLER,
             failsafe_timeout_ms: (loop_cfg.failsafe_timeout_us / 1000) as u32,
             failsafe_descent: loop_cfg.descent_thrust_fraction,
             fix_period_ms: 10,
@@ -137,6 +137,21 @@ pub enum Refusal {
     Design(ControlError),
     /// The change re-designs the controller: only while disarmed.
     Armed,
+}
+
+impl Refusal {
+    /// Its code in our protocol's `Param` answer (0 there: not refused).
+    pub fn code(&self) -> u8 {
+        match self {
+            Refusal::Unknown => 1,
+            Refusal::Range { .. } => 2,
+            Refusal::NotInteger => 3,
+            Refusal::Controller(_) => 4,
+            Refusal::Mixer(_) => 5,
+            Refusal::Design(_) => 6,
+            Refusal::Armed => 7,
+        }
+    }
 }
 
 impl core::fmt::Display for Refusal {
