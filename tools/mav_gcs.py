@@ -19,7 +19,12 @@ heartbeat, then:
 5. streams SET_POSITION_TARGET_LOCAL_NED: 1 m up, then a step of
    --step m north; reads LOCAL_POSITION_NED, ATTITUDE and SYS_STATUS;
    the position must end within --tolerance of the set-point;
-6. disarms: refused in the air, accepted when forced (param2 = 21196).
+6. asks to disarm in the air (must be refused), then falls silent: no
+   more heartbeats, as a ground station that is gone. The vehicle must
+   say so, land where it is and disarm itself (its FS_GCS_MS failsafe).
+
+It sends a HEARTBEAT (MAV_TYPE_GCS) every 0.5 s of wall time until then,
+as QGroundControl does every second.
 
 Prints one line `gcs check: P passed, F failed` (and what failed) and
 exits non-zero if anything failed. Used by tools/rotorpy_hil.py --gcs.
@@ -49,6 +54,8 @@ class Gcs:
         self.seen = {}
         self.boot_ms = 0
         self.position = None
+        self.beating = True
+        self.last_beat = 0.0
 
     def check(self, ok, what):
         self.results.append((bool(ok), what))
@@ -59,6 +66,9 @@ class Gcs:
         """The next message of one of `types`, keeping note of everything else."""
         end = time.time() + (timeout or self.timeout)
         while time.time() < end:
+            if self.beating and time.time() - self.last_beat > 0.5:
+                self.m.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                self.last_beat = time.time()
             msg = self.m.recv_match(blocking=True, timeout=0.2)
             if msg is None:
                 continue
@@ -196,8 +206,17 @@ class Gcs:
             rate = self.seen.get(t, 0) / span_s
             self.check(rate >= lo, f"{t} at {rate:.1f} Hz of vehicle time (at least {lo})")
         self.check(self.command(MAV_CMD_COMPONENT_ARM_DISARM, 0.0) == MAV_RESULT_DENIED, "disarm in the air denied")
-        self.check(self.command(MAV_CMD_COMPONENT_ARM_DISARM, 0.0, 21196.0) == MAV_RESULT_ACCEPTED,
-                   "forced disarm (21196) accepted")
+        # Gone: no more heartbeats. The vehicle must land and disarm by itself.
+        self.beating = False
+        n_texts = len(self.texts)
+        disarmed = False
+        end = time.time() + 4 * self.timeout
+        while time.time() < end and not disarmed:
+            hb = self.recv(["HEARTBEAT"], timeout=5.0)
+            disarmed = hb is not None and not hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        said = self.texts[n_texts:]
+        self.check(disarmed and "ground station lost: landing" in said and "landed: disarmed" in said,
+                   f"silent ground station: landed and disarmed by itself ({said})")
 
 
 def main():

@@ -48,6 +48,9 @@ pub struct Settings {
     pub failsafe_timeout_ms: u32,
     /// Failsafe thrust as a fraction of hover thrust.
     pub failsafe_descent: f32,
+    /// No ground-station `HEARTBEAT` for this long while armed (once one
+    /// has been seen) → land where it is, ms; 0: off.
+    pub gcs_loss_ms: u32,
     /// Period of the position fixes taken from `HIL_STATE_QUATERNION`, ms.
     pub fix_period_ms: u32,
 }
@@ -68,6 +71,7 @@ impl Settings {
             controller: crate::BOOT_CONTROLLER,
             failsafe_timeout_ms: (loop_cfg.failsafe_timeout_us / 1000) as u32,
             failsafe_descent: loop_cfg.descent_thrust_fraction,
+            gcs_loss_ms: 5_000,
             fix_period_ms: 10,
         }
     }
@@ -106,6 +110,12 @@ impl Settings {
         }
         if !(0.5..=1.0).contains(&self.failsafe_descent) {
             return Err(Refusal::Range { lo: 0.5, hi: 1.0 });
+        }
+        if self.gcs_loss_ms != 0 && !(500..=60_000).contains(&self.gcs_loss_ms) {
+            return Err(Refusal::Range {
+                lo: 500.0,
+                hi: 60_000.0,
+            });
         }
         if !(1..=1_000).contains(&self.fix_period_ms) {
             return Err(Refusal::Range { lo: 1.0, hi: 1_000.0 });
@@ -306,7 +316,7 @@ fn pwm(s: &Settings) -> (u16, u16) {
 }
 
 /// Every parameter, in `param_index` order.
-pub const PARAMS: [Param; 27] = [
+pub const PARAMS: [Param; 28] = [
     real!("VEH_MASS", "mass, kg", true, vehicle.mass_kg),
     real!(
         "VEH_IXX",
@@ -481,6 +491,16 @@ pub const PARAMS: [Param; 27] = [
         false,
         failsafe_descent
     ),
+    Param {
+        id: "FS_GCS_MS",
+        doc: "no ground-station heartbeat for this long while armed: land, ms (0 off)",
+        get: |s| s.gcs_loss_ms as f32,
+        set: |s, v| {
+            s.gcs_loss_ms = whole(v, 0, 60_000)?;
+            Ok(())
+        },
+        redesign: false,
+    },
     Param {
         id: "HIL_FIX_MS",
         doc: "period of the fixes taken from HIL_STATE_QUATERNION, ms",

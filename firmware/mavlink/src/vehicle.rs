@@ -16,6 +16,9 @@
 //!   wound up on the ground) and, unless a set-point came first, holds the
 //!   position armed at. Disarming in the air (more than [`IN_AIR_M`] above
 //!   where it armed) is refused unless forced (`param2` = 21196), as PX4 does.
+//! - Ground-station loss (`FS_GCS_MS`, once a `HEARTBEAT` of type
+//!   `MAV_TYPE_GCS` has been heard): armed and silent that long → land
+//!   where it is and disarm on the ground.
 //! - `SET_POSITION_TARGET_LOCAL_NED` (`MAV_FRAME_LOCAL_NED`, position
 //!   given; velocity, acceleration, yaw and yaw rate when not masked) → the
 //!   set-point (feed-forward as given).
@@ -84,6 +87,8 @@ pub struct VehicleCounters {
 
 /// Height above the arming point from which the vehicle is in the air, m.
 pub const IN_AIR_M: f32 = 0.15;
+/// Within this of the height it armed at, a landing vehicle has landed, m.
+pub const LANDED_M: f32 = 0.03;
 /// `param2` of a disarm that is obeyed in the air too (MAVLink's magic number).
 const FORCE: f32 = 21196.0;
 
@@ -137,6 +142,10 @@ pub struct MavVehicle {
     armed: bool,
     /// Where it armed (estimated), down, m.
     armed_down_m: f32,
+    /// Simulated time of the last ground-station `HEARTBEAT`, µs.
+    gcs_seen_us: Option<u64>,
+    /// Landing because the ground station was lost.
+    landing: bool,
     /// A set-point arrived since boot (arming then keeps it).
     setpoint_given: bool,
     home: Option<Home>,
@@ -184,6 +193,8 @@ impl MavVehicle {
             mixer: None,
             armed: false,
             armed_down_m: 0.0,
+            gcs_seen_us: None,
+            landing: false,
             setpoint_given: false,
             home: None,
             last_fix_us: None,
@@ -286,7 +297,12 @@ impl MavVehicle {
                 }
             }
             MavMessage::PARAM_SET(m) if self.for_me(m.target_system) => self.on_param_set(m, out),
-            MavMessage::HEARTBEAT(_) => Ok(()),
+            MavMessage::HEARTBEAT(h) => {
+                if h.mavtype == MavType::MAV_TYPE_GCS {
+                    self.gcs_seen_us = Some(self.last_sensor_us.unwrap_or(0));
+                }
+                Ok(())
+            }
             _ => {
                 self.counters.ignored = self.counters.ignored.wrapping_add(1);
                 Ok(())
@@ -339,6 +355,7 @@ impl MavVehicle {
             Peer::Simulator,
             &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.armed)),
         )?;
+        self.watch_ground_station(s.time_us, out)?;
         self.telemetry(s.time_us, out)
     }
 
@@ -414,6 +431,36 @@ impl MavVehicle {
         )
     }
 
+    /// The ground-station failsafe (`FS_GCS_MS`): armed, a ground station
+    /// was heard, and it has been silent that long → land where it is: the
+    /// set-point drops to the height it armed at, and once there (within
+    /// [`LANDED_M`]) it disarms. Set-points no longer count while landing;
+    /// a heartbeat again does not cancel it (as PX4's data-link loss).
+    fn watch_ground_station<S: MavSink>(&mut self, now_us: u64, out: &mut S) -> Result<(), S::Error> {
+        let limit_us = u64::from(self.core.settings().gcs_loss_ms) * 1000;
+        let Some(est) = self.core.navigator().estimate() else {
+            return Ok(());
+        };
+        let lost = self.gcs_seen_us.is_some_and(|t| now_us.saturating_sub(t) > limit_us);
+        if self.armed && !self.landing && limit_us > 0 && lost {
+            self.landing = true;
+            let yaw = fc_core::quat_to_euler(&est.att)[2];
+            let ground = Vector3::new(est.pos_ned_m[0], est.pos_ned_m[1], self.armed_down_m);
+            self.core.set_setpoint(&Setpoint::hold(ground, yaw));
+            self.say(
+                out,
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                format_args!("ground station lost: landing"),
+            )?;
+        }
+        if self.armed && self.landing && (est.pos_ned_m[2] - self.armed_down_m).abs() < LANDED_M {
+            self.armed = false;
+            self.landing = false;
+            self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("landed: disarmed"))?;
+        }
+        Ok(())
+    }
+
     /// Armed and more than [`IN_AIR_M`] above where it armed (estimated):
     /// disarming would drop it.
     fn in_air(&self) -> bool {
@@ -442,6 +489,7 @@ impl MavVehicle {
             self.core.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
         }
         self.armed_down_m = est.pos_ned_m[2];
+        self.landing = false;
         self.armed = true;
         Ok(())
     }
@@ -452,6 +500,7 @@ impl MavVehicle {
             return Ok(());
         }
         match setpoint_from_target(m, self.core.setpoint().yaw_rad) {
+            Some(_) if self.landing => Ok(()),
             Some(sp) => {
                 self.core.set_setpoint(&sp);
                 self.setpoint_given = true;

@@ -347,6 +347,52 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     assert_eq!(v.core().setpoint().yaw_rad, 0.5);
 }
 
+#[test]
+fn losing_the_ground_station_lands_and_disarms() {
+    let gcs_beat = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        mavtype: MavType::MAV_TYPE_GCS,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+        ..Default::default()
+    });
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut out = Sent::default();
+    let t = rest(&mut v, &mut out, 1_000_000, 2000);
+    v.handle(&gcs_beat, &mut out, &Still, 0).unwrap();
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(v.armed());
+    // Fly to 2 m up (the set-point; the samples still say "at rest": the
+    // estimate stays on the ground, so it is "landed" as soon as it lands).
+    let up = SET_POSITION_TARGET_LOCAL_NED_DATA {
+        z: -2.0,
+        target_system: 1,
+        type_mask: PositionTargetTypemask::empty(),
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..Default::default()
+    };
+    v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(up), &mut out, &Still, 0)
+        .unwrap();
+    // Heard 4.9 s ago: still fine (FS_GCS_MS 5000).
+    let mut out = Sent::default();
+    let t = rest(&mut v, &mut out, t, 4_900);
+    assert!(v.armed() && out.texts().is_empty(), "{:?}", out.texts());
+    assert_eq!(v.core().setpoint().pos_ned_m[2], -2.0);
+    // Silent past 5 s: land where it is, then disarm on the ground.
+    rest(&mut v, &mut out, t, 200);
+    let texts = out.texts();
+    assert_eq!(texts, ["ground station lost: landing", "landed: disarmed"], "{texts:?}");
+    assert!(!v.armed());
+    assert!(v.core().setpoint().pos_ned_m[2].abs() < 0.05);
+    // Off (FS_GCS_MS 0): never.
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let i = params::index_of(b"FS_GCS_MS").unwrap();
+    v.apply(i, 0.0).unwrap();
+    let t = rest(&mut v, &mut out, 1_000_000, 2000);
+    v.handle(&gcs_beat, &mut out, &Still, 0).unwrap();
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    rest(&mut v, &mut out, t, 6_000);
+    assert!(v.armed());
+}
+
 /// A small deterministic generator (xorshift64*).
 struct Rng(u64);
 impl Rng {
@@ -411,7 +457,7 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
                 ..Default::default()
             }),
             3 => command(rng.f32(), rng.f32()),
-            4 => param_set(PARAMS[(rng.next() % 27) as usize].id, rng.f32()),
+            4 => param_set(PARAMS[(rng.next() % PARAMS.len() as u64) as usize].id, rng.f32()),
             _ => MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
                 x: rng.f32(),
                 y: rng.f32(),
