@@ -33,6 +33,30 @@ impl<T: RealField + Copy> PdAxis<T> {
     pub fn law(&self, e: T, e_dot: T) -> T {
         self.kp * e + self.kd * e_dot
     }
+
+    /// Both gains times `k`.
+    pub fn scaled(&self, k: T) -> Self {
+        Self {
+            kp: self.kp * k,
+            kd: self.kd * k,
+        }
+    }
+}
+
+/// How much larger the attitude gains of `p` must be than the OS4's for
+/// the same closed-loop attitude dynamics: the angular acceleration of a
+/// roll or pitch input `U` is `l·U/I`, of a yaw input `U4/Iz`, so the
+/// gains scale as `I/l` (roll, pitch) and `Iz` (yaw). Exactly 1 on the
+/// OS4 (`(x/y)/(x/y)`), so the thesis' and project's gains are unchanged
+/// there. The position loops give accelerations and need no scaling.
+pub fn attitude_gain_scale<T: RealField + Copy>(p: &VehicleParams<T>) -> [T; 3] {
+    let os4 = VehicleParams::<T>::os4();
+    let lever = |p: &VehicleParams<T>, i: usize| p.inertia_kgm2[i] / p.arm_m;
+    [
+        lever(p, 0) / lever(&os4, 0),
+        lever(p, 1) / lever(&os4, 1),
+        p.inertia_kgm2[2] / os4.inertia_kgm2[2],
+    ]
 }
 
 /// Gains of the Euler PD controller. Position loops give accelerations
@@ -65,6 +89,18 @@ impl<T: RealField + Copy> PdEulerGains<T> {
             roll: PdAxis::new(2.15, 2.5),
             pitch: PdAxis::new(2.1, 2.8),
             yaw: PdAxis::new(5.0, 1.4),
+        }
+    }
+
+    /// These gains for vehicle `p` ([`attitude_gain_scale`]): the same
+    /// attitude dynamics as on the OS4.
+    pub fn for_vehicle(&self, p: &VehicleParams<T>) -> Self {
+        let [kr, kp, ky] = attitude_gain_scale(p);
+        Self {
+            roll: self.roll.scaled(kr),
+            pitch: self.pitch.scaled(kp),
+            yaw: self.yaw.scaled(ky),
+            ..*self
         }
     }
 
@@ -189,5 +225,44 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
 
     fn resume(&mut self) {
         self.obs.resume();
+    }
+}
+
+#[cfg(test)]
+mod gain_scale_tests {
+    use super::*;
+
+    #[test]
+    fn attitude_gains_keep_the_os4s_angular_dynamics_on_another_vehicle() {
+        // Exactly the OS4's gains on the OS4 (the study is unchanged).
+        assert_eq!(attitude_gain_scale(&VehicleParams::<f64>::os4()), [1.0; 3]);
+        assert_eq!(attitude_gain_scale(&VehicleParams::<f32>::os4()), [1.0; 3]);
+        assert_eq!(
+            PdEulerGains::<f32>::tuned().for_vehicle(&VehicleParams::os4()),
+            PdEulerGains::tuned()
+        );
+        // Inertia ×4 about x and y, ×3 about z, arm ×2: roll and pitch
+        // gains ×2 (I/l), yaw ×3 (Iz); the position loops unchanged.
+        let os4 = VehicleParams::<f64>::os4();
+        let mut p = os4;
+        p.inertia_kgm2 = [
+            4.0 * os4.inertia_kgm2[0],
+            4.0 * os4.inertia_kgm2[1],
+            3.0 * os4.inertia_kgm2[2],
+        ];
+        p.arm_m = 2.0 * os4.arm_m;
+        let k = attitude_gain_scale(&p);
+        assert!(
+            (k[0] - 2.0).abs() < 1e-12 && (k[1] - 2.0).abs() < 1e-12 && (k[2] - 3.0).abs() < 1e-12,
+            "{k:?}"
+        );
+        // The angular acceleration a roll error commands, l·U2/I, is the OS4's.
+        let (g0, g) = (
+            PdEulerGains::<f64>::tuned(),
+            PdEulerGains::<f64>::tuned().for_vehicle(&p),
+        );
+        let alpha = |g: &PdEulerGains<f64>, v: &VehicleParams<f64>| v.arm_m * g.roll.law(0.1, -0.3) / v.inertia_kgm2[0];
+        assert!((alpha(&g, &p) - alpha(&g0, &os4)).abs() < 1e-12);
+        assert_eq!((g.x, g.y, g.z), (g0.x, g0.y, g0.z));
     }
 }

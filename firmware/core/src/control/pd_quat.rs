@@ -38,6 +38,18 @@ pub struct PdQuatGains<T> {
 }
 
 impl<T: RealField + Copy> PdQuatGains<T> {
+    /// These gains for vehicle `p` (`pd_euler::attitude_gain_scale`): the
+    /// same attitude dynamics as on the OS4.
+    pub fn for_vehicle(&self, p: &VehicleParams<T>) -> Self {
+        let [kr, kp, ky] = super::pd_euler::attitude_gain_scale(p);
+        Self {
+            q1: self.q1.scaled(kr),
+            q2: self.q2.scaled(kp),
+            q3: self.q3.scaled(ky),
+            ..*self
+        }
+    }
+
     /// Thesis Tables 4.3 (x 0.7/0.8, y 0.6/0.8, z 550/35, q3 10/2) and 4.4
     /// (q1 10/2, q2 10/1).
     pub fn thesis() -> Self {

@@ -340,10 +340,11 @@ impl ControllerSpec {
             Thesis => AccelObserver::off(),
         };
         match (self.family, self.form, self.preset) {
-            (Pd, Euler, Project) => slot.become_pdeuler(p, PdEulerGains::tuned(), mode, obs),
-            (Pd, Euler, Thesis) => slot.become_pdeuler(p, PdEulerGains::thesis(), mode, obs),
-            (Pd, Quaternion, Project) => slot.become_pdquat(p, PdQuatGains::tuned(), mode, obs),
-            (Pd, Quaternion, Thesis) => slot.become_pdquat(p, PdQuatGains::thesis(), mode, obs),
+            // The gains are the OS4's; the attitude loops keep their dynamics on `p`.
+            (Pd, Euler, Project) => slot.become_pdeuler(p, PdEulerGains::tuned().for_vehicle(&p), mode, obs),
+            (Pd, Euler, Thesis) => slot.become_pdeuler(p, PdEulerGains::thesis().for_vehicle(&p), mode, obs),
+            (Pd, Quaternion, Project) => slot.become_pdquat(p, PdQuatGains::tuned().for_vehicle(&p), mode, obs),
+            (Pd, Quaternion, Thesis) => slot.become_pdquat(p, PdQuatGains::thesis().for_vehicle(&p), mode, obs),
             (Lqr, Euler, _) => {
                 if !matches!(slot, AnyController::LqrEuler(_)) {
                     slot.become_lqreuler(p, mode);
