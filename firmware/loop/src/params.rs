@@ -266,7 +266,9 @@ impl core::fmt::Debug for Param {
     }
 }
 
-/// `value` as a whole number in `[lo, hi]`.
+/// `value` as a whole number in `[lo, hi]`. (Not inlined: it is called by
+/// a dozen setters, and the image's flash is counted.)
+#[inline(never)]
 fn whole(value: f32, lo: u32, hi: u32) -> Result<u32, Refusal> {
     if !(value >= lo as f32 && value <= hi as f32) {
         return Err(Refusal::Range {
@@ -281,6 +283,7 @@ fn whole(value: f32, lo: u32, hi: u32) -> Result<u32, Refusal> {
 }
 
 /// `value` unless it is not finite (the whole is range-checked later).
+#[inline(never)]
 fn finite(value: f32) -> Result<f32, Refusal> {
     if value.is_finite() {
         Ok(value)
