@@ -211,7 +211,7 @@ impl MavReader {
 /// another dialect message is well-formed but unused ([`MavError::Unused`]).
 macro_rules! subset {
     ($($name:ident: $data:ident),+ $(,)?) => {
-        /// The ids of [`subset`]'s messages.
+        /// The ids of the messages this crate reads and writes (see `encode` and `MavReader`).
         pub const SUBSET: &[u32] = &[$(<common::$data as mavlink::MessageData>::ID),+];
 
         fn parse_subset(id: u32, payload: &[u8]) -> Option<Result<MavMessage, ()>> {
