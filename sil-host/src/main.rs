@@ -266,7 +266,7 @@ struct FlyArgs {
     noise_seed: u64,
     /// What the controller flies on: `ekf` (simulated IMU and fixes through the on-board
     /// error-state Kalman filter) or `truth` (the true state, or --noise's version of it).
-    /// Default: `ekf`, on every target (IMU and fix messages over the wire, protocol v5); `truth`
+    /// Default: `ekf`, on every target (IMU and fix messages over the wire, protocol v5 and later); `truth`
     /// where ekf cannot run (controllers slower than 50 Hz, --noise), with a note.
     #[arg(long, value_enum, value_name = "EST")]
     estimator: Option<EstimatorArg>,

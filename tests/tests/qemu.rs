@@ -195,7 +195,8 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
         );
         assert_eq!(pil.failsafe_steps, 0);
         // The firmware's own defmt log, decoded from QEMU's semihosting output.
-        for line in ["INFO up: protocol v5", "INFO session open", "INFO controller selected"] {
+        let up = format!("INFO up: protocol v{}", fc_proto::PROTOCOL_VERSION);
+        for line in [up.as_str(), "INFO session open", "INFO controller selected"] {
             assert!(log.contains(line), "{line:?} missing from the firmware log:\n{log}");
         }
         assert!(!log.contains("WARN") && !log.contains("ERROR"), "{log}");
@@ -205,7 +206,7 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
 }
 
 /// The sensor flight on the real image: the same IMU samples and fixes go
-/// to the image over USART1 (protocol v5) as to the in-process estimator,
+/// to the image over USART1 (protocol v5 and later) as to the in-process estimator,
 /// and the image's estimator and controller fly the same flight.
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
