@@ -189,10 +189,6 @@ trait Vehicle {
     fn finish(self: Box<Self>) -> Result<Vec<String>>;
 }
 
-fn refused(c: fc_mavlink::MavCounters) -> u32 {
-    c.bad_crc + c.unknown + c.unsupported + c.malformed + c.other_system
-}
-
 /// [`MavVehicle`] in this process.
 struct InProcess {
     v: MavVehicle,
@@ -287,7 +283,7 @@ impl Vehicle for InQemu {
         Ok(())
     }
     fn refused(&self) -> u32 {
-        refused(self.reader.counters())
+        self.reader.counters().refused()
     }
     fn finish(self: Box<Self>) -> Result<Vec<String>> {
         drop(self.usart);
@@ -593,7 +589,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             }
         }
     }
-    res.refused_frames = refused(sim_reader.counters()) + refused(gcs_reader.counters()) + v.refused();
+    res.refused_frames = sim_reader.counters().refused() + gcs_reader.counters().refused() + v.refused();
     res.firmware_log = v.finish()?;
     res.final_pos_ned_m = truth.into();
     res.tracking_rmse_m = (sq_n > 0).then(|| (sq_sum / sq_n as f64).sqrt());

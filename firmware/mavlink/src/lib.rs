@@ -82,6 +82,14 @@ pub struct MavCounters {
     pub skipped_bytes: u32,
 }
 
+impl MavCounters {
+    /// Frames refused, of every kind (bad CRC, unknown, unsupported,
+    /// malformed, other systems); unused messages and noise are not refusals.
+    pub fn refused(&self) -> u32 {
+        self.bad_crc + self.unknown + self.unsupported + self.malformed + self.other_system
+    }
+}
+
 /// MAVLink 2 frames from a byte stream, one byte at a time, in a fixed
 /// buffer: a frame is read to its length and then checked, decoded and
 /// delivered or refused (counted); a refused frame is dropped whole and the

@@ -53,10 +53,6 @@ mod target {
         }
     }
 
-    fn refused(c: &MavCounters) -> u32 {
-        c.bad_crc + c.unknown + c.unsupported + c.malformed + c.other_system
-    }
-
     /// Logs what changed since the last call.
     fn log_changes(v: &MavVehicle, reader: &MavCounters, last: &mut (bool, VehicleCounters, u32, usize)) {
         let c = v.counters();
@@ -74,7 +70,7 @@ mod target {
                 c.commands_refused
             );
         }
-        if refused(reader) != last.2 {
+        if reader.refused() != last.2 {
             defmt::warn!(
                 "MAVLink frames refused: crc {=u32} unknown {=u32} unsupported {=u32} malformed {=u32} other system {=u32}",
                 reader.bad_crc,
@@ -91,7 +87,7 @@ mod target {
                 last.3 = hw;
             }
         }
-        (last.0, last.1, last.2) = (v.armed(), c, refused(reader));
+        (last.0, last.1, last.2) = (v.armed(), c, reader.refused());
     }
 
     #[entry]
@@ -134,7 +130,7 @@ mod target {
                     }
                 }
             }
-            v.set_link_errors(refused(&reader.counters()));
+            v.set_link_errors(reader.counters().refused());
             log_changes(v, &reader.counters(), &mut last);
             board::idle();
         }
