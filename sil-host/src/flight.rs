@@ -12,7 +12,7 @@ use crate::plant::{Plant, PlantConfig};
 use crate::record::{state_row, RowSink, RECORD_DT_S};
 use crate::scenario::{Reference, Scenario};
 use crate::sensors::IMU_PERIOD_S;
-use fc_core::control::{wrap_pi, AnyController, Controller, ControllerSpec, Family, MpcConfig, Setpoint};
+use fc_core::control::{wrap_pi, AnyController, Controller, ControllerSpec, Family, MpcConfig, Setpoint, Tuning};
 use fc_core::{hover_quat_state, AttitudeForm, QuatState, VehicleParams};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
@@ -161,7 +161,12 @@ pub struct FlightResult {
 pub fn build_for(cfg: &FlightConfig) -> anyhow::Result<AnyController<f32>> {
     cfg.validate()?;
     cfg.spec
-        .build_with(cfg.vehicle.cast(), 1.0 / cfg.control_hz, cfg.mpc_override)
+        .build_with(
+            cfg.vehicle.cast(),
+            1.0 / cfg.control_hz,
+            cfg.mpc_override,
+            &Tuning::project(),
+        )
         .map_err(|e| anyhow::anyhow!("designing {} failed: {e}", cfg.spec))
 }
 

@@ -447,31 +447,38 @@ impl FlightCore {
     }
 
     /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
-    /// settings checked; a change of the vehicle or the controller
-    /// re-designs it, which only `allow_redesign` permits (a front end says
-    /// whether the vehicle is disarmed). A refusal leaves everything as it
-    /// was.
+    /// settings checked; a change of the vehicle, the controller or its
+    /// gains and weights re-designs it, which only `allow_redesign` permits
+    /// (a front end says whether the vehicle is disarmed). A refusal leaves
+    /// everything as it was.
     pub fn apply_param(&mut self, index: usize, value: f32, allow_redesign: bool) -> Result<(), params::Refusal> {
         use params::Refusal;
         let next = params::write(&self.settings, index, value)?;
-        if next == self.settings {
+        // `index` is known (`params::write` refused it otherwise). A
+        // parameter writes only its own field: its value says whether
+        // anything changed, its flag whether the change re-designs.
+        let p = &params::PARAMS[index];
+        if (p.get)(&next).to_bits() == (p.get)(&self.settings).to_bits() {
             return Ok(());
         }
-        let vehicle = next.vehicle != self.settings.vehicle;
-        let controller = next.controller != self.settings.controller;
-        if (vehicle || controller) && !allow_redesign {
+        let redesign = p.redesign;
+        if redesign && !allow_redesign {
             return Err(Refusal::Armed);
         }
-        let old = self.settings;
-        if vehicle {
-            self.set_vehicle(next.vehicle).map_err(Refusal::Design)?;
-        }
-        if controller {
-            if let Err(e) = self.try_select(next.controller) {
-                // The vehicle may have changed above: back to the old one
-                // (its controller was designed for it before).
-                let _ = self.set_vehicle(old.vehicle);
+        if redesign {
+            let old = self.settings;
+            self.settings.vehicle = next.vehicle;
+            self.settings.tuning = next.tuning;
+            let selected = next.controller != old.controller;
+            if let Err(e) = self.install(next.controller) {
+                // Back to the old settings, and their controller (it was
+                // designed from them before).
+                self.settings = old;
+                let _ = self.install(old.controller);
                 return Err(Refusal::Design(e));
+            }
+            if selected {
+                self.selections = self.selections.wrapping_add(1);
             }
         }
         self.settings = next;
@@ -598,18 +605,19 @@ impl FlightCore {
     /// fallback PD if even that fails, and the error is returned.
     fn install(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
         let ts = self.cfg.control_period_s;
-        let result = spec.build_in(&mut self.ctrl, self.settings.vehicle, ts, None);
+        let result = spec.build_in(&mut self.ctrl, self.settings.vehicle, ts, None, &self.settings.tuning);
         if result.is_ok() {
             self.spec = spec;
             self.settings.controller = spec;
         } else if self
             .spec
-            .build_in(&mut self.ctrl, self.settings.vehicle, ts, None)
+            .build_in(&mut self.ctrl, self.settings.vehicle, ts, None, &self.settings.tuning)
             .is_err()
         {
             self.spec = FALLBACK_CONTROLLER;
             // PD designs cannot fail: nothing to check.
-            let _ = FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.settings.vehicle, ts, None);
+            let _ =
+                FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.settings.vehicle, ts, None, &self.settings.tuning);
         }
         result
     }

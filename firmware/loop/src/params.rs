@@ -14,7 +14,7 @@
 //! `STATUSTEXT`).
 
 use fc_core::control::ControlError;
-use fc_core::control::{ControllerSpec, SpecError};
+use fc_core::control::{ControllerSpec, SpecError, Tuning};
 use fc_core::model::airframe::{Mixer, MixerError, MotorUnit, RotorLayout, Spin};
 use fc_core::model::VehicleParams;
 
@@ -44,6 +44,8 @@ pub struct Settings {
     pub unit: MotorUnit,
     /// The controller.
     pub controller: ControllerSpec,
+    /// Its gains and weights (`PD_*`, `LQR_W_*`, `MPC_W_*`).
+    pub tuning: Tuning,
     /// No `HIL_SENSOR` for this long → failsafe, ms.
     pub failsafe_timeout_ms: u32,
     /// Failsafe thrust as a fraction of hover thrust.
@@ -69,6 +71,7 @@ impl Settings {
             reversed: 0,
             unit: MotorUnit::SpeedFraction,
             controller: crate::BOOT_CONTROLLER,
+            tuning: Tuning::project(),
             failsafe_timeout_ms: (loop_cfg.failsafe_timeout_us / 1000) as u32,
             failsafe_descent: loop_cfg.descent_thrust_fraction,
             gcs_loss_ms: 5_000,
@@ -120,8 +123,39 @@ impl Settings {
         if !(1..=1_000).contains(&self.fix_period_ms) {
             return Err(Refusal::Range { lo: 1.0, hi: 1_000.0 });
         }
-        Ok(())
+        check_tuning(&self.tuning)
     }
+}
+
+/// The gains' and weights' ranges: PD position gains in [0, 100]
+/// ((m/s²)/m, (m/s²)/(m/s)), attitude gains in [0, 10⁴] ((rad/s²)/rad,
+/// (rad/s²)/(rad/s)); weight multipliers in [10⁻³, 10³]; the MPC's moment
+/// observer 0 (the preset's) or in [10⁻³, 10] s.
+fn check_tuning(t: &Tuning) -> Result<(), Refusal> {
+    let within = |v: f32, lo: f32, hi: f32| {
+        if v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(Refusal::Range { lo, hi })
+        }
+    };
+    for a in t.pd_position {
+        within(a.kp, 0.0, 100.0)?;
+        within(a.kd, 0.0, 100.0)?;
+    }
+    for a in t.pd_attitude {
+        within(a.kp, 0.0, 1e4)?;
+        within(a.kd, 0.0, 1e4)?;
+    }
+    if t.mpc_moment_tau_s != 0.0 {
+        within(t.mpc_moment_tau_s, 1e-3, 10.0)?;
+    }
+    for w in [t.lqr, t.mpc] {
+        for m in [w.position, w.velocity, w.attitude, w.rate, w.input, w.input_rate] {
+            within(m, 1e-3, 1e3)?;
+        }
+    }
+    Ok(())
 }
 
 /// Why a parameter write was refused (each short enough for a 50-character
@@ -319,7 +353,7 @@ fn pwm(s: &Settings) -> (u16, u16) {
 }
 
 /// Every parameter, in `param_index` order.
-pub const PARAMS: [Param; 28] = [
+pub const PARAMS: [Param; 52] = [
     real!("VEH_MASS", "mass, kg", true, vehicle.mass_kg),
     real!(
         "VEH_IXX",
@@ -514,6 +548,115 @@ pub const PARAMS: [Param; 28] = [
         },
         redesign: false,
     },
+    real!("PD_X_P", "PD north loop, (m/s^2)/m", true, tuning.pd_position[0].kp),
+    real!("PD_X_D", "PD north loop, (m/s^2)/(m/s)", true, tuning.pd_position[0].kd),
+    real!("PD_Y_P", "PD east loop, (m/s^2)/m", true, tuning.pd_position[1].kp),
+    real!("PD_Y_D", "PD east loop, (m/s^2)/(m/s)", true, tuning.pd_position[1].kd),
+    real!("PD_Z_P", "PD down loop, (m/s^2)/m", true, tuning.pd_position[2].kp),
+    real!("PD_Z_D", "PD down loop, (m/s^2)/(m/s)", true, tuning.pd_position[2].kd),
+    real!(
+        "PD_ROLL_P",
+        "PD roll loop, (rad/s^2)/rad",
+        true,
+        tuning.pd_attitude[0].kp
+    ),
+    real!(
+        "PD_ROLL_D",
+        "PD roll loop, (rad/s^2)/(rad/s)",
+        true,
+        tuning.pd_attitude[0].kd
+    ),
+    real!(
+        "PD_PITCH_P",
+        "PD pitch loop, (rad/s^2)/rad",
+        true,
+        tuning.pd_attitude[1].kp
+    ),
+    real!(
+        "PD_PITCH_D",
+        "PD pitch loop, (rad/s^2)/(rad/s)",
+        true,
+        tuning.pd_attitude[1].kd
+    ),
+    real!("PD_YAW_P", "PD yaw loop, (rad/s^2)/rad", true, tuning.pd_attitude[2].kp),
+    real!(
+        "PD_YAW_D",
+        "PD yaw loop, (rad/s^2)/(rad/s)",
+        true,
+        tuning.pd_attitude[2].kd
+    ),
+    real!(
+        "LQR_W_POS",
+        "LQR position weights, multiple of the preset's",
+        true,
+        tuning.lqr.position
+    ),
+    real!(
+        "LQR_W_VEL",
+        "LQR velocity weights, multiple of the preset's",
+        true,
+        tuning.lqr.velocity
+    ),
+    real!(
+        "LQR_W_ATT",
+        "LQR attitude weights, multiple of the preset's",
+        true,
+        tuning.lqr.attitude
+    ),
+    real!(
+        "LQR_W_RATE",
+        "LQR body-rate weights, multiple of the preset's",
+        true,
+        tuning.lqr.rate
+    ),
+    real!(
+        "LQR_W_U",
+        "LQR input weights, multiple of the preset's",
+        true,
+        tuning.lqr.input
+    ),
+    real!(
+        "MPC_W_POS",
+        "MPC position weights, multiple of the preset's",
+        true,
+        tuning.mpc.position
+    ),
+    real!(
+        "MPC_W_VEL",
+        "MPC velocity weights, multiple of the preset's",
+        true,
+        tuning.mpc.velocity
+    ),
+    real!(
+        "MPC_W_ATT",
+        "MPC attitude weights, multiple of the preset's",
+        true,
+        tuning.mpc.attitude
+    ),
+    real!(
+        "MPC_W_RATE",
+        "MPC body-rate weights, multiple of the preset's",
+        true,
+        tuning.mpc.rate
+    ),
+    real!(
+        "MPC_W_U",
+        "MPC input weights, multiple of the preset's",
+        true,
+        tuning.mpc.input
+    ),
+    real!(
+        "MPC_W_DU",
+        "MPC input-rate weights, multiple of the preset's",
+        true,
+        tuning.mpc.input_rate
+    ),
+    real!(
+        "MPC_OBS_M_TAU",
+        "MPC moment-disturbance estimate time constant, s (0 preset)",
+        true,
+        tuning.mpc_moment_tau_s
+    ),
 ];
 
 /// The index of the parameter named `id` (a MAVLink `param_id`: up to 16

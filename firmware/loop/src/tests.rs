@@ -696,3 +696,72 @@ fn parameters_over_the_wire_are_checked_echoed_and_redesign_only_before_the_firs
     let (_, _, id, value, refusal) = param(&rig.send(&ToFc::ParamRead { index: 999 }, 2_000));
     assert!(value.is_nan() && refusal == 1 && id == [0; 16]);
 }
+
+/// The gains are parameters: `PD_ROLL_P`/`PD_ROLL_D` are the angular
+/// acceleration a roll error commands (checked against the thesis' torque
+/// `l·U2 = Ix·φ̈` at zero rates of the other axes), and an LQR weight
+/// multiplier re-designs the LQR (a heavier position weight answers a
+/// position error harder). Both only before the first step; out of range
+/// refused.
+#[test]
+fn gains_and_weights_are_parameters_that_redesign_the_controller() {
+    let set = |rig: &mut Rig, name: &[u8], value: f32, now_us: u64| -> (f32, u8) {
+        let index = params::index_of(name).unwrap() as u16;
+        match rig.send(&ToFc::ParamSet { index, value }, now_us)[..] {
+            [FromFc::Param { value, refusal, .. }] => (value, refusal),
+            ref other => panic!("{other:?}"),
+        }
+    };
+    let first_u = |rig: &mut Rig, state: [f32; 13]| -> [f32; 4] {
+        match rig.send(
+            &ToFc::Sensor {
+                seq: 1,
+                t_us: 2_000,
+                state,
+            },
+            2_000,
+        )[..]
+        {
+            [FromFc::Actuator { u, .. }, ..] => u,
+            ref other => panic!("{other:?}"),
+        }
+    };
+    // PD Euler, roll gains 300 (rad/s²)/rad and 20 (rad/s²)/(rad/s).
+    let mut rig = Rig::new();
+    rig.open();
+    assert_eq!(set(&mut rig, b"CTL_ID", 0.0, 0), (0.0, 0));
+    assert_eq!(set(&mut rig, b"PD_ROLL_P", 300.0, 0), (300.0, 0));
+    assert_eq!(set(&mut rig, b"PD_ROLL_D", 20.0, 0), (20.0, 0));
+    // Negative gains, absurd multipliers: refused (out of range), kept.
+    assert_eq!(set(&mut rig, b"PD_ROLL_P", -1.0, 0), (300.0, 2));
+    assert_eq!(set(&mut rig, b"LQR_W_POS", 0.0, 0), (1.0, 2));
+    assert_eq!(set(&mut rig, b"MPC_W_U", f32::NAN, 0), (1.0, 2));
+    // At the set-point, rolled 0.05 rad and rolling at 0.2 rad/s.
+    let mut s = hover_state();
+    let half = 0.025f32;
+    s[6..10].copy_from_slice(&[libm::cosf(half), libm::sinf(half), 0.0, 0.0]);
+    s[10] = 0.2;
+    let u = first_u(&mut rig, s);
+    let p = rig.fc.vehicle();
+    let roll_accel = p.arm_m * u[1] / p.inertia_kgm2[0];
+    let want = -300.0 * 0.05 - 20.0 * 0.2;
+    assert!((roll_accel - want).abs() < 1e-3 * want.abs(), "{roll_accel} vs {want}");
+    // In flight: a gain change re-designs, refused.
+    assert_eq!(set(&mut rig, b"PD_ROLL_P", 200.0, 2_000), (300.0, 7));
+
+    // The LQR (quaternion, the boot controller): 10 cm north of the
+    // set-point, the pitch command for weights ×1 and position ×4.
+    let pitch_cmd = |w: f32| {
+        let mut rig = Rig::new();
+        rig.open();
+        assert_eq!(set(&mut rig, b"LQR_W_POS", w, 0), (w, 0));
+        let mut s = hover_state();
+        s[0] = 0.1;
+        first_u(&mut rig, s)[2]
+    };
+    let (u1, u4) = (pitch_cmd(1.0), pitch_cmd(4.0));
+    // Nose down to go back south… the answer grows with the weight
+    // (roughly with its square root for a position-dominated gain).
+    assert!(u1 != 0.0 && u4.signum() == u1.signum(), "{u1} {u4}");
+    assert!(u4.abs() > 1.3 * u1.abs(), "{u1} {u4}");
+}

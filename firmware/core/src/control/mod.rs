@@ -16,6 +16,7 @@ pub mod pd_quat;
 pub mod reference;
 pub mod regulation;
 pub mod spec;
+pub mod tuning;
 
 pub use crate::model::AttitudeForm;
 pub use lqr_euler::LqrEuler;
@@ -23,10 +24,11 @@ pub use lqr_quat::LqrQuat;
 pub use lqr_table::GainTable;
 pub use mpc::{Mpc, MpcConfig, MpcFast, MpcThesis};
 pub use observer::AccelObserver;
-pub use pd_euler::{PdEuler, PdEulerGains};
+pub use pd_euler::{PdAxis, PdEuler, PdEulerGains};
 pub use pd_quat::{PdQuat, PdQuatGains};
 pub use reference::{tilt_and_thrust, AttitudeRef, ReferenceMode, TiltThrust};
 pub use spec::{ControllerSpec, Family, Preset, SpecError, SpecRow, INTEGRAL_MOMENT_TAU_S, INTEGRAL_TAU_S, SPECS};
+pub use tuning::{Tuning, WeightScale};
 
 use crate::linalg::RiccatiError;
 use crate::model::{quat_to_euler, DiscretiseError, Input, Quat, QuatState};

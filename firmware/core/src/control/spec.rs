@@ -13,7 +13,7 @@
 
 use super::{
     lqr_euler, lqr_quat, lqr_table::inputs_weighted_for, observer::AccelObserver, AnyController, ControlError, LqrQuat,
-    MpcConfig, MpcFast, MpcThesis, PdEuler, PdEulerGains, PdQuatGains, ReferenceMode,
+    MpcConfig, MpcFast, MpcThesis, PdEuler, PdEulerGains, PdQuatGains, ReferenceMode, Tuning,
 };
 use crate::model::{AttitudeForm, VehicleParams};
 use core::fmt;
@@ -289,40 +289,46 @@ impl ControllerSpec {
     }
 
     /// Designs the controller for the vehicle `p`, PD and LQR at
-    /// `control_period_s` (s).
+    /// `control_period_s` (s), with the project's tuning ([`Tuning::project`]).
     pub fn build<T: RealField + Copy>(
         &self,
         p: VehicleParams<T>,
         control_period_s: f64,
     ) -> Result<AnyController<T>, ControlError> {
-        self.build_with(p, control_period_s, None)
+        self.build_with(p, control_period_s, None, &Tuning::project())
     }
 
     /// [`ControllerSpec::build`] with an MPC configuration replacing the
-    /// preset's (tuning, sweeps; the sizes stay the preset's). Ignored by PD and LQR.
+    /// preset's (tuning, sweeps; the sizes stay the preset's; ignored by PD
+    /// and LQR) and the user's gains and weights `tuning`.
     pub fn build_with<T: RealField + Copy>(
         &self,
         p: VehicleParams<T>,
         control_period_s: f64,
         mpc: Option<MpcConfig>,
+        tuning: &Tuning,
     ) -> Result<AnyController<T>, ControlError> {
         let mut c = AnyController::PdEuler(PdEuler::new(p, PdEulerGains::tuned(), self.reference));
-        self.build_in(&mut c, p, control_period_s, mpc)?;
+        self.build_in(&mut c, p, control_period_s, mpc, tuning)?;
         Ok(c)
     }
 
     /// Builds the controller in place, in `slot` (the controller it held is
     /// replaced): what the firmware does, so that the large controllers
     /// (MPC, scheduled LQR, ≈ 7 KiB each) are designed where they live
-    /// instead of being built on the stack and moved. `mpc` as in
-    /// [`ControllerSpec::build_with`]. On error `slot` holds no usable
-    /// controller: build one again (the flight loop rebuilds the previous).
+    /// instead of being built on the stack and moved. `mpc` and `tuning` as
+    /// in [`ControllerSpec::build_with`]: the project preset's PD takes its
+    /// gains from `tuning` (the thesis preset's are the printed tables), and
+    /// both presets' LQR and MPC weights are scaled by its multipliers. On
+    /// error `slot` holds no usable controller: build one again (the flight
+    /// loop rebuilds the previous).
     pub fn build_in<T: RealField + Copy>(
         &self,
         slot: &mut AnyController<T>,
         p: VehicleParams<T>,
         control_period_s: f64,
         mpc: Option<MpcConfig>,
+        tuning: &Tuning,
     ) -> Result<(), ControlError> {
         let mode = self.reference;
         let ts = control_period_s;
@@ -339,37 +345,44 @@ impl ControllerSpec {
             )?,
             Thesis => AccelObserver::off(),
         };
+        let mpc_config = |preset: fn(AttitudeForm) -> MpcConfig, form| {
+            let mut cfg = mpc.unwrap_or(preset(form));
+            tuning.apply_mpc(&mut cfg);
+            cfg
+        };
         match (self.family, self.form, self.preset) {
-            // The gains are the OS4's; the attitude loops keep their dynamics on `p`.
-            (Pd, Euler, Project) => slot.become_pdeuler(p, PdEulerGains::tuned().for_vehicle(&p), mode, obs),
+            (Pd, Euler, Project) => slot.become_pdeuler(p, PdEulerGains::from_tuning(tuning, &p), mode, obs),
+            // The printed gains are the OS4's; the attitude loops keep their dynamics on `p`.
             (Pd, Euler, Thesis) => slot.become_pdeuler(p, PdEulerGains::thesis().for_vehicle(&p), mode, obs),
-            (Pd, Quaternion, Project) => slot.become_pdquat(p, PdQuatGains::tuned().for_vehicle(&p), mode, obs),
+            (Pd, Quaternion, Project) => slot.become_pdquat(p, PdQuatGains::from_tuning(tuning, &p), mode, obs),
             (Pd, Quaternion, Thesis) => slot.become_pdquat(p, PdQuatGains::thesis().for_vehicle(&p), mode, obs),
             (Lqr, Euler, _) => {
                 if !matches!(slot, AnyController::LqrEuler(_)) {
                     slot.become_lqreuler(p, mode);
                 }
                 if let AnyController::LqrEuler(c) = slot {
-                    let (q, r) = match self.preset {
+                    let (mut q, r) = match self.preset {
                         Project => lqr_euler::tuned_weights(),
                         Thesis => lqr_euler::euler_weights(),
                     };
                     // The weights are the OS4's; the inputs keep their relative cost.
-                    let r = inputs_weighted_for(&r, &p);
+                    let mut r = inputs_weighted_for(&r, &p);
+                    tuning.lqr.apply_lqr(&mut q, &mut r);
                     c.redesign(p, &q, &r, ts, mode)?;
                     c.set_observer(obs.smoothed());
                 }
             }
             (Lqr, Quaternion, preset) => {
-                let (q, r) = match preset {
+                let (mut q, r) = match preset {
                     Project => lqr_quat::tuned_weights(),
                     Thesis => lqr_quat::quat_weights(),
                 };
-                let r = inputs_weighted_for(&r, &p);
+                let mut r = inputs_weighted_for(&r, &p);
+                tuning.lqr.apply_lqr(&mut q, &mut r);
                 slot.become_lqrquat(LqrQuat::new(p, &q, &r, ts, mode)?.with_observer(obs.smoothed()))
             }
             (Mpc, form, Project) => {
-                let cfg = mpc.unwrap_or(MpcConfig::fast(form));
+                let cfg = mpc_config(MpcConfig::fast, form);
                 if !matches!(slot, AnyController::MpcFast(_)) {
                     slot.become_mpcfast(p, cfg);
                 }
@@ -378,7 +391,7 @@ impl ControllerSpec {
                 }
             }
             (Mpc, form, Thesis) => {
-                let cfg = mpc.unwrap_or(MpcConfig::thesis(form));
+                let cfg = mpc_config(MpcConfig::thesis, form);
                 if !matches!(slot, AnyController::MpcThesis(_)) {
                     slot.become_mpcthesis(p, cfg);
                 }
@@ -495,7 +508,8 @@ mod tests {
                 for _ in 0..3 {
                     crate::control::Controller::update(&mut slot, &est, &sp).expect("step");
                 }
-                s.build_in(&mut slot, p, 0.001, None).expect("design in place");
+                s.build_in(&mut slot, p, 0.001, None, &Tuning::project())
+                    .expect("design in place");
                 assert_eq!(format!("{slot:?}"), fresh, "{} over {}", s.name(), before.name());
             }
         }

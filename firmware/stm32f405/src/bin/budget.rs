@@ -49,7 +49,7 @@ mod target {
     use cortex_m_semihosting::hprintln;
     use fc_core::control::{
         AnyController, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
-        StateEstimate, SPECS,
+        StateEstimate, Tuning, SPECS,
     };
     use fc_core::estimate::{Eskf, EskfConfig, Fix, ImuSample};
     use fc_core::{euler_to_quat, VehicleParams};
@@ -445,7 +445,7 @@ mod target {
     /// The a-priori QP iteration bound of an MPC spec (0 for the others).
     fn bound_of(spec: &ControllerSpec, p: VehicleParams<f32>, dt: f32) -> u32 {
         let slot = slot();
-        match spec.build_in(slot, p, dt as f64, spec.mpc_config()) {
+        match spec.build_in(slot, p, dt as f64, spec.mpc_config(), &Tuning::project()) {
             Ok(()) => Controller::iteration_bound(slot),
             Err(_) => 0,
         }
@@ -508,7 +508,7 @@ mod target {
                         }
                     }
                     let slot = slot();
-                    spec.build_in(slot, p, dt as f64, mpc).ok()?;
+                    spec.build_in(slot, p, dt as f64, mpc, &Tuning::project()).ok()?;
                     // The MPCs are measured as their own types, as the image calls them.
                     match slot {
                         AnyController::MpcFast(c) => Some(control_worst(c, &clock, dt)),
