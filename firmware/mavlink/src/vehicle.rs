@@ -36,6 +36,7 @@ use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
 use core::convert::Infallible;
 use fc_core::control::Setpoint;
+use fc_core::estimate::Fix;
 use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
@@ -83,6 +84,8 @@ pub struct VehicleCounters {
     pub params_refused: u32,
     /// Messages this vehicle has no use for.
     pub ignored: u32,
+    /// Barometer readings fused (flagged in `HIL_SENSOR`).
+    pub baro_fixes: u32,
 }
 
 /// Height above the arming point from which the vehicle is in the air, m.
@@ -96,6 +99,11 @@ const FORCE: f32 = 21196.0;
 const HEARTBEAT_HZ: u64 = 1;
 const SYS_STATUS_HZ: u64 = 2;
 const ATTITUDE_HZ: u64 = 50;
+/// A flagged `HIL_SENSOR` barometer is fused at most this often, µs (50 Hz,
+/// a barometer's rate; `HIL_SENSOR` comes at the IMU's).
+pub const BARO_PERIOD_US: u64 = 20_000;
+/// 1σ assumed of a barometric height, m.
+pub const BARO_SIGMA_M: f32 = 0.1;
 
 /// The flight loop's answers to one `Imu` step, kept.
 #[derive(Default)]
@@ -151,6 +159,11 @@ pub struct MavVehicle {
     home: Option<Home>,
     /// Time of the last fix taken, µs.
     last_fix_us: Option<u64>,
+    /// Pressure altitude at home (NED z = 0), m: the first `HIL_SENSOR`
+    /// barometer reading referenced to the estimated height then.
+    baro_ref_m: Option<f32>,
+    /// Time of the last barometer reading fused, µs.
+    last_baro_us: Option<u64>,
     /// Time of the last `HIL_SENSOR`, µs.
     last_sensor_us: Option<u64>,
     /// The `Imu` sequence number.
@@ -198,6 +211,8 @@ impl MavVehicle {
             setpoint_given: false,
             home: None,
             last_fix_us: None,
+            baro_ref_m: None,
+            last_baro_us: None,
             last_sensor_us: None,
             seq: 0,
             motors: [0.0; 4],
@@ -332,9 +347,14 @@ impl MavVehicle {
             self.core.open_session();
             self.home = None;
             self.last_fix_us = None;
+            self.baro_ref_m = None;
+            self.last_baro_us = None;
             self.next_us = [s.time_us; 3];
         }
         self.last_sensor_us = Some(s.time_us);
+        if let Some(alt) = s.baro_alt_m {
+            self.on_baro(s.time_us, alt);
+        }
         self.seq = self.seq.wrapping_add(1);
         let _ = self
             .core
@@ -357,6 +377,29 @@ impl MavVehicle {
         )?;
         self.watch_ground_station(s.time_us, out)?;
         self.telemetry(s.time_us, out)
+    }
+
+    /// A barometric altitude (`HIL_SENSOR`, flagged): fused as the height
+    /// above home at most every [`BARO_PERIOD_US`], once the estimator has
+    /// a position. Its first reading is referenced to the estimated height
+    /// then (a barometer's altitude is above sea level, and drifts with the
+    /// weather: what is fused is its change).
+    fn on_baro(&mut self, t_us: u64, alt_m: f32) {
+        if self.last_baro_us.is_some_and(|t| t_us < t + BARO_PERIOD_US) {
+            return;
+        }
+        let Some(est) = self.core.navigator().estimate() else {
+            return;
+        };
+        let reference = *self.baro_ref_m.get_or_insert(alt_m + est.pos_ned_m[2]);
+        let fix = Fix {
+            alt_m: Some(alt_m - reference),
+            alt_sigma_m: BARO_SIGMA_M,
+            ..Fix::EMPTY
+        };
+        self.core.push_fix(&fix);
+        self.last_baro_us = Some(t_us);
+        self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
     }
 
     fn on_state(&mut self, m: &HIL_STATE_QUATERNION_DATA) {
