@@ -52,6 +52,9 @@ pub struct HilImu {
     pub imu: ImuSample,
     /// Barometric altitude (up), m, when the message flags it updated.
     pub baro_alt_m: Option<f32>,
+    /// Magnetic field, body FRD, gauss, when the message flags all three
+    /// axes updated (finite, not zero).
+    pub mag_frd_gauss: Option<Vector3<f32>>,
 }
 
 /// `HIL_SENSOR` → IMU sample. Refused unless the six inertial fields are
@@ -82,6 +85,12 @@ pub fn imu_from_hil_sensor(m: &HIL_SENSOR_DATA) -> Result<HilImu, HilError> {
         .contains(HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_PRESSURE_ALT)
         .then_some(m.pressure_alt)
         .filter(|a| a.is_finite());
+    let mag_flags = HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XMAG
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YMAG
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZMAG;
+    let mag = Vector3::new(m.xmag, m.ymag, m.zmag);
+    let mag =
+        (m.fields_updated.contains(mag_flags) && mag.iter().all(|v| v.is_finite()) && mag.norm() > 0.0).then_some(mag);
     Ok(HilImu {
         time_us: m.time_usec,
         imu: ImuSample {
@@ -89,7 +98,22 @@ pub fn imu_from_hil_sensor(m: &HIL_SENSOR_DATA) -> Result<HilImu, HilError> {
             accel_frd_mps2: Vector3::new(m.xacc, m.yacc, m.zacc),
         },
         baro_alt_m: baro,
+        mag_frd_gauss: mag,
     })
+}
+
+/// The magnetic heading, rad: the field `mag_frd` (body FRD) levelled with
+/// roll `roll_rad` and pitch `pitch_rad` (ZYX Euler), and the angle of its
+/// horizontal part from the body's heading, `−atan2(m_y, m_x)`. It is the
+/// heading up to the magnetic declination (which the caller references
+/// out); `None` when the field is (nearly) vertical.
+pub fn mag_heading_rad(mag_frd: &Vector3<f32>, roll_rad: f32, pitch_rad: f32) -> Option<f32> {
+    let (sp, cp) = (libm::sinf(roll_rad), libm::cosf(roll_rad));
+    let (st, ct) = (libm::sinf(pitch_rad), libm::cosf(pitch_rad));
+    let (mx, my, mz) = (mag_frd[0], mag_frd[1], mag_frd[2]);
+    let hx = mx * ct + (my * sp + mz * cp) * st;
+    let hy = my * cp - mz * sp;
+    (libm::hypotf(hx, hy) > 1e-3 * mag_frd.norm()).then(|| -libm::atan2f(hy, hx))
 }
 
 /// The origin of the local NED frame, as `HIL_STATE_QUATERNION` spells positions.

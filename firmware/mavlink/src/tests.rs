@@ -214,3 +214,49 @@ proptest! {
         prop_assert!(matches!(got[..], [Ok(_)]), "{:?}", got);
     }
 }
+
+proptest! {
+    /// The magnetic heading of a field seen from any attitude (built with
+    /// the model's rotation matrix, not the levelling formula) is the
+    /// attitude's heading minus the declination.
+    #[test]
+    fn mag_heading_is_the_heading_minus_the_declination(
+        phi in -0.6f32..0.6, theta in -0.6f32..0.6, psi in -3.1f32..3.1, decl in -0.4f32..0.4, dip in 0.2f32..1.3,
+    ) {
+        use fc_core::model::{euler_to_quat, quat_to_rotation};
+        let (h, v) = (0.5 * libm::cosf(dip), 0.5 * libm::sinf(dip));
+        let m_ned = nalgebra::Vector3::new(h * libm::cosf(decl), h * libm::sinf(decl), v);
+        let r = quat_to_rotation(&euler_to_quat(phi, theta, psi));
+        let m_frd = r.transpose() * m_ned;
+        let got = mag_heading_rad(&m_frd, phi, theta).unwrap();
+        let err = fc_core::control::wrap_pi(got - (psi - decl));
+        prop_assert!(err.abs() < 1e-4, "got {got}, want {}", psi - decl);
+    }
+}
+
+#[test]
+fn a_vertical_field_has_no_heading_and_flags_gate_the_magnetometer() {
+    assert_eq!(mag_heading_rad(&nalgebra::Vector3::new(0.0, 0.0, 0.5), 0.0, 0.0), None);
+    let inertial = HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XACC
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YACC
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZACC
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XGYRO
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YGYRO
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZGYRO;
+    let mut m = HIL_SENSOR_DATA {
+        zacc: -9.81,
+        xmag: 0.2,
+        zmag: 0.4,
+        fields_updated: inertial | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XMAG,
+        ..Default::default()
+    };
+    // One axis flagged is not a reading.
+    assert_eq!(imu_from_hil_sensor(&m).unwrap().mag_frd_gauss, None);
+    m.fields_updated |= HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YMAG | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZMAG;
+    assert_eq!(
+        imu_from_hil_sensor(&m).unwrap().mag_frd_gauss,
+        Some(nalgebra::Vector3::new(0.2, 0.0, 0.4))
+    );
+    m.ymag = f32::NAN;
+    assert_eq!(imu_from_hil_sensor(&m).unwrap().mag_frd_gauss, None);
+}

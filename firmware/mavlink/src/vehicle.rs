@@ -86,6 +86,8 @@ pub struct VehicleCounters {
     pub ignored: u32,
     /// Barometer readings fused (flagged in `HIL_SENSOR`).
     pub baro_fixes: u32,
+    /// Magnetometer headings fused (flagged in `HIL_SENSOR`).
+    pub mag_fixes: u32,
 }
 
 /// Height above the arming point from which the vehicle is in the air, m.
@@ -99,11 +101,13 @@ const FORCE: f32 = 21196.0;
 const HEARTBEAT_HZ: u64 = 1;
 const SYS_STATUS_HZ: u64 = 2;
 const ATTITUDE_HZ: u64 = 50;
-/// A flagged `HIL_SENSOR` barometer is fused at most this often, µs (50 Hz,
-/// a barometer's rate; `HIL_SENSOR` comes at the IMU's).
+/// A flagged `HIL_SENSOR` barometer (and magnetometer) is fused at most
+/// this often, µs (50 Hz; `HIL_SENSOR` comes at the IMU's rate).
 pub const BARO_PERIOD_US: u64 = 20_000;
 /// 1σ assumed of a barometric height, m.
 pub const BARO_SIGMA_M: f32 = 0.1;
+/// 1σ assumed of a magnetometer heading, rad (2°).
+pub const MAG_SIGMA_RAD: f32 = 0.035;
 
 /// The flight loop's answers to one `Imu` step, kept.
 #[derive(Default)]
@@ -164,6 +168,12 @@ pub struct MavVehicle {
     baro_ref_m: Option<f32>,
     /// Time of the last barometer reading fused, µs.
     last_baro_us: Option<u64>,
+    /// Magnetic heading minus true heading (the declination, and whatever
+    /// the simulator's field adds), rad: the first reading referenced to
+    /// the estimated heading then.
+    mag_ref_rad: Option<f32>,
+    /// Time of the last magnetometer heading fused, µs.
+    last_mag_us: Option<u64>,
     /// Time of the last `HIL_SENSOR`, µs.
     last_sensor_us: Option<u64>,
     /// The `Imu` sequence number.
@@ -213,6 +223,8 @@ impl MavVehicle {
             last_fix_us: None,
             baro_ref_m: None,
             last_baro_us: None,
+            mag_ref_rad: None,
+            last_mag_us: None,
             last_sensor_us: None,
             seq: 0,
             motors: [0.0; 4],
@@ -349,11 +361,16 @@ impl MavVehicle {
             self.last_fix_us = None;
             self.baro_ref_m = None;
             self.last_baro_us = None;
+            self.mag_ref_rad = None;
+            self.last_mag_us = None;
             self.next_us = [s.time_us; 3];
         }
         self.last_sensor_us = Some(s.time_us);
         if let Some(alt) = s.baro_alt_m {
             self.on_baro(s.time_us, alt);
+        }
+        if let Some(mag) = s.mag_frd_gauss {
+            self.on_mag(s.time_us, &mag);
         }
         self.seq = self.seq.wrapping_add(1);
         let _ = self
@@ -400,6 +417,33 @@ impl MavVehicle {
         self.core.push_fix(&fix);
         self.last_baro_us = Some(t_us);
         self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
+    }
+
+    /// A magnetometer reading (`HIL_SENSOR`, all three axes flagged): its
+    /// tilt-compensated heading ([`hil::mag_heading_rad`], levelled with the
+    /// estimated roll and pitch) fused at most every [`BARO_PERIOD_US`].
+    /// The first reading is referenced to the estimated heading then, which
+    /// removes the declination (no world magnetic model on board).
+    fn on_mag(&mut self, t_us: u64, mag_frd: &Vector3<f32>) {
+        if self.last_mag_us.is_some_and(|t| t_us < t + BARO_PERIOD_US) {
+            return;
+        }
+        let Some(est) = self.core.navigator().estimate() else {
+            return;
+        };
+        let e = est.euler();
+        let Some(psi_mag) = hil::mag_heading_rad(mag_frd, e[0], e[1]) else {
+            return;
+        };
+        let reference = *self.mag_ref_rad.get_or_insert(psi_mag - e[2]);
+        let fix = Fix {
+            yaw_rad: Some(fc_core::control::wrap_pi(psi_mag - reference)),
+            yaw_sigma_rad: MAG_SIGMA_RAD,
+            ..Fix::EMPTY
+        };
+        self.core.push_fix(&fix);
+        self.last_mag_us = Some(t_us);
+        self.counters.mag_fixes = self.counters.mag_fixes.wrapping_add(1);
     }
 
     fn on_state(&mut self, m: &HIL_STATE_QUATERNION_DATA) {

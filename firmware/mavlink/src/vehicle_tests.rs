@@ -566,3 +566,45 @@ fn a_flagged_barometer_bounds_the_height_without_position_fixes() {
     assert!(with_baro.abs() < 0.2, "with the barometer: z {with_baro}");
     assert!((with_baro - at_7s).abs() < 0.03, "still moving: {at_7s} → {with_baro}");
 }
+
+/// A magnetometer flagged in `HIL_SENSOR` holds the heading when nothing
+/// else does: 10 s without fixes, the gyro reading 0.02 rad/s about z too
+/// much (a bias the filter has not seen). Dead reckoning turns by 0.2 rad;
+/// with the magnetometer reading the field of the heading it never left,
+/// the heading stays within 2°.
+#[test]
+fn a_flagged_magnetometer_holds_the_heading_without_fixes() {
+    let heading = |mag: bool| {
+        let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+        let mut out = Sent::default();
+        let mut t = rest(&mut v, &mut out, 0, 2_000);
+        let [_, MavMessage::HIL_SENSOR(mut m)] = at_rest(0) else {
+            unreachable!()
+        };
+        m.zgyro = 0.02;
+        if mag {
+            // North and down, as in central Europe (gauss).
+            (m.xmag, m.ymag, m.zmag) = (0.21, 0.0, 0.43);
+            m.fields_updated |= HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XMAG
+                | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YMAG
+                | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZMAG;
+        }
+        for _ in 0..10_000 {
+            m.time_usec = t;
+            v.handle(&MavMessage::HIL_SENSOR(m.clone()), &mut out, &Still, 0)
+                .unwrap();
+            t += 1_000;
+        }
+        let psi = v.core().navigator().estimate().map_or(f32::NAN, |e| e.euler()[2]);
+        (psi, v.counters().mag_fixes)
+    };
+    let (dead_reckoned, none) = heading(false);
+    let (with_mag, fused) = heading(true);
+    assert_eq!(none, 0);
+    assert!((499..=501).contains(&fused), "{fused}");
+    assert!(
+        (dead_reckoned - 0.2).abs() < 0.01,
+        "dead reckoning turns 0.02·10 rad: ψ {dead_reckoned}"
+    );
+    assert!(with_mag.abs() < 0.035, "with the magnetometer: ψ {with_mag}");
+}
