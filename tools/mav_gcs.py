@@ -11,11 +11,13 @@ heartbeat, then:
    and reads one back by name (PARAM_REQUEST_READ);
 2. writes a non-physical value (a negative mass): the write must be
    refused — the old value echoed in PARAM_VALUE and a STATUSTEXT naming
-   the parameter —, then a valid one (failsafe timeout) and a controller
-   change (which re-designs the controller on board), both accepted;
+   the parameter —, then a valid one (failsafe timeout), a controller
+   change and a weight of the flying controller (each re-designs it on
+   board), all accepted;
 3. arms (COMMAND_LONG MAV_CMD_COMPONENT_ARM_DISARM), retrying while the
    vehicle answers "temporarily rejected" (its estimator aligns first);
-4. checks that a re-designing parameter is refused while armed;
+4. checks that a re-designing parameter (the mass, a gain) is refused
+   while armed;
 5. streams SET_POSITION_TARGET_LOCAL_NED: 1 m up, then a step of
    --step m north; reads LOCAL_POSITION_NED, ATTITUDE and SYS_STATUS;
    the position must end within --tolerance of the set-point;
@@ -178,6 +180,9 @@ class Gcs:
         msg = self.set_param("CTL_ID", ctl)
         self.check(ok and msg is not None and msg.param_value == ctl,
                    f"CTL_ID 2 then {ctl}: re-designed on board while disarmed")
+        # A gain of the flying controller (the LQR's velocity weights ×1.5).
+        msg = self.set_param("LQR_W_VEL", 1.5)
+        self.check(msg is not None and msg.param_value == 1.5, "LQR_W_VEL = 1.5 accepted (LQR re-designed)")
 
         result = None
         end = time.time() + self.timeout
@@ -192,6 +197,12 @@ class Gcs:
                    "HEARTBEAT says armed")
         msg = self.set_param("VEH_MASS", mass * 1.1)
         self.check(msg is not None and msg.param_value == mass, "VEH_MASS refused while armed")
+        roll_p = by_name.get("PD_ROLL_P")
+        n_texts = len(self.texts)
+        msg = self.set_param("PD_ROLL_P", 2.0 * roll_p if roll_p else 100.0)
+        why = [t for t in self.texts[n_texts:] if "PD_ROLL_P" in t and "disarm" in t]
+        self.check(msg is not None and msg.param_value == roll_p and why,
+                   f"a gain (PD_ROLL_P) refused while armed: {why[:1]}")
 
         up, step = (0.0, 0.0, -1.0), (step_m, 0.0, -1.0)
         self.check(self.fly_to(up, 4.0), "1 m up, held 4 s of vehicle time")

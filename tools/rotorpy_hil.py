@@ -64,6 +64,8 @@ def main():
                     help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
                          "sets parameters, arms and flies the vehicle; the flight ends when it is done")
     ap.add_argument("--gcs-port", type=int, default=14550)
+    ap.add_argument("--param", action="append", metavar="NAME=VALUE",
+                    help="a flight-controller parameter set before the flight (repeatable)")
     a = ap.parse_args()
 
     cmd = [a.sil_host, "px4-hil", "--connect", f"127.0.0.1:{a.port}", "--controller", a.controller,
@@ -79,6 +81,8 @@ def main():
         cmd += ["--gcs", f"127.0.0.1:{a.gcs_port}", "--gcs-only"]
     for w in a.waypoint or []:
         cmd += ["--waypoint", w]
+    for p in a.param or []:
+        cmd += ["--param", p]
     if a.scenario:
         cmd += ["--scenario", a.scenario, "--scenario-start", str(a.scenario_start)]
     if a.csv:

@@ -123,6 +123,11 @@ struct Px4HilArgs {
     /// Rate of the position fixes taken from HIL_STATE_QUATERNION, Hz.
     #[arg(long, default_value_t = 100.0, value_name = "HZ")]
     fix_hz: f64,
+    /// Set a flight-controller parameter before the flight (`NAME=VALUE`, repeatable, after the
+    /// options above; e.g. `PD_ROLL_P=250`, `MPC_W_U=4`; README lists them). Checked as the
+    /// vehicle checks a PARAM_SET: a refused one is an error.
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    params: Vec<String>,
     /// Write the trace (t, reported NED, estimated NED, set-point NED) as CSV.
     #[arg(long, value_name = "PATH")]
     csv: Option<PathBuf>,
@@ -920,6 +925,19 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
     settings
         .check()
         .map_err(|e| anyhow::anyhow!("the vehicle's settings are refused: {e} (--hub-m, --vehicle)"))?;
+    for p in &a.params {
+        let Some((name, value)) = p.split_once('=') else {
+            bail!("--param '{p}' is not NAME=VALUE");
+        };
+        let index = fc_mavlink::params::index_of(name.trim().as_bytes())
+            .ok_or_else(|| anyhow::anyhow!("--param '{p}': no parameter is named '{}'", name.trim()))?;
+        let value: f32 = value
+            .trim()
+            .parse()
+            .map_err(|_| anyhow::anyhow!("--param '{p}': '{}' is not a number", value.trim()))?;
+        settings = fc_mavlink::params::write(&settings, index, value)
+            .map_err(|e| anyhow::anyhow!("--param '{p}' is refused: {e}"))?;
+    }
     let mut mission = Vec::new();
     for w in &a.waypoints {
         let v: Vec<f64> = w
