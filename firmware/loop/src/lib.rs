@@ -7,7 +7,7 @@
 //! time does not increase are not flown, counted, and answered with the
 //! held output (a lockstep client must not block); NaN/∞ or a non-unit
 //! attitude is rejected (the reply repeats the current output). No valid
-//! sensor frame for `failsafe_timeout_us` → failsafe: level (zero torques)
+//! sensor frame for the failsafe timeout (parameter `FS_TIMEOUT_MS`) → failsafe: level (zero torques)
 //! and a gentle descent (thrust below hover); the first valid frame
 //! afterwards resumes control. Every loop is bounded; nothing allocates or
 //! blocks.
@@ -49,12 +49,6 @@ use nav::{NavMode, Navigator};
 /// Loop settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FcConfig {
-    /// No valid sensor frame for this long → failsafe, µs; never less than
-    /// two periods of the running controller (the thesis MPC steps at 4 Hz:
-    /// its frames are 250 ms apart by design).
-    pub failsafe_timeout_us: u64,
-    /// Failsafe thrust as a fraction of hover thrust (below 1: descend).
-    pub descent_thrust_fraction: f32,
     /// Control period the controllers are designed for, s (PD/LQR; the MPC
     /// presets fix their own).
     pub control_period_s: f64,
@@ -91,8 +85,6 @@ pub enum TimeBase {
 impl Default for FcConfig {
     fn default() -> Self {
         Self {
-            failsafe_timeout_us: 50_000,
-            descent_thrust_fraction: 0.85,
             control_period_s: 0.002,
             max_reads_per_service: 16,
             time_base: TimeBase::Lockstep,
@@ -293,18 +285,14 @@ impl FlightCore {
     /// its static home, so that the boot design does not run beneath a
     /// stack copy of the whole loop (the controller is ≈ 7 KiB).
     pub fn unstarted(cfg: FcConfig) -> Self {
-        let mut settings = params::Settings::os4();
-        settings.failsafe_timeout_ms = (cfg.failsafe_timeout_us / 1000).min(u64::from(u32::MAX)) as u32;
-        settings.failsafe_descent = cfg.descent_thrust_fraction;
-        Self::unstarted_with(cfg, settings)
+        Self::unstarted_with(cfg, params::Settings::os4())
     }
 
-    /// The flight loop with `settings` (the failsafe's replacing `cfg`'s),
-    /// nothing designed yet: [`FlightCore::start`] checks the settings and
-    /// designs their controller for their vehicle, in place.
-    pub fn unstarted_with(mut cfg: FcConfig, settings: params::Settings) -> Self {
-        cfg.failsafe_timeout_us = u64::from(settings.failsafe_timeout_ms) * 1000;
-        cfg.descent_thrust_fraction = settings.failsafe_descent;
+    /// The flight loop with `settings` (the parameters: vehicle,
+    /// controller, failsafe), nothing designed yet: [`FlightCore::start`]
+    /// checks the settings and designs their controller for their vehicle,
+    /// in place.
+    pub fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {
         let params = settings.vehicle;
         Self {
             cfg,
@@ -482,8 +470,6 @@ impl FlightCore {
             }
         }
         self.settings = next;
-        self.cfg.failsafe_timeout_us = u64::from(next.failsafe_timeout_ms) * 1000;
-        self.cfg.descent_thrust_fraction = next.failsafe_descent;
         Ok(())
     }
 
@@ -574,13 +560,15 @@ impl FlightCore {
     /// Enters the failsafe if the last valid step is more than the timeout
     /// (at least two controller periods) before `now_us`, on the time base's clock.
     fn timeout_at(&mut self, now_us: u64) {
-        let timeout = self.cfg.failsafe_timeout_us.max(self.period_us().saturating_mul(2));
+        // Never less than two periods of the running controller (the thesis
+        // MPC steps at 4 Hz: its frames are 250 ms apart by design).
+        let timeout = (u64::from(self.settings.failsafe_timeout_ms) * 1000).max(self.period_us().saturating_mul(2));
         if let Some(t) = self.last_valid_us {
             if now_us.saturating_sub(t) > timeout && !self.failsafe {
                 self.failsafe = true;
                 self.counters.failsafe_entries = self.counters.failsafe_entries.wrapping_add(1);
                 self.u = Vector4::new(
-                    self.cfg.descent_thrust_fraction * self.settings.vehicle.hover_thrust_n(),
+                    self.settings.failsafe_descent * self.settings.vehicle.hover_thrust_n(),
                     0.0,
                     0.0,
                     0.0,

@@ -46,9 +46,11 @@ pub struct Settings {
     pub controller: ControllerSpec,
     /// Its gains and weights (`PD_*`, `LQR_W_*`, `MPC_W_*`).
     pub tuning: Tuning,
-    /// No `HIL_SENSOR` for this long → failsafe, ms.
+    /// No valid sensor step (`HIL_SENSOR`, or our protocol's `Sensor`/`Imu`)
+    /// for this long → failsafe, ms; the loop never uses less than two
+    /// periods of the running controller.
     pub failsafe_timeout_ms: u32,
-    /// Failsafe thrust as a fraction of hover thrust.
+    /// Failsafe thrust as a fraction of hover thrust (below 1: descend).
     pub failsafe_descent: f32,
     /// No ground-station `HEARTBEAT` for this long while armed (once one
     /// has been seen) → land where it is, ms; 0: off.
@@ -59,11 +61,10 @@ pub struct Settings {
 
 impl Settings {
     /// The OS4 of the thesis on its "+" frame, motor speeds as fractions,
-    /// the boot controller (quaternion LQR), the loop's failsafe defaults,
-    /// fixes at 100 Hz.
+    /// the boot controller (quaternion LQR), failsafe after 50 ms without
+    /// sensor data (85 % of hover thrust), fixes at 100 Hz.
     pub fn os4() -> Self {
         let vehicle = VehicleParams::<f32>::os4();
-        let loop_cfg = crate::FcConfig::default();
         Self {
             vehicle,
             airframe: Airframe::Plus,
@@ -72,8 +73,8 @@ impl Settings {
             unit: MotorUnit::SpeedFraction,
             controller: crate::BOOT_CONTROLLER,
             tuning: Tuning::project(),
-            failsafe_timeout_ms: (loop_cfg.failsafe_timeout_us / 1000) as u32,
-            failsafe_descent: loop_cfg.descent_thrust_fraction,
+            failsafe_timeout_ms: 50,
+            failsafe_descent: 0.85,
             gcs_loss_ms: 5_000,
             fix_period_ms: 10,
         }

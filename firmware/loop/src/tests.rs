@@ -691,7 +691,7 @@ fn parameters_over_the_wire_are_checked_echoed_and_redesign_only_before_the_firs
     let fs = params::index_of(b"FS_TIMEOUT_MS").unwrap() as u16;
     let (_, _, _, value, refusal) = param(&rig.send(&ToFc::ParamSet { index: fs, value: 80.0 }, 2_000));
     assert_eq!((value, refusal), (80.0, 0));
-    assert_eq!(rig.fc.config().failsafe_timeout_us, 80_000);
+    assert_eq!(rig.fc.settings().failsafe_timeout_ms, 80);
     // No such parameter.
     let (_, _, id, value, refusal) = param(&rig.send(&ToFc::ParamRead { index: 999 }, 2_000));
     assert!(value.is_nan() && refusal == 1 && id == [0; 16]);

@@ -279,7 +279,7 @@ fn parameters_answer_as_the_protocol_says_and_redesigns_wait_for_disarm() {
     v.handle(&param_set("FS_TIMEOUT_MS", 80.0), &mut out, &Still, 0)
         .unwrap();
     assert_eq!(out.param("FS_TIMEOUT_MS"), Some(80.0));
-    assert_eq!(v.core().config().failsafe_timeout_us, 80_000);
+    assert_eq!(v.core().settings().failsafe_timeout_ms, 80);
     // Disarming on the ground is obeyed; the next answer is all zeros.
     v.handle(&command(0.0, 0.0), &mut out, &Still, 0).unwrap();
     assert!(!v.armed());
