@@ -41,7 +41,7 @@ use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
 use fc_loop::nav::NavMode;
-use fc_loop::{setpoint_to_wire, FcConfig, FlightCore, Outbox};
+use fc_loop::{FcConfig, FlightCore, Outbox};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
@@ -586,22 +586,23 @@ impl MavVehicle {
             self.counters.ignored = self.counters.ignored.wrapping_add(1);
             return Ok(());
         }
-        match setpoint_from_target(m, self.core.setpoint().yaw_rad) {
-            Some(_) if self.landing => Ok(()),
-            Some(sp) => {
-                self.core.set_setpoint(&sp);
-                self.setpoint_given = true;
-                Ok(())
-            }
-            None => {
-                self.counters.setpoints_refused = self.counters.setpoints_refused.wrapping_add(1);
-                self.say(
-                    out,
-                    MavSeverity::MAV_SEVERITY_WARNING,
-                    format_args!("set-point refused: LOCAL_NED, position, finite"),
-                )
-            }
+        // The frame and mask here; the values (finite, within range) by the
+        // flight loop, as for every protocol.
+        let accepted = match setpoint_from_target(m, self.core.setpoint().yaw_rad) {
+            Some(_) if self.landing => return Ok(()),
+            Some(sp) => self.core.set_setpoint(&sp),
+            None => false,
+        };
+        if accepted {
+            self.setpoint_given = true;
+            return Ok(());
         }
+        self.counters.setpoints_refused = self.counters.setpoints_refused.wrapping_add(1);
+        self.say(
+            out,
+            MavSeverity::MAV_SEVERITY_WARNING,
+            format_args!("set-point refused: LOCAL_NED, position, finite"),
+        )
     }
 
     fn on_param_set<S: MavSink>(&mut self, m: &PARAM_SET_DATA, out: &mut S) -> Result<(), S::Error> {
@@ -748,8 +749,9 @@ impl MavVehicle {
 }
 
 /// `SET_POSITION_TARGET_LOCAL_NED` as a set-point: `None` unless the frame
-/// is `MAV_FRAME_LOCAL_NED`, the position is given and everything used is
-/// finite. A masked yaw keeps `yaw_rad`.
+/// is `MAV_FRAME_LOCAL_NED` and the position is given. A masked yaw keeps
+/// `yaw_rad`. The values are not checked here:
+/// [`FlightCore::set_setpoint`] refuses what is not finite or in range.
 pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32) -> Option<Setpoint<f32>> {
     use PositionTargetTypemask as T;
     let mask = m.type_mask;
@@ -787,7 +789,7 @@ pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32
     if !mask.contains(T::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE) {
         sp.yaw_rate_radps = m.yaw_rate;
     }
-    fc_loop::setpoint_from_wire(&setpoint_to_wire(&sp))
+    Some(sp)
 }
 
 #[cfg(test)]

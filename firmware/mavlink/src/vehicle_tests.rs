@@ -341,10 +341,33 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     .unwrap();
     assert_eq!(v.counters().setpoints_refused, 1);
     sp.coordinate_frame = MavFrame::MAV_FRAME_LOCAL_NED;
-    v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp), &mut out, &Still, 0)
-        .unwrap();
+    v.handle(
+        &MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp.clone()),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
     assert_eq!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     assert_eq!(v.core().setpoint().yaw_rad, 0.5);
+    // A NaN velocity (not masked) is refused by the flight loop: counted,
+    // said, and the set-point in force stays.
+    let bad = SET_POSITION_TARGET_LOCAL_NED_DATA {
+        vx: f32::NAN,
+        x: 9.0,
+        ..sp
+    };
+    v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(bad), &mut out, &Still, 0)
+        .unwrap();
+    assert_eq!(v.counters().setpoints_refused, 2);
+    assert_eq!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    assert!(
+        out.texts()
+            .iter()
+            .filter(|t| t.starts_with("set-point refused"))
+            .count()
+            == 2
+    );
 }
 
 #[test]
