@@ -294,13 +294,7 @@ impl Vehicle for InQemu {
 /// Writes the parameters of `s` that differ from the vehicle's boot values
 /// and checks each echo; refusals are errors with the vehicle's reason.
 fn write_parameters(v: &mut dyn Vehicle, s: &Settings) -> Result<()> {
-    use fc_mavlink::params::PARAMS;
-    let boot = Settings::os4();
-    for p in PARAMS.iter() {
-        let value = (p.get)(s);
-        if value == (p.get)(&boot) {
-            continue;
-        }
+    for (_, p, value) in fc_mavlink::params::differences(s, &Settings::os4()) {
         let set = MavMessage::PARAM_SET(common::PARAM_SET_DATA {
             param_value: value,
             target_system: SYSTEM_ID,

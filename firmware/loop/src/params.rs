@@ -667,6 +667,16 @@ pub fn index_of(id: &[u8]) -> Option<usize> {
     PARAMS.iter().position(|p| p.id.as_bytes() == &id[..len])
 }
 
+/// The parameters whose value in `s` differs from `base` (e.g. the boot
+/// settings), as `(index, parameter, value in s)`: what a host writes to
+/// make a flight controller booted with `base` fly `s`.
+pub fn differences<'a>(s: &'a Settings, base: &'a Settings) -> impl Iterator<Item = (usize, &'static Param, f32)> + 'a {
+    PARAMS.iter().enumerate().filter_map(move |(i, p)| {
+        let value = (p.get)(s);
+        (value.to_bits() != (p.get)(base).to_bits()).then_some((i, p, value))
+    })
+}
+
 /// Writes parameter `index` = `value` into a copy of `s` and checks the
 /// copy; the new settings, or why not.
 pub fn write(s: &Settings, index: usize, value: f32) -> Result<Settings, Refusal> {

@@ -214,7 +214,7 @@ impl FcClient {
     /// controller has (as read back), so that its controllers are
     /// designed for `vehicle` (`--vehicle` over a link).
     pub fn set_vehicle(&mut self, vehicle: &fc_core::VehicleParams<f64>) -> Result<()> {
-        use fc_loop::params::{Settings, PARAMS};
+        use fc_loop::params::{differences, Settings};
         let os4 = fc_core::VehicleParams::<f64>::OS4;
         if vehicle.gravity_mps2 != os4.gravity_mps2 || vehicle.rotor_gain != os4.rotor_gain {
             bail!(
@@ -224,13 +224,10 @@ impl FcClient {
         }
         let mut wanted = Settings::os4();
         wanted.vehicle = vehicle.cast();
-        for (i, p) in PARAMS.iter().enumerate().filter(|(_, p)| p.id.starts_with("VEH_")) {
-            let value = (p.get)(&wanted);
-            if value != (p.get)(&Settings::os4()) {
-                let got = self.set_param(i, value)?;
-                if got != value {
-                    bail!("{} reads back as {got}, not {value}", p.id);
-                }
+        for (i, p, value) in differences(&wanted, &Settings::os4()) {
+            let got = self.set_param(i, value)?;
+            if got != value {
+                bail!("{} reads back as {got}, not {value}", p.id);
             }
         }
         Ok(())
