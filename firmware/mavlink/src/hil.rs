@@ -57,16 +57,21 @@ pub struct HilImu {
     pub mag_frd_gauss: Option<Vector3<f32>>,
 }
 
-/// `HIL_SENSOR` → IMU sample. Refused unless the six inertial fields are
-/// flagged updated and finite.
-pub fn imu_from_hil_sensor(m: &HIL_SENSOR_DATA) -> Result<HilImu, HilError> {
-    let inertial = HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XACC
+/// The `HIL_SENSOR` flags of the six inertial fields (accelerometer and
+/// gyro, x y z), all of which a sample must have updated.
+pub fn inertial_flags() -> HilSensorUpdatedFlags {
+    HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XACC
         | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YACC
         | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZACC
         | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XGYRO
         | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YGYRO
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZGYRO;
-    if !m.fields_updated.contains(inertial) {
+        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZGYRO
+}
+
+/// `HIL_SENSOR` → IMU sample. Refused unless the six inertial fields are
+/// flagged updated and finite.
+pub fn imu_from_hil_sensor(m: &HIL_SENSOR_DATA) -> Result<HilImu, HilError> {
+    if !m.fields_updated.contains(inertial_flags()) {
         return Err(HilError::NoInertialData);
     }
     let named = [

@@ -237,12 +237,7 @@ proptest! {
 #[test]
 fn a_vertical_field_has_no_heading_and_flags_gate_the_magnetometer() {
     assert_eq!(mag_heading_rad(&nalgebra::Vector3::new(0.0, 0.0, 0.5), 0.0, 0.0), None);
-    let inertial = HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XACC
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YACC
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZACC
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XGYRO
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YGYRO
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZGYRO;
+    let inertial = hil::inertial_flags();
     let mut m = HIL_SENSOR_DATA {
         zacc: -9.81,
         xmag: 0.2,

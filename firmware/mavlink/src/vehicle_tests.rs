@@ -70,12 +70,7 @@ fn message_name(m: &MavMessage) -> &'static str {
 
 /// At rest on the ground at home, level, heading north.
 fn at_rest(t_us: u64) -> [MavMessage; 2] {
-    let flags = HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XACC
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YACC
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZACC
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XGYRO
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YGYRO
-        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZGYRO;
+    let flags = hil::inertial_flags();
     [
         MavMessage::HIL_STATE_QUATERNION(HIL_STATE_QUATERNION_DATA {
             time_usec: t_us,

@@ -229,8 +229,22 @@ impl<T: RealField + Copy> Controller<T> for PdEuler<T> {
 }
 
 #[cfg(test)]
-mod gain_scale_tests {
+pub(crate) mod gain_scale_tests {
     use super::*;
+
+    /// The OS4 with inertia ×4 about x and y, ×3 about z and the arm ×2:
+    /// its attitude gains in input units are ×2 (roll, pitch) and ×3 (yaw).
+    pub(crate) fn bigger_os4() -> VehicleParams<f64> {
+        let os4 = VehicleParams::<f64>::os4();
+        let mut p = os4;
+        p.inertia_kgm2 = [
+            4.0 * os4.inertia_kgm2[0],
+            4.0 * os4.inertia_kgm2[1],
+            3.0 * os4.inertia_kgm2[2],
+        ];
+        p.arm_m = 2.0 * os4.arm_m;
+        p
+    }
 
     #[test]
     fn attitude_gains_keep_the_os4s_angular_dynamics_on_another_vehicle() {
@@ -243,14 +257,7 @@ mod gain_scale_tests {
         );
         // Inertia ×4 about x and y, ×3 about z, arm ×2: roll and pitch
         // gains ×2 (I/l), yaw ×3 (Iz); the position loops unchanged.
-        let os4 = VehicleParams::<f64>::os4();
-        let mut p = os4;
-        p.inertia_kgm2 = [
-            4.0 * os4.inertia_kgm2[0],
-            4.0 * os4.inertia_kgm2[1],
-            3.0 * os4.inertia_kgm2[2],
-        ];
-        p.arm_m = 2.0 * os4.arm_m;
+        let (os4, p) = (VehicleParams::<f64>::os4(), bigger_os4());
         let k = attitude_gain_scale(&p);
         assert!(
             (k[0] - 2.0).abs() < 1e-12 && (k[1] - 2.0).abs() < 1e-12 && (k[2] - 3.0).abs() < 1e-12,

@@ -242,14 +242,10 @@ mod tests {
     /// the arm gets twice the roll gain in N/rad (and 3× Iz, 3× yaw).
     #[test]
     fn attitude_gains_command_the_same_angular_acceleration_on_any_vehicle() {
-        let os4 = VehicleParams::<f64>::os4();
-        let mut p = os4;
-        p.inertia_kgm2 = [
-            4.0 * os4.inertia_kgm2[0],
-            4.0 * os4.inertia_kgm2[1],
-            3.0 * os4.inertia_kgm2[2],
-        ];
-        p.arm_m = 2.0 * os4.arm_m;
+        let (os4, p) = (
+            VehicleParams::<f64>::os4(),
+            super::super::pd_euler::gain_scale_tests::bigger_os4(),
+        );
         let t = Tuning::project();
         let (a, b) = (PdEulerGains::from_tuning(&t, &os4), PdEulerGains::from_tuning(&t, &p));
         assert!(close(b.roll.kp, 2.0 * a.roll.kp) && close(b.pitch.kd, 2.0 * a.pitch.kd));
