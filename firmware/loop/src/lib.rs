@@ -552,6 +552,13 @@ impl FlightCore {
         }
     }
 
+    /// How often the running controller runs, µs (its own period, or the
+    /// loop's control period): on the sample grid, at the first sample at
+    /// or after each multiple ([`schedule::Schedule`]).
+    pub fn controller_period_us(&self) -> u64 {
+        self.period_us()
+    }
+
     /// The running controller's period, µs.
     fn period_us(&self) -> u64 {
         schedule::period_us(self.ctrl.period_s().unwrap_or(self.cfg.control_period_s))
