@@ -98,9 +98,8 @@ pub struct Tuning {
     pub mpc: WeightScale,
     /// Time constant of the MPC's moment-disturbance estimate, s (0: the
     /// preset's, [`MpcConfig::observer_moment_tau_s`]). The fast preset's
-    /// 5 ms makes up for slow rotors on the OS4 but passes gyro noise
-    /// straight into the torque; a vehicle flown from a noisy IMU wants it
-    /// slower (rotorpy's Crazyflie: 0.5 s, README).
+    /// 5 ms makes up for slow rotors on the OS4; rotorpy's Crazyflie flies
+    /// only with it slower (0.5 s; why is partly open, README).
     pub mpc_moment_tau_s: f32,
 }
 
@@ -134,9 +133,7 @@ impl Tuning {
             mpc_moment_tau_s: 0.0,
         }
     }
-}
 
-impl Tuning {
     /// An MPC configuration with this tuning applied: weights scaled, and
     /// the moment observer's time constant replaced unless it is 0.
     pub fn apply_mpc(&self, cfg: &mut MpcConfig) {
