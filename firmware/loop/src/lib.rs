@@ -449,11 +449,10 @@ impl FlightCore {
         if (p.get)(&next).to_bits() == (p.get)(&self.settings).to_bits() {
             return Ok(());
         }
-        let redesign = p.redesign;
-        if redesign && !allow_redesign {
+        if p.redesign && !allow_redesign {
             return Err(Refusal::Armed);
         }
-        if redesign {
+        if p.redesign {
             let old = self.settings;
             self.settings.vehicle = next.vehicle;
             self.settings.tuning = next.tuning;
@@ -500,22 +499,6 @@ impl FlightCore {
     pub fn try_select(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
         self.install(spec)?;
         self.selections = self.selections.wrapping_add(1);
-        Ok(())
-    }
-
-    /// Designs the running controller for vehicle `params`. A vehicle
-    /// [`VehicleParams::check`] refuses, or one the controller cannot be
-    /// designed for, is refused and the previous one stays (redesigned).
-    pub fn set_vehicle(&mut self, params: VehicleParams<f32>) -> Result<(), ControlError> {
-        params.check().map_err(|_| ControlError::InvalidParameter)?;
-        let old = self.settings.vehicle;
-        self.settings.vehicle = params;
-        let spec = self.spec;
-        if let Err(e) = self.install(spec) {
-            self.settings.vehicle = old;
-            let _ = self.install(spec);
-            return Err(e);
-        }
         Ok(())
     }
 
