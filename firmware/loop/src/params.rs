@@ -112,9 +112,7 @@ impl Settings {
         if !(10..=5_000).contains(&self.failsafe_timeout_ms) {
             return Err(Refusal::Range { lo: 10.0, hi: 5_000.0 });
         }
-        if !(0.5..=1.0).contains(&self.failsafe_descent) {
-            return Err(Refusal::Range { lo: 0.5, hi: 1.0 });
-        }
+        within(self.failsafe_descent, 0.5, 1.0)?;
         if self.gcs_loss_ms != 0 && !(500..=60_000).contains(&self.gcs_loss_ms) {
             return Err(Refusal::Range {
                 lo: 500.0,
@@ -128,18 +126,20 @@ impl Settings {
     }
 }
 
+/// `v` in `[lo, hi]` (NaN is not).
+fn within(v: f32, lo: f32, hi: f32) -> Result<(), Refusal> {
+    if v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(Refusal::Range { lo, hi })
+    }
+}
+
 /// The gains' and weights' ranges: PD position gains in [0, 100]
 /// ((m/s²)/m, (m/s²)/(m/s)), attitude gains in [0, 10⁴] ((rad/s²)/rad,
 /// (rad/s²)/(rad/s)); weight multipliers in [10⁻³, 10³]; the MPC's moment
 /// observer 0 (the preset's) or in [10⁻³, 10] s.
 fn check_tuning(t: &Tuning) -> Result<(), Refusal> {
-    let within = |v: f32, lo: f32, hi: f32| {
-        if v >= lo && v <= hi {
-            Ok(())
-        } else {
-            Err(Refusal::Range { lo, hi })
-        }
-    };
     for a in t.pd_position {
         within(a.kp, 0.0, 100.0)?;
         within(a.kd, 0.0, 100.0)?;
