@@ -41,6 +41,7 @@ use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
 use fc_loop::nav::NavMode;
+use fc_loop::schedule::Schedule;
 use fc_loop::{FcConfig, FlightCore, Outbox};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
@@ -166,14 +167,14 @@ pub struct MavVehicle {
     /// Pressure altitude at home (NED z = 0), m: the first `HIL_SENSOR`
     /// barometer reading referenced to the estimated height then.
     baro_ref_m: Option<f32>,
-    /// Time of the last barometer reading fused, µs.
-    last_baro_us: Option<u64>,
+    /// When a barometer reading is next fused (every [`BARO_PERIOD_US`]).
+    baro_due: Schedule,
     /// Magnetic heading minus true heading (the declination, and whatever
     /// the simulator's field adds), rad: the first reading referenced to
     /// the estimated heading then.
     mag_ref_rad: Option<f32>,
-    /// Time of the last magnetometer heading fused, µs.
-    last_mag_us: Option<u64>,
+    /// When a magnetometer heading is next fused (every [`BARO_PERIOD_US`]).
+    mag_due: Schedule,
     /// Time of the last `HIL_SENSOR`, µs.
     last_sensor_us: Option<u64>,
     /// Time between the last two `HIL_SENSOR`s, µs (0: not known yet).
@@ -224,9 +225,9 @@ impl MavVehicle {
             home: None,
             last_fix_us: None,
             baro_ref_m: None,
-            last_baro_us: None,
+            baro_due: Schedule::new(),
             mag_ref_rad: None,
-            last_mag_us: None,
+            mag_due: Schedule::new(),
             last_sensor_us: None,
             sensor_interval_us: 0,
             seq: 0,
@@ -363,9 +364,9 @@ impl MavVehicle {
             self.home = None;
             self.last_fix_us = None;
             self.baro_ref_m = None;
-            self.last_baro_us = None;
+            self.baro_due.reset();
             self.mag_ref_rad = None;
-            self.last_mag_us = None;
+            self.mag_due.reset();
             self.next_us = [s.time_us; 3];
         }
         if let Some(last) = self.last_sensor_us.filter(|&t| s.time_us > t) {
@@ -408,12 +409,12 @@ impl MavVehicle {
     /// then (a barometer's altitude is above sea level, and drifts with the
     /// weather: what is fused is its change).
     fn on_baro(&mut self, t_us: u64, alt_m: f32) {
-        if self.last_baro_us.is_some_and(|t| t_us < t + BARO_PERIOD_US) {
-            return;
-        }
         let Some(est) = self.core.navigator().estimate() else {
             return;
         };
+        if !self.baro_due.due(t_us, BARO_PERIOD_US) {
+            return;
+        }
         let reference = *self.baro_ref_m.get_or_insert(alt_m + est.pos_ned_m[2]);
         let fix = Fix {
             alt_m: Some(alt_m - reference),
@@ -421,7 +422,6 @@ impl MavVehicle {
             ..Fix::EMPTY
         };
         self.core.push_fix(&fix);
-        self.last_baro_us = Some(t_us);
         self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
     }
 
@@ -431,9 +431,6 @@ impl MavVehicle {
     /// The first reading is referenced to the estimated heading then, which
     /// removes the declination (no world magnetic model on board).
     fn on_mag(&mut self, t_us: u64, mag_frd: &Vector3<f32>) {
-        if self.last_mag_us.is_some_and(|t| t_us < t + BARO_PERIOD_US) {
-            return;
-        }
         let Some(est) = self.core.navigator().estimate() else {
             return;
         };
@@ -441,6 +438,9 @@ impl MavVehicle {
         let Some(psi_mag) = hil::mag_heading_rad(mag_frd, e[0], e[1]) else {
             return;
         };
+        if !self.mag_due.due(t_us, BARO_PERIOD_US) {
+            return;
+        }
         let reference = *self.mag_ref_rad.get_or_insert(psi_mag - e[2]);
         let fix = Fix {
             yaw_rad: Some(fc_core::control::wrap_pi(psi_mag - reference)),
@@ -448,7 +448,6 @@ impl MavVehicle {
             ..Fix::EMPTY
         };
         self.core.push_fix(&fix);
-        self.last_mag_us = Some(t_us);
         self.counters.mag_fixes = self.counters.mag_fixes.wrapping_add(1);
     }
 
