@@ -565,6 +565,26 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
     std::println!("fuzz: {frames} frames, reader {c:?}, vehicle {:?}", v.counters());
 }
 
+/// A vehicle aligned at rest at home (2 s of samples and fixes), then 10 s
+/// of `HIL_SENSOR` only at 1 kHz: the at-rest sample as `edit` changes it;
+/// `each(k, vehicle)` sees the vehicle before sample `k`.
+fn sensors_only(edit: impl Fn(&mut HIL_SENSOR_DATA), mut each: impl FnMut(u64, &MavVehicle)) -> MavVehicle {
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut out = Sent::default();
+    let t = rest(&mut v, &mut out, 0, 2_000);
+    let [_, MavMessage::HIL_SENSOR(mut m)] = at_rest(0) else {
+        unreachable!()
+    };
+    edit(&mut m);
+    for k in 0..10_000 {
+        each(k, &v);
+        m.time_usec = t + k * 1_000;
+        v.handle(&MavMessage::HIL_SENSOR(m.clone()), &mut out, &Still, 0)
+            .unwrap();
+    }
+    v
+}
+
 /// A barometer flagged in `HIL_SENSOR` bounds the height when nothing else
 /// does. Aligned at rest at home with fixes, then 10 s of `HIL_SENSOR`
 /// only, its accelerometer reading 0.1 m/s² too much upward force (a bias
@@ -576,28 +596,22 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
 #[test]
 fn a_flagged_barometer_bounds_the_height_without_position_fixes() {
     let drift = |baro: bool| {
-        let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
-        let mut out = Sent::default();
-        let mut t = rest(&mut v, &mut out, 0, 2_000);
-        let [_, MavMessage::HIL_SENSOR(mut m)] = at_rest(0) else {
-            unreachable!()
-        };
-        m.zacc = -9.81 - 0.1;
-        if baro {
-            m.pressure_alt = 480.0;
-            m.fields_updated |= HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_PRESSURE_ALT;
-        }
         let z = |v: &MavVehicle| v.core().navigator().estimate().map_or(f32::NAN, |e| e.pos_ned_m[2]);
         let mut z_7s = f32::NAN;
-        for k in 0..10_000 {
-            if k == 7_000 {
-                z_7s = z(&v);
-            }
-            m.time_usec = t;
-            v.handle(&MavMessage::HIL_SENSOR(m.clone()), &mut out, &Still, 0)
-                .unwrap();
-            t += 1_000;
-        }
+        let v = sensors_only(
+            |m| {
+                m.zacc = -9.81 - 0.1;
+                if baro {
+                    m.pressure_alt = 480.0;
+                    m.fields_updated |= HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_PRESSURE_ALT;
+                }
+            },
+            |k, v| {
+                if k == 7_000 {
+                    z_7s = z(v);
+                }
+            },
+        );
         (z_7s, z(&v), v.counters().baro_fixes)
     };
     let (_, dead_reckoned, none) = drift(false);
@@ -621,26 +635,19 @@ fn a_flagged_barometer_bounds_the_height_without_position_fixes() {
 #[test]
 fn a_flagged_magnetometer_holds_the_heading_without_fixes() {
     let heading = |mag: bool| {
-        let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
-        let mut out = Sent::default();
-        let mut t = rest(&mut v, &mut out, 0, 2_000);
-        let [_, MavMessage::HIL_SENSOR(mut m)] = at_rest(0) else {
-            unreachable!()
-        };
-        m.zgyro = 0.02;
-        if mag {
-            // North and down, as in central Europe (gauss).
-            (m.xmag, m.ymag, m.zmag) = (0.21, 0.0, 0.43);
-            m.fields_updated |= HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XMAG
-                | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YMAG
-                | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZMAG;
-        }
-        for _ in 0..10_000 {
-            m.time_usec = t;
-            v.handle(&MavMessage::HIL_SENSOR(m.clone()), &mut out, &Still, 0)
-                .unwrap();
-            t += 1_000;
-        }
+        let v = sensors_only(
+            |m| {
+                m.zgyro = 0.02;
+                if mag {
+                    // North and down, as in central Europe (gauss).
+                    (m.xmag, m.ymag, m.zmag) = (0.21, 0.0, 0.43);
+                    m.fields_updated |= HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_XMAG
+                        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_YMAG
+                        | HilSensorUpdatedFlags::HIL_SENSOR_UPDATED_ZMAG;
+                }
+            },
+            |_, _| {},
+        );
         let psi = v.core().navigator().estimate().map_or(f32::NAN, |e| e.euler()[2]);
         (psi, v.counters().mag_fixes)
     };
