@@ -4,11 +4,14 @@
 //!
 //! `firmware` (our protocol):
 //! - flash (vector table, code, read-only data, and the initial values of
-//!   `.data`, which live in flash too) ≤ 272 KiB: about a quarter of the
+//!   `.data`, which live in flash too) ≤ 280 KiB: about a quarter of the
 //!   F405's 1 MiB, leaving room for a bootloader, parameters and logs. It
 //!   was 256 KiB until the parameters came on board (session 10: the table
 //!   of 28, their whole-settings checks, the mixer's among them, ≈ 15 KiB;
-//!   the image went from 251 340 B to 266 620 B);
+//!   the image went from 251 340 B to 266 620 B), and 272 KiB until the MPC
+//!   fitted 1 kHz (issue 14: the exact QP's four block sizes, the
+//!   precomputed state responses and the faster products, ≈ 11 KiB; from
+//!   273 956 B to 284 908 B);
 //! - static RAM (`.data`, `.bss`, `.uninit`) ≤ 16 KiB: the flight loop with
 //!   its controller (≈ 7.5 KiB, designed in place) and the link's queues.
 //!   The stack's high-water mark (≤ 32 KiB) is the QEMU budget test's; both
@@ -69,7 +72,7 @@ fn check(name: &str, elf: &std::path::Path, flash_budget: u64, ram_budget: u64) 
 #[test]
 fn the_image_fits_its_flash_and_static_ram_budgets() {
     let elf = sil_host::link::firmware_elf().expect("building the thumbv7em image");
-    check("image", &elf, 272 * 1024, 16 * 1024);
+    check("image", &elf, 280 * 1024, 16 * 1024);
 }
 
 #[test]

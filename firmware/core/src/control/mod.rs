@@ -314,7 +314,9 @@ impl<T: RealField + Copy> HeadingFrame<T> {
 /// Wraps an angle to (−π, π].
 pub fn wrap_pi<T: RealField + Copy>(a: T) -> T {
     let two_pi = T::two_pi();
-    let mut x = a % two_pi;
+    // `%` is a call into `fmod` (a loop over the exponent difference on the
+    // M4); within one turn it is the identity, so it is skipped there.
+    let mut x = if a.abs() < two_pi { a } else { a % two_pi };
     if x > T::pi() {
         x -= two_pi;
     } else if x <= -T::pi() {

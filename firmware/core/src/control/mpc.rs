@@ -32,6 +32,7 @@ use super::{
     validate, wrap_pi, ControlError, ControlOutput, ControlStatus, Controller, HeadingFrame, ReferenceMode, Setpoint,
     StateEstimate,
 };
+use crate::linalg::matvec::{mul, tr_mul};
 use crate::linalg::solve_dare;
 use crate::lit;
 use crate::model::{
@@ -99,6 +100,11 @@ pub struct MpcConfig {
     /// ([`Mpc::iteration_bound`]) every solve is certified; below it a solve
     /// may stop unproved ([`crate::qp::QpStatus::IterationLimit`]).
     pub qp_max_iterations: u32,
+    /// Solve the QP exactly by enumerating the active sets of its
+    /// independent blocks when its Hessian has them
+    /// ([`crate::qp::QpSettings::enumerate`]); `false`: the fast gradient
+    /// method with its certified iteration bound.
+    pub qp_enumerate: bool,
 }
 
 impl MpcConfig {
@@ -129,6 +135,7 @@ impl MpcConfig {
             qp_early_exit: true,
             qp_accuracy: 1e-6,
             qp_max_iterations: 2000,
+            qp_enumerate: true,
         }
     }
 
@@ -204,6 +211,7 @@ impl MpcConfig {
             // bound (260 iterations with M = 3), which fits a 5 ms step
             // (src/bin/budget.rs, `certified` rows).
             qp_max_iterations: u32::MAX,
+            qp_enumerate: true,
         }
     }
 }
@@ -250,12 +258,12 @@ type Vec12<T> = SVector<T, 12>;
 /// };
 /// let out = mpc.update(&est, &Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0))?;
 /// assert!(out.u[0] > params.hover_thrust_n()); // it starts climbing before the setpoint moves
-/// // The QP it solved: its accuracy proved within the a-priori bound,
-/// // the answer inside the input box.
+/// // The QP it solved: exactly, by enumerating the active sets of its four
+/// // independent input channels; the answer inside the input box.
 /// use fc_core::qp::QpStatus;
 /// let qp = mpc.last_qp().expect("a QP was solved");
-/// assert!(qp.solution.iterations <= mpc.iteration_bound());
-/// assert!(matches!(qp.solution.status, QpStatus::Converged | QpStatus::Polished | QpStatus::BoundReached));
+/// assert_eq!(qp.solution.status, QpStatus::Exact);
+/// assert!(qp.solution.gap <= 1e-5); // its certificate, in the objective's units
 /// assert!((0..12).all(|i| qp.lb[i] <= qp.solution.z[i] && qp.solution.z[i] <= qp.ub[i]));
 /// # Ok::<(), fc_core::control::ControlError>(())
 /// ```
@@ -274,6 +282,18 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     wd_e: SMatrix<T, 12, 6>,
     q: Vec12<T>,
     p_term: Mat12<T>,
+    /// The state cost's gradient in z is linear in the initial state, the
+    /// disturbance and its trend: `g = Gx·x₀ + Gw·d + Gt·ḋ + (reference
+    /// part)`. These are computed once at design ([`Mpc::design_response`]),
+    /// so a step needs no free-response simulation, only the adjoint pass
+    /// over the references.
+    gx: SMatrix<T, NZ, 12>,
+    /// Gradient per unit of disturbance (heading frame: acceleration, m/s²,
+    /// then angular acceleration, rad/s²).
+    gw: SMatrix<T, NZ, 6>,
+    /// Gradient per unit of the horizontal disturbance's rate (heading
+    /// frame, m/s³), through the damped trend.
+    gt: SMatrix<T, NZ, 3>,
     r: Vector4<T>,
     s: Vector4<T>,
     qp: BoxQp<T, NZ>,
@@ -364,6 +384,7 @@ fn qp_settings<T: RealField + Copy>(cfg: &MpcConfig) -> QpSettings<T> {
         accuracy: lit(cfg.qp_accuracy),
         max_iterations: cfg.qp_max_iterations,
         polish: true,
+        enumerate: cfg.qp_enumerate,
     }
 }
 
@@ -430,6 +451,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             wd_e: SMatrix::zeros(),
             q: Vec12::zeros(),
             p_term: Mat12::zeros(),
+            gx: SMatrix::zeros(),
+            gw: SMatrix::zeros(),
+            gt: SMatrix::zeros(),
             r: Vector4::zeros(),
             s: Vector4::zeros(),
             qp: BoxQp::identity(),
@@ -529,13 +553,19 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     fn design_qp(&mut self) -> Result<(), ControlError> {
         let h = self.build_hessian();
         self.qp = BoxQp::new(&h).map_err(|_| ControlError::InvalidParameter)?;
+        self.design_response();
         for b in 0..M {
             for c in 0..4 {
                 self.lb[4 * b + c] = self.bx.lo[c] - self.u_hover[c];
                 self.ub[4 * b + c] = self.bx.hi[c] - self.u_hover[c];
             }
         }
-        self.iteration_bound = self.qp.iteration_bound(&self.lb, &self.ub, self.settings.accuracy);
+        // An exact (enumerated) solve is one pass: its "bound" is 1.
+        self.iteration_bound = if self.settings.enumerate && self.qp.blocks().is_some() {
+            1
+        } else {
+            self.qp.iteration_bound(&self.lb, &self.ub, self.settings.accuracy)
+        };
         Ok(())
     }
 
@@ -597,21 +627,20 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         Ok(())
     }
 
-    /// Adjoint gradient of the state cost for a trajectory `x[1..=N]` with
-    /// references `r[1..=N]`: per-move sums of `Bdᵀλ_{k+1}`.
-    fn state_gradient(&self, x: &[Vec12<T>; N], r: &[Vec12<T>; N]) -> SVector<T, NZ> {
+    /// Adjoint gradient of the state cost for the errors `e[k] = x[k] − r[k]`
+    /// of steps 1..=N: per-move sums of `Bdᵀλ_{k+1}`.
+    fn state_gradient(&self, e: &[Vec12<T>; N]) -> SVector<T, NZ> {
         let mut g = SVector::<T, NZ>::zeros();
         let mut lambda = Vec12::<T>::zeros();
         for k in (0..N).rev() {
-            let e = x[k] - r[k];
             let w = if k == N - 1 {
-                self.p_term * e
+                mul(&self.p_term, &e[k])
             } else {
-                self.q.component_mul(&e)
+                self.q.component_mul(&e[k])
             };
-            lambda = w + self.ad.tr_mul(&lambda);
+            lambda = w + tr_mul(&self.ad, &lambda);
             // x[k] is the state after input step k: its λ feeds input step k.
-            let gk = self.bd.tr_mul(&lambda);
+            let gk = tr_mul(&self.bd, &lambda);
             let b = block_of::<M>(k);
             for c in 0..4 {
                 g[4 * b + c] += gk[c];
@@ -620,12 +649,42 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         g
     }
 
+    /// `Gx`, `Gw`, `Gt`: the state cost's gradient for a unit initial
+    /// state, disturbance and disturbance rate, column by column (each the
+    /// adjoint of one free response, references zero).
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
+    fn design_response(&mut self) {
+        for col in 0..12 + 6 + 3 {
+            // Column `col` of [Gx | Gw | Gt]: its initial state and its
+            // input to the prediction at step k.
+            let x0 = if col < 12 { Vec12::ith(col, T::one()) } else { Vec12::zeros() };
+            let input = |k: usize| match col {
+                0..12 => Vec12::<T>::zeros(),
+                12..18 => self.wd.column(col - 12).into_owned(),
+                _ => self.wd.column(col - 18) * self.trend[k],
+            };
+            let mut x = [Vec12::<T>::zeros(); N];
+            let mut xk = x0;
+            for (k, xs) in x.iter_mut().enumerate() {
+                xk = mul(&self.ad, &xk) + input(k);
+                *xs = xk;
+            }
+            let g = self.state_gradient(&x);
+            match col {
+                0..12 => self.gx.set_column(col, &g),
+                12..18 => self.gw.set_column(col - 12, &g),
+                _ => self.gt.set_column(col - 18, &g),
+            }
+        }
+    }
+
     // Design-time code: kept out of line so that its large frames are not
     // merged into the callers' (stack) and not copied into each (flash).
     #[inline(never)]
     fn build_hessian(&self) -> SMatrix<T, NZ, NZ> {
         let mut h = SMatrix::<T, NZ, NZ>::zeros();
-        let zero_ref = [Vec12::<T>::zeros(); N];
         for col in 0..NZ {
             let (b, c) = (col / 4, col % 4);
             let mut x = [Vec12::<T>::zeros(); N];
@@ -638,7 +697,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
                 xk = self.ad * xk + self.bd * u;
                 *xs = xk;
             }
-            h.set_column(col, &self.state_gradient(&x, &zero_ref));
+            h.set_column(col, &self.state_gradient(&x));
         }
         // Input magnitude: each prediction step's input belongs to one move.
         for k in 0..N {
@@ -710,14 +769,26 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
                 -p.inertia_kgm2[2] * self.dist[5],
             );
         }
-        let mut ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
+        let ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
         let lim = lit::<T>(self.cfg.max_heading_error_rad);
-        ar.yaw_rad = yaw + wrap_pi(ar.yaw_rad - yaw).max(-lim).min(lim);
+        // The heading error the reference asks for, capped.
+        let dpsi = super::reference::limit(wrap_pi(ar.yaw_rad - yaw), lim);
         let mut r = Vec12::<T>::zeros();
         r.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&sp.pos_ned_m));
         r.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&sp.vel_ned_mps));
-        let qref = crate::model::euler_to_quat(ar.roll_rad, ar.pitch_rad, ar.yaw_rad);
-        r.fixed_rows_mut::<3>(6).copy_from(&self.attitude_coords(&qref, frame));
+        // The reference attitude relative to the heading frame: for ZYX
+        // angles `q_h⁻¹ ⊗ q(φ, θ, ψ_h + Δψ) = q(φ, θ, Δψ)`, so its Euler
+        // coordinates are (φ, θ, Δψ) and its quaternion that of (φ, θ, Δψ),
+        // without a round trip through the frame.
+        let att = match self.cfg.form {
+            AttitudeForm::Euler => Vector3::new(ar.roll_rad, ar.pitch_rad, dpsi),
+            AttitudeForm::Quaternion => {
+                let q = crate::model::euler_to_quat(ar.roll_rad, ar.pitch_rad, dpsi);
+                let q = if q[0] < T::zero() { -q } else { q };
+                Vector3::new(q[1], q[2], q[3])
+            }
+        };
+        r.fixed_rows_mut::<3>(6).copy_from(&att);
         r.fixed_rows_mut::<3>(9).copy_from(&ar.rates_frd_radps);
         let du = Vector4::new(
             ar.thrust_n - self.u_hover[0],
@@ -753,7 +824,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let frame = HeadingFrame::new(yaw_prev);
         // Disturbance in the previous heading frame.
         let mut dh = self.dist_in(&frame);
-        let pred = self.ad_e * x_prev + self.bd_e * self.du_prev + self.wd_e * dh;
+        let pred = mul(&self.ad_e, &x_prev) + mul(&self.bd_e, &self.du_prev) + mul(&self.wd_e, &dh);
         let meas = self.heading_state(est, yaw_prev);
         let nu = meas - pred;
         // Attribute velocity and rate innovations to the disturbance, low-passed.
@@ -801,39 +872,28 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         self.observe(est);
         let yaw = quat_to_euler(&est.att)[2];
         let x0 = self.heading_state(est, yaw);
-        // Disturbance in this heading frame.
         let frame = HeadingFrame::new(yaw);
-        let w = self.wd * self.dist_in(&frame);
         let d_acc = self.dist.fixed_rows::<3>(0).into_owned();
         let d_rate = self.disturbance_rate();
-        let w_rate = self.wd.fixed_columns::<3>(0) * frame.to_frame(&d_rate);
-        // Free response (z = 0) and references over the horizon.
-        let mut xs = [Vec12::<T>::zeros(); N];
-        let mut rs = [Vec12::<T>::zeros(); N];
-        let mut g = SVector::<T, NZ>::zeros();
-        let mut xk = x0;
-        for k in 0..N {
-            // Disturbance of step k: the estimate plus its damped trend.
-            xk = self.ad * xk + w + w_rate * self.trend[k];
-            xs[k] = xk;
+        // The state cost's gradient from the initial state and the
+        // disturbance with its trend (heading frame), through the responses
+        // computed at design: the prediction needs no simulation here.
+        let mut g = mul(&self.gx, &x0) + mul(&self.gw, &self.dist_in(&frame)) + mul(&self.gt, &frame.to_frame(&d_rate));
+        // The references over the horizon, as the errors of a zero state.
+        let mut es = [Vec12::<T>::zeros(); N];
+        for (k, ek) in es.iter_mut().enumerate() {
             let spk = self.horizon_setpoint(sp, k + 1);
+            // Disturbance of step k: the estimate plus its damped trend.
             let dk = d_acc + d_rate * self.trend[k];
             let (rk, du_ref) = self.reference_state(&spk, &dk, yaw, &frame);
-            rs[k] = rk;
+            *ek = -rk;
             // Input magnitude reference: the input of step k is move block_of(k).
             let b = block_of::<M>(k);
             for ch in 0..4 {
                 g[4 * b + ch] -= self.r[ch] * du_ref[ch];
             }
         }
-        // The yaw reference of every step relative to the *current* heading is
-        // an angle difference: wrap it the short way round.
-        if self.cfg.form == AttitudeForm::Euler {
-            for r in rs.iter_mut() {
-                r[8] = wrap_pi(r[8]);
-            }
-        }
-        g += self.state_gradient(&xs, &rs);
+        g += self.state_gradient(&es);
         for ch in 0..4 {
             g[ch] -= self.s[ch] * self.du_prev[ch];
         }

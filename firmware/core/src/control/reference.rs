@@ -66,23 +66,110 @@ pub fn tilt_and_thrust<T: RealField + Copy>(
     vel: &Vector3<T>,
     yaw: T,
 ) -> TiltThrust<T> {
-    let m = p.mass_kg;
-    let g = p.gravity_mps2;
-    let ax = acc_d[0] + p.kt_nspm[0] / m * vel[0];
-    let ay = acc_d[1] + p.kt_nspm[1] / m * vel[1];
-    let az = acc_d[2] + p.kt_nspm[2] / m * vel[2];
-    let lift = (g - az).max(lit::<T>(0.2) * g);
-    let (s, c) = trig::sin_cos(yaw);
-    let max_tilt = lit::<T>(MAX_TILT_RAD);
-    let pitch = ((-c * ax - s * ay) / lift).atan().max(-max_tilt).min(max_tilt);
-    let roll = ((-s * ax + c * ay) * trig::cos(pitch) / lift)
-        .atan()
-        .max(-max_tilt)
-        .min(max_tilt);
-    TiltThrust {
-        roll_rad: roll,
-        pitch_rad: pitch,
-        thrust_n: m * lift / (trig::cos(roll) * trig::cos(pitch)),
+    Tilt::new(p, acc_d, vel, yaw).tt
+}
+
+/// `v` limited to `[−lim, lim]` by comparisons (`f32::max`/`min` are calls
+/// on the M4); NaN gives `−lim`, as `v.max(−lim).min(lim)` does.
+#[inline(always)]
+pub fn limit<T: RealField + Copy>(v: T, lim: T) -> T {
+    if v > lim {
+        lim
+    } else if v >= -lim {
+        v
+    } else {
+        -lim
+    }
+}
+
+/// [`tilt_and_thrust`] with the intermediate values its time derivative
+/// reuses ([`AttitudeRef::feedforward`]).
+struct Tilt<T: RealField + Copy> {
+    tt: TiltThrust<T>,
+    /// The drag-compensated acceleration `A` (x and y), m/s².
+    ax: T,
+    ay: T,
+    /// `g − Az`, m/s², and whether its 0.2 g floor is inactive.
+    lift: T,
+    lift_free: bool,
+    /// sin and cos of the heading.
+    s_yaw: T,
+    c_yaw: T,
+    /// Whether the pitch and roll are inside their ±45° limit.
+    pitch_free: bool,
+    roll_free: bool,
+    /// sin and cos of the roll and pitch.
+    s_roll: T,
+    c_roll: T,
+    s_pitch: T,
+    c_pitch: T,
+}
+
+impl<T: RealField + Copy> Tilt<T> {
+    fn new(p: &VehicleParams<T>, acc_d: &Vector3<T>, vel: &Vector3<T>, yaw: T) -> Self {
+        let m = p.mass_kg;
+        let g = p.gravity_mps2;
+        let ax = acc_d[0] + p.kt_nspm[0] / m * vel[0];
+        let ay = acc_d[1] + p.kt_nspm[1] / m * vel[1];
+        let az = acc_d[2] + p.kt_nspm[2] / m * vel[2];
+        let floor = lit::<T>(0.2) * g;
+        let lift = if g - az > floor { g - az } else { floor };
+        let (s, c) = trig::sin_cos(yaw);
+        let max_tilt = lit::<T>(MAX_TILT_RAD);
+        let pitch_free = ((-c * ax - s * ay) / lift).atan();
+        let pitch = limit(pitch_free, max_tilt);
+        let (s_pitch, c_pitch) = trig::sin_cos(pitch);
+        let roll_free = ((-s * ax + c * ay) * c_pitch / lift).atan();
+        let roll = limit(roll_free, max_tilt);
+        let (s_roll, c_roll) = trig::sin_cos(roll);
+        Self {
+            tt: TiltThrust {
+                roll_rad: roll,
+                pitch_rad: pitch,
+                thrust_n: m * lift / (c_roll * c_pitch),
+            },
+            ax,
+            ay,
+            lift,
+            lift_free: g - az > floor,
+            s_yaw: s,
+            c_yaw: c,
+            pitch_free: pitch == pitch_free,
+            roll_free: roll == roll_free,
+            s_roll,
+            c_roll,
+            s_pitch,
+            c_pitch,
+        }
+    }
+
+    /// `(φ̇, θ̇)`, rad/s: the time derivative of the roll and pitch when the
+    /// drag-compensated acceleration changes at `a_dot` (m/s³) and the
+    /// heading at `yaw_rate` (rad/s). Differentiates the formulas of
+    /// [`tilt_and_thrust`] (a limit that is active holds its angle: rate 0).
+    fn rates(&self, a_dot: &Vector3<T>, yaw_rate: T) -> (T, T) {
+        let (s, c, ax, ay, lift) = (self.s_yaw, self.c_yaw, self.ax, self.ay, self.lift);
+        let lift_dot = if self.lift_free { -a_dot[2] } else { T::zero() };
+        let one = T::one();
+        // θ = atan(u), u = (−cψ·Ax − sψ·Ay)/L.
+        let num_p = -c * ax - s * ay;
+        let num_p_dot = -c * a_dot[0] - s * a_dot[1] + yaw_rate * (s * ax - c * ay);
+        let u = num_p / lift;
+        let theta_dot = if self.pitch_free {
+            (num_p_dot - u * lift_dot) / lift / (one + u * u)
+        } else {
+            T::zero()
+        };
+        // φ = atan(v), v = (−sψ·Ax + cψ·Ay)·cos θ / L.
+        let num_r = -s * ax + c * ay;
+        let num_r_dot = -s * a_dot[0] + c * a_dot[1] + yaw_rate * num_p;
+        let v = num_r * self.c_pitch / lift;
+        let phi_dot = if self.roll_free {
+            (num_r_dot * self.c_pitch - num_r * self.s_pitch * theta_dot - v * lift_dot) / lift / (one + v * v)
+        } else {
+            T::zero()
+        };
+        (phi_dot, theta_dot)
     }
 }
 
@@ -101,9 +188,6 @@ pub struct AttitudeRef<T: RealField + Copy> {
     pub rates_frd_radps: Vector3<T>,
 }
 
-/// Time step of the central difference that gives the reference attitude's rates, s.
-const RATE_DIFF_S: f64 = 0.005;
-
 impl<T: RealField + Copy> AttitudeRef<T> {
     /// Level at the setpoint's heading, hover thrust, no rates (what the
     /// thesis' LQR regulates to).
@@ -118,37 +202,31 @@ impl<T: RealField + Copy> AttitudeRef<T> {
     }
 
     /// What the reference's acceleration implies ([`tilt_and_thrust`] at the
-    /// reference velocity and heading), with body rates from a central
-    /// difference of that map along the reference's jerk and yaw rate.
+    /// reference velocity and heading), with body rates from the exact time
+    /// derivative of that map along the reference's jerk and yaw rate.
     pub fn feedforward(p: &VehicleParams<T>, sp: &Setpoint<T>) -> Self {
-        let tt = tilt_and_thrust(p, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
-        let h = lit::<T>(RATE_DIFF_S);
-        let at = |sgn: T| {
-            tilt_and_thrust(
-                p,
-                &(sp.acc_ned_mps2 + sp.jerk_ned_mps3 * (sgn * h)),
-                &(sp.vel_ned_mps + sp.acc_ned_mps2 * (sgn * h)),
-                sp.yaw_rad + sp.yaw_rate_radps * sgn * h,
-            )
-        };
-        let (fwd, back) = (at(T::one()), at(-T::one()));
-        let two_h = h + h;
-        let phi_dot = (fwd.roll_rad - back.roll_rad) / two_h;
-        let theta_dot = (fwd.pitch_rad - back.pitch_rad) / two_h;
+        let t = Tilt::new(p, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
+        // d/dt of the drag-compensated acceleration along the reference.
+        let m = p.mass_kg;
+        let a_dot = Vector3::new(
+            sp.jerk_ned_mps3[0] + p.kt_nspm[0] / m * sp.acc_ned_mps2[0],
+            sp.jerk_ned_mps3[1] + p.kt_nspm[1] / m * sp.acc_ned_mps2[1],
+            sp.jerk_ned_mps3[2] + p.kt_nspm[2] / m * sp.acc_ned_mps2[2],
+        );
+        let (phi_dot, theta_dot) = t.rates(&a_dot, sp.yaw_rate_radps);
         let psi_dot = sp.yaw_rate_radps;
         // Euler rates → body rates (ZYX).
-        let (sphi, cphi) = trig::sin_cos(tt.roll_rad);
-        let (sth, cth) = trig::sin_cos(tt.pitch_rad);
+        let (sphi, cphi, sth, cth) = (t.s_roll, t.c_roll, t.s_pitch, t.c_pitch);
         let rates = Vector3::new(
             phi_dot - psi_dot * sth,
             theta_dot * cphi + psi_dot * sphi * cth,
             -theta_dot * sphi + psi_dot * cphi * cth,
         );
         Self {
-            roll_rad: tt.roll_rad,
-            pitch_rad: tt.pitch_rad,
+            roll_rad: t.tt.roll_rad,
+            pitch_rad: t.tt.pitch_rad,
             yaw_rad: sp.yaw_rad,
-            thrust_n: tt.thrust_n,
+            thrust_n: t.tt.thrust_n,
             rates_frd_radps: rates,
         }
     }
@@ -225,11 +303,13 @@ mod tests {
         let (r, w) = (2.0, 2.0 * core::f64::consts::PI / 6.0);
         let sp_at = |t: f64| {
             let (s, c) = trig::sin_cos(w * t);
+            let (s2, c2) = trig::sin_cos(2.0 * w * t);
             Setpoint {
-                pos_ned_m: Vector3::new(r * s, r * (1.0 - c), -1.0),
-                vel_ned_mps: Vector3::new(r * w * c, r * w * s, 0.0),
-                acc_ned_mps2: Vector3::new(-r * w * w * s, r * w * w * c, 0.0),
-                jerk_ned_mps3: Vector3::new(-r * w * w * w * c, -r * w * w * w * s, 0.0),
+                // With a vertical oscillation too: the lift changes.
+                pos_ned_m: Vector3::new(r * s, r * (1.0 - c), -1.0 + 0.5 * s2),
+                vel_ned_mps: Vector3::new(r * w * c, r * w * s, w * c2),
+                acc_ned_mps2: Vector3::new(-r * w * w * s, r * w * w * c, -2.0 * w * w * s2),
+                jerk_ned_mps3: Vector3::new(-r * w * w * w * c, -r * w * w * w * s, -4.0 * w * w * w * c2),
                 yaw_rad: 0.3 + 0.2 * t,
                 yaw_rate_radps: 0.2,
             }
@@ -247,7 +327,7 @@ mod tests {
         let w_fd = crate::model::quat_mul(&crate::model::quat_conj(&q(&a)), &qd) * 2.0;
         let want = Vector3::new(w_fd[1], w_fd[2], w_fd[3]);
         assert!(
-            (a.rates_frd_radps - want).norm() < 1e-4,
+            (a.rates_frd_radps - want).norm() < 1e-7,
             "{} vs {want}",
             a.rates_frd_radps
         );

@@ -1,9 +1,10 @@
 //! Fixed-size linear algebra the controllers need beyond nalgebra's own:
-//! LU solves for const-generic sizes and the algebraic Riccati equations
-//! (continuous and discrete).
+//! LU solves for const-generic sizes, the algebraic Riccati equations
+//! (continuous and discrete) and matrix–vector products fast on the M4.
 
 pub mod eigen;
 pub mod lu;
+pub mod matvec;
 pub mod riccati;
 
 pub use eigen::*;

@@ -29,6 +29,9 @@
 //! residual, objective and certified gap, even when stopped early. No
 //! allocation.
 
+mod exact;
+pub use exact::{Blocks, MAX_BLOCK};
+
 use crate::linalg::{lu_solve, symmetric_eigenvalues};
 use crate::lit;
 use crate::math::{clamp, max as fmax};
@@ -71,6 +74,11 @@ pub enum QpStatus {
     /// Stopped by `max_iterations` below the bound: feasible, accuracy
     /// not proved.
     IterationLimit,
+    /// Solved by enumerating every active set of the Hessian's independent
+    /// blocks ([`Blocks`]): the exact minimiser in exact arithmetic after a
+    /// fixed amount of work; [`QpSolution::gap`] certifies the returned
+    /// point in the solver's float type.
+    Exact,
     /// g, lb or ub had NaN/∞ or lb > ub: the returned point is the projection
     /// of the warm start (or the box centre) and no iteration was made.
     InvalidData,
@@ -117,6 +125,10 @@ pub struct QpSettings<T> {
     pub max_iterations: u32,
     /// Try the active-set polish.
     pub polish: bool,
+    /// Solve exactly by enumeration ([`Blocks`]) when the Hessian splits
+    /// into independent blocks of at most [`MAX_BLOCK`] variables (`false`:
+    /// always the fast gradient method).
+    pub enumerate: bool,
 }
 
 impl<T: RealField + Copy> Default for QpSettings<T> {
@@ -126,6 +138,7 @@ impl<T: RealField + Copy> Default for QpSettings<T> {
             accuracy: lit(1e-9),
             max_iterations: 100_000,
             polish: true,
+            enumerate: true,
         }
     }
 }
@@ -142,6 +155,12 @@ impl<T: RealField + Copy> Default for QpSettings<T> {
 /// let qp = BoxQp::new(&Matrix2::<f64>::identity())?;
 /// let (lb, ub) = (Vector2::new(0.0, 0.0), Vector2::new(1.0, 1.0));
 /// let sol = qp.solve(&Vector2::new(-2.0, 1.0), &lb, &ub, &Vector2::zeros(), &QpSettings::default());
+/// assert!((sol.z - Vector2::new(1.0, 0.0)).amax() < 1e-9);
+/// // H = I is two independent blocks of one variable: solved exactly.
+/// assert_eq!(sol.status, QpStatus::Exact);
+/// // The fast gradient method instead, within its a-priori bound:
+/// let fgm = QpSettings { enumerate: false, ..QpSettings::default() };
+/// let sol = qp.solve(&Vector2::new(-2.0, 1.0), &lb, &ub, &Vector2::zeros(), &fgm);
 /// assert!((sol.z - Vector2::new(1.0, 0.0)).amax() < 1e-9);
 /// assert!(matches!(sol.status, QpStatus::Converged | QpStatus::Polished));
 /// assert!(sol.iterations <= sol.iteration_bound); // the a-priori bound holds
@@ -166,6 +185,9 @@ pub struct BoxQp<T: RealField + Copy, const N: usize> {
     ln_rate: T,
     /// 1 / L, the step size.
     inv_l: T,
+    /// The Hessian's independent blocks, when they are small enough to
+    /// enumerate.
+    blocks: Option<Blocks<N>>,
 }
 
 /// One coordinate of a certificate: `min_{w ∈ [lo, hi]} [g(w − y) + μ/2 (w − y)²]`
@@ -215,6 +237,7 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
         }
         let (sl, smu) = (l.sqrt(), mu.sqrt());
         Ok(Self {
+            blocks: Blocks::of(&h),
             h,
             hs,
             d,
@@ -239,7 +262,14 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             beta: T::zero(),
             ln_rate: Self::ln_rate_of(T::one(), T::one()),
             inv_l: T::one(),
+            blocks: Blocks::of(&SMatrix::<T, N, N>::identity()),
         }
+    }
+
+    /// The Hessian's independent blocks when every one has at most
+    /// [`MAX_BLOCK`] variables (then [`QpSettings::enumerate`] solves exactly).
+    pub fn blocks(&self) -> Option<&Blocks<N>> {
+        self.blocks.as_ref()
     }
 
     /// `ln(1 − √(μ/L))`; a very negative number when μ = L (one step solves).
@@ -336,6 +366,10 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             g.iter().chain(lb.iter()).chain(ub.iter()).all(|v| v.is_finite()) && (0..N).all(|i| lb[i] <= ub[i]);
         if !data_ok {
             return Self::invalid(lb, ub, z0);
+        }
+        if let (Some(blocks), true) = (&self.blocks, settings.enumerate) {
+            let z = blocks.solve(&self.h, g, lb, ub);
+            return self.exact(g, lb, ub, z);
         }
         let eps = settings.accuracy;
         let bound = self.iteration_bound(lb, ub, eps);
@@ -472,6 +506,22 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             -low
         } else {
             T::zero()
+        }
+    }
+
+    /// The answer of the enumeration, with its certificate: one pass, no
+    /// iterations to bound.
+    fn exact(&self, g: &SVector<T, N>, lb: &SVector<T, N>, ub: &SVector<T, N>, z: SVector<T, N>) -> QpSolution<T, N> {
+        let grad = self.h * z + g;
+        QpSolution {
+            objective: z.dot(&(grad + g)) * lit::<T>(0.5),
+            gap: self.certificate(&z, &grad, lb, ub),
+            residual: Self::residual_at(&z, &grad, lb, ub),
+            z,
+            iterations: 1,
+            iteration_bound: 1,
+            solve_bound: 1,
+            status: QpStatus::Exact,
         }
     }
 

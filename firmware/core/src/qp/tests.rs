@@ -13,18 +13,35 @@ fn enumerate<const N: usize>(
     lb: &SVector<f64, N>,
     ub: &SVector<f64, N>,
 ) -> SVector<f64, N> {
-    let mut best: Option<(f64, SVector<f64, N>)> = None;
-    let total = 3usize.pow(N as u32);
+    let z = enumerate_dyn(
+        &nalgebra::DMatrix::from_column_slice(N, N, h.as_slice()),
+        &nalgebra::DVector::from_column_slice(g.as_slice()),
+        &nalgebra::DVector::from_column_slice(lb.as_slice()),
+        &nalgebra::DVector::from_column_slice(ub.as_slice()),
+    );
+    SVector::from_column_slice(z.as_slice())
+}
+
+/// [`enumerate`] for any size.
+fn enumerate_dyn(
+    h: &nalgebra::DMatrix<f64>,
+    g: &nalgebra::DVector<f64>,
+    lb: &nalgebra::DVector<f64>,
+    ub: &nalgebra::DVector<f64>,
+) -> nalgebra::DVector<f64> {
+    let n = g.len();
+    let mut best: Option<(f64, nalgebra::DVector<f64>)> = None;
+    let total = 3usize.pow(n as u32);
     for code in 0..total {
         let mut c = code;
-        let mut state = [0u8; N];
+        let mut state = vec![0u8; n];
         for s in state.iter_mut() {
             *s = (c % 3) as u8;
             c /= 3;
         }
-        let mut z = SVector::<f64, N>::zeros();
-        let free: Vec<usize> = (0..N).filter(|&i| state[i] == 2).collect();
-        for i in 0..N {
+        let mut z = nalgebra::DVector::<f64>::zeros(n);
+        let free: Vec<usize> = (0..n).filter(|&i| state[i] == 2).collect();
+        for i in 0..n {
             z[i] = match state[i] {
                 0 => lb[i],
                 1 => ub[i],
@@ -37,7 +54,7 @@ fn enumerate<const N: usize>(
             let mut r = nalgebra::DVector::<f64>::zeros(k);
             for (a, &i) in free.iter().enumerate() {
                 r[a] = -g[i];
-                for j in 0..N {
+                for j in 0..n {
                     if state[j] != 2 {
                         r[a] -= h[(i, j)] * z[j];
                     }
@@ -51,11 +68,11 @@ fn enumerate<const N: usize>(
                 z[i] = sol[a];
             }
         }
-        let feasible = (0..N).all(|i| z[i] >= lb[i] - 1e-9 && z[i] <= ub[i] + 1e-9);
+        let feasible = (0..n).all(|i| z[i] >= lb[i] - 1e-9 && z[i] <= ub[i] + 1e-9);
         if !feasible {
             continue;
         }
-        let obj = 0.5 * (h * z).dot(&z) + g.dot(&z);
+        let obj = 0.5 * (h * &z).dot(&z) + g.dot(&z);
         if best.as_ref().is_none_or(|(b, _)| obj < *b) {
             best = Some((obj, z));
         }
@@ -92,6 +109,7 @@ fn check<const N: usize>(h: SMatrix<f64, N, N>, g: SVector<f64, N>, lb: SVector<
         accuracy: 1e-9 * scale,
         max_iterations: u32::MAX,
         polish: true,
+        enumerate: false,
     };
     let bound = qp.iteration_bound(&lb, &ub, settings.accuracy);
     for warm in [SVector::zeros(), ub, (lb + ub) * 0.5] {
@@ -240,6 +258,7 @@ fn early_stop_is_still_feasible() {
             accuracy: 1e-12,
             max_iterations: 3,
             polish: false,
+            enumerate: false,
         },
     );
     assert_eq!(sol.status, QpStatus::IterationLimit);
@@ -262,6 +281,7 @@ fn fixed_time_runs_exactly_to_the_bound() {
         accuracy: 1e-9,
         max_iterations: u32::MAX,
         polish: false,
+        enumerate: false,
     };
     let early = qp.solve(&g, &lb, &ub, &SVector::zeros(), &s);
     assert_eq!(early.status, QpStatus::Converged);
@@ -322,6 +342,7 @@ fn far_corner_starts_are_proved_within_the_bound() {
                 accuracy: 1e-8,
                 max_iterations: u32::MAX,
                 polish: false,
+                enumerate: false,
             };
             let sol = qp.solve(&g, &lb, &ub, &ub, &s);
             assert!(sol.objective - f_star <= 1e-8 * (1.0 + 1e-6), "{sol:?}");
@@ -335,4 +356,193 @@ fn far_corner_starts_are_proved_within_the_bound() {
             );
         }
     }
+}
+
+/// A block-diagonal SPD matrix of `N` variables: blocks of sizes drawn from
+/// `seed` (1 to `MAX_BLOCK`, each an [`spd`]-like matrix of condition
+/// `cond`, badly scaled), their variables spread over the indices by a
+/// random permutation. Returns the matrix and the blocks (as index lists).
+fn block_spd<const N: usize>(seed: u64, cond: f64) -> (SMatrix<f64, N, N>, Vec<Vec<usize>>) {
+    let mut s = seed | 1;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut perm: Vec<usize> = (0..N).collect();
+    for i in (1..N).rev() {
+        let j = (rnd() * (i + 1) as f64) as usize;
+        perm.swap(i, j.min(i));
+    }
+    let mut blocks = Vec::new();
+    let mut at = 0;
+    while at < N {
+        let k = (1 + (rnd() * MAX_BLOCK as f64) as usize).min(MAX_BLOCK).min(N - at);
+        blocks.push(perm[at..at + k].to_vec());
+        at += k;
+    }
+    let mut h = SMatrix::<f64, N, N>::zeros();
+    for (bi, idx) in blocks.iter().enumerate() {
+        let k = idx.len();
+        let a = nalgebra::DMatrix::<f64>::from_fn(k, k, |_, _| rnd() - 0.5);
+        let q = a.qr().q();
+        let d = nalgebra::DVector::<f64>::from_fn(k, |i, _| cond.powf(i as f64 / (k.max(2) - 1) as f64));
+        let scale = nalgebra::DVector::<f64>::from_fn(k, |_, _| 10f64.powf(2.0 * (rnd() - 0.5)));
+        let m = &q * nalgebra::DMatrix::from_diagonal(&d) * q.transpose();
+        let _ = bi;
+        for a in 0..k {
+            for b in 0..k {
+                h[(idx[a], idx[b])] = scale[a] * m[(a, b)] * scale[b];
+            }
+        }
+    }
+    // Exactly symmetric, as BoxQp::new makes it.
+    ((h + h.transpose()) * 0.5, blocks)
+}
+
+/// The exact solution block by block, by the independent enumeration.
+fn enumerate_blocks<const N: usize>(
+    h: &SMatrix<f64, N, N>,
+    g: &SVector<f64, N>,
+    lb: &SVector<f64, N>,
+    ub: &SVector<f64, N>,
+    blocks: &[Vec<usize>],
+) -> SVector<f64, N> {
+    let mut z = SVector::<f64, N>::zeros();
+    for idx in blocks {
+        let k = idx.len();
+        let zb = enumerate_dyn(
+            &nalgebra::DMatrix::from_fn(k, k, |a, b| h[(idx[a], idx[b])]),
+            &nalgebra::DVector::from_fn(k, |a, _| g[idx[a]]),
+            &nalgebra::DVector::from_fn(k, |a, _| lb[idx[a]]),
+            &nalgebra::DVector::from_fn(k, |a, _| ub[idx[a]]),
+        );
+        for a in 0..k {
+            z[idx[a]] = zb[a];
+        }
+    }
+    z
+}
+
+/// The exact path in `f64`: found blocks, status, box, objective to 1e-9 of
+/// the independent enumeration and a sound certificate at most 1e-9.
+fn check_exact<const N: usize>(
+    h: SMatrix<f64, N, N>,
+    blocks: &[Vec<usize>],
+    g: SVector<f64, N>,
+    degenerate: bool,
+    seed: u64,
+) {
+    let (lb, ub) = boxes::<N>(seed, degenerate);
+    let qp = BoxQp::new(&h).unwrap();
+    let found = qp.blocks().expect("blocks of at most MAX_BLOCK are found");
+    assert_eq!(found.count(), blocks.len());
+    assert_eq!(
+        found.active_sets(),
+        blocks.iter().map(|b| 3u32.pow(b.len() as u32)).sum::<u32>()
+    );
+    let exact = enumerate_blocks(&h, &g, &lb, &ub, blocks);
+    let f_star = qp.objective(&exact, &g);
+    let scale = f_star.abs().max(1.0);
+    let sol = qp.solve(&g, &lb, &ub, &SVector::zeros(), &QpSettings::default());
+    assert_eq!(sol.status, QpStatus::Exact);
+    assert!((0..N).all(|i| lb[i] <= sol.z[i] && sol.z[i] <= ub[i]), "{sol:?}");
+    let true_gap = sol.objective - f_star;
+    assert!(
+        true_gap.abs() <= 1e-9 * scale,
+        "objective {} vs {f_star}",
+        sol.objective
+    );
+    assert!(
+        sol.gap + 1e-9 * scale >= true_gap,
+        "certificate {} below {true_gap}",
+        sol.gap
+    );
+    assert!(sol.gap <= 1e-9 * scale, "certificate {} of an exact answer", sol.gap);
+    // Every variable of the answer within 1e-6 of the box width of the truth.
+    for i in 0..N {
+        assert!(
+            (sol.z[i] - exact[i]).abs() <= 1e-6 * (1.0 + ub[i] - lb[i]),
+            "z[{i}] {} vs {}",
+            sol.z[i],
+            exact[i]
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn exact_solves_of_block_hessians_match_enumeration(seed in any::<u64>(), gs in proptest::collection::vec(-30.0f64..30.0, 12), degenerate in any::<bool>()) {
+        let (h, blocks) = block_spd::<12>(seed, 100.0);
+        check_exact(h, &blocks, SVector::from_column_slice(&gs), degenerate, seed);
+    }
+
+    #[test]
+    fn exact_solves_of_ill_conditioned_blocks_match_enumeration(seed in any::<u64>(), gs in proptest::collection::vec(-300.0f64..300.0, 9)) {
+        let (h, blocks) = block_spd::<9>(seed, 1e6);
+        check_exact(h, &blocks, SVector::from_column_slice(&gs), false, seed ^ 0x77);
+    }
+}
+
+/// Adversarial: ties. The unconstrained optimum of each block placed
+/// exactly on a bound (its multiplier zero: two active sets give the same
+/// point) or on a corner; the enumeration must still return it.
+#[test]
+fn exact_solves_with_optima_on_the_bounds() {
+    for seed in 0..200u64 {
+        let (h, blocks) = block_spd::<8>(seed, 1e3);
+        let (lb, ub) = boxes::<8>(seed, false);
+        // The optimum: alternately at lb, at ub and in the middle.
+        let z_star = SVector::<f64, 8>::from_fn(|i, _| match (i as u64 + seed) % 3 {
+            0 => lb[i],
+            1 => ub[i],
+            _ => 0.5 * (lb[i] + ub[i]),
+        });
+        let g = -(h * z_star);
+        check_exact(h, &blocks, g, false, seed);
+        let qp = BoxQp::new(&h).unwrap();
+        let sol = qp.solve(&g, &lb, &ub, &SVector::zeros(), &QpSettings::default());
+        assert!((sol.z - z_star).amax() <= 1e-9, "{:?} vs {z_star:?}", sol.z);
+    }
+}
+
+#[test]
+fn blocks_are_found_or_refused() {
+    // A dense 5×5 is one block larger than MAX_BLOCK: no enumeration.
+    assert!(BoxQp::new(&spd::<5>(1, 10.0)).unwrap().blocks().is_none());
+    // A dense 4×4 is one block of 4 (81 active sets).
+    let b = *BoxQp::new(&spd::<4>(1, 10.0)).unwrap().blocks().unwrap();
+    assert_eq!((b.count(), b.active_sets()), (1, 81));
+    // Diagonal: N blocks of 1.
+    let b = *BoxQp::new(&SMatrix::<f64, 6, 6>::identity()).unwrap().blocks().unwrap();
+    assert_eq!((b.count(), b.active_sets()), (6, 18));
+    // Coupling 0–5 and 5–2 joins three variables into one block.
+    let mut h = SMatrix::<f64, 6, 6>::identity() * 4.0;
+    for (i, j) in [(0, 5), (5, 2)] {
+        h[(i, j)] = 1.0;
+        h[(j, i)] = 1.0;
+    }
+    let b = *BoxQp::new(&h).unwrap().blocks().unwrap();
+    assert_eq!((b.count(), b.active_sets()), (4, 27 + 3 * 3));
+    // With enumeration off the same problem takes the iterative path.
+    let qp = BoxQp::new(&h).unwrap();
+    let g = SVector::<f64, 6>::repeat(1.0);
+    let (lb, ub) = (SVector::repeat(-1.0), SVector::repeat(1.0));
+    let it = qp.solve(
+        &g,
+        &lb,
+        &ub,
+        &SVector::zeros(),
+        &QpSettings {
+            enumerate: false,
+            ..QpSettings::default()
+        },
+    );
+    let ex = qp.solve(&g, &lb, &ub, &SVector::zeros(), &QpSettings::default());
+    assert_ne!(it.status, QpStatus::Exact);
+    assert_eq!(ex.status, QpStatus::Exact);
+    assert!((it.z - ex.z).amax() < 1e-6);
 }
