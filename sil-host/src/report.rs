@@ -231,10 +231,15 @@ pub fn mpc_step_json(ctrl: &fc_core::control::AnyController<f32>, t: f64) -> Opt
             "iteration_bound": m.iteration_bound(),
             "solve_bound": qp.solution.solve_bound,
             "iterations_allowed": m.iteration_bound().min(cfg.qp_max_iterations),
+            "method": match m.qp_active_sets() {
+                Some(_) => "exact: every active set of the Hessian's independent blocks",
+                None => "fast gradient method to its certified iteration bound",
+            },
+            "active_sets": m.qp_active_sets(),
             "certified_accuracy": {
                 "objective": eps,
                 "input_units": input_acc,
-                "holds_for_every_solve": cfg.qp_max_iterations >= m.iteration_bound(),
+                "holds_for_every_solve": m.qp_active_sets().is_some() || cfg.qp_max_iterations >= m.iteration_bound(),
             },
             "gap": qp.solution.gap as f64,
             "residual": qp.solution.residual as f64,

@@ -580,6 +580,16 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         self.iteration_bound
     }
 
+    /// Active sets the exact QP solve tries on every step (`Σ 3^kᵢ` over
+    /// the Hessian's independent blocks: 4 × 27 = 108 for the fast preset),
+    /// or `None` when the QP is solved by the fast gradient method.
+    pub fn qp_active_sets(&self) -> Option<u32> {
+        match (self.settings.enumerate, self.qp.blocks()) {
+            (true, Some(b)) => Some(b.active_sets()),
+            _ => None,
+        }
+    }
+
     /// The configuration.
     pub fn config(&self) -> &MpcConfig {
         &self.cfg
@@ -659,7 +669,11 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         for col in 0..12 + 6 + 3 {
             // Column `col` of [Gx | Gw | Gt]: its initial state and its
             // input to the prediction at step k.
-            let x0 = if col < 12 { Vec12::ith(col, T::one()) } else { Vec12::zeros() };
+            let x0 = if col < 12 {
+                Vec12::ith(col, T::one())
+            } else {
+                Vec12::zeros()
+            };
             let input = |k: usize| match col {
                 0..12 => Vec12::<T>::zeros(),
                 12..18 => self.wd.column(col - 12).into_owned(),

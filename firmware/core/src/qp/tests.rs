@@ -546,3 +546,98 @@ fn blocks_are_found_or_refused() {
     assert_eq!(ex.status, QpStatus::Exact);
     assert!((it.z - ex.z).amax() < 1e-6);
 }
+
+/// The fast MPC's own QP in `f32`, as it flies: for random linear terms
+/// (up to the 1e5 its gradients reach in the study's gusty helix) and for
+/// adversarial ones (optima placed on bounds, corners and just inside),
+/// the exact solve is within the preset's certified accuracy of the `f64`
+/// optimum, in the objective (1e-5 beyond the f32 rounding of the objective
+/// itself) and in input units (the bound that accuracy implies), and its
+/// `f32` certificate is sound and within the same.
+#[test]
+fn the_fast_mpcs_qp_in_f32_is_within_its_certified_accuracy() {
+    use crate::control::{MpcConfig, MpcFast};
+    use crate::model::{AttitudeForm, VehicleParams};
+    let mpc = MpcFast::<f32>::new(VehicleParams::os4(), MpcConfig::fast(AttitudeForm::Euler)).unwrap();
+    let h32 = *mpc.hessian();
+    let h = h32.map(|v| v as f64);
+    let eps = MpcConfig::fast(AttitudeForm::Euler).qp_accuracy;
+    let qp = BoxQp::new(&h32).unwrap();
+    assert_eq!(qp.blocks().map(|b| (b.count(), b.active_sets())), Some((4, 108)));
+    // The fast preset's box (U − U_hover), from a flight's mpc-step.
+    let p = VehicleParams::<f64>::os4();
+    let (bx, hover) = (p.input_box(), crate::model::hover_input(&p));
+    // (in f32, as the MPC holds it, so that both solves see the same box)
+    let lb = SVector::<f64, 12>::from_fn(|i, _| (bx.lo[i % 4] - hover[i % 4]) as f32 as f64);
+    let ub = SVector::<f64, 12>::from_fn(|i, _| (bx.hi[i % 4] - hover[i % 4]) as f32 as f64);
+    let blocks: Vec<Vec<usize>> = (0..4).map(|c| vec![c, c + 4, c + 8]).collect();
+    let mut s = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let hinv = h.try_inverse().unwrap();
+    let (mut worst_gap, mut worst_dz) = (0.0f64, 0.0f64);
+    for case in 0..3000 {
+        let g = if case % 2 == 0 {
+            let scale = 10f64.powf(5.0 * rnd());
+            SVector::<f64, 12>::from_fn(|_, _| (rnd() - 0.5) * 2.0 * scale)
+        } else {
+            // An optimum on a bound, a corner, or a hair inside.
+            let z = SVector::<f64, 12>::from_fn(|i, _| match (case / 2 + i) % 4 {
+                0 => lb[i],
+                1 => ub[i],
+                2 => lb[i] + 1e-6 * (ub[i] - lb[i]),
+                _ => lb[i] + rnd() * (ub[i] - lb[i]),
+            });
+            -(h * z)
+        };
+        let g = g.map(|v| v as f32).map(|v| v as f64);
+        let sol = qp.solve(
+            &g.map(|v| v as f32),
+            &lb.map(|v| v as f32),
+            &ub.map(|v| v as f32),
+            &SVector::zeros(),
+            &QpSettings::default(),
+        );
+        assert_eq!(sol.status, QpStatus::Exact);
+        let z = sol.z.map(|v| v as f64);
+        let exact = enumerate_blocks(&h, &g, &lb, &ub, &blocks);
+        let f = |z: &SVector<f64, 12>| 0.5 * (h * z).dot(z) + g.dot(z);
+        let true_gap = f(&z) - f(&exact);
+        // The objective itself is an f32 sum: its rounding (4 ε₃₂·|f*|, the
+        // rule tools/check_mpc_step.py applies too) is the floor under any
+        // f32 solver's gap.
+        let rounding = 4.0 * f32::EPSILON as f64 * f(&exact).abs().max(1.0);
+        assert!(true_gap <= eps + rounding, "case {case}: true gap {true_gap:e}");
+        worst_gap = worst_gap.max(true_gap / (eps + rounding));
+        // In input units: ½‖z − z*‖²_H ≤ f(z) − f*, so
+        // |zᵢ − z*ᵢ| ≤ √(2·gap·(H⁻¹)ᵢᵢ) (what `mpc-step` states).
+        for i in 0..12 {
+            let bound = (2.0 * (eps + rounding) * hinv[(i, i)]).sqrt();
+            let dz = (z[i] - exact[i]).abs();
+            assert!(
+                dz <= bound,
+                "case {case}: z[{i}] {} vs {} (bound {bound:e})",
+                z[i],
+                exact[i]
+            );
+            worst_dz = worst_dz.max(dz / (ub[i] - lb[i]));
+        }
+        // The f32 certificate bounds the gap (beyond the objective's own
+        // f32 rounding) and itself proves the accuracy.
+        assert!(
+            sol.gap as f64 + rounding >= true_gap,
+            "case {case}: certificate {} < {true_gap:e}",
+            sol.gap
+        );
+        assert!(
+            (sol.gap as f64) <= eps + rounding,
+            "case {case}: certificate {:e}",
+            sol.gap
+        );
+    }
+    eprintln!("worst gap / (1e-5 + f32 rounding) {worst_gap:.2e}, worst |Δz| / box width {worst_dz:.2e}");
+}
