@@ -223,7 +223,7 @@ fn invert<T: RealField + Copy, const K: usize>(h: &[[T; K]; K], free: u8) -> [[T
             continue;
         }
         let piv = a[p][p];
-        if !(piv > T::zero()) {
+        if piv.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater) {
             inv[p] = [T::zero(); K];
             continue;
         }
