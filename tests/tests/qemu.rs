@@ -51,9 +51,10 @@ fn every_controller_fits_its_cycle_budget() {
         .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
         .collect();
     // 4 PD/LQR variants × (control, loop) + 4 MPC variants × (control,
-    // certified at 1 kHz, FGM info, loop) + the estimator's two (a whole
-    // mocap fix; the navigator's worst gps step).
-    assert_eq!(rows.len(), 26, "{out}");
+    // certified at 1 kHz, FGM info, loop) + the fast MPC's QP alone (2
+    // forms) + the estimator's two (a whole mocap fix; the navigator's worst
+    // gps step).
+    assert_eq!(rows.len(), 28, "{out}");
     // The estimator of sensor flights: one predict and one fix update per
     // step at 1 kHz, within the 20 000 instructions.
     let est: Vec<_> = rows.iter().filter(|r| r[0] == "estimator (ESKF)").collect();

@@ -226,6 +226,8 @@ pub struct MpcQp<T: RealField + Copy, const NZ: usize> {
     pub lb: SVector<T, NZ>,
     /// Upper bounds.
     pub ub: SVector<T, NZ>,
+    /// The solve's warm start.
+    pub warm: SVector<T, NZ>,
     /// The solver's answer.
     pub solution: QpSolution<T, NZ>,
 }
@@ -600,6 +602,14 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         self.last_qp.as_ref()
     }
 
+    /// The last QP solved again by the MPC's own solver and settings, from
+    /// the same start (for measuring the solve alone and for checks: the
+    /// answer is the one the step used).
+    pub fn resolve_last_qp(&self) -> Option<QpSolution<T, NZ>> {
+        let qp = self.last_qp.as_ref()?;
+        Some(self.qp.solve(&qp.g, &qp.lb, &qp.ub, &qp.warm, &self.settings))
+    }
+
     /// Current disturbance estimate: acceleration NED (m/s²), angular
     /// acceleration body FRD (rad/s²).
     pub fn disturbance_estimate(&self) -> (Vector3<T>, Vector3<T>) {
@@ -931,6 +941,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
             g,
             lb: self.lb,
             ub: self.ub,
+            warm,
             solution: sol,
         });
         self.preview_valid = false;

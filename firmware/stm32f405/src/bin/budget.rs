@@ -45,8 +45,8 @@ mod target {
     use cortex_m_rt::entry;
     use cortex_m_semihosting::hprintln;
     use fc_core::control::{
-        AnyController, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
-        StateEstimate, Tuning, SPECS,
+        AnyController, Controller, ControllerSpec, Family, MpcFast, PdEuler, PdEulerGains, Preset, ReferenceMode,
+        Setpoint, StateEstimate, Tuning, SPECS,
     };
     use fc_core::estimate::{Eskf, EskfConfig, Fix, ImuSample};
     use fc_core::{euler_to_quat, VehicleParams};
@@ -300,6 +300,32 @@ mod target {
         instructions(worst)
     }
 
+    /// Worst instructions of the fast MPC's QP solve alone over the test
+    /// flight: each step's QP (`last_qp`) solved again, exactly as in the
+    /// step, on its own clock.
+    fn qp_worst(mpc: &mut MpcFast<f32>, clock: &SysTickClock, dt: f32) -> Option<u32> {
+        let mut rng = Lcg(7);
+        let mut worst = 0u32;
+        for k in 0..STEPS {
+            let t = k as f32 * dt;
+            let sp = reference(t);
+            if let Some((n, pdt)) = Controller::preview_request(mpc) {
+                for i in 1..=n {
+                    let _ = mpc.set_preview(i, &reference(t + i as f32 * pdt as f32));
+                }
+            }
+            let est = state(&mut rng, &sp);
+            let _ = Controller::update(mpc, &est, &sp);
+            let t0 = clock.now();
+            let sol = mpc.resolve_last_qp()?;
+            worst = worst.max(clock.since(t0));
+            if sol.z != mpc.last_qp()?.solution.z {
+                return None;
+            }
+        }
+        Some(instructions(worst))
+    }
+
     fn instructions(ticks: u32) -> u32 {
         (ticks as f32 / TICKS_PER_INSTRUCTION) as u32
     }
@@ -506,6 +532,18 @@ mod target {
                     // a 1 kHz step whatever the preset's own rate.
                     ok &= check(name, form, 1000, what, m);
                 }
+            }
+            if r.family == Family::Mpc && r.preset == Preset::Project {
+                let m = with_stack(|| {
+                    let slot = slot();
+                    spec.build_in(slot, p, dt as f64, spec.mpc_config(), &Tuning::project())
+                        .ok()?;
+                    match slot {
+                        AnyController::MpcFast(c) => qp_worst(c, &clock, dt),
+                        _ => None,
+                    }
+                });
+                check(name, form, 1000, "QP alone (exact, 108 active sets), info", m);
             }
             let m = with_stack(|| loop_worst(id, dt, spec.preview(), &clock));
             check(name, form, hz, "loop", m);
