@@ -11,7 +11,7 @@
 //!   the image went from 251 340 B to 266 620 B), and 272 KiB until the MPC
 //!   fitted 1 kHz (issue 14: the exact QP's four block sizes, the
 //!   precomputed state responses and the faster products, ≈ 11 KiB; from
-//!   273 956 B to 284 908 B);
+//!   273 956 B to 285 060 B);
 //! - static RAM (`.data`, `.bss`, `.uninit`) ≤ 16 KiB: the flight loop with
 //!   its controller (≈ 7.5 KiB, designed in place) and the link's queues.
 //!   The stack's high-water mark (≤ 32 KiB) is the QEMU budget test's; both
