@@ -99,10 +99,11 @@ fn quaternion_pd_turns_the_short_way() {
 }
 
 #[test]
-fn fast_mpc_storage_fits_32_kib() {
+fn fast_mpc_storage_fits_16_kib() {
     // Everything the controller keeps between steps (models, weights, the
-    // Hessian and its scaling, the preview buffer, warm start, estimates).
+    // Hessian and its scaling, the designed responses, the preview buffer,
+    // warm start, estimates): issue 14's budget for the MPC's RAM.
     let size = core::mem::size_of::<fc_core::control::MpcFast<f32>>();
-    assert!(size <= 32 * 1024, "MpcFast<f32> is {size} bytes");
+    assert!(size <= 16 * 1024, "MpcFast<f32> is {size} bytes");
     eprintln!("size_of::<MpcFast<f32>>() = {size} bytes");
 }
