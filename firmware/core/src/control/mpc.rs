@@ -145,13 +145,15 @@ impl MpcConfig {
     /// [`MpcFast`]'s three moves (the first two steps' inputs, then one
     /// held for the rest of the horizon).
     ///
-    /// Three moves, not four: the QP has 12 variables instead of 16, its
-    /// a-priori bound falls 327 → 260 iterations and an iteration costs
-    /// ≈ 800 instructions on the M4 instead of 1 232, so every solve is
-    /// certified within 5 ms (QEMU: 330 k instructions, 88 % of the budget
-    /// at CPI 1.5 × margin 1.5); and it tracks no worse (helix 28 mm calm,
-    /// 35 mm under `wind,mismatch`, the robustness sweep 100 %). Two moves
-    /// (bound 153) were cheaper still but lost the sweep's worst corner.
+    /// Three moves, not four: the QP has 12 variables instead of 16 (four
+    /// independent blocks of 3, solved exactly by trying their 27 active
+    /// sets each; four moves would be 81 each), and it tracks no worse
+    /// (helix 28 mm calm, 35 mm under `wind,mismatch`, the robustness sweep
+    /// 100 %). Two moves were cheaper still but lost the sweep's worst
+    /// corner. The whole step's certified worst case fits a 1 kHz step
+    /// (QEMU: 57 k / 61 k instructions Euler / quaternion, 76 % / 82 % at
+    /// CPI 1.5 × margin 1.5; `src/bin/budget.rs`), though the preset
+    /// re-solves at 200 Hz, the rate it was tuned and studied at.
     ///
     /// Tuning: tight position weights for tracking; heavy roll/pitch-rate
     /// weights, because with slow rotors a lightly damped attitude loop
@@ -206,10 +208,9 @@ impl MpcConfig {
             max_heading_error_rad: 0.35,
             qp_early_exit: true,
             qp_accuracy: 1e-5,
-            // No cap: every solve stops as soon as its accuracy is proved
-            // (its certificate or its own bound), at worst at the a-priori
-            // bound (260 iterations with M = 3), which fits a 5 ms step
-            // (src/bin/budget.rs, `certified` rows).
+            // With `qp_enumerate = false` (the iterative solver): no cap,
+            // every solve stops as soon as its accuracy is proved, at worst
+            // at the a-priori bound (260 iterations with M = 3).
             qp_max_iterations: u32::MAX,
             qp_enumerate: true,
         }
@@ -577,7 +578,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     }
 
     /// The a-priori QP iteration bound for the configured accuracy (computed
-    /// once: the Hessian and the box never change).
+    /// once: the Hessian and the box never change); 1 when the QP is solved
+    /// exactly ([`Mpc::qp_active_sets`]): one pass.
     pub fn iteration_bound(&self) -> u32 {
         self.iteration_bound
     }
