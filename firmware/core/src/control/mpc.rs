@@ -564,7 +564,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             }
         }
         // An exact (enumerated) solve is one pass: its "bound" is 1.
-        self.iteration_bound = if self.settings.enumerate && self.qp.blocks().is_some() {
+        self.iteration_bound = if self.qp_active_sets().is_some() {
             1
         } else {
             self.qp.iteration_bound(&self.lb, &self.ub, self.settings.accuracy)
@@ -671,6 +671,20 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         g
     }
 
+    /// The state cost's gradient (references zero) of the free response
+    /// from `x0` under the per-step input `input(k)` added to the
+    /// prediction: the design's one simulation, for the Hessian's columns
+    /// and the responses `Gx`, `Gw`, `Gt`.
+    fn response_gradient(&self, x0: Vec12<T>, input: &dyn Fn(usize) -> Vec12<T>) -> SVector<T, NZ> {
+        let mut x = [Vec12::<T>::zeros(); N];
+        let mut xk = x0;
+        for (k, xs) in x.iter_mut().enumerate() {
+            xk = mul(&self.ad, &xk) + input(k);
+            *xs = xk;
+        }
+        self.state_gradient(&x)
+    }
+
     /// `Gx`, `Gw`, `Gt`: the state cost's gradient for a unit initial
     /// state, disturbance and disturbance rate, column by column (each the
     /// adjoint of one free response, references zero).
@@ -687,17 +701,11 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
                 Vec12::zeros()
             };
             let input = |k: usize| match col {
-                0..12 => Vec12::<T>::zeros(),
+                0..12 => Vec12::zeros(),
                 12..18 => self.wd.column(col - 12).into_owned(),
                 _ => self.wd.column(col - 18) * self.trend[k],
             };
-            let mut x = [Vec12::<T>::zeros(); N];
-            let mut xk = x0;
-            for (k, xs) in x.iter_mut().enumerate() {
-                xk = mul(&self.ad, &xk) + input(k);
-                *xs = xk;
-            }
-            let g = self.state_gradient(&x);
+            let g = self.response_gradient(x0, &input);
             match col {
                 0..12 => self.gx.set_column(col, &g),
                 12..18 => self.gw.set_column(col - 12, &g),
@@ -712,18 +720,17 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     fn build_hessian(&self) -> SMatrix<T, NZ, NZ> {
         let mut h = SMatrix::<T, NZ, NZ>::zeros();
         for col in 0..NZ {
+            // A unit move of channel c in move b: the input Bd·e_c at that
+            // move's prediction steps.
             let (b, c) = (col / 4, col % 4);
-            let mut x = [Vec12::<T>::zeros(); N];
-            let mut xk = Vec12::<T>::zeros();
-            for (k, xs) in x.iter_mut().enumerate() {
-                let mut u = Vector4::<T>::zeros();
+            let input = |k: usize| {
                 if block_of::<M>(k) == b {
-                    u[c] = T::one();
+                    self.bd.column(c).into_owned()
+                } else {
+                    Vec12::zeros()
                 }
-                xk = self.ad * xk + self.bd * u;
-                *xs = xk;
-            }
-            h.set_column(col, &self.state_gradient(&x));
+            };
+            h.set_column(col, &self.response_gradient(Vec12::zeros(), &input));
         }
         // Input magnitude: each prediction step's input belongs to one move.
         for k in 0..N {
