@@ -60,6 +60,20 @@ pub fn clamp<T: RealField + Copy>(v: T, lo: T, hi: T) -> T {
     }
 }
 
+/// `v` limited to `[−lim, lim]` by comparisons (see [`clamp`]), for a
+/// symmetric limit where NaN must not pass: NaN gives `−lim`, as
+/// `v.max(−lim).min(lim)` does.
+#[inline(always)]
+pub fn limit<T: RealField + Copy>(v: T, lim: T) -> T {
+    if v > lim {
+        lim
+    } else if v >= -lim {
+        v
+    } else {
+        -lim
+    }
+}
+
 /// The larger of `a` and `b` by comparison (see [`clamp`]); `a` if either is NaN.
 #[inline(always)]
 pub fn max<T: RealField + Copy>(a: T, b: T) -> T {

@@ -805,7 +805,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
         let lim = lit::<T>(self.cfg.max_heading_error_rad);
         // The heading error the reference asks for, capped.
-        let dpsi = super::reference::limit(wrap_pi(ar.yaw_rad - yaw), lim);
+        let dpsi = crate::math::limit(wrap_pi(ar.yaw_rad - yaw), lim);
         let mut r = Vec12::<T>::zeros();
         r.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&sp.pos_ned_m));
         r.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&sp.vel_ned_mps));

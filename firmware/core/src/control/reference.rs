@@ -5,6 +5,7 @@
 use super::Setpoint;
 use crate::lit;
 use crate::math as trig;
+use crate::math::limit;
 use crate::model::VehicleParams;
 use nalgebra::{RealField, Vector3};
 
@@ -67,19 +68,6 @@ pub fn tilt_and_thrust<T: RealField + Copy>(
     yaw: T,
 ) -> TiltThrust<T> {
     Tilt::new(p, acc_d, vel, yaw).tt
-}
-
-/// `v` limited to `[−lim, lim]` by comparisons (`f32::max`/`min` are calls
-/// on the M4); NaN gives `−lim`, as `v.max(−lim).min(lim)` does.
-#[inline(always)]
-pub fn limit<T: RealField + Copy>(v: T, lim: T) -> T {
-    if v > lim {
-        lim
-    } else if v >= -lim {
-        v
-    } else {
-        -lim
-    }
 }
 
 /// [`tilt_and_thrust`] with the intermediate values its time derivative
