@@ -80,15 +80,21 @@ fn enumerate_dyn(
     best.expect("a box QP always has a solution").1
 }
 
+/// A reproducible uniform sequence in [0, 1) from a non-zero `state`
+/// (xorshift64, the top 53 bits).
+fn xorshift(mut state: u64) -> impl FnMut() -> f64 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// A random SPD matrix with condition number about `cond`.
 fn spd<const N: usize>(seed: u64, cond: f64) -> SMatrix<f64, N, N> {
-    let mut s = seed | 1;
-    let mut rnd = || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
+    let mut uniform = xorshift(seed | 1);
+    let mut rnd = || uniform() - 0.5;
     let a = nalgebra::DMatrix::<f64>::from_fn(N, N, |_, _| rnd());
     let qd = a.qr().q();
     let q = SMatrix::<f64, N, N>::from_fn(|i, j| qd[(i, j)]);
@@ -166,13 +172,7 @@ fn check<const N: usize>(h: SMatrix<f64, N, N>, g: SVector<f64, N>, lb: SVector<
 }
 
 fn boxes<const N: usize>(seed: u64, degenerate: bool) -> (SVector<f64, N>, SVector<f64, N>) {
-    let mut s = seed.wrapping_mul(2654435761) | 1;
-    let mut rnd = || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = xorshift(seed.wrapping_mul(2654435761) | 1);
     let mut lb = SVector::<f64, N>::zeros();
     let mut ub = SVector::<f64, N>::zeros();
     for i in 0..N {
@@ -363,13 +363,7 @@ fn far_corner_starts_are_proved_within_the_bound() {
 /// `cond`, badly scaled), their variables spread over the indices by a
 /// random permutation. Returns the matrix and the blocks (as index lists).
 fn block_spd<const N: usize>(seed: u64, cond: f64) -> (SMatrix<f64, N, N>, Vec<Vec<usize>>) {
-    let mut s = seed | 1;
-    let mut rnd = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = xorshift(seed | 1);
     let mut perm: Vec<usize> = (0..N).collect();
     for i in (1..N).rev() {
         let j = (rnd() * (i + 1) as f64) as usize;
@@ -571,13 +565,7 @@ fn the_fast_mpcs_qp_in_f32_is_within_its_certified_accuracy() {
     let lb = SVector::<f64, 12>::from_fn(|i, _| (bx.lo[i % 4] - hover[i % 4]) as f32 as f64);
     let ub = SVector::<f64, 12>::from_fn(|i, _| (bx.hi[i % 4] - hover[i % 4]) as f32 as f64);
     let blocks: Vec<Vec<usize>> = (0..4).map(|c| vec![c, c + 4, c + 8]).collect();
-    let mut s = 0x9e37_79b9_7f4a_7c15u64;
-    let mut rnd = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = xorshift(0x9e37_79b9_7f4a_7c15);
     let hinv = h.try_inverse().unwrap();
     let (mut worst_gap, mut worst_dz) = (0.0f64, 0.0f64);
     for case in 0..3000 {
