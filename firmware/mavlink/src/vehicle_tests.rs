@@ -46,6 +46,11 @@ impl Sent {
             })
             .collect()
     }
+    /// Asserts that a STATUSTEXT saying exactly `text` was sent.
+    fn assert_text(&self, text: &str) {
+        let texts = self.texts();
+        assert!(texts.iter().any(|t| t == text), "{text:?} not among {texts:?}");
+    }
     fn acks(&self) -> Vec<MavResult> {
         self.0
             .iter()
@@ -248,13 +253,7 @@ fn uneven_control_steps_are_said_at_arming() {
     let mut out = Sent::default();
     v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
     assert_eq!(out.acks(), [MavResult::MAV_RESULT_ACCEPTED]);
-    assert!(
-        out.texts()
-            .iter()
-            .any(|t| t == "uneven control steps: 5000 us on 2000 us samples"),
-        "{:?}",
-        out.texts()
-    );
+    out.assert_text("uneven control steps: 5000 us on 2000 us samples");
 }
 
 #[test]
@@ -271,13 +270,7 @@ fn parameters_answer_as_the_protocol_says_and_redesigns_wait_for_disarm() {
     // Refused: the old value is echoed and a STATUSTEXT names it.
     v.handle(&param_set("VEH_MASS", -1.0), &mut out, &Still, 0).unwrap();
     assert_eq!(out.param("VEH_MASS"), Some(0.65));
-    assert!(
-        out.texts()
-            .iter()
-            .any(|t| t == "VEH_MASS=-1 refused: out of [0.01, 100]"),
-        "{:?}",
-        out.texts()
-    );
+    out.assert_text("VEH_MASS=-1 refused: out of [0.01, 100]");
     // Accepted, re-designed while disarmed: the core flies the new mass.
     v.handle(&param_set("VEH_MASS", 0.7), &mut out, &Still, 0).unwrap();
     assert_eq!(out.param("VEH_MASS"), Some(0.7));
@@ -285,7 +278,7 @@ fn parameters_answer_as_the_protocol_says_and_redesigns_wait_for_disarm() {
     v.handle(&param_set("CTL_ID", 0.0), &mut out, &Still, 0).unwrap();
     assert_eq!(v.core().spec(), fc_loop::FALLBACK_CONTROLLER);
     v.handle(&param_set("NO_SUCH", 1.0), &mut out, &Still, 0).unwrap();
-    assert!(out.texts().iter().any(|t| t == "NO_SUCH: no such parameter"));
+    out.assert_text("NO_SUCH: no such parameter");
 
     let t = rest(&mut v, &mut out, 1_000_000, 2000);
     v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
