@@ -58,6 +58,7 @@ def main():
     ap.add_argument("--max-final-error", type=float, default=0.05, help="m (waypoints)")
     ap.add_argument("--max-rmse", type=float, default=0.15, help="m (scenario tracking, 3-D)")
     ap.add_argument("--csv", help="the flight controller's trace")
+    ap.add_argument("--ulog", help="the flight as a ULog (sil-host px4-hil --ulog)")
     ap.add_argument("--json", help="write the summary here too")
     ap.add_argument("--seed", type=int, default=1, help="seeds rotorpy's IMU noise (numpy)")
     ap.add_argument("--gcs", action="store_true",
@@ -87,6 +88,8 @@ def main():
         cmd += ["--scenario", a.scenario, "--scenario-start", str(a.scenario_start)]
     if a.csv:
         cmd += ["--csv", a.csv]
+    if a.ulog:
+        cmd += ["--ulog", a.ulog]
     np.random.seed(a.seed)
     fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     vehicle = Lockstep(quad_params, mavlink_url=f"tcpin:localhost:{a.port}")

@@ -382,6 +382,8 @@ pub fn fly_endpoint<E: Endpoint>(
     let mut schedule = fc_loop::schedule::Schedule::new();
     let mut est_acc = crate::estimation::EstimationAccumulator::default();
     let mut est_trace = Vec::new();
+    // The estimate of the last IMU step, for a streaming sink's next row.
+    let mut last_nav: Option<crate::endpoint::NavReport> = None;
 
     let mut res = FlightResult {
         rows: Vec::new(),
@@ -447,6 +449,7 @@ pub fn fly_endpoint<E: Endpoint>(
                     let step = ep.step_sensed(t, &readings, &sp, &previews, control)?;
                     if let Some(nav) = &step.nav {
                         est_acc.push(t, &plant.quat_state(), &s.true_biases(), nav);
+                        last_nav = Some(*nav);
                     }
                     step
                 }
@@ -523,7 +526,12 @@ pub fn fly_endpoint<E: Endpoint>(
                     res.rows.push(row);
                     res.reference.push(rref);
                 }
-                Recording::Stream(sink) => sink.push(&row, Some(&rref))?,
+                Recording::Stream(sink) => {
+                    sink.push(&row, Some(&rref))?;
+                    if let Some(nav) = last_nav.take() {
+                        sink.estimate(t, &nav)?;
+                    }
+                }
             }
         }
         if i < ticks {

@@ -116,6 +116,8 @@ pub struct HilConfig {
     pub duration_s: f64,
     /// Where the flight controller runs.
     pub target: Target,
+    /// Write the flight as a ULog here (PX4's log format), as it flies.
+    pub ulog: Option<std::path::PathBuf>,
 }
 
 /// What a HIL flight did, measured from the messages that crossed the
@@ -420,6 +422,10 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             Box::new(q)
         }
     };
+    let mut ulog = match &cfg.ulog {
+        Some(path) => Some(crate::flight_log::HilULog::create(path, &cfg.settings)?),
+        None => None,
+    };
     let stream = connect(&cfg.addr, cfg.connect_timeout_s)?;
     stream.set_nodelay(true)?;
     stream.set_read_timeout(Some(Duration::from_secs(60)))?;
@@ -466,6 +472,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     // The set-point last sent, and the mission's reference now.
     let (mut home, mut truth, mut sp) = (None, Vector3::<f64>::zeros(), None::<Setpoint<f32>>);
     let mut reference = None::<Setpoint<f32>>;
+    // Simulated time of the last HIL_SENSOR (the log's clock), the last
+    // attitude estimate's heading, and the arming state last logged.
+    let (mut t_now, mut est_yaw, mut logged_armed) = (0.0f64, 0.0f32, None::<bool>);
     let mut buf = [0u8; 4096];
     let mut dgram = [0u8; 2048];
     let mut out = Vec::new();
@@ -505,6 +514,11 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 if fc_mavlink::hil::on_earth(m) {
                     let h = *home.get_or_insert(fc_mavlink::hil::Home::of(m));
                     truth = h.ned_m(m.lat, m.lon, m.alt);
+                    if let Some(log) = ulog.as_mut() {
+                        let p = [truth[0] as f32, truth[1] as f32, truth[2] as f32];
+                        let v = [m.vx, m.vy, m.vz].map(|c| f32::from(c) * 0.01);
+                        log.truth(t_now, p, v, m.attitude_quaternion)?;
+                    }
                 }
             }
             let MavMessage::HIL_SENSOR(m) = &msg else {
@@ -513,6 +527,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             };
             let t0 = *t0_us.get_or_insert(m.time_usec);
             let t = m.time_usec.saturating_sub(t0) as f64 * 1e-6;
+            t_now = t;
             // The mission, sent as a ground station sends it: the set-point
             // when it changes, at most at 100 Hz (a trajectory's moves, with
             // its velocity and acceleration), and at least every second;
@@ -525,6 +540,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 let changed = sp.is_none_or(|old| old != s);
                 if (changed && t >= next_sp_s - 1e-9) || t >= next_sp_s + 1.0 {
                     v.deliver(&position_target(&s, (t * 1e3) as u32), &mut out)?;
+                    if let Some(log) = ulog.as_mut() {
+                        log.setpoint(t, &s)?;
+                    }
                     next_sp_s = t + SETPOINT_PERIOD_S;
                     sp = Some(s);
                 }
@@ -548,12 +566,34 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                     }
                     MavMessage::LOCAL_POSITION_NED(p) => {
                         let est = Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z));
+                        if let Some(log) = ulog.as_mut() {
+                            log.position(t, [p.x, p.y, p.z], [p.vx, p.vy, p.vz], est_yaw)?;
+                        }
                         if armed {
                             res.max_estimate_error_m = res.max_estimate_error_m.max((est - truth).norm());
                         }
                         res.trace.push([
                             t, truth[0], truth[1], truth[2], est[0], est[1], est[2], spn[0], spn[1], spn[2],
                         ]);
+                    }
+                    MavMessage::ATTITUDE(a) => {
+                        est_yaw = a.yaw;
+                        if let Some(log) = ulog.as_mut() {
+                            let q = fc_core::euler_to_quat(a.roll, a.pitch, a.yaw);
+                            log.attitude(t, [q[0], q[1], q[2], q[3]])?;
+                        }
+                    }
+                    MavMessage::HIL_ACTUATOR_CONTROLS(c) => {
+                        if let Some(log) = ulog.as_mut() {
+                            log.outputs(t, &c.controls[..4])?;
+                        }
+                    }
+                    MavMessage::PARAM_VALUE(pv) => {
+                        if let Some(log) = ulog.as_mut() {
+                            if let Ok(name) = pv.param_id.to_str() {
+                                log.param(name.trim_end_matches('\0'), pv.param_value)?;
+                            }
+                        }
                     }
                     MavMessage::SYS_STATUS(st) => {
                         res.vehicle_errors = [st.errors_count1, st.errors_count2, st.errors_count3, st.errors_count4];
@@ -563,12 +603,22 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                         if text == "armed" {
                             armed = true;
                         }
+                        if let (Some(log), MavMessage::STATUSTEXT(st)) = (ulog.as_mut(), &m) {
+                            let warning = st.severity as u8 <= common::MavSeverity::MAV_SEVERITY_WARNING as u8;
+                            log.text(t, warning, &text)?;
+                        }
                         res.status_texts.push(text);
                     }
                     _ => {}
                 }
                 if armed && res.armed_at_s.is_none() {
                     res.armed_at_s = Some(t);
+                }
+                if let Some(log) = ulog.as_mut() {
+                    if logged_armed != Some(armed) || matches!(m, MavMessage::HEARTBEAT(_)) {
+                        log.status(t, armed)?;
+                        logged_armed = Some(armed);
+                    }
                 }
                 let (to_sim, to_gcs) = route(&m);
                 if to_sim {
@@ -585,6 +635,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     }
     res.refused_frames = sim_reader.counters().refused() + gcs_reader.counters().refused() + v.refused();
     res.firmware_log = v.finish()?;
+    if let Some(log) = ulog {
+        log.finish()?;
+    }
     res.final_pos_ned_m = truth.into();
     res.tracking_rmse_m = (sq_n > 0).then(|| (sq_sum / sq_n as f64).sqrt());
     res.final_error_m = reference.map(|s| (truth - s.pos_ned_m.cast::<f64>()).norm());

@@ -12,6 +12,7 @@ pub mod estimation;
 pub mod estimation_report;
 pub mod figures;
 pub mod flight;
+pub mod flight_log;
 pub mod full_report;
 pub mod hil;
 pub mod html;
@@ -27,6 +28,7 @@ pub mod sensors;
 pub mod study;
 pub mod study_plots;
 pub mod sweep;
+pub mod ulog;
 
 pub use disturbance::DisturbanceSet;
 pub use fc_core::AttitudeForm;

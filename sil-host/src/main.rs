@@ -13,6 +13,7 @@ use fc_core::AttitudeForm;
 use sil_host::disturbance::DisturbanceSet;
 use sil_host::flight::Recording;
 use sil_host::flight::{FlightConfig, Target};
+use sil_host::flight_log::{FlyULog, Tee};
 use sil_host::openloop::OpenLoop;
 use sil_host::plant::PlantConfig;
 use sil_host::record::{CsvSink, Discard, STATE_COLUMNS};
@@ -131,6 +132,11 @@ struct Px4HilArgs {
     /// Write the trace (t, reported NED, estimated NED, set-point NED) as CSV.
     #[arg(long, value_name = "PATH")]
     csv: Option<PathBuf>,
+    /// Write the flight as a ULog (PX4's log format: pyulog, PlotJuggler, Flight Review), as it
+    /// flies: the simulator's truth, the estimate, the set-point, the motors, arming, STATUSTEXTs
+    /// and the parameters, under PX4's topic names.
+    #[arg(long, value_name = "PATH")]
+    ulog: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -348,6 +354,11 @@ struct FlyArgs {
     /// Write the metrics as JSON (`-` for standard output).
     #[arg(long, value_name = "PATH")]
     json: Option<PathBuf>,
+    /// Write the flight as a ULog (PX4's log format: pyulog, PlotJuggler, Flight Review), as it
+    /// flies, every 10 ms: the plant's truth (PX4's ground-truth topics), the estimate, the
+    /// reference, the motors and the flight's parameters, under PX4's topic names.
+    #[arg(long, value_name = "PATH")]
+    ulog: Option<PathBuf>,
     /// With `--target qemu`: print the firmware's own log (defmt over semihosting, decoded with
     /// the image's format table) to standard error after the flight.
     #[arg(long)]
@@ -740,15 +751,37 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
     // reports metrics, which are computed online, so no flight of any
     // length is held in memory.
     let mut csv = a.csv.as_deref().map(|p| CsvSink::create(p, true)).transpose()?;
-    let rec = match csv.as_mut() {
-        Some(sink) => Recording::Stream(sink),
-        None => Recording::Stream(&mut Discard),
+    let mut ulog = match &a.ulog {
+        Some(p) => {
+            let mut settings = fc_loop::params::Settings::os4();
+            settings.vehicle = cfg.vehicle.cast();
+            settings.controller = cfg.spec;
+            Some(FlyULog::create(p, &settings, cfg.vehicle, cfg.sensors.is_none())?)
+        }
+        None => None,
+    };
+    let mut tee;
+    let rec = match (csv.as_mut(), ulog.as_mut()) {
+        (Some(c), Some(u)) => {
+            tee = Tee(c, u);
+            Recording::Stream(&mut tee)
+        }
+        (Some(c), None) => Recording::Stream(c),
+        (None, Some(u)) => Recording::Stream(u),
+        (None, None) => Recording::Stream(&mut Discard),
     };
     let res = sil_host::flight::fly_target_with_progress(&cfg, &exec, Some(&tick), rec);
     bar.finish_and_clear();
     let res = res?;
     if let Some(sink) = csv {
         sink.finish()?;
+    }
+    if let Some(mut log) = ulog {
+        let end = cfg.scenario.duration_s;
+        for l in &res.firmware_log {
+            sil_host::record::RowSink::log(&mut log, end, l)?;
+        }
+        log.finish()?;
     }
     if a.firmware_log {
         for l in &res.firmware_log {
@@ -988,6 +1021,7 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
         mission,
         gcs: a.gcs,
         duration_s: a.duration,
+        ulog: a.ulog.clone(),
         target: match a.target.as_str() {
             "in-process" => sil_host::hil::Target::InProcess,
             "qemu" => sil_host::hil::Target::Qemu(sil_host::link::firmware_mavlink_elf()?),

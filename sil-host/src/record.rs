@@ -45,6 +45,18 @@ pub trait RowSink {
     /// Takes one row: the state part and, for closed-loop flights, the
     /// reference `[x, y, z, ψ]` at the same time.
     fn push(&mut self, row: &[f64; 21], reference: Option<&[f64; 4]>) -> anyhow::Result<()>;
+
+    /// Takes the on-board estimate of a sensor flight at time `t` (s), at
+    /// the rows' rate; sinks that do not record it ignore it.
+    fn estimate(&mut self, _t: f64, _nav: &crate::endpoint::NavReport) -> anyhow::Result<()> {
+        Ok(())
+    }
+
+    /// Takes a line of the flight controller's log at time `t` (s);
+    /// sinks that do not record it ignore it.
+    fn log(&mut self, _t: f64, _text: &str) -> anyhow::Result<()> {
+        Ok(())
+    }
 }
 
 /// A sink that drops every row (a flight whose metrics are all that is wanted).
