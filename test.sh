@@ -53,9 +53,13 @@ rm -rf target/report-quick
 cargo run -q --release -p sil-host -- report --quick --no-progress --out target/report-quick
 python3 tools/check_report.py target/report-quick | tee -a "$log"
 echo "== a flight against rotorpy, a simulator this project did not write (PX4 HIL over TCP 4560)"
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore rotorpy pymavlink
+python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore rotorpy pymavlink pyulog
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
-    --duration 15 --json target/rotorpy-hil.json | grep "rotorpy check:" | tee -a "$log"
+    --duration 15 --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg | grep "rotorpy check:" | tee -a "$log"
+echo "== flight logs: the rotorpy flight's ULog and a SIL flight's, read back with pyulog against their JSON"
+ulog_info target/rotorpy-hil.ulg
+python3 tools/check_ulog.py hil target/rotorpy-hil.ulg target/rotorpy-hil.json | tee -a "$log"
+python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --scenario circle --duration 25 \
     --json target/rotorpy-hil-circle.json | grep "rotorpy check:" | tee -a "$log"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --controller pd --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
@@ -69,4 +73,6 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --
 echo "== a pymavlink ground station (tools/mav_gcs.py) lists, reads and sets parameters, arms and flies it against rotorpy"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration 60 \
     --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy|gcs) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
+tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy|gcs|ulog|slurm) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
