@@ -29,6 +29,7 @@ pub mod study;
 pub mod study_plots;
 pub mod sweep;
 pub mod ulog;
+pub mod ulog_plot;
 
 pub use disturbance::DisturbanceSet;
 pub use fc_core::AttitudeForm;

@@ -28,7 +28,7 @@ use std::path::PathBuf;
     version,
     about = "Software-in-the-loop host for the quadrotor flight-control core",
     long_about = "Flies the no_std flight-control core against a nonlinear f64 plant built from the \
-                  same equations (docs/model.md). Frames: earth NED (z down, altitude = -z), body FRD; \
+                  same equations (docs/book/src/model.md). Frames: earth NED (z down, altitude = -z), body FRD; \
                   angles in rad unless an option says degrees."
 )]
 struct Cli {
@@ -68,6 +68,25 @@ enum Command {
     /// as a ground station's commands, or a real ground station (--gcs) flies it. Prints a JSON
     /// summary.
     Px4Hil(Px4HilArgs),
+    /// Draw the report's position figures (position against time, the path seen from above) from
+    /// a ULog: this project's (`fly --ulog`, `px4-hil --ulog`) or PX4's own. Flown position: the
+    /// ground truth when the log has it, else vehicle_local_position; the set-point dashed.
+    Plot(PlotArgs),
+    /// Print this command-line reference as Markdown: the book's chapter
+    /// docs/book/src/cli.md is this output, checked by a test.
+    #[command(hide = true)]
+    MarkdownHelp,
+}
+
+#[derive(Args, Debug)]
+struct PlotArgs {
+    /// The ULog to draw.
+    #[arg(long, value_name = "FILE")]
+    ulog: PathBuf,
+    /// Output directory for DIR/STEM_position.svg|png and DIR/STEM_path_top.svg|png (created if
+    /// missing); STEM is the log's file name.
+    #[arg(long, default_value = "figures", value_name = "DIR")]
+    out: PathBuf,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -111,7 +130,7 @@ struct Px4HilArgs {
     /// Mission: `T,N,E,D` (from T s, hold N, E, D m about home; heading 0), repeatable, in time order.
     #[arg(long = "waypoint", value_name = "T,N,E,D", required_unless_present_any = ["scenario", "gcs_only"])]
     waypoints: Vec<String>,
-    /// Or a scenario's trajectory (`circle`, `helix`, `setpoint`; docs/model.md §9, starting 1 m
+    /// Or a scenario's trajectory (`circle`, `helix`, `setpoint`; docs/book/src/model.md §9, starting 1 m
     /// above home), flown from --scenario-start s after holding its start point.
     #[arg(long, value_enum, conflicts_with = "waypoints")]
     scenario: Option<ScenarioKind>,
@@ -125,7 +144,7 @@ struct Px4HilArgs {
     #[arg(long, default_value_t = 100.0, value_name = "HZ")]
     fix_hz: f64,
     /// Set a flight-controller parameter before the flight (`NAME=VALUE`, repeatable, after the
-    /// options above; e.g. `PD_ROLL_P=250`, `MPC_W_U=4`; README lists them). Checked as the
+    /// options above; e.g. `PD_ROLL_P=250`, `MPC_W_U=4`; the book's MAVLink chapter lists them). Checked as the
     /// vehicle checks a PARAM_SET: a refused one is an error.
     #[arg(long = "param", value_name = "NAME=VALUE")]
     params: Vec<String>,
@@ -180,7 +199,7 @@ struct SweepArgs {
     /// A flight succeeds if it never strays farther than this from the reference, m.
     #[arg(long, default_value_t = 1.0, value_name = "M")]
     tube_m: f64,
-    /// Scenario flown (docs/model.md §9 defaults).
+    /// Scenario flown (docs/book/src/model.md §9 defaults).
     #[arg(long, value_enum, default_value = "helix")]
     scenario: ScenarioKind,
     /// Scenario from a TOML file instead (see `fly --help`).
@@ -261,10 +280,10 @@ struct FlyArgs {
     /// Form of the controller and of the plant: `euler` or `quaternion`.
     #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
     model: AttitudeForm,
-    /// Scenario (docs/model.md §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s).
+    /// Scenario (docs/book/src/model.md §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s).
     #[arg(long, value_enum, default_value = "setpoint")]
     scenario: ScenarioKind,
-    /// Disturbances on the plant: none, wind, mismatch or wind,mismatch (docs/model.md §9).
+    /// Disturbances on the plant: none, wind, mismatch or wind,mismatch (docs/book/src/model.md §9).
     #[arg(long, default_value = "none", value_name = "SET")]
     disturbance: DisturbanceSet,
     /// Sensor noise on the state the controller sees: white, Gaussian, drawn every control step;
@@ -328,7 +347,7 @@ struct FlyArgs {
     #[arg(long, value_parser = reference_parser(), default_value = "feedforward")]
     reference: ReferenceMode,
     /// PD gains: `tuned` (the thesis gains with the roll/pitch and quaternion z corrections
-    /// explained in the README) or `thesis` (Tables 4.1-4.4 as printed). LQR ignores it.
+    /// explained in the book's controllers chapter) or `thesis` (Tables 4.1-4.4 as printed). LQR ignores it.
     #[arg(long, value_parser = preset_parser(Family::Pd), default_value = "tuned")]
     gains: Preset,
     /// Controller rate of PD and LQR, Hz (the MPC presets fix their own rate).
@@ -343,7 +362,7 @@ struct FlyArgs {
     #[arg(long, value_name = "FILE")]
     vehicle: Option<PathBuf>,
     /// Scenario from a TOML file (any subset of kind, start_ned_m, start_yaw_deg, target_ned_m,
-    /// target_yaw_deg, radius_m, period_s, climb_rate_mps, duration_s; the rest are the docs/model.md §9
+    /// target_yaw_deg, radius_m, period_s, climb_rate_mps, duration_s; the rest are the docs/book/src/model.md §9
     /// defaults of its kind, --scenario when it names none). Other scenario options then apply
     /// on top of it.
     #[arg(long, value_name = "FILE")]
@@ -439,10 +458,10 @@ struct PlantArgs {
     /// RK4 integration rate of the plant, Hz (each control period is cut into sub-steps at this rate).
     #[arg(long, default_value_t = 1000.0, value_name = "HZ", allow_negative_numbers = true)]
     integration_hz: f64,
-    /// Turn on the first-order rotor lag (tau = 0.178 s, gain 0.936, docs/model.md §6).
+    /// Turn on the first-order rotor lag (tau = 0.178 s, gain 0.936, docs/book/src/model.md §6).
     #[arg(long)]
     rotor_lag: bool,
-    /// Disturbances acting on the plant: none, wind, mismatch or wind,mismatch (docs/model.md §9).
+    /// Disturbances acting on the plant: none, wind, mismatch or wind,mismatch (docs/book/src/model.md §9).
     #[arg(long, default_value = "none", value_name = "SET")]
     disturbance: DisturbanceSet,
 }
@@ -909,6 +928,32 @@ fn main() -> Result<()> {
         Command::Sweep(a) => sweep_cmd(a),
         Command::MpcStep(a) => mpc_step_cmd(a),
         Command::Px4Hil(a) => px4_hil(a.clone()),
+        Command::Plot(a) => {
+            let tracks = sil_host::ulog_plot::read_tracks(&a.ulog)?;
+            let stem = a
+                .ulog
+                .file_stem()
+                .map_or("ulog".into(), |s| s.to_string_lossy().into_owned());
+            std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+            for fig in sil_host::ulog_plot::figures(&stem, &tracks) {
+                sil_host::figures::write(&a.out, &fig)?;
+                println!("wrote {}/{}.svg and .png", a.out.display(), fig.stem);
+            }
+            println!(
+                "{} samples of {}, {} set-points",
+                tracks.flown.len(),
+                tracks.source,
+                tracks.setpoint.len()
+            );
+            Ok(())
+        }
+        Command::MarkdownHelp => {
+            let opts = clap_markdown::MarkdownOptions::new()
+                .title("Command-line reference".to_string())
+                .show_footer(false);
+            print!("{}", clap_markdown::help_markdown_custom::<Cli>(&opts));
+            Ok(())
+        }
         Command::Serve(a) => {
             for (flag, v) in [("--idle-timeout", a.idle_timeout), ("--max-session", a.max_session)] {
                 if !(v.is_finite() && v > 0.0 && v <= 1e6) {

@@ -202,3 +202,83 @@ fn inputs_that_cannot_be_flown_are_refused_by_name_before_flying() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The book's command-line chapter is the binary's own reference, generated
+/// from the clap definitions, so the two cannot drift apart.
+#[test]
+fn the_books_cli_chapter_is_the_generated_reference() {
+    let out = sil_host().arg("markdown-help").output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let chapter = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/book/src/cli.md");
+    let book = std::fs::read_to_string(chapter).unwrap();
+    assert!(
+        book == String::from_utf8_lossy(&out.stdout),
+        "docs/book/src/cli.md is not the CLI's reference: regenerate it with \
+         `cargo run -p sil-host -- markdown-help > docs/book/src/cli.md`"
+    );
+    for command in ["fly", "report", "sweep", "px4-hil", "serve", "--ulog"] {
+        assert!(book.contains(command), "the reference names {command}");
+    }
+}
+
+/// A flight's ULog is read back by another parser (yule_log) and drawn as
+/// the report draws its figures: every 10 ms row of the CSV is a sample.
+#[test]
+fn a_flights_ulog_draws_the_reports_position_figures() {
+    let dir = std::env::temp_dir().join(format!("sil-host-plot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (ulg, csv, figs) = (dir.join("hover.ulg"), dir.join("hover.csv"), dir.join("figs"));
+    let out = sil_host()
+        .args([
+            "fly",
+            "--controller",
+            "lqr",
+            "--scenario",
+            "circle",
+            "--duration",
+            "3",
+            "--ulog",
+        ])
+        .arg(&ulg)
+        .arg("--csv")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = std::fs::read_to_string(&csv).unwrap().lines().count() - 1;
+    assert_eq!(rows, 301, "3 s of 10 ms rows");
+    let out = sil_host()
+        .args(["plot", "--ulog"])
+        .arg(&ulg)
+        .arg("--out")
+        .arg(&figs)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(&format!(
+            "{rows} samples of vehicle_local_position_groundtruth, {rows} set-points"
+        )),
+        "{text}"
+    );
+    for stem in ["hover_position", "hover_path_top"] {
+        for ext in ["svg", "png"] {
+            let f = figs.join(format!("{stem}.{ext}"));
+            assert!(
+                std::fs::metadata(&f).map(|m| m.len() > 1000).unwrap_or(false),
+                "{} drawn",
+                f.display()
+            );
+        }
+    }
+    // Not a ULog: a clear error, non-zero exit.
+    let out = sil_host().args(["plot", "--ulog"]).arg(&csv).output().unwrap();
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("not a ULog"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
