@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Every test of the project, as CI runs it: formatting, lints (host and
 # thumbv7em), the firmware image build, and all unit, property and
-# end-to-end tests. Installs what a fresh machine lacks (the thumbv7em target).
+# end-to-end tests, the book, the independent checks against python-control,
+# scipy, rotorpy and pyulog, and the sweep on Slurm. Installs what a fresh
+# machine lacks (the thumbv7em target, QEMU, Slurm, mdbook, Python packages).
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -32,6 +34,17 @@ echo "== image size (flash = text + data, static RAM = data + bss): QEMU image, 
 size target/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
 echo "== API docs (warnings denied; the doctests run with the tests below)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
+echo "== the book (docs/book, mdBook): built with its warnings refused, every internal link and anchor checked"
+if ! mdbook --version 2>/dev/null | grep -q '^mdbook v0\.5\.'; then
+    cargo install mdbook --version 0.5.4 --locked --no-default-features --features search --quiet
+fi
+book_log=$(mktemp)
+mdbook build docs/book 2>&1 | tee "$book_log"
+if grep -qE '(WARN|ERROR)' "$book_log"; then
+    echo "mdbook warned: see above"
+    exit 1
+fi
+rm -f "$book_log"
 echo "== tests"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
@@ -40,6 +53,7 @@ trap 'rm -f "$log"' EXIT
 cargo test --workspace -- --include-ignored 2>&1 | tee "$log"
 # One closing line over every test binary (cargo's last line is often a
 # doc-test run with 0 tests).
+python3 tools/check_book.py target/book | tee -a "$log"
 echo "== independent LQR design check (python-control)"
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore numpy scipy control
 cargo build -q -p sil-host
@@ -75,4 +89,4 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration
     --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
 echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy|gcs|ulog|slurm) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|report|wire|rotorpy|gcs|ulog|slurm|book) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

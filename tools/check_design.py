@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Independent check of `sil-host design lqr` against python-control.
 
-Linearises its own transcription of docs/model.md §4/§5 by central differences
+Linearises its own transcription of docs/book/src/model.md §4/§5 by central differences
 (numpy), solves the LQR with python-control's `lqr` (SLICOT/scipy CARE), and
 compares A, B and K with what the firmware core printed.
 

@@ -2,7 +2,7 @@
 """Checks a `sil-host report` directory as a reader would meet it: index.md
 and index.html exist, every relative link in index.md (figures, PNG/SVG,
 sweep pages) resolves to a non-empty file, PNGs are PNGs and SVGs are SVG,
-and the HTML carries its figures inline. Prints `report check: N passed, M
+the HTML carries its figures inline, and the report links into the book. Prints `report check: N passed, M
 failed` and exits non-zero on any failure."""
 import re
 import sys
@@ -39,6 +39,8 @@ for link in links:
         check("<svg" in f.read_text(errors="replace"), f"{link} is an SVG")
 for section in ["## Headline", "## Figures", "Table 4.", "## Prediction horizon", "## Robustness", "## Instructions per step"]:
     check(section in md, f"index.md has {section!r}")
+book = [l for l in links if "docs/book/src/" in l and l.endswith(".md")]
+check(len(book) >= 5 and "## Read on" in md, f"index.md links into the book's chapters (found {len(book)})")
 check(html.count("<svg") >= 14 and "<img" not in html, "index.html inlines its figures")
 print(f"report check: {passed} passed, {failed} failed")
 sys.exit(1 if failed else 0)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""A flight-controller client written from the README's wire-format section
+"""A flight-controller client written from the book's wire-format section (docs/book/src/protocols/wire.md)
 only (COBS + CRC-32C + postcard, protocol v3), run against `sil-host serve`:
 it sends garbage first, then handshakes, selects the LQR, holds a set-point
 and flies a few hundred lockstep steps of a crude vertical model, and checks

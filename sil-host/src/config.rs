@@ -1,6 +1,6 @@
 //! Vehicle parameters and scenarios from TOML files (`--vehicle FILE`,
 //! `--scenario-file FILE`). Every field is optional: a file overrides what it
-//! names and keeps the built-in default (the OS4 of docs/model.md §2, the docs/model.md §9
+//! names and keeps the built-in default (the OS4 of docs/book/src/model.md §2, the docs/book/src/model.md §9
 //! scenario) for the rest. Unknown fields, wrong types and non-physical
 //! values are errors that name the field.
 //!
@@ -157,7 +157,7 @@ pub fn load_vehicle(path: &Path) -> Result<VehicleParams<f64>> {
     vehicle_from_str(path, &read(path)?)
 }
 
-/// Parses a scenario file's text over the docs/model.md §9 defaults of its kind
+/// Parses a scenario file's text over the docs/book/src/model.md §9 defaults of its kind
 /// (`default_kind` when the file names none).
 pub fn scenario_from_str(path: &Path, text: &str, default_kind: ScenarioKind) -> Result<Scenario> {
     let t: ScenarioToml = parse(path, text)?;

@@ -1,4 +1,4 @@
-//! Disturbances of docs/model.md §9: `wind` (earth-frame force and body moment) and
+//! Disturbances of docs/book/src/model.md §9: `wind` (earth-frame force and body moment) and
 //! `mismatch` (the plant differs from the controller's model).
 
 use fc_core::{Disturbance, VehicleParams};

@@ -33,7 +33,7 @@ pub struct FlightConfig {
     /// Plant RK4 rate, Hz.
     pub integration_hz: f64,
     /// The vehicle: what the controllers are designed for and what the plant
-    /// is (before `disturbance` and `uncertainty`). Default: the OS4 (docs/model.md §2).
+    /// is (before `disturbance` and `uncertainty`). Default: the OS4 (docs/book/src/model.md §2).
     pub vehicle: VehicleParams<f64>,
     /// How the true vehicle differs from `vehicle` (robustness sweeps).
     pub uncertainty: Option<Uncertainty>,
@@ -125,7 +125,7 @@ pub struct FlightResult {
     pub reference: Vec<[f64; 4]>,
     /// The samples the metrics are computed from; empty when streamed.
     pub trace: Trace,
-    /// docs/model.md §10 metrics.
+    /// docs/book/src/model.md §10 metrics.
     pub metrics: FlightMetrics,
     /// Controller compute time on this host.
     pub step_time_ns: StepTime,

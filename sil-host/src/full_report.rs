@@ -278,6 +278,68 @@ fn figure_markdown(f: &Figure) -> String {
     )
 }
 
+/// The book's chapters the report points its reader to: `(file under
+/// docs/book/src, title, what it explains)`.
+const BOOK_CHAPTERS: [(&str, &str, &str); 7] = [
+    (
+        "model.md",
+        "The model",
+        "the equations, the scenarios and metrics, and the thesis' corrections",
+    ),
+    (
+        "controllers.md",
+        "Controllers",
+        "PD and LQR, feed-forward and integral action",
+    ),
+    (
+        "mpc.md",
+        "The MPC and its exact QP",
+        "the presets, the solver, and the comparison with TinyMPC",
+    ),
+    (
+        "estimator.md",
+        "The estimator",
+        "flying from sensors: the IMU, the fixes and the error-state Kalman filter",
+    ),
+    (
+        "firmware.md",
+        "The firmware image",
+        "QEMU and the worst-case budgets behind the instruction counts",
+    ),
+    (
+        "sweeps.md",
+        "Robustness sweeps",
+        "the sweep above, and running it on a cluster",
+    ),
+    (
+        "simulation.md",
+        "Simulation",
+        "every flight option, to fly any row of this report yourself",
+    ),
+];
+
+/// The "Read on" section: links from the report's directory `out` to the
+/// book's chapter sources (Markdown, readable in place and rendered by
+/// mdBook), relative so that they work wherever the repository is.
+fn read_on(out: &Path) -> String {
+    let book = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/book/src");
+    let (out, book) = match (out.canonicalize(), book.canonicalize()) {
+        (Ok(o), Ok(b)) => (o, b),
+        // No book beside this binary (an installed sil-host): say where it is.
+        _ => {
+            return "\n## Read on\n\nThe book (`docs/book/` in the repository) explains every part of this report.\n"
+                .into()
+        }
+    };
+    let rel = pathdiff::diff_paths(&book, &out).unwrap_or(book);
+    let mut s = String::from("\n## Read on\n\nThe book explains what this report measures:\n\n");
+    for (file, title, what) in BOOK_CHAPTERS {
+        let link = rel.join(file);
+        let _ = writeln!(s, "- [{title}]({}): {what}", link.to_string_lossy().replace('\\', "/"));
+    }
+    s
+}
+
 /// Flies the study and writes the report.
 pub fn write_report(o: &ReportOptions) -> Result<Written> {
     let t0 = Instant::now();
@@ -403,7 +465,7 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
             md.push_str(
                 "The thumbv7em image in QEMU's netduinoplus2 (`-icount shift=0`: SysTick counts 0.168 per executed \
                  instruction), flown in lockstep over the emulated USART on a short set-point, beside the same \
-                 flight in-process. Worst-case budgets: README, `firmware/stm32f405/src/bin/budget.rs`. The \
+                 flight in-process. Worst-case budgets: the book's firmware chapter, `firmware/stm32f405/src/bin/budget.rs`. The \
                  firmware's failsafe timer runs on the frames' simulated time, so a busy host cannot trigger it: \
                  the failsafe column is 0 unless the flight itself starves the controller of valid frames.\n\n\
                  | controller | steps | instructions mean | instructions max | RMSE x/y/z m, QEMU | RMSE x/y/z m, in-process | failsafe entries |\n\
@@ -430,8 +492,9 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
     }
     md.push('\n');
     md.push_str(study::EXPLANATIONS);
-
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    md.push_str(&read_on(&o.out));
+
     let index_md = o.out.join("index.md");
     std::fs::write(&index_md, &md).with_context(|| format!("writing {}", index_md.display()))?;
     let html = crate::html::markdown_to_html(&md, "The thesis' study, redone by the firmware core", &o.out);

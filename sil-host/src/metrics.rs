@@ -1,4 +1,4 @@
-//! Flight metrics of docs/model.md §10, computed online while a flight is
+//! Flight metrics of docs/book/src/model.md §10, computed online while a flight is
 //! flown ([`MetricsAccumulator`]) or from a recorded trace.
 
 use fc_core::{hover_input, InputBox, VehicleParams};

@@ -1,4 +1,4 @@
-//! The nonlinear plant in `f64`: the core's equations (docs/model.md §4–6), integrated
+//! The nonlinear plant in `f64`: the core's equations (docs/book/src/model.md §4–6), integrated
 //! with fixed-step RK4 and sub-steps, rotor clamping and optional rotor lag,
 //! external disturbances, quaternion renormalisation after every step.
 
@@ -18,7 +18,7 @@ pub struct PlantConfig {
     pub params: VehicleParams<f64>,
     /// RK4 rate, Hz: each `step(dt)` is cut into `ceil(dt·rate)` equal sub-steps.
     pub integration_hz: f64,
-    /// First-order rotor lag (docs/model.md §6) on or off.
+    /// First-order rotor lag (docs/book/src/model.md §6) on or off.
     pub rotor_lag: bool,
     /// Time-varying external force/moment.
     pub disturbance: DisturbanceSet,
@@ -41,7 +41,7 @@ impl PlantConfig {
     }
 
     /// Applies a disturbance set: `mismatch` changes the true parameters and
-    /// turns the rotor lag on (docs/model.md §9); `wind` adds the force/moment profile.
+    /// turns the rotor lag on (docs/book/src/model.md §9); `wind` adds the force/moment profile.
     pub fn with_disturbance(mut self, d: DisturbanceSet) -> Self {
         if d.mismatch {
             self.params = DisturbanceSet::mismatched(&self.params);

@@ -1,4 +1,4 @@
-//! Scenarios of docs/model.md §9: `setpoint`, `circle` and `helix`, every number a parameter.
+//! Scenarios of docs/book/src/model.md §9: `setpoint`, `circle` and `helix`, every number a parameter.
 
 use fc_core::VehicleParams;
 use nalgebra::Vector3;
@@ -91,7 +91,7 @@ pub const LIMITS: Limits = Limits {
 };
 
 impl Scenario {
-    /// The docs/model.md §9 defaults for a kind.
+    /// The docs/book/src/model.md §9 defaults for a kind.
     pub fn default_for(kind: ScenarioKind) -> Self {
         Self {
             kind,

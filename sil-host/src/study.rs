@@ -474,7 +474,7 @@ pub const EXPLANATIONS: &str = "\
 ## Why the numbers differ from the thesis
 
 - **PD roll/pitch gains.** Table 4.2 repeats Table 4.1's x/y gains (2.1/2.8, 2.15/2.5) for θ/φ. With torques \
-`l·U2`, `l·U3` (docs/model.md §1) that leaves an attitude pole at −0.65 rad/s and a position cascade that is barely \
+`l·U2`, `l·U3` (docs/book/src/model.md §1) that leaves an attitude pole at −0.65 rad/s and a position cascade that is barely \
 stable at ψ = 0 and unstable at ψ = 15° (the test `printed_roll_pitch_gains_leave_the_euler_pd_marginal`); the \
 'printed thesis gains' rows show the result. The project's `tuned` gains change only roll/pitch (ωn ≈ 15 rad/s); \
 with them the thesis' own x, y, z, ψ gains reproduce its Euler settling times to within a few hundredths of a second.
@@ -494,11 +494,11 @@ exact ZOH model at 500 Hz with the sampled cost. With Table 4.5's weights the co
 roll/pitch pole that 500 Hz sampling cannot reproduce, so the discrete gain is ≈ 55 % different in its fastest \
 channels (test `discrete_gain_tends_to_continuous_gain`). `design lqr` prints the continuous gain and matches \
 python-control to 1e-12.
-- **Disturbances.** The thesis does not say what its disturbance was; ours are docs/model.md §9's. The thesis' \
+- **Disturbances.** The thesis does not say what its disturbance was; ours are docs/book/src/model.md §9's. The thesis' \
 PD and LQR have no integral action: `wind` pushes 0.5 N north from 5 s, which the PD's x loop (Kp 2.1 m/s² per m) \
 alone would hold off by F/(m·Kp) = 0.5/(0.65·2.1) ≈ 0.37 m, and with `mismatch` (+15 % mass) the quaternion LQR \
 with Table 4.7's Q = I (≈ 1 N per metre of z error) sags ≈ 2 m; the thesis' own 48 % RMSE for its disturbed \
-quaternion LQR shows that weakness. The project's PD and LQR carry a disturbance observer (docs/model.md §8.6: \
+quaternion LQR shows that weakness. The project's PD and LQR carry a disturbance observer (docs/book/src/model.md §8.6: \
 force τ = 50 ms, moment τ = 1 s) and are offset-free: the set-point under `wind` ends within 3 cm while the 0.5 Hz \
 gust still blows, and the helix under `wind,mismatch` stays within 0.1 m (RMSE). The thesis' disturbed numbers \
 stay near its undisturbed ones, so its disturbance was much smaller or had no constant part.
@@ -507,7 +507,7 @@ thesis' 6.9–8.5 s (the thesis' MPC had no reference preview and, in MATLAB, a 
 re-solves at 200 Hz over a 1 s horizon with preview, feed-forward and a disturbance estimate: offset-free under \
 `wind` (the set-point ends within 2 cm while the gust still blows), and stable under `mismatch` and on the \
 robustness sweep's slowest rotors thanks to heavy roll/pitch-rate weights (600; 30 lost the sweep's worst corner, \
-docs/model.md §8.6, at the price of a slower set-point: 3.5 s against 2.3 s). Its helix RMSE with `wind` is \
+docs/book/src/model.md §8.6, at the price of a slower set-point: 3.5 s against 2.3 s). Its helix RMSE with `wind` is \
 within 15 % of the calm one: the 0.5 Hz, 0.2 N gust sits above the position loop's bandwidth, so feedback alone cannot \
 hold it off (a disturbance estimate held constant over the horizon left 1.46×); the estimate's rate is \
 extrapolated with a damped trend (T = 0.3 s), so the MPC anticipates where the gust is going rather than chasing it.

@@ -1,6 +1,6 @@
-//! `open-loop` against an independent high-accuracy integration of docs/model.md §4/§5.
+//! `open-loop` against an independent high-accuracy integration of docs/book/src/model.md §4/§5.
 //!
-//! The reference below re-transcribes the equations from docs/model.md with plain
+//! The reference below re-transcribes the equations from docs/book/src/model.md with plain
 //! arrays (none of the core's code) and integrates them with an adaptive
 //! Dormand–Prince 5(4) method at a 1e-12 tolerance.
 
@@ -20,7 +20,7 @@ const KM: f64 = 7.5e-7;
 const KT: [f64; 3] = [0.1, 0.1, 0.15];
 const KR: [f64; 3] = [0.1, 0.1, 0.15];
 
-/// ωr from docs/model.md §3's inverse mixer.
+/// ωr from docs/book/src/model.md §3's inverse mixer.
 fn omega_r(u: [f64; 4]) -> f64 {
     let w1 = (u[0] / (4.0 * KF) + u[2] / (2.0 * KF) + u[3] / (4.0 * KM)).sqrt();
     let w2 = (u[0] / (4.0 * KF) - u[1] / (2.0 * KF) - u[3] / (4.0 * KM)).sqrt();
@@ -39,7 +39,7 @@ fn rates(s: &[f64], u: [f64; 4], wr: f64) -> [f64; 3] {
     ]
 }
 
-/// docs/model.md §5, state [x y z vx vy vz q0 q1 q2 q3 p q r].
+/// docs/book/src/model.md §5, state [x y z vx vy vz q0 q1 q2 q3 p q r].
 fn quat_rhs(x: &[f64; 13], u: [f64; 4], wr: f64) -> [f64; 13] {
     let (q0, q1, q2, q3) = (x[6], x[7], x[8], x[9]);
     let (p, q, r) = (x[10], x[11], x[12]);
@@ -61,7 +61,7 @@ fn quat_rhs(x: &[f64; 13], u: [f64; 4], wr: f64) -> [f64; 13] {
     ]
 }
 
-/// docs/model.md §4, state [x y z vx vy vz φ θ ψ p q r] (padded to 13).
+/// docs/book/src/model.md §4, state [x y z vx vy vz φ θ ψ p q r] (padded to 13).
 fn euler_rhs(x: &[f64; 13], u: [f64; 4], wr: f64) -> [f64; 13] {
     let (ph, th, ps) = (x[6], x[7], x[8]);
     let (p, q, r) = (x[9], x[10], x[11]);

@@ -1,5 +1,5 @@
 //! Issue 15's closed-loop claims, flown in the SIL: the project's PD and LQR
-//! are offset-free (their disturbance observer, docs/model.md §8.6) where
+//! are offset-free (their disturbance observer, docs/book/src/model.md §8.6) where
 //! the thesis' printed controllers are not, every project controller tracks
 //! the helix under `wind,mismatch` within 0.1 m, and the robustness sweep's
 //! worst corner (slow rotors, little rotational drag, heavy inertia, strong

@@ -4,7 +4,7 @@
 //! generic over the float type (`f32` on the STM32F405, `f64` in the host plant),
 //! so the simulator and the flight code use the same equations.
 //!
-//! Conventions (see `docs/model.md` §1):
+//! Conventions (see `docs/book/src/model.md` §1):
 //! - earth frame **NED** (z down, altitude = −z), body frame **FRD**;
 //! - Euler state `[x y z ẋ ẏ ż φ θ ψ p q r]` (m, m/s, rad, rad/s), ZYX angles;
 //! - quaternion state `[x y z ẋ ẏ ż q0 q1 q2 q3 p q r]`, scalar first, body→earth;

@@ -486,7 +486,7 @@ pub const PARAMS: [Param; 52] = [
     },
     Param {
         id: "CTL_ID",
-        doc: "controller (the wire ids of README's controller table)",
+        doc: "controller (the wire ids of the book's controller table)",
         get: |s| s.controller.to_wire().map_or(-1.0, |(id, _)| f32::from(id)),
         set: |s, v| {
             let ff = s.controller.reference == fc_core::control::ReferenceMode::Feedforward;

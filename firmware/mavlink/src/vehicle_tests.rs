@@ -448,7 +448,7 @@ impl Rng {
 }
 
 /// Frames into the flight loop: how many, from `FUZZ_FRAMES` (default
-/// 10⁶, the figure in the README).
+/// 10⁶, the figure in the book's MAVLink chapter).
 fn fuzz_frames() -> u64 {
     std::env::var("FUZZ_FRAMES")
         .ok()

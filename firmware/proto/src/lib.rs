@@ -11,7 +11,7 @@
 //! the flight loop (`fc-loop`) turns messages into controller calls, and the
 //! controller core (`fc-core`) decides what a `Select`'s id means
 //! (`ControllerSpec::from_wire`). The format, byte by byte, is in the
-//! workspace README ("The wire format").
+//! book, docs/book/src/protocols/wire.md ("The wire format, byte by byte").
 //!
 //! # Example: frame a message and parse it back
 //!

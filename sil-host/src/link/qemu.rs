@@ -136,7 +136,7 @@ impl Qemu {
     /// The emulated USART as a TCP stream. Connects only once QEMU says it
     /// is waiting for the connection, plus a short settle: connecting the
     /// moment the socket opens was seen to leave the guest's link silent
-    /// (not understood yet; see the README). Returns once the firmware has
+    /// (not understood yet; see the book's firmware chapter). Returns once the firmware has
     /// logged that it is up.
     pub fn connect(&mut self) -> Result<TcpStream> {
         let t0 = Instant::now();

@@ -19,7 +19,7 @@ pub fn euler_weights() -> (SMatrix<f64, 12, 12>, SMatrix<f64, 4, 4>) {
 /// The project's weights: Table 4.5's with the pitch rate weighted 40
 /// instead of 5. Table 4.5's light pitch-rate weight leaves a pitch loop that
 /// slow rotors (0.2 s) with half the rotational drag turn unstable: the
-/// robustness sweep's worst corner diverged (docs/model.md §8.6). 85, the
+/// robustness sweep's worst corner diverged (docs/book/src/model.md §8.6). 85, the
 /// roll rate's weight, holds the corner too but slows the pitch loop enough
 /// that a 5 s circle's x RMSE grows past 0.2 m; 20 and 40 hold both.
 pub fn tuned_weights() -> (SMatrix<f64, 12, 12>, SMatrix<f64, 4, 4>) {

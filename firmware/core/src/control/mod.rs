@@ -2,7 +2,7 @@
 //! (Crazyflie style: one file per controller).
 //!
 //! Every controller maps a [`StateEstimate`] and a [`Setpoint`] to inputs `U`
-//! inside the box of docs/model.md §2, with a [`ControlStatus`] record. Non-finite
+//! inside the box of docs/book/src/model.md §2, with a [`ControlStatus`] record. Non-finite
 //! inputs are rejected with a [`ControlError`]; the caller keeps flying with
 //! its failsafe.
 

@@ -160,7 +160,7 @@ impl MpcConfig {
     /// diverges: under `mismatch` (0.178 s rotor lag) the rate weight 0.2 did
     /// and 30 did not, but 30 still lost the robustness sweep's worst corner
     /// (0.2 s lag, half the rotational drag, 30 % more inertia, 10 % stronger
-    /// rotors; 300 nearly held it, 600 holds it with margin, docs/model.md §8.6).
+    /// rotors; 300 nearly held it, 600 holds it with margin, docs/book/src/model.md §8.6).
     /// The price of 600 over 30: the calm helix's x RMSE 15 → 28 mm, the
     /// set-point's x settling 2.3 → 3.5 s. The horizontal disturbance is predicted with a damped
     /// trend (T = 0.3 s, rate through `s/(τs + 1)²` with τ = 50 ms, at most

@@ -3,7 +3,7 @@
 //! Whatever the controller's model leaves out — wind, a heavier vehicle, a
 //! weaker rotor, wrong drag, a moment from an off-centre load — shows up as
 //! the difference between the acceleration the vehicle had and the one the
-//! model ([`Vehicle`], docs/model.md §4) predicted for the input it was
+//! model ([`Vehicle`], docs/book/src/model.md §4) predicted for the input it was
 //! sent. The observer low-passes that difference into estimates: `d̂` (NED,
 //! m/s², the force part) and `m̂` (body FRD, rad/s², the moment part). The
 //! controllers aim at the attitude and thrust that produce `a_ref − d̂`
@@ -37,7 +37,7 @@
 //! afterwards (a unit test holds the thrust at its limit for 6 s and finds
 //! the estimate equal to the true disturbance).
 //!
-//! The time constants are the project's choice (docs/model.md §8.6): the
+//! The time constants are the project's choice (docs/book/src/model.md §8.6): the
 //! force part is fast (`τ` = 50 ms: a 0.5 Hz gust is mostly cancelled), the
 //! moment part slow (`τm` = 1 s): with slow rotors the torque not yet
 //! delivered looks like a moment disturbance, and a fast moment estimate

@@ -116,7 +116,7 @@ impl<T: RealField + Copy> PdEulerGains<T> {
     /// lighter Kd (0.45, ζ ≈ 0.9 on paper) loses the loop once the rotational
     /// drag is half the nominal and the inertia 30 % higher: the sweep's
     /// corner, where the Routh condition of `(Is² + k_r s)(τs + 1) + l(K_d s +
-    /// K_p)` fails (docs/model.md §8.6). x, y, z and ψ keep the thesis gains (z
+    /// K_p)` fails (docs/book/src/model.md §8.6). x, y, z and ψ keep the thesis gains (z
     /// and ψ reproduce the thesis' settling times).
     pub fn tuned() -> Self {
         Self {

@@ -1,6 +1,6 @@
 //! From a desired acceleration to the attitude and thrust that produce it
 //! (thesis 3.79, 3.85, 3.86 — an exact inversion of the translational
-//! dynamics of docs/model.md §4), and the reference feed-forward modes.
+//! dynamics of docs/book/src/model.md §4), and the reference feed-forward modes.
 
 use super::Setpoint;
 use crate::lit;

@@ -157,7 +157,7 @@ pub const INTEGRAL_TAU_S: f64 = 0.05;
 /// Time constant of the observer's moment part, s. Slow on purpose: with
 /// slow rotors the torque not yet delivered looks like a moment
 /// disturbance; at 2 ms–0.2 s the robustness sweep lost 1–13 % of its
-/// vehicles to the attitude loop, at 1 s none (docs/model.md §8.6).
+/// vehicles to the attitude loop, at 1 s none (docs/book/src/model.md §8.6).
 pub const INTEGRAL_MOMENT_TAU_S: f64 = 1.0;
 
 /// Why a specification could not be read or sent.

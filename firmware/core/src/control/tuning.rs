@@ -99,7 +99,7 @@ pub struct Tuning {
     /// Time constant of the MPC's moment-disturbance estimate, s (0: the
     /// preset's, [`MpcConfig::observer_moment_tau_s`]). The fast preset's
     /// 5 ms makes up for slow rotors on the OS4; rotorpy's Crazyflie flies
-    /// only with it slower (0.5 s; why is partly open, README).
+    /// only with it slower (0.5 s; why is partly open: the book's HIL chapter).
     pub mpc_moment_tau_s: f32,
 }
 

@@ -339,7 +339,7 @@ impl<const H: usize> Eskf<H> {
             let r = quat_to_rotation(&self.q);
             let (r00, r10, r20) = (r[(0, 0)], r[(1, 0)], r[(2, 0)]);
             let n = (r00 * r00 + r10 * r10).max(1e-6);
-            // ∂ψ/∂δθ for a rotation δθ in NED (docs/model.md §11).
+            // ∂ψ/∂δθ for a rotation δθ in NED (docs/book/src/model.md §11).
             let h = [(ITH, -r20 * r00 / n), (ITH + 1, -r20 * r10 / n), (ITH + 2, 1.0)];
             let y = crate::control::wrap_pi(yaw - quat_to_euler(&past.q)[2]);
             let sig = fix.yaw_sigma_rad;

@@ -25,7 +25,7 @@
 //!   counted and dropped; the covariance is kept symmetric with a positive
 //!   diagonal and reset if it ever becomes non-finite.
 //!
-//! Derivation and the choices it makes: docs/model.md §11.
+//! Derivation and the choices it makes: docs/book/src/model.md §11.
 
 mod eskf;
 

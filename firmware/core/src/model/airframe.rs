@@ -2,7 +2,7 @@
 //! it spins, and how the motor command is expressed (PX4's mixer idea).
 //!
 //! The controllers produce the thesis' inputs `U = [U1 N, U2 N, U3 N, U4 N·m]`
-//! (docs/model.md §3): total thrust, the roll and pitch force differences
+//! (docs/book/src/model.md §3): total thrust, the roll and pitch force differences
 //! (moments `l·U2`, `l·U3` with `l` = [`VehicleParams::arm_m`]) and the yaw
 //! moment. [`Mixer`] turns them into one command per motor for a
 //! [`RotorLayout`] — the OS4's "+" of the thesis, an "X" such as the
@@ -51,7 +51,7 @@ pub struct RotorLayout<T> {
 }
 
 impl<T: RealField + Copy> RotorLayout<T> {
-    /// The thesis' OS4 "+" (docs/model.md §3): motor 1 front, 2 right, 3
+    /// The thesis' OS4 "+" (docs/book/src/model.md §3): motor 1 front, 2 right, 3
     /// rear, 4 left, at `arm_m`; 1 and 3 anticlockwise, 2 and 4 clockwise —
     /// the layout [`super::mix`] assumes.
     pub fn plus(arm_m: T) -> Self {

@@ -1,4 +1,4 @@
-//! Nonlinear equations of motion (docs/model.md §4 Euler form, §5 quaternion form),
+//! Nonlinear equations of motion (docs/book/src/model.md §4 Euler form, §5 quaternion form),
 //! with translational and rotational drag, the gyroscopic rotor term and
 //! external disturbances.
 
@@ -135,7 +135,7 @@ impl<T: RealField + Copy> Vehicle<T> {
     }
 
     /// Body angular acceleration (rad/s²) from rates `ω = (p, q, r)`, inputs,
-    /// relative rotor speed `ωr` (rad/s) and the disturbance moment (docs/model.md §4).
+    /// relative rotor speed `ωr` (rad/s) and the disturbance moment (docs/book/src/model.md §4).
     #[inline(always)]
     pub fn rate_derivative(&self, w: &Vector3<T>, u: &Input<T>, omega_r: T, d: &Disturbance<T>) -> Vector3<T> {
         let p = &self.params;
@@ -152,7 +152,7 @@ impl<T: RealField + Copy> Vehicle<T> {
         )
     }
 
-    /// Time derivative of the Euler-form state (docs/model.md §4). Singular at |θ| = 90°
+    /// Time derivative of the Euler-form state (docs/book/src/model.md §4). Singular at |θ| = 90°
     /// (the result is then non-finite); use the quaternion form for aerobatics.
     pub fn euler_derivative(&self, x: &EulerState<T>, u: &Input<T>, omega_r: T, d: &Disturbance<T>) -> EulerState<T> {
         let (phi, theta, psi) = (x[6], x[7], x[8]);
@@ -182,7 +182,7 @@ impl<T: RealField + Copy> Vehicle<T> {
         dx
     }
 
-    /// Time derivative of the quaternion-form state (docs/model.md §5). The quaternion
+    /// Time derivative of the quaternion-form state (docs/book/src/model.md §5). The quaternion
     /// is used as given (callers renormalise after each integration step).
     pub fn quat_derivative(&self, x: &QuatState<T>, u: &Input<T>, omega_r: T, d: &Disturbance<T>) -> QuatState<T> {
         let two = lit::<T>(2.0);

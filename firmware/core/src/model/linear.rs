@@ -1,4 +1,4 @@
-//! Analytic Jacobians of the dynamics about hover with heading ψT (docs/model.md §7).
+//! Analytic Jacobians of the dynamics about hover with heading ψT (docs/book/src/model.md §7).
 //!
 //! The Euler form uses the full 12-state; the quaternion form uses the reduced
 //! 12-state `[x y z ẋ ẏ ż q1 q2 q3 p q r]`, with `q0 = +sqrt(1 − q1² − q2² − q3²)`

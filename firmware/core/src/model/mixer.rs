@@ -1,4 +1,4 @@
-//! The mixer (docs/model.md §3): rotor speeds ↔ inputs `U`, with the corrected inverse.
+//! The mixer (docs/book/src/model.md §3): rotor speeds ↔ inputs `U`, with the corrected inverse.
 //!
 //! Rotor 1 front (+x body), 2 right (+y), 3 rear, 4 left; rotors 1 and 3 spin
 //! the opposite way to 2 and 4.

@@ -1,4 +1,4 @@
-//! The vehicle model (docs/model.md §2–7), generic over the float type `T: RealField + Copy`.
+//! The vehicle model (docs/book/src/model.md §2–7), generic over the float type `T: RealField + Copy`.
 //!
 //! Split by concern, nalgebra style: [`params`] (construction), [`mixer`]
 //! (rotor speeds ↔ inputs), [`dynamics`] (nonlinear ODEs), [`attitude`]

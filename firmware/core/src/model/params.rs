@@ -1,4 +1,4 @@
-//! Vehicle parameters (docs/model.md §2, OS4 quadrotor) and the input boxes derived from them.
+//! Vehicle parameters (docs/book/src/model.md §2, OS4 quadrotor) and the input boxes derived from them.
 
 use super::lit;
 use nalgebra::{RealField, Vector4};
@@ -90,14 +90,14 @@ pub struct VehicleParams<T> {
     pub kr_nms: [T; 3],
     /// Rotor speed limit Ωmax, rad/s.
     pub omega_max_radps: T,
-    /// Rotor first-order lag time constant τ, s (docs/model.md §6).
+    /// Rotor first-order lag time constant τ, s (docs/book/src/model.md §6).
     pub rotor_tau_s: T,
-    /// Rotor steady-state gain k (dimensionless, docs/model.md §6).
+    /// Rotor steady-state gain k (dimensionless, docs/book/src/model.md §6).
     pub rotor_gain: T,
 }
 
 impl VehicleParams<f64> {
-    /// The OS4 quadrotor of thesis Appendix A (docs/model.md §2): the built-in default.
+    /// The OS4 quadrotor of thesis Appendix A (docs/book/src/model.md §2): the built-in default.
     pub const OS4: Self = Self {
         mass_kg: 0.65,
         gravity_mps2: 9.81,
@@ -150,7 +150,7 @@ impl<T: RealField + Copy> VehicleParams<T> {
         (self.hover_thrust_n() / (lit::<T>(4.0) * self.kf_ns2)).sqrt()
     }
 
-    /// The input box implied by Ωmax (docs/model.md §2): `0 ≤ U1 ≤ 4kfΩ²max`,
+    /// The input box implied by Ωmax (docs/book/src/model.md §2): `0 ≤ U1 ≤ 4kfΩ²max`,
     /// `|U2|,|U3| ≤ kfΩ²max`, `|U4| ≤ 2kMΩ²max`, shrunk by 8 ulp of `T` so that
     /// a value inside stays inside the exact (`f64`) box after conversion.
     pub fn input_box(&self) -> InputBox<T> {

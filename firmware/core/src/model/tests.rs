@@ -1,5 +1,5 @@
 //! Model tests against independent truth: finite differences, closed-form
-//! ZOH, the docs/model.md §2 numbers, round trips.
+//! ZOH, the docs/book/src/model.md §2 numbers, round trips.
 
 use super::*;
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2, Vector3, Vector4};
@@ -46,7 +46,7 @@ fn rotor_clamping_gives_input_bounds() {
     let p = p64();
     let b = p.input_box();
     // Absurd commands saturate every rotor at Ωmax or 0: realised U stays in the box
-    // and reaches the docs/model.md §2 corners.
+    // and reaches the docs/book/src/model.md §2 corners.
     let full = realised_inputs(&p, &rotor_speeds(&p, &Vector4::new(1e6, 0.0, 0.0, 0.0)));
     assert!((full[0] - 45.072).abs() < 1e-9);
     let roll = realised_inputs(&p, &rotor_speeds(&p, &Vector4::new(b.hi[0] / 2.0, 1e6, 0.0, 0.0)));
