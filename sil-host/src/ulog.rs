@@ -291,6 +291,10 @@ pub mod px4 {
         Field { ty, name }
     }
 
+    const fn topic(name: &'static str, fields: &'static [Field]) -> Format {
+        Format { name, fields }
+    }
+
     const LOCAL_POSITION: &[Field] = &[
         f("uint64_t", "timestamp"),
         f("float", "x"),
@@ -309,25 +313,13 @@ pub mod px4 {
 
     /// The position estimate the controller flies on: NED m about home,
     /// m/s, heading rad.
-    pub const VEHICLE_LOCAL_POSITION: Format = Format {
-        name: "vehicle_local_position",
-        fields: LOCAL_POSITION,
-    };
+    pub const VEHICLE_LOCAL_POSITION: Format = topic("vehicle_local_position", LOCAL_POSITION);
     /// The attitude estimate: unit quaternion body FRD → NED, scalar first.
-    pub const VEHICLE_ATTITUDE: Format = Format {
-        name: "vehicle_attitude",
-        fields: ATTITUDE,
-    };
+    pub const VEHICLE_ATTITUDE: Format = topic("vehicle_attitude", ATTITUDE);
     /// The simulator's true position (PX4's SITL ground-truth topic).
-    pub const VEHICLE_LOCAL_POSITION_GROUNDTRUTH: Format = Format {
-        name: "vehicle_local_position_groundtruth",
-        fields: LOCAL_POSITION,
-    };
+    pub const VEHICLE_LOCAL_POSITION_GROUNDTRUTH: Format = topic("vehicle_local_position_groundtruth", LOCAL_POSITION);
     /// The simulator's true attitude.
-    pub const VEHICLE_ATTITUDE_GROUNDTRUTH: Format = Format {
-        name: "vehicle_attitude_groundtruth",
-        fields: ATTITUDE,
-    };
+    pub const VEHICLE_ATTITUDE_GROUNDTRUTH: Format = topic("vehicle_attitude_groundtruth", ATTITUDE);
     /// The set-point: NED m, m/s, m/s², yaw rad, yaw rate rad/s.
     pub const VEHICLE_LOCAL_POSITION_SETPOINT: Format = Format {
         name: "vehicle_local_position_setpoint",
