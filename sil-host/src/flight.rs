@@ -142,6 +142,9 @@ pub struct FlightResult {
     pub estimator_step_time: Option<StepTime>,
     /// The same in instructions under QEMU (mean, max).
     pub estimator_instructions_per_step: Option<(f64, f64)>,
+    /// The rate the controller was flown at, Hz: `control_hz` for PD and
+    /// LQR, the preset's own rate for the MPC.
+    pub control_hz: f64,
     /// Control steps flown.
     pub steps: usize,
     /// Steps the flight controller answered from its failsafe (remote targets).
@@ -397,6 +400,7 @@ pub fn fly_endpoint<E: Endpoint>(
         instructions_per_step: None,
         estimator_step_time: None,
         estimator_instructions_per_step: None,
+        control_hz: 1.0 / ts,
         steps: 0,
         failsafe_steps: 0,
         link_counters: None,

@@ -350,9 +350,10 @@ struct FlyArgs {
     /// explained in the book's controllers chapter) or `thesis` (Tables 4.1-4.4 as printed). LQR ignores it.
     #[arg(long, value_parser = preset_parser(Family::Pd), default_value = "tuned")]
     gains: Preset,
-    /// Controller rate of PD and LQR, Hz (the MPC presets fix their own rate).
-    #[arg(long, default_value_t = 500.0, value_name = "HZ", allow_negative_numbers = true)]
-    control_hz: f64,
+    /// Controller rate of PD and LQR, Hz [default: 500]. The MPC presets fix their own rate, so
+    /// the MPC refuses it; the JSON's `control_hz` is the rate flown.
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
+    control_hz: Option<f64>,
     /// Plant RK4 rate, Hz (sub-steps within each control period).
     #[arg(long, default_value_t = 1000.0, value_name = "HZ", allow_negative_numbers = true)]
     integration_hz: f64,
@@ -737,7 +738,15 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
         Family::Mpc => a.preset,
         Family::Lqr => Preset::Project,
     };
-    cfg.control_hz = a.control_hz;
+    cfg.control_hz = match (a.controller, a.control_hz) {
+        (Family::Mpc, Some(hz)) => bail!(
+            "--control-hz {hz}: the MPC's preset fixes its own rate ({} Hz for --preset {}); \
+             --control-hz sets PD's and LQR's",
+            1.0 / cfg.spec.period_s(0.002),
+            cfg.spec.row().preset_name
+        ),
+        (_, hz) => hz.unwrap_or(500.0),
+    };
     if let Some(f) = &a.vehicle {
         cfg.vehicle = sil_host::config::load_vehicle(f)?;
     }

@@ -41,7 +41,7 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
         "sensor_noise": cfg.noise,
         "reference": cfg.spec.reference.name(),
         "preset": cfg.spec.row().preset_name,
-        "control_hz": cfg.control_hz,
+        "control_hz": res.control_hz,
         "integration_hz": cfg.integration_hz,
         "duration_s": cfg.scenario.duration_s,
         "axes": {

@@ -282,3 +282,33 @@ fn a_flights_ulog_draws_the_reports_position_figures() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The JSON's `control_hz` is the rate the controller flew at: the MPC
+/// preset's own, not a `--control-hz` it cannot honour (which it refuses).
+#[test]
+fn the_json_reports_the_rate_flown_and_the_mpc_refuses_a_rate() {
+    let rate = |args: &[&str]| -> (f64, u64) {
+        let out = sil_host()
+            .args(["fly", "--scenario", "setpoint", "--duration", "1", "--json", "-"])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (v["control_hz"].as_f64().unwrap(), v["steps"].as_u64().unwrap())
+    };
+    assert_eq!(rate(&["--controller", "mpc"]), (200.0, 201));
+    assert_eq!(rate(&["--controller", "mpc", "--preset", "thesis"]), (4.0, 5));
+    assert_eq!(rate(&["--controller", "lqr", "--control-hz", "250"]), (250.0, 251));
+    assert_eq!(rate(&["--controller", "pd"]), (500.0, 501));
+    let out = sil_host()
+        .args(["fly", "--controller", "mpc", "--control-hz", "1000", "--duration", "1"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--control-hz 1000: the MPC's preset fixes its own rate (200 Hz"),
+        "{err}"
+    );
+}
