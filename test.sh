@@ -71,7 +71,8 @@ python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ig
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
     --duration 15 --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg | grep "rotorpy check:" | tee -a "$log"
 echo "== flight logs: the rotorpy flight's ULog and a SIL flight's, read back with pyulog against their JSON"
-ulog_info target/rotorpy-hil.ulg
+# pyulog's ulog_info (its console script may not be on PATH; its main() is the same).
+python3 -c 'import sys, pyulog.info; sys.argv = ["ulog_info", sys.argv[1]]; pyulog.info.main()' target/rotorpy-hil.ulg
 python3 tools/check_ulog.py hil target/rotorpy-hil.ulg target/rotorpy-hil.json | tee -a "$log"
 python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --scenario circle --duration 25 \
