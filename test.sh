@@ -79,6 +79,12 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --scenario circl
     --json target/rotorpy-hil-circle.json | grep "rotorpy check:" | tee -a "$log"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --controller pd --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
     --duration 15 --json target/rotorpy-hil-pd.json | grep "rotorpy check:" | tee -a "$log"
+# One flight per standard motor layout: rotorpy's motors put in PX4's, Betaflight's, the
+# Crazyflie's and the OS4's "+" order, the flight controller told so (MOT_FRAME).
+for layout in px4 betaflight crazyflie plus; do
+    python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --layout "$layout" --waypoint 0,0,0,-1 \
+        --waypoint 5,1,0,-1 --duration 10 --json "target/rotorpy-hil-$layout.json" | grep "rotorpy check:" | tee -a "$log"
+done
 # The MPC with its moment observer slowed (a parameter): at its preset it wanders off rotorpy's step (README).
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --controller mpc --param MPC_OBS_M_TAU=0.5 \
     --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --json target/rotorpy-hil-mpc.json | grep "rotorpy check:" | tee -a "$log"

@@ -32,6 +32,33 @@ from rotorpy.vehicles.crazyflie_params import quad_params  # noqa: E402
 from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
 
 
+# Motor layouts as each vendor numbers its motors: (forward, right) hub position
+# in units of the hub's x/y offset (the Crazyflie's 43 mm hubs at 45°: 30.4 mm),
+# and the spin seen from above (CW / CCW). Written from the vendors' own
+# references: PX4's airframe reference ("Quadrotor x"), Betaflight's motor tab
+# (Quad X, props in), the Crazyflie firmware's M1-M4; rotorpy's own Crazyflie
+# order; and the OS4's "+" (docs/book/src/model.md §3) at the same moment arm.
+LAYOUTS = {
+    "rotorpy": ("x-rotorpy", [(1, -1, "CW"), (1, 1, "CCW"), (-1, 1, "CW"), (-1, -1, "CCW")]),
+    "px4": ("x-px4", [(1, 1, "CCW"), (-1, -1, "CCW"), (1, -1, "CW"), (-1, 1, "CW")]),
+    "betaflight": ("x-betaflight", [(-1, 1, "CW"), (1, 1, "CCW"), (-1, -1, "CCW"), (1, -1, "CW")]),
+    "crazyflie": ("x-crazyflie", [(1, 1, "CCW"), (-1, 1, "CW"), (-1, -1, "CCW"), (1, -1, "CW")]),
+    "plus": ("plus", [(1, 0, "CCW"), (0, 1, "CW"), (-1, 0, "CCW"), (0, -1, "CW")]),
+}
+
+
+def params_for(layout):
+    """rotorpy's Crazyflie with its motors in `layout`'s order. rotorpy's body
+    frame is FLU (y left) and its rotor direction +1 is clockwise from above
+    (its own Crazyflie: r1 front-left +1, r2 front-right -1, …)."""
+    q = dict(quad_params)
+    d = quad_params["rotor_pos"]["r1"][0]
+    rotors = LAYOUTS[layout][1]
+    q["rotor_pos"] = {f"r{i + 1}": np.array([x * d, -y * d, 0.0]) for i, (x, y, _) in enumerate(rotors)}
+    q["rotor_directions"] = np.array([1 if spin == "CW" else -1 for (_, _, spin) in rotors])
+    return q
+
+
 class Lockstep(PX4Multirotor):
     """rotorpy's vehicle, waiting as long as it takes for the flight
     controller's answer (its own waits 10 ms of wall time and then flies
@@ -65,12 +92,15 @@ def main():
                     help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
                          "sets parameters, arms and flies the vehicle; the flight ends when it is done")
     ap.add_argument("--gcs-port", type=int, default=14550)
+    ap.add_argument("--layout", choices=sorted(LAYOUTS), default="rotorpy",
+                    help="rotorpy's motors in this vendor's order, and the flight controller told so "
+                         "(--airframe, MOT_FRAME)")
     ap.add_argument("--param", action="append", metavar="NAME=VALUE",
                     help="a flight-controller parameter set before the flight (repeatable)")
     a = ap.parse_args()
 
     cmd = [a.sil_host, "px4-hil", "--connect", f"127.0.0.1:{a.port}", "--controller", a.controller,
-           "--vehicle", "vehicles/crazyflie-rotorpy.toml", "--airframe", "x-rotorpy", "--hub-m", "0.043",
+           "--vehicle", "vehicles/crazyflie-rotorpy.toml", "--airframe", LAYOUTS[a.layout][0], "--hub-m", "0.043",
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
     if (bool(a.waypoint) + bool(a.scenario) + a.gcs) != 1:
         ap.error("give --waypoint(s), --scenario or --gcs")
@@ -92,7 +122,7 @@ def main():
         cmd += ["--ulog", a.ulog]
     np.random.seed(a.seed)
     fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
-    vehicle = Lockstep(quad_params, mavlink_url=f"tcpin:localhost:{a.port}")
+    vehicle = Lockstep(params_for(a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
     state = dict(vehicle.initial_state)
     zero = {"cmd_motor_speeds": np.zeros(4)}
     track = []

@@ -106,7 +106,9 @@ struct Px4HilArgs {
     /// The vehicle (a TOML file, see `sil-host fly --help`); e.g. vehicles/crazyflie-rotorpy.toml.
     #[arg(long, value_name = "FILE")]
     vehicle: PathBuf,
-    /// Rotor layout in the simulator's motor order: `x-rotorpy` (hubs at --hub-m, 45°) or `plus` (the OS4's, at the vehicle's arm).
+    /// Rotor layout and motor order (`MOT_FRAME`): `x-rotorpy`, `x-px4` (PX4's quad X), `x-betaflight`
+    /// (Betaflight's Quad X, props in), `x-crazyflie` (the Crazyflie's M1–M4), all with hubs at --hub-m
+    /// at 45°; or `plus` (the OS4's, at the vehicle's arm). The simulator's motors must be in that order.
     #[arg(long, default_value = "x-rotorpy")]
     airframe: String,
     /// Hub distance from the centre for `x-rotorpy`, m.
@@ -992,8 +994,11 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
     settings.vehicle = vehicle.cast();
     (settings.airframe, settings.hub_m) = match a.airframe.as_str() {
         "x-rotorpy" => (Airframe::XRotorpy, a.hub_m as f32),
+        "x-px4" => (Airframe::XPx4, a.hub_m as f32),
+        "x-betaflight" => (Airframe::XBetaflight, a.hub_m as f32),
+        "x-crazyflie" => (Airframe::XCrazyflie, a.hub_m as f32),
         "plus" => (Airframe::Plus, vehicle.arm_m as f32),
-        other => bail!("unknown --airframe '{other}': use x-rotorpy or plus"),
+        other => bail!("unknown --airframe '{other}': use x-rotorpy, x-px4, x-betaflight, x-crazyflie or plus"),
     };
     settings.unit = match a.motor_unit.as_str() {
         "speed" => MotorUnit::SpeedFraction,

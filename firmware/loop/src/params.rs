@@ -26,6 +26,23 @@ pub enum Airframe {
     /// An "X" in rotorpy's (and its Crazyflie's) motor order
     /// ([`RotorLayout::x_rotorpy`]): `MOT_FRAME` 1.
     XRotorpy,
+    /// PX4's quadrotor X ([`RotorLayout::x_px4`]): `MOT_FRAME` 2.
+    XPx4,
+    /// Betaflight's Quad X, props in ([`RotorLayout::x_betaflight`]): `MOT_FRAME` 3.
+    XBetaflight,
+    /// The Crazyflie 2.x's M1–M4 ([`RotorLayout::x_crazyflie`]): `MOT_FRAME` 4.
+    XCrazyflie,
+}
+
+impl Airframe {
+    /// Every layout, in `MOT_FRAME` order.
+    pub const ALL: [Airframe; 5] = [
+        Airframe::Plus,
+        Airframe::XRotorpy,
+        Airframe::XPx4,
+        Airframe::XBetaflight,
+        Airframe::XCrazyflie,
+    ];
 }
 
 /// Everything the parameters set: the vehicle, its motors, the controller
@@ -85,6 +102,9 @@ impl Settings {
         let mut l = match self.airframe {
             Airframe::Plus => RotorLayout::plus(self.hub_m),
             Airframe::XRotorpy => RotorLayout::x_rotorpy(self.hub_m),
+            Airframe::XPx4 => RotorLayout::x_px4(self.hub_m),
+            Airframe::XBetaflight => RotorLayout::x_betaflight(self.hub_m),
+            Airframe::XCrazyflie => RotorLayout::x_crazyflie(self.hub_m),
         };
         for (i, r) in l.rotors.iter_mut().enumerate() {
             if self.reversed & (1 << i) != 0 {
@@ -413,17 +433,10 @@ pub const PARAMS: [Param; 52] = [
     real!("VEH_TAU_M", "rotor time constant, s", true, vehicle.rotor_tau_s),
     Param {
         id: "MOT_FRAME",
-        doc: "rotor layout and motor order: 0 plus (OS4), 1 X (rotorpy)",
-        get: |s| match s.airframe {
-            Airframe::Plus => 0.0,
-            Airframe::XRotorpy => 1.0,
-        },
+        doc: "rotor layout and motor order: 0 plus (OS4), 1 X rotorpy, 2 X PX4, 3 X Betaflight, 4 X Crazyflie",
+        get: |s| Airframe::ALL.iter().position(|a| *a == s.airframe).unwrap_or(0) as f32,
         set: |s, v| {
-            s.airframe = if whole(v, 0, 1)? == 0 {
-                Airframe::Plus
-            } else {
-                Airframe::XRotorpy
-            };
+            s.airframe = Airframe::ALL[whole(v, 0, Airframe::ALL.len() as u32 - 1)? as usize];
             Ok(())
         },
         redesign: false,

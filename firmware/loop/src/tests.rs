@@ -765,3 +765,24 @@ fn gains_and_weights_are_parameters_that_redesign_the_controller() {
     assert!(u1 != 0.0 && u4.signum() == u1.signum(), "{u1} {u4}");
     assert!(u4.abs() > 1.3 * u1.abs(), "{u1} {u4}");
 }
+
+/// `MOT_FRAME` selects each standard layout by its number, reads back what
+/// was written, and refuses a number no layout has (the settings unchanged).
+#[test]
+fn every_motor_layout_is_a_mot_frame_value() {
+    use params::{Airframe, Refusal, Settings};
+    let i = params::index_of(b"MOT_FRAME").unwrap();
+    let mut s = Settings::os4();
+    s.hub_m = 0.043;
+    for (n, want) in Airframe::ALL.iter().enumerate() {
+        let next = params::write(&s, i, n as f32).unwrap();
+        assert_eq!(next.airframe, *want);
+        assert_eq!((params::PARAMS[i].get)(&next), n as f32);
+        assert!(next.mixer().is_ok(), "{want:?} mixes");
+    }
+    assert_eq!(
+        params::write(&s, i, 5.0).unwrap_err(),
+        Refusal::Range { lo: 0.0, hi: 4.0 }
+    );
+    assert_eq!(params::write(&s, i, 1.5).unwrap_err(), Refusal::NotInteger);
+}

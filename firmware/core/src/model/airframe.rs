@@ -69,6 +69,34 @@ impl<T: RealField + Copy> RotorLayout<T> {
         Self::from_hubs([[h, -h], [h, h], [-h, h], [-h, -h]], [c, a, c, a])
     }
 
+    /// PX4's quadrotor X (its airframe reference, "Quadrotor x"; also
+    /// ArduPilot's Quad X): 1 front-right anticlockwise, 2 rear-left
+    /// anticlockwise, 3 front-left clockwise, 4 rear-right clockwise, hubs
+    /// `hub_m` from the centre at 45°.
+    pub fn x_px4(hub_m: T) -> Self {
+        let h = hub_m / lit::<T>(2.0).sqrt();
+        let (a, c) = (Spin::Anticlockwise, Spin::Clockwise);
+        Self::from_hubs([[h, h], [-h, -h], [h, -h], [-h, h]], [a, a, c, c])
+    }
+
+    /// Betaflight's Quad X with its default ("props in") directions: 1
+    /// rear-right clockwise, 2 front-right anticlockwise, 3 rear-left
+    /// anticlockwise, 4 front-left clockwise (`MOT_REV` 15 gives "props out").
+    pub fn x_betaflight(hub_m: T) -> Self {
+        let h = hub_m / lit::<T>(2.0).sqrt();
+        let (a, c) = (Spin::Anticlockwise, Spin::Clockwise);
+        Self::from_hubs([[-h, h], [h, h], [-h, -h], [h, -h]], [c, a, a, c])
+    }
+
+    /// The Crazyflie 2.x as its firmware numbers it: M1 front-right
+    /// anticlockwise, M2 rear-right clockwise, M3 rear-left anticlockwise,
+    /// M4 front-left clockwise.
+    pub fn x_crazyflie(hub_m: T) -> Self {
+        let h = hub_m / lit::<T>(2.0).sqrt();
+        let (a, c) = (Spin::Anticlockwise, Spin::Clockwise);
+        Self::from_hubs([[h, h], [-h, h], [-h, -h], [h, -h]], [a, c, a, c])
+    }
+
     /// Motors 1 to 4 at the hub positions `pos_frd_m` (x forward, y right,
     /// m) with the spins `spin`.
     pub fn from_hubs(pos_frd_m: [[T; 2]; 4], spin: [Spin; 4]) -> Self {
@@ -300,6 +328,78 @@ mod tests {
         for (g, w) in got.iter().zip(want) {
             assert!((g - w).abs() < 1e-12, "{got:?} vs {want:?}");
         }
+    }
+
+    /// Every standard layout reproduces every wrench: the thrusts the mixer
+    /// asks for, put back through first principles (r × F, drag moments),
+    /// give the commanded thrust and moments.
+    #[test]
+    fn every_layout_reproduces_each_wrench() {
+        let p = crazyflie();
+        let layouts = [
+            ("plus", RotorLayout::plus(0.043)),
+            ("rotorpy", RotorLayout::x_rotorpy(0.043)),
+            ("px4", RotorLayout::x_px4(0.043)),
+            ("betaflight", RotorLayout::x_betaflight(0.043)),
+            ("crazyflie", RotorLayout::x_crazyflie(0.043)),
+        ];
+        for (name, layout) in layouts {
+            let m = Mixer::new(&layout, &p, MotorUnit::SpeedFraction).unwrap();
+            for u in [
+                Vector4::new(0.3, 0.0, 0.0, 0.0),
+                Vector4::new(0.35, 0.01, -0.02, 2e-5),
+                Vector4::new(0.25, -0.03, 0.0, 0.0),
+                Vector4::new(0.3, 0.0, 0.025, -4e-5),
+            ] {
+                let f = m.thrusts(&u);
+                let mut w = [0.0; 4];
+                for (r, fi) in layout.rotors.iter().zip(f.iter()) {
+                    let [x, y] = r.pos_frd_m;
+                    let spin = if r.spin == Spin::Anticlockwise { 1.0 } else { -1.0 };
+                    w[0] += fi;
+                    w[1] += -y * fi;
+                    w[2] += x * fi;
+                    w[3] += spin * p.km_nms2 / p.kf_ns2 * fi;
+                }
+                let want = [u[0], p.arm_m * u[1], p.arm_m * u[2], u[3]];
+                for (g, wnt) in w.iter().zip(want) {
+                    assert!((g - wnt).abs() < 1e-12, "{name}: {u}: {w:?} vs {want:?}");
+                }
+            }
+        }
+    }
+
+    /// Which motors speed up for a pure moment, as each vendor numbers its
+    /// motors (PX4's airframe reference, Betaflight's motor tab, the
+    /// Crazyflie's firmware): roll right (left side up), pitch up (nose
+    /// up), yaw right (clockwise from above: the anticlockwise rotors).
+    #[test]
+    fn each_vendors_motor_numbering_and_spins() {
+        let p = crazyflie();
+        let faster = |layout: &RotorLayout<f64>, u: Vector4<f64>| -> [bool; 4] {
+            let m = Mixer::new(layout, &p, MotorUnit::ThrustFraction).unwrap();
+            let hover = m.thrusts(&Vector4::new(0.3, 0.0, 0.0, 0.0));
+            let f = m.thrusts(&u);
+            core::array::from_fn(|i| f[i] > hover[i])
+        };
+        let roll = Vector4::new(0.3, 0.02, 0.0, 0.0);
+        let pitch = Vector4::new(0.3, 0.0, 0.02, 0.0);
+        let yaw = Vector4::new(0.3, 0.0, 0.0, 5e-5);
+        // PX4: 1 front-right, 2 rear-left, 3 front-left, 4 rear-right; 1, 2 anticlockwise.
+        let px4 = RotorLayout::x_px4(0.043);
+        assert_eq!(faster(&px4, roll), [false, true, true, false]);
+        assert_eq!(faster(&px4, pitch), [true, false, true, false]);
+        assert_eq!(faster(&px4, yaw), [true, true, false, false]);
+        // Betaflight: 1 rear-right, 2 front-right, 3 rear-left, 4 front-left; 2, 3 anticlockwise.
+        let bf = RotorLayout::x_betaflight(0.043);
+        assert_eq!(faster(&bf, roll), [false, false, true, true]);
+        assert_eq!(faster(&bf, pitch), [false, true, false, true]);
+        assert_eq!(faster(&bf, yaw), [false, true, true, false]);
+        // Crazyflie: M1 front-right, M2 rear-right, M3 rear-left, M4 front-left; M1, M3 anticlockwise.
+        let cf = RotorLayout::x_crazyflie(0.043);
+        assert_eq!(faster(&cf, roll), [false, false, true, true]);
+        assert_eq!(faster(&cf, pitch), [true, false, false, true]);
+        assert_eq!(faster(&cf, yaw), [true, false, true, false]);
     }
 
     #[test]
