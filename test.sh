@@ -85,6 +85,10 @@ for layout in px4 betaflight crazyflie plus; do
     python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --layout "$layout" --waypoint 0,0,0,-1 \
         --waypoint 5,1,0,-1 --duration 10 --json "target/rotorpy-hil-$layout.json" | grep "rotorpy check:" | tee -a "$log"
 done
+# rotorpy's Hummingbird (vehicles/hummingbird-rotorpy.toml), the fast MPC at its preset.
+python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --vehicle hummingbird --controller mpc \
+    --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --json target/rotorpy-hil-hummingbird-mpc.json \
+    | grep "rotorpy check:" | tee -a "$log"
 # The MPC with its moment observer slowed (a parameter): at its preset it wanders off rotorpy's step (README).
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --controller mpc --param MPC_OBS_M_TAU=0.5 \
     --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --json target/rotorpy-hil-mpc.json | grep "rotorpy check:" | tee -a "$log"

@@ -28,7 +28,8 @@ import sys
 os.environ["MAVLINK20"] = "1"
 
 import numpy as np  # noqa: E402
-from rotorpy.vehicles.crazyflie_params import quad_params  # noqa: E402
+from rotorpy.vehicles.crazyflie_params import quad_params as crazyflie_params  # noqa: E402
+from rotorpy.vehicles.hummingbird_params import quad_params as hummingbird_params  # noqa: E402
 from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
 
 
@@ -47,10 +48,18 @@ LAYOUTS = {
 }
 
 
-def params_for(layout):
-    """rotorpy's Crazyflie with its motors in `layout`'s order. rotorpy's body
+# rotorpy's vehicles and our vehicle files for them (vehicles/).
+VEHICLES = {
+    "crazyflie": (crazyflie_params, "vehicles/crazyflie-rotorpy.toml"),
+    "hummingbird": (hummingbird_params, "vehicles/hummingbird-rotorpy.toml"),
+}
+
+
+def params_for(vehicle, layout):
+    """rotorpy's `vehicle` with its motors in `layout`'s order. rotorpy's body
     frame is FLU (y left) and its rotor direction +1 is clockwise from above
     (its own Crazyflie: r1 front-left +1, r2 front-right -1, …)."""
+    quad_params = VEHICLES[vehicle][0]
     q = dict(quad_params)
     d = quad_params["rotor_pos"]["r1"][0]
     rotors = LAYOUTS[layout][1]
@@ -92,6 +101,8 @@ def main():
                     help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
                          "sets parameters, arms and flies the vehicle; the flight ends when it is done")
     ap.add_argument("--gcs-port", type=int, default=14550)
+    ap.add_argument("--vehicle", choices=sorted(VEHICLES), default="crazyflie",
+                    help="rotorpy's vehicle, flown with our vehicle file for it")
     ap.add_argument("--layout", choices=sorted(LAYOUTS), default="rotorpy",
                     help="rotorpy's motors in this vendor's order, and the flight controller told so "
                          "(--airframe, MOT_FRAME)")
@@ -100,7 +111,8 @@ def main():
     a = ap.parse_args()
 
     cmd = [a.sil_host, "px4-hil", "--connect", f"127.0.0.1:{a.port}", "--controller", a.controller,
-           "--vehicle", "vehicles/crazyflie-rotorpy.toml", "--airframe", LAYOUTS[a.layout][0], "--hub-m", "0.043",
+           "--vehicle", VEHICLES[a.vehicle][1], "--airframe", LAYOUTS[a.layout][0],
+           "--hub-m", str(VEHICLES[a.vehicle][0]["rotor_pos"]["r1"][0] * 2 ** 0.5),
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
     if (bool(a.waypoint) + bool(a.scenario) + a.gcs) != 1:
         ap.error("give --waypoint(s), --scenario or --gcs")
@@ -122,7 +134,7 @@ def main():
         cmd += ["--ulog", a.ulog]
     np.random.seed(a.seed)
     fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
-    vehicle = Lockstep(params_for(a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
+    vehicle = Lockstep(params_for(a.vehicle, a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
     state = dict(vehicle.initial_state)
     zero = {"cmd_motor_speeds": np.zeros(4)}
     track = []
