@@ -60,7 +60,7 @@ cargo build -q -p sil-host
 python3 tools/check_design.py target/debug/sil-host | tee -a "$log"
 echo "== independent re-solve of MPC steps (scipy)"
 python3 tools/check_mpc_step.py target/debug/sil-host | tee -a "$log"
-echo "== a client written from the README's wire format, against sil-host serve"
+echo "== a client written from the book's wire format (docs/book/src/protocols/wire.md), against sil-host serve"
 python3 tools/check_wire.py target/debug/sil-host | tee -a "$log"
 echo "== the main job, quick: sil-host report --quick (index, HTML and every linked figure)"
 rm -rf target/report-quick
