@@ -89,7 +89,7 @@ done
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --vehicle hummingbird --controller mpc \
     --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --json target/rotorpy-hil-hummingbird-mpc.json \
     | grep "rotorpy check:" | tee -a "$log"
-# The MPC with its moment observer slowed (a parameter): at its preset it wanders off rotorpy's step (README).
+# The MPC with its moment observer slowed (a parameter): at its preset it wanders off rotorpy's Crazyflie step (the book's HIL chapter).
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --controller mpc --param MPC_OBS_M_TAU=0.5 \
     --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --json target/rotorpy-hil-mpc.json | grep "rotorpy check:" | tee -a "$log"
 echo "== the same step flight on the real image: firmware-mavlink in QEMU, USART1 bridged to rotorpy (about 4 min)"
