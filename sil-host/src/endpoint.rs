@@ -127,12 +127,19 @@ impl<C> InProcess<C> {
 }
 
 impl<C: Controller<f32>> InProcess<C> {
-    /// Resumes after a gap (as the flight loop on the MCU does: the
-    /// controller forgets only the step before) and hands it the preview.
+    /// Tells the controller the time since its last step, or resumes it
+    /// after a gap (as the flight loop on the MCU does: the controller
+    /// forgets only the step before), and hands it the preview.
     fn prepare(&mut self, t: f64, preview: &[Setpoint<f32>]) {
         let period = self.ctrl.period_s().unwrap_or(0.0);
-        if self.last_t.is_some_and(|last| t - last > 1.5 * period && period > 0.0) {
-            self.ctrl.resume();
+        if let Some(last) = self.last_t {
+            // In µs, as the flight controller over the wire measures it.
+            let dt_us = ((t * 1e6).round() as u64).saturating_sub((last * 1e6).round() as u64);
+            if fc_core::control::plausible_step(dt_us as f64 * 1e-6, period) {
+                self.ctrl.elapsed(dt_us as f32 * 1e-6);
+            } else {
+                self.ctrl.resume();
+            }
         }
         self.last_t = Some(t);
         for (k, p) in preview.iter().enumerate() {

@@ -34,8 +34,8 @@ pub mod params;
 pub mod schedule;
 
 use fc_core::control::{
-    AnyController, ControlError, Controller, ControllerSpec, Family, PdEuler, PdEulerGains, ReferenceMode, Setpoint,
-    StateEstimate,
+    AnyController, ControlError, ControlOutput, Controller, ControllerSpec, Family, PdEuler, PdEulerGains,
+    ReferenceMode, Setpoint, StateEstimate,
 };
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::{AttitudeForm, Input, QuatState, VehicleParams};
@@ -237,6 +237,9 @@ pub struct FlightCore {
     nav_failsafe: bool,
     /// When the controller runs under the `Imu` steps.
     schedule: schedule::Schedule,
+    /// Time of the controller's last update, µs, on the time base's clock
+    /// (its next update is told the interval: [`Controller::elapsed`]).
+    last_control_us: Option<u64>,
 }
 
 /// A wire fix as the estimator's type.
@@ -313,6 +316,7 @@ impl FlightCore {
             nav: Navigator::bmi088(),
             nav_failsafe: false,
             schedule: schedule::Schedule::new(),
+            last_control_us: None,
         }
     }
 
@@ -387,6 +391,7 @@ impl FlightCore {
         self.nav.reset();
         self.nav_failsafe = false;
         self.schedule.reset();
+        self.last_control_us = None;
     }
 
     /// Flies `sp` from now on, as a `Setpoint` message does; a set-point
@@ -617,12 +622,35 @@ impl FlightCore {
         within && reachable
     }
 
-    /// More than one and a half control periods since the last valid step:
-    /// this step does not follow that one (frames were missing or invalid).
+    /// Longer since the last valid step than a controller integrates over
+    /// ([`fc_core::control::plausible_step`]: 20 ms, or one and a half
+    /// periods of a slower controller): this step does not follow that one
+    /// (frames were missing or invalid).
     fn gap_since_last_step(&self, now_us: u64) -> bool {
-        let period_us = self.period_us();
+        let period_s = self.period_us() as f64 * 1e-6;
         self.last_valid_us
-            .is_some_and(|t| now_us.saturating_sub(t) > period_us.saturating_add(period_us / 2))
+            .is_some_and(|t| !fc_core::control::plausible_step(now_us.saturating_sub(t) as f64 * 1e-6, period_s))
+    }
+
+    /// The controller's step at `now_us`, told the measured interval since
+    /// its last one (a 2 ms simulator under a 1 ms controller, a late
+    /// sample), or resumed when that interval is a gap.
+    fn control_step(
+        &mut self,
+        est: &StateEstimate<f32>,
+        sp: &Setpoint<f32>,
+        now_us: u64,
+    ) -> Result<ControlOutput<f32>, ControlError> {
+        if let Some(t) = self.last_control_us {
+            let dt_us = now_us.saturating_sub(t);
+            if fc_core::control::plausible_step(dt_us as f64 * 1e-6, self.period_us() as f64 * 1e-6) {
+                self.ctrl.elapsed(dt_us as f32 * 1e-6);
+            } else {
+                self.ctrl.resume();
+            }
+        }
+        self.last_control_us = Some(now_us);
+        self.ctrl.update(est, sp)
     }
 
     fn handle<O: Outbox, C: CycleClock>(
@@ -789,7 +817,7 @@ impl FlightCore {
                     if self.nav_failsafe {
                         Navigator::preview_along(&mut self.ctrl, &sp);
                     }
-                    match self.ctrl.update(&est, &sp) {
+                    match self.control_step(&est, &sp, now) {
                         Ok(o) => {
                             self.u = o.u;
                             iterations = o.status.iterations;
@@ -881,7 +909,8 @@ impl FlightCore {
                 self.failsafe = false;
             }
             let t0 = clock.now();
-            let out = self.ctrl.update(&est, &self.sp);
+            let sp = self.sp;
+            let out = self.control_step(&est, &sp, now);
             cycles = clock.since(t0);
             match out {
                 Ok(o) => {

@@ -153,6 +153,10 @@ impl<T: RealField + Copy, const H: usize> Controller<T> for LqrEuler<T, H> {
         self.obs.reset();
     }
 
+    fn elapsed(&mut self, dt_s: T) {
+        self.obs.elapsed(dt_s);
+    }
+
     fn resume(&mut self) {
         self.obs.resume();
     }

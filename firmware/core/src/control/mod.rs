@@ -222,6 +222,14 @@ pub trait Controller<T: RealField + Copy> {
     /// step's innovation) and keeps its disturbance estimate and trend,
     /// warm start, previous input and preview.
     fn resume(&mut self) {}
+    /// The measured time since the previous `update`, s, for the next
+    /// `update` only: a simulator stepping at 2 or 3 ms, a late sample or an
+    /// uneven grid. Controllers whose memory spans a step (the disturbance
+    /// observers) integrate over it instead of their nominal period, so an
+    /// uneven step is not read as a disturbance. A value that is not a
+    /// plausible step ([`plausible_step`]) is ignored: that update uses the
+    /// nominal period. The default ignores it (a controller without memory).
+    fn elapsed(&mut self, _dt_s: T) {}
     /// Reference preview wanted before each update: `(steps, spacing s)`;
     /// `None` for controllers that use only the current setpoint.
     fn preview_request(&self) -> Option<(usize, f64)> {
@@ -240,6 +248,20 @@ pub trait Controller<T: RealField + Copy> {
     fn iteration_bound(&self) -> u32 {
         0
     }
+}
+
+/// Longest interval between two updates that a controller's memory
+/// integrates over, s: longer is a gap, after which the caller resumes the
+/// controller ([`Controller::resume`]) instead. 20 ms: a 50 Hz simulator's
+/// step, or 20 lost 1 kHz samples.
+pub const MAX_STEP_S: f64 = 0.02;
+
+/// Whether `dt_s` is an interval a controller integrates over: positive,
+/// finite and at most [`MAX_STEP_S`] or 1.5 × its nominal `period_s` (s;
+/// the thesis MPC steps every 250 ms by design).
+pub fn plausible_step<T: RealField + Copy>(dt_s: T, period_s: f64) -> bool {
+    let max = crate::lit::<T>(MAX_STEP_S.max(1.5 * period_s));
+    dt_s.is_finite() && dt_s > T::zero() && dt_s <= max
 }
 
 /// Checks both inputs of a step.
@@ -415,6 +437,16 @@ impl<T: RealField + Copy> Controller<T> for AnyController<T> {
             AnyController::LqrQuat(c) => c.resume(),
             AnyController::MpcThesis(c) => c.resume(),
             AnyController::MpcFast(c) => c.resume(),
+        }
+    }
+    fn elapsed(&mut self, dt_s: T) {
+        match self {
+            AnyController::PdEuler(c) => c.elapsed(dt_s),
+            AnyController::PdQuat(c) => c.elapsed(dt_s),
+            AnyController::LqrEuler(c) => c.elapsed(dt_s),
+            AnyController::LqrQuat(c) => c.elapsed(dt_s),
+            AnyController::MpcThesis(c) => c.elapsed(dt_s),
+            AnyController::MpcFast(c) => c.elapsed(dt_s),
         }
     }
     fn reset(&mut self) {

@@ -181,14 +181,14 @@ impl MpcConfig {
         Self {
             form,
             pred_dt_s: 0.05,
-            exec_dt_s: 0.005,
+            exec_dt_s: 0.001,
             q: [
-                400.0,
-                400.0,
+                1600.0,
+                1600.0,
+                240.0,
                 60.0,
-                20.0,
-                20.0,
-                8.0,
+                60.0,
+                24.0,
                 30.0 * a,
                 30.0 * a,
                 20.0 * a,
@@ -200,7 +200,7 @@ impl MpcConfig {
             s: [0.05, 0.5, 0.5, 5.0],
             terminal: true,
             observer_tau_s: Some(0.02),
-            observer_moment_tau_s: 0.005,
+            observer_moment_tau_s: 0.004,
             disturbance_trend_s: Some(0.3),
             disturbance_trend_max_mps2: 0.4,
             disturbance_rate_filter_s: 0.05,
@@ -318,7 +318,23 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     trend: [T; N],
     last: Option<(Vec12<T>, T)>,
     last_qp: Option<MpcQp<T, NZ>>,
+    /// The measured interval the next observer update spans, s
+    /// ([`Controller::elapsed`]; `None`: the execution period).
+    next_dt: Option<T>,
+    /// The interval the last observer update spanned, s (the trend's rate
+    /// filter differences over it).
+    last_dt: T,
+    /// The prediction model, its terminal weight and its input matrix
+    /// decouple into the hover model's four channels ([`CHANNELS`]): the
+    /// adjoint pass runs on each channel's few states instead of all 12.
+    decoupled: bool,
 }
+
+/// The hover model's independent channels in the heading frame: each
+/// input moves only its own states (state order `[x y z ẋ ẏ ż a₁ a₂ a₃ p q r]`,
+/// `a` the attitude coordinates). Thrust: z, ż; roll: y, ẏ, a₁, p; pitch:
+/// x, ẋ, a₂, q; yaw: a₃, r.
+pub const CHANNELS: ([usize; 2], [usize; 4], [usize; 4], [usize; 2]) = ([2, 5], [1, 4, 6, 9], [0, 3, 7, 10], [8, 11]);
 
 /// The f64 matrices of one discretisation, in one place: the continuous
 /// hover model with the disturbance inputs appended, `[B | Bw]` (Bw =
@@ -473,6 +489,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             trend: [T::zero(); N],
             last: None,
             last_qp: None,
+            next_dt: None,
+            last_dt: lit(cfg.exec_dt_s),
+            decoupled: false,
         }
     }
 
@@ -508,6 +527,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         self.u_hover = crate::model::hover_input(&params);
         self.params = params;
         self.settings = qp_settings(&cfg);
+        self.last_dt = lit(cfg.exec_dt_s);
         self.trend = [T::zero(); N];
         self.preview = [Setpoint::hold(Vector3::zeros(), T::zero()); N];
         Controller::reset(self);
@@ -554,6 +574,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     /// The condensed Hessian, its QP solver and the box of the moves.
     #[inline(never)]
     fn design_qp(&mut self) -> Result<(), ControlError> {
+        self.decoupled = self.channels_decouple();
         let h = self.build_hessian();
         self.qp = BoxQp::new(&h).map_err(|_| ControlError::InvalidParameter)?;
         self.design_response();
@@ -570,6 +591,32 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             self.qp.iteration_bound(&self.lb, &self.ub, self.settings.accuracy)
         };
         Ok(())
+    }
+
+    /// Whether the prediction model `Ad`, its input matrix `Bd` and the
+    /// terminal weight couple no two of the [`CHANNELS`]: every entry
+    /// between two channels below 1e-9 of the matrix's largest (the DARE's
+    /// rounding leaves ≈ 1e-16 where exact arithmetic has 0).
+    fn channels_decouple(&self) -> bool {
+        let (z, y, x, w) = CHANNELS;
+        let mut channel = [0usize; 12];
+        for (c, states) in [&z[..], &y[..], &x[..], &w[..]].iter().enumerate() {
+            for &i in states.iter() {
+                channel[i] = c;
+            }
+        }
+        let square_ok = |m: &Mat12<T>| {
+            let tol = m.amax() * lit::<T>(1e-9);
+            (0..12).all(|i| (0..12).all(|j| channel[i] == channel[j] || m[(i, j)].abs() <= tol))
+        };
+        let tol = self.bd.amax() * lit::<T>(1e-9);
+        let input_ok = (0..12).all(|i| (0..4).all(|c| channel[i] == c || self.bd[(i, c)].abs() <= tol));
+        square_ok(&self.ad) && square_ok(&self.p_term) && input_ok
+    }
+
+    /// Whether the adjoint pass runs channel by channel (see [`CHANNELS`]).
+    pub fn decoupled(&self) -> bool {
+        self.decoupled
     }
 
     /// The constant QP Hessian.
@@ -631,7 +678,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let Some(tt) = self.cfg.disturbance_trend_s else {
             return Vector3::zeros();
         };
-        let span = lit::<T>(self.cfg.disturbance_rate_filter_s - self.cfg.exec_dt_s);
+        // τ − dt of the last update (at least τ/2: a long step is not a
+        // reason to divide by nearly nothing).
+        let tau = lit::<T>(self.cfg.disturbance_rate_filter_s);
+        let span = (tau - self.last_dt).max(tau * lit(0.5));
         let lim = lit::<T>(self.cfg.disturbance_trend_max_mps2 / tt);
         let rate = |i: usize| ((self.dist_lp[0][i] - self.dist_lp[1][i]) / span).max(-lim).min(lim);
         Vector3::new(rate(0), rate(1), T::zero())
@@ -652,6 +702,58 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     /// Adjoint gradient of the state cost for the errors `e[k] = x[k] − r[k]`
     /// of steps 1..=N: per-move sums of `Bdᵀλ_{k+1}`.
     fn state_gradient(&self, e: &[Vec12<T>; N]) -> SVector<T, NZ> {
+        if self.decoupled {
+            let mut g = SVector::<T, NZ>::zeros();
+            let (z, y, x, w) = CHANNELS;
+            self.channel_gradient(z, 0, e, &mut g);
+            self.channel_gradient(y, 1, e, &mut g);
+            self.channel_gradient(x, 2, e, &mut g);
+            self.channel_gradient(w, 3, e, &mut g);
+            return g;
+        }
+        self.dense_gradient(e)
+    }
+
+    /// [`Mpc::state_gradient`] of one channel: the adjoint recursion on the
+    /// states `idx` of input `ch` alone (the others are not coupled to it).
+    /// The indices are constants once inlined, so each product is a few
+    /// loads and multiply-adds with no index arithmetic.
+    #[inline(always)]
+    fn channel_gradient<const K: usize>(&self, idx: [usize; K], ch: usize, e: &[Vec12<T>; N], g: &mut SVector<T, NZ>) {
+        // Terminal step: P·e restricted to the channel.
+        let mut lambda = [T::zero(); K];
+        for (a, &i) in idx.iter().enumerate() {
+            let mut s = T::zero();
+            for &j in idx.iter() {
+                s += self.p_term[(i, j)] * e[N - 1][j];
+            }
+            lambda[a] = s;
+        }
+        let mut k = N - 1;
+        loop {
+            let mut gk = T::zero();
+            for (b, &j) in idx.iter().enumerate() {
+                gk += self.bd[(j, ch)] * lambda[b];
+            }
+            g[4 * block_of::<M>(k) + ch] += gk;
+            if k == 0 {
+                return;
+            }
+            k -= 1;
+            let mut next = [T::zero(); K];
+            for (a, &i) in idx.iter().enumerate() {
+                let mut s = self.q[i] * e[k][i];
+                for (b, &j) in idx.iter().enumerate() {
+                    s += self.ad[(j, i)] * lambda[b];
+                }
+                next[a] = s;
+            }
+            lambda = next;
+        }
+    }
+
+    /// [`Mpc::state_gradient`] over all 12 states (a model that does not decouple).
+    fn dense_gradient(&self, e: &[Vec12<T>; N]) -> SVector<T, NZ> {
         let mut g = SVector::<T, NZ>::zeros();
         let mut lambda = Vec12::<T>::zeros();
         for k in (0..N).rev() {
@@ -851,21 +953,45 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
 
     /// Observer update from the previous step's prediction (and, with a
     /// trend, the low-passed rate of the horizontal estimate).
+    ///
+    /// The observer model is the ZOH at the execution period `T`; a step of
+    /// measured length `dt` ([`Controller::elapsed`]) scales the predicted
+    /// change by `dt/T` (exact to first order in `dt`; the second-order
+    /// error `dt·(dt − T)·A·ẋ/2` is ≈ 1e-5 m/s on a 2 ms step), and so the
+    /// innovations are read against the right interval, not as a
+    /// disturbance.
     fn observe(&mut self, est: &StateEstimate<T>) {
+        let t_nominal = lit::<T>(self.cfg.exec_dt_s);
+        let dt = self.next_dt.take().unwrap_or(t_nominal);
         let Some(tau) = self.cfg.observer_tau_s else { return };
         let Some((x_prev, yaw_prev)) = self.last else { return };
+        self.last_dt = dt;
+        let scale = dt / t_nominal;
         let frame = HeadingFrame::new(yaw_prev);
         // Disturbance in the previous heading frame.
         let mut dh = self.dist_in(&frame);
-        let pred = mul(&self.ad_e, &x_prev) + mul(&self.bd_e, &self.du_prev) + mul(&self.wd_e, &dh);
         let meas = self.heading_state(est, yaw_prev);
-        let nu = meas - pred;
+        // Only the velocity and rate rows of the prediction are read.
+        let mut nu = Vec12::<T>::zeros();
+        for i in [3, 4, 5, 9, 10, 11] {
+            let mut p = T::zero();
+            for j in 0..12 {
+                p += self.ad_e[(i, j)] * x_prev[j];
+            }
+            for c in 0..4 {
+                p += self.bd_e[(i, c)] * self.du_prev[c];
+            }
+            for c in 0..6 {
+                p += self.wd_e[(i, c)] * dh[c];
+            }
+            nu[i] = meas[i] - (x_prev[i] + (p - x_prev[i]) * scale);
+        }
         // Attribute velocity and rate innovations to the disturbance, low-passed.
-        let gain = lit::<T>((self.cfg.exec_dt_s / tau).min(1.0));
-        let gain_m = lit::<T>((self.cfg.exec_dt_s / self.cfg.observer_moment_tau_s).min(1.0));
+        let gain = (dt / lit::<T>(tau)).min(T::one());
+        let gain_m = (dt / lit::<T>(self.cfg.observer_moment_tau_s)).min(T::one());
         for i in 0..3 {
-            let bf = self.wd_e[(3 + i, i)];
-            let bm = self.wd_e[(9 + i, 3 + i)];
+            let bf = self.wd_e[(3 + i, i)] * scale;
+            let bm = self.wd_e[(9 + i, 3 + i)] * scale;
             if bf > T::zero() {
                 dh[i] += gain * nu[3 + i] / bf;
             }
@@ -888,7 +1014,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             // The trend's rate filter (see `disturbance_rate`): two cascaded
             // low-passes of the horizontal estimate. Differencing the estimate
             // directly would pass its noise at a gain of 1/dt.
-            let a = lit::<T>(self.cfg.exec_dt_s / self.cfg.disturbance_rate_filter_s);
+            let a = (dt / lit::<T>(self.cfg.disturbance_rate_filter_s)).min(T::one());
             for i in 0..2 {
                 let l1 = self.dist_lp[0][i] + a * (dh[i] - self.dist_lp[0][i]);
                 self.dist_lp[0][i] = l1;
@@ -980,6 +1106,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         Mpc::iteration_bound(self)
     }
 
+    fn elapsed(&mut self, dt_s: T) {
+        self.next_dt = super::plausible_step(dt_s, self.cfg.exec_dt_s).then_some(dt_s);
+    }
+
     fn resume(&mut self) {
         self.last = None;
     }
@@ -991,6 +1121,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         self.dist_lp = [[T::zero(); 2]; 2];
         self.last = None;
         self.last_qp = None;
+        self.next_dt = None;
+        self.last_dt = lit(self.cfg.exec_dt_s);
         self.preview_valid = false;
     }
 }
@@ -999,3 +1131,82 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
 pub type MpcThesis<T> = Mpc<T, 20, 2, 8>;
 /// The `fast` preset's sizes: N = 20, M = 3.
 pub type MpcFast<T> = Mpc<T, 20, 3, 12>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::VehicleParams;
+
+    fn hover_at(z: f64) -> StateEstimate<f64> {
+        StateEstimate {
+            pos_ned_m: Vector3::new(0.0, 0.0, z),
+            vel_ned_mps: Vector3::zeros(),
+            att: Vector4::new(1.0, 0.0, 0.0, 0.0),
+            rates_frd_radps: Vector3::zeros(),
+        }
+    }
+
+    #[test]
+    fn the_channel_adjoint_equals_the_dense_one() {
+        for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+            for cfg in [MpcConfig::fast(form), MpcConfig::thesis(form)] {
+                let mpc = MpcFast::<f64>::new(VehicleParams::os4(), cfg).unwrap();
+                assert!(mpc.decoupled(), "the hover model decouples into its four channels");
+                // Arbitrary errors on every state at every step.
+                let mut e = [Vec12::<f64>::zeros(); 20];
+                for (k, ek) in e.iter_mut().enumerate() {
+                    for i in 0..12 {
+                        ek[i] = libm::sin(1.3 * k as f64 + 0.7 * i as f64) * (1.0 + i as f64);
+                    }
+                }
+                let (a, b) = (mpc.state_gradient(&e), mpc.dense_gradient(&e));
+                assert!((a - b).amax() <= 1e-9 * b.amax(), "{form:?}: {a} vs {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_coupled_model_takes_the_dense_path() {
+        let mut mpc = MpcFast::<f64>::new(VehicleParams::os4(), MpcConfig::fast(AttitudeForm::Euler)).unwrap();
+        mpc.ad[(0, 1)] = 0.1; // x driven by y: no longer four channels
+        assert!(!mpc.channels_decouple());
+    }
+
+    /// At hover, with no disturbance, a step of any measured length is
+    /// predicted as what it is: the estimate stays zero. Told nothing, a
+    /// 3 ms step read as a 1 ms one would be.
+    #[test]
+    fn a_measured_step_is_not_a_disturbance() {
+        let p = VehicleParams::<f64>::os4();
+        let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
+        cfg.exec_dt_s = 0.001;
+        // A climb: the thrust is not the hover thrust.
+        let sp = Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0);
+        // The vehicle from hover for `dt` under the MPC's first input, as the model has it.
+        let fly = |tell: bool, dt: f64| {
+            let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+            let mut est = hover_at(-1.0);
+            let u = mpc.update(&est, &sp).unwrap().u;
+            // The vertical acceleration the model predicts for the input sent.
+            let a = p.gravity_mps2 - u[0] / p.mass_kg;
+            est.vel_ned_mps[2] = a * dt;
+            est.pos_ned_m[2] += 0.5 * a * dt * dt;
+            if tell {
+                mpc.elapsed(dt);
+            }
+            mpc.update(&est, &sp).unwrap();
+            mpc.disturbance_estimate().0[2]
+        };
+        for dt in [0.001, 0.002, 0.003, 0.0017] {
+            assert!(fly(true, dt).abs() < 1e-3, "dt {dt}: {}", fly(true, dt));
+        }
+        // Not told: the 3 ms step's extra velocity is taken for a force.
+        assert!(fly(false, 0.003).abs() > 0.1, "{}", fly(false, 0.003));
+        // An implausible interval is ignored (the nominal period).
+        let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+        mpc.elapsed(f64::NAN);
+        assert_eq!(mpc.next_dt, None);
+        mpc.elapsed(1.0);
+        assert_eq!(mpc.next_dt, None);
+    }
+}

@@ -82,8 +82,13 @@ pub struct AccelObserver<T: RealField + Copy> {
     two_stage: bool,
     /// `dt/τ` of the moment part (0: off).
     gain_moment: T,
-    /// `1/dt`, 1/s.
+    /// `1/dt` of the nominal period, 1/s.
     inv_dt: T,
+    /// The nominal period, s.
+    period: T,
+    /// The measured interval the next update spans, s (`None`: the nominal
+    /// period; see [`AccelObserver::elapsed`]).
+    next_dt: Option<T>,
     /// Clamp on each axis of the force estimate, m/s².
     limit: T,
     /// The force part's first stage, NED m/s².
@@ -103,6 +108,8 @@ impl<T: RealField + Copy> AccelObserver<T> {
             two_stage: false,
             gain_moment: T::zero(),
             inv_dt: T::zero(),
+            period: T::zero(),
+            next_dt: None,
             limit: T::zero(),
             d_stage: Vector3::zeros(),
             d_hat: Vector3::zeros(),
@@ -125,6 +132,8 @@ impl<T: RealField + Copy> AccelObserver<T> {
             two_stage: false,
             gain_moment: lit(period_s / tau_moment_s),
             inv_dt: lit(1.0 / period_s),
+            period: lit(period_s),
+            next_dt: None,
             limit: lit(DISTURBANCE_LIMIT_G * gravity_mps2),
             d_stage: Vector3::zeros(),
             d_hat: Vector3::zeros(),
@@ -172,20 +181,34 @@ impl<T: RealField + Copy> AccelObserver<T> {
         )
     }
 
+    /// The next update spans `dt_s` (s, measured: [`crate::control::Controller::elapsed`])
+    /// instead of the nominal period: its differences are taken over `dt_s`
+    /// and its low-passes advance by `dt_s/τ` (at most 1). An implausible
+    /// interval ([`super::plausible_step`]) is ignored.
+    pub fn elapsed(&mut self, dt_s: T) {
+        let period = nalgebra::try_convert::<T, f64>(self.period).unwrap_or(0.0);
+        self.next_dt = super::plausible_step(dt_s, period).then_some(dt_s);
+    }
+
     /// Updates the estimates with this step's velocity and rates (call
     /// first in a step).
     pub fn observe(&mut self, est: &StateEstimate<T>) {
+        let dt = self.next_dt.take();
         let Some(prev) = self.pending.take() else { return };
-        let a_meas = (est.vel_ned_mps - prev.vel_ned_mps) * self.inv_dt;
-        let mut d1 = self.d_stage + (a_meas - prev.model_acc_ned_mps2 - self.d_stage) * self.gain;
-        let w_dot = (est.rates_frd_radps - prev.rates_frd_radps) * self.inv_dt;
-        let mut m = self.m_hat + (w_dot - prev.model_rate_dot_frd_radps2 - self.m_hat) * self.gain_moment;
+        // The interval as a multiple of the nominal period (1 without a measurement).
+        let s = dt.map_or(T::one(), |dt| dt * self.inv_dt);
+        let inv_dt = self.inv_dt / s;
+        let (gain, gain_moment) = ((self.gain * s).min(T::one()), (self.gain_moment * s).min(T::one()));
+        let a_meas = (est.vel_ned_mps - prev.vel_ned_mps) * inv_dt;
+        let mut d1 = self.d_stage + (a_meas - prev.model_acc_ned_mps2 - self.d_stage) * gain;
+        let w_dot = (est.rates_frd_radps - prev.rates_frd_radps) * inv_dt;
+        let mut m = self.m_hat + (w_dot - prev.model_rate_dot_frd_radps2 - self.m_hat) * gain_moment;
         let m_lim = lit::<T>(MOMENT_LIMIT_RADPS2);
         for i in 0..3 {
             d1[i] = d1[i].max(-self.limit).min(self.limit);
         }
         let mut d = if self.two_stage {
-            self.d_hat + (d1 - self.d_hat) * self.gain
+            self.d_hat + (d1 - self.d_hat) * gain
         } else {
             d1
         };

@@ -156,6 +156,10 @@ impl<T: RealField + Copy> Controller<T> for PdQuat<T> {
         self.obs.reset();
     }
 
+    fn elapsed(&mut self, dt_s: T) {
+        self.obs.elapsed(dt_s);
+    }
+
     fn resume(&mut self) {
         self.obs.resume();
     }
