@@ -177,8 +177,6 @@ pub struct MavVehicle {
     mag_due: Schedule,
     /// Time of the last `HIL_SENSOR`, µs.
     last_sensor_us: Option<u64>,
-    /// Time between the last two `HIL_SENSOR`s, µs (0: not known yet).
-    sensor_interval_us: u64,
     /// The `Imu` sequence number.
     seq: u32,
     /// Motor commands of the last step.
@@ -229,7 +227,6 @@ impl MavVehicle {
             mag_ref_rad: None,
             mag_due: Schedule::new(),
             last_sensor_us: None,
-            sensor_interval_us: 0,
             seq: 0,
             motors: [0.0; 4],
             cycles: (0, 1),
@@ -369,9 +366,6 @@ impl MavVehicle {
             self.mag_due.reset();
             self.next_us = [s.time_us; 3];
         }
-        if let Some(last) = self.last_sensor_us.filter(|&t| s.time_us > t) {
-            self.sensor_interval_us = s.time_us - last;
-        }
         self.last_sensor_us = Some(s.time_us);
         if let Some(alt) = s.baro_alt_m {
             self.on_baro(s.time_us, alt);
@@ -482,18 +476,6 @@ impl MavVehicle {
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if m.param1 == 1.0 => match self.arm() {
                 Ok(()) => {
                     self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
-                    // A controller period that is not a whole number of
-                    // sample intervals runs at uneven steps (5 ms on 2 ms
-                    // samples: 6, 4, 6 ms…), while its model and observer
-                    // assume even ones: said, not refused.
-                    let (period, interval) = (self.core.controller_period_us(), self.sensor_interval_us);
-                    if interval > 0 && period % interval != 0 {
-                        self.say(
-                            out,
-                            MavSeverity::MAV_SEVERITY_WARNING,
-                            format_args!("uneven control steps: {period} us on {interval} us samples"),
-                        )?;
-                    }
                     MavResult::MAV_RESULT_ACCEPTED
                 }
                 Err(why) => {

@@ -232,28 +232,6 @@ fn it_arms_only_once_aligned_and_hovers_on_the_analytic_rotor_speed() {
     let hover = ((p.mass_kg * p.gravity_mps2 / (4.0 * p.kf_ns2)).sqrt() / p.omega_max_radps) as f32;
     let m = v.motors();
     assert!(m.iter().all(|&c| (c - hover).abs() < 0.01 * hover), "{m:?} vs {hover}");
-    // The LQR's 2 ms on 1 ms samples: even steps, nothing to say.
-    assert!(!out.texts().iter().any(|t| t.contains("uneven")), "{:?}", out.texts());
-}
-
-/// A controller period that is not a whole number of sample intervals is
-/// said at arming: the fast MPC's 5 ms on 2 ms samples (rotorpy's default
-/// step) runs 6, 4, 6 ms apart.
-#[test]
-fn uneven_control_steps_are_said_at_arming() {
-    let mut s = Settings::os4();
-    s.controller = fc_core::control::ControllerSpec::from_wire(5, true).unwrap();
-    let mut v = MavVehicle::new(s, 1).unwrap();
-    let mut out = Sent::default();
-    for k in 0..1_500u64 {
-        for m in at_rest(k * 2_000) {
-            v.handle(&m, &mut out, &Still, 0).unwrap();
-        }
-    }
-    let mut out = Sent::default();
-    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
-    assert_eq!(out.acks(), [MavResult::MAV_RESULT_ACCEPTED]);
-    out.assert_text("uneven control steps: 5000 us on 2000 us samples");
 }
 
 #[test]
