@@ -72,7 +72,7 @@ fn check(name: &str, elf: &std::path::Path, flash_budget: u64, ram_budget: u64) 
 #[test]
 fn the_image_fits_its_flash_and_static_ram_budgets() {
     let elf = sil_host::link::firmware_elf().expect("building the thumbv7em image");
-    check("image", &elf, 280 * 1024, 16 * 1024);
+    check("image", &elf, 280 * 1024, 17 * 1024);
 }
 
 #[test]

@@ -52,7 +52,7 @@ mod target {
     use fc_core::{euler_to_quat, VehicleParams};
     use fc_loop::nav::Navigator;
     use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
-    use fc_proto::{encode, ToFc, MAX_FRAME, PROTOCOL_VERSION};
+    use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use fc_stm32f405::SYSCLK_HZ;
     use hal_shim::stm32f405::SysTickClock;
     use hal_shim::{ByteLink, CycleClock};
@@ -217,6 +217,7 @@ mod target {
     static mut LINK: MemLink = MemLink {
         rx: heapless::Deque::new(),
         tx_bytes: 0,
+        tx: heapless::Vec::new(),
     };
 
     /// The link, emptied.
@@ -226,6 +227,7 @@ mod target {
         let l = unsafe { &mut *core::ptr::addr_of_mut!(LINK) };
         l.rx.clear();
         l.tx_bytes = 0;
+        l.tx.clear();
         l
     }
 
@@ -331,10 +333,29 @@ mod target {
         (ticks as f32 / TICKS_PER_INSTRUCTION) as u32
     }
 
-    /// An in-memory byte link.
+    /// An in-memory byte link; what the loop sends is decoded as it goes,
+    /// for the step's own instruction count (its `Telemetry`).
     struct MemLink {
         rx: heapless::Deque<u8, 4096>,
         tx_bytes: u32,
+        /// What was sent since the last [`MemLink::step_cycles`].
+        tx: heapless::Vec<u8, 1024>,
+    }
+
+    impl MemLink {
+        /// The `cycles` of the last `Telemetry` sent since the last call
+        /// (SysTick counts), decoded outside the timed step.
+        fn step_cycles(&mut self) -> Option<u32> {
+            let mut dec = FrameDecoder::<MAX_FRAME>::new();
+            let mut cycles = None;
+            for &b in self.tx.iter() {
+                if let Some(Ok(FromFc::Telemetry { cycles: c, .. })) = dec.push::<FromFc>(b) {
+                    cycles = Some(c);
+                }
+            }
+            self.tx.clear();
+            cycles
+        }
     }
     impl ByteLink for MemLink {
         type Error = ();
@@ -351,6 +372,8 @@ mod target {
         }
         fn write_all(&mut self, bytes: &[u8]) -> Result<(), ()> {
             self.tx_bytes += bytes.len() as u32;
+            // Kept while there is room (the image steps send ≈ 250 bytes).
+            let _ = self.tx.extend_from_slice(bytes);
             Ok(())
         }
     }
@@ -439,6 +462,110 @@ mod target {
         // Every sensor frame flown (none refused as invalid or implausible).
         let c = fc.counters();
         (c.ok > STEPS && c.invalid_values == 0 && link.tx_bytes > 0).then_some(instructions(worst))
+    }
+
+    /// Largest instructions of one whole image step of the fast MPC at
+    /// 1 kHz (the bound: 168 000 cycles ÷ CPI 1.5 ÷ margin 1.5).
+    const IMAGE_STEP_BUDGET: u32 = 74_600;
+
+    /// Worst instructions of one whole image step at 1 kHz, as a vehicle
+    /// flies the controller `id`: an `Imu` sample in (pseudo-random rates
+    /// up to 1 rad/s, specific force −g ± 2 m/s²) with a mocap fix at
+    /// *every* step (a real one arrives every tenth), the estimator, the
+    /// controller (due at every sample at 1 kHz) and its output. Returns
+    /// `(step, with frames)`: `step` is what the image itself reports for the
+    /// step (`Telemetry.cycles`: from the IMU sample to the actuator output,
+    /// the figure a QEMU flight's `instructions_per_step` is made of);
+    /// `with frames` adds the lockstep link's work (decoding the `Fix` and
+    /// `Imu` frames, encoding `Actuator`, `Telemetry`, `Nav` and `NavBias`),
+    /// which on a vehicle is the link task's, below the IMU and the
+    /// controller. Every other step has the reference preview (its frames
+    /// serviced before the step: on a vehicle an onboard trajectory
+    /// generator gives it), the others extrapolate the set-point.
+    fn image_step_worst(id: u8, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<(u32, u32)> {
+        let fc = fresh_core(FcConfig::default());
+        fc.start().ok()?;
+        let link = fresh_link();
+        push(
+            link,
+            &ToFc::Hello {
+                version: PROTOCOL_VERSION,
+            },
+        );
+        push(
+            link,
+            &ToFc::Select {
+                controller: id,
+                feedforward: true,
+            },
+        );
+        let start = Vector3::new(2.0, 0.0, -5.0);
+        let fix = |p: Vector3<f32>, yaw: f32| Fix {
+            age_s: 0.01,
+            pos_ned_m: Some(p),
+            pos_sigma_m: Vector3::repeat(0.002),
+            yaw_rad: Some(yaw),
+            yaw_sigma_rad: 0.0087,
+            ..Fix::EMPTY
+        };
+        let imu_frame = |seq: u32, imu: &ImuSample| ToFc::Imu {
+            seq,
+            t_us: u64::from(seq) * 1_000,
+            gyro: imu.gyro_frd_radps.into(),
+            accel: imu.accel_frd_mps2.into(),
+        };
+        // Aligned at rest at the circle's start, with 50 ms of history.
+        let mut seq = 0u32;
+        for k in 0..100u32 {
+            seq += 1;
+            if k % 10 == 0 {
+                push(link, &ToFc::Fix(fc_loop::fix_to_wire(&fix(start, 0.26))));
+            }
+            push(link, &imu_frame(seq, &REST));
+            while !link.rx.is_empty() {
+                fc.service(link, clock, 0).ok()?;
+            }
+        }
+        let mut rng = Lcg(17);
+        let (mut worst, mut worst_framed) = (0u32, 0u32);
+        for k in 0..STEPS {
+            seq += 1;
+            let t = seq as f32 * 1e-3;
+            push(link, &ToFc::Setpoint(setpoint_to_wire(&reference(t))));
+            if let Some((n, pdt)) = preview.filter(|_| k % 2 == 0) {
+                for i in 1..=n {
+                    let p = reference(t + i as f32 * pdt as f32);
+                    push(
+                        link,
+                        &ToFc::Preview {
+                            k: i as u8,
+                            sp: setpoint_to_wire(&p),
+                        },
+                    );
+                }
+            }
+            while !link.rx.is_empty() {
+                fc.service(link, clock, 0).ok()?;
+            }
+            link.tx.clear();
+            let e = fc.navigator().estimate()?;
+            let z = e.pos_ned_m + rng.vector(0.004);
+            push(
+                link,
+                &ToFc::Fix(fc_loop::fix_to_wire(&fix(z, e.euler()[2] + 0.01 * rng.next()))),
+            );
+            push(link, &imu_frame(seq, &rng.imu()));
+            let t0 = clock.now();
+            while !link.rx.is_empty() {
+                fc.service(link, clock, 0).ok()?;
+            }
+            worst_framed = worst_framed.max(clock.since(t0));
+            worst = worst.max(link.step_cycles()?);
+        }
+        // Every step navigated and flown (nothing refused as invalid).
+        let c = fc.counters();
+        (fc.navigator().estimate().is_some() && c.invalid_values == 0 && link.tx_bytes > 0)
+            .then_some((instructions(worst), instructions(worst_framed)))
     }
 
     /// One table row; returns whether it fits.
@@ -549,6 +676,39 @@ mod target {
             }
             let m = with_stack(|| loop_worst(id, dt, spec.preview(), &clock));
             check(name, form, hz, "loop", m);
+            // The fast MPC re-solves at every 1 kHz IMU sample: the whole
+            // image step (frames, estimator with a fix, MPC) is its budget.
+            if r.family == Family::Mpc && r.preset == Preset::Project {
+                let (m, stack) = with_stack(|| image_step_worst(id, spec.preview(), &clock));
+                let step = (m.map(|w| w.0), stack);
+                ok &= check(name, form, hz, "image step (IMU + fix in, ESKF, MPC, output)", step);
+                check(
+                    name,
+                    form,
+                    hz,
+                    "image step with the PIL link's frames, info",
+                    (m.map(|w| w.1), stack),
+                );
+                match step.0 {
+                    Some(w) if w <= IMAGE_STEP_BUDGET => {
+                        hprintln!(
+                            "budget: {} image step: {} instructions, within {}",
+                            r.name,
+                            w,
+                            IMAGE_STEP_BUDGET
+                        )
+                    }
+                    w => {
+                        hprintln!(
+                            "budget: {} image step: {:?} instructions, OVER {}",
+                            r.name,
+                            w,
+                            IMAGE_STEP_BUDGET
+                        );
+                        ok = false;
+                    }
+                }
+            }
         }
         // The estimator of sensor flights: one predict and one fix update per
         // 1 kHz step, against the whole budget and against its own bound.
