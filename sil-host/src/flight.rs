@@ -46,6 +46,66 @@ pub struct FlightConfig {
     /// controller in that window (the plant keeps the last input), as when
     /// the link or the sensors drop out. `None`: none.
     pub sensor_gap: Option<(f64, f64)>,
+    /// The simulator's step grid for true-state flights (`None`: the
+    /// controller's own period, one step per control period): the flight
+    /// controller is stepped at every grid point and runs its controller on
+    /// its schedule, as behind a simulator that steps at 2 ms, 3 ms or an
+    /// uneven grid.
+    pub step_grid: Option<StepGrid>,
+}
+
+/// A simulator's step grid: steps `period ± jitter` apart (uniform, from a
+/// seeded generator), each on a plant tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepGrid {
+    /// Mean time between steps, s.
+    pub period_s: f64,
+    /// Largest deviation of one interval from the period, s (0: even).
+    pub jitter_s: f64,
+    /// Seed of the jitter.
+    pub seed: u64,
+}
+
+impl StepGrid {
+    /// An even grid of `period_s`.
+    pub fn even(period_s: f64) -> Self {
+        Self {
+            period_s,
+            jitter_s: 0.0,
+            seed: 1,
+        }
+    }
+
+    /// Refuses a grid that is not a grid: a period outside (0, 1] s, or a
+    /// jitter that is negative, non-finite or not below the period.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let (p, j) = (self.period_s, self.jitter_s);
+        if !(p.is_finite() && p > 0.0 && p <= 1.0) {
+            anyhow::bail!("--step-grid period {p:?} s is out of range: must be in (0, 1] s");
+        }
+        if !(j.is_finite() && j >= 0.0 && j < p) {
+            anyhow::bail!("--step-grid jitter {j:?} s is out of range: must be in [0, the period {p} s)");
+        }
+        Ok(())
+    }
+
+    /// The intervals of the grid, in plant ticks of `tick` s (each at least one).
+    fn intervals(&self, tick: f64) -> impl FnMut() -> usize {
+        let (period, jitter) = (self.period_s, self.jitter_s);
+        let mut state = self
+            .seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        move || {
+            // xorshift64*: a uniform number in [−1, 1].
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            let u = (state.wrapping_mul(2_685_821_657_736_338_717) >> 11) as f64 / (1u64 << 53) as f64;
+            let dt = period + jitter * (2.0 * u - 1.0);
+            ((dt / tick).round() as usize).max(1)
+        }
+    }
 }
 
 /// Fastest plant integration rate accepted, Hz.
@@ -74,6 +134,12 @@ impl FlightConfig {
         if !(ch.is_finite() && ch > 0.0 && ch <= ih) {
             anyhow::bail!("--control-hz {ch:?} is out of range: must be > 0 and at most --integration-hz ({ih} Hz)");
         }
+        if let Some(g) = &self.step_grid {
+            g.validate()?;
+            if self.sensors.is_some() {
+                anyhow::bail!("--step-grid steps a true-state flight; a sensor flight steps at its IMU's samples");
+            }
+        }
         Ok(())
     }
 
@@ -91,6 +157,7 @@ impl FlightConfig {
             noise: None,
             sensors: None,
             sensor_gap: None,
+            step_grid: None,
         }
     }
 }
@@ -382,6 +449,9 @@ pub fn fly_endpoint<E: Endpoint>(
         );
     }
     let ctrl_period_us = fc_loop::schedule::period_us(ts);
+    // The simulator's own grid (true-state flights): the next tick it steps at.
+    let mut grid = cfg.step_grid.map(|g| g.intervals(tick));
+    let mut next_grid_tick = 0usize;
     let mut schedule = fc_loop::schedule::Schedule::new();
     let mut est_acc = crate::estimation::EstimationAccumulator::default();
     let mut est_trace = Vec::new();
@@ -430,10 +500,20 @@ pub fn fly_endpoint<E: Endpoint>(
         let in_gap = cfg.sensor_gap.is_some_and(|(start, len)| t >= start && t < start + len);
         // A step of the endpoint: every control period on the true state;
         // every IMU sample in a sensor flight, the controller on its schedule.
+        // A true-state flight on the simulator's grid steps the controller
+        // when it is due there (a grid finer than its period skips steps).
+        let on_grid = match grid.as_mut() {
+            Some(next) if i == next_grid_tick => {
+                next_grid_tick += next();
+                !in_gap && schedule.due((t * 1e6).round() as u64, ctrl_period_us)
+            }
+            Some(_) => false,
+            None => i % ctrl_every == 0,
+        };
         let stepped = !in_gap
             && match imu_fix {
                 Some(_) => i % imu_every == 0,
-                None => i % ctrl_every == 0,
+                None => on_grid,
             };
         if stepped {
             let xq = plant.quat_state();

@@ -275,7 +275,7 @@ struct FlyArgs {
     /// or `mpc` (linear MPC with the core's QP solver; see --preset).
     #[arg(long, value_parser = family_parser())]
     controller: Family,
-    /// MPC preset: `fast` (50 ms prediction steps over 1 s, re-solved at 200 Hz) or `thesis`
+    /// MPC preset: `fast` (50 ms prediction steps over 1 s, re-solved at 1 kHz) or `thesis`
     /// (Ts 0.25 s at 4 Hz, N 20, M 2, thesis weights). Other controllers ignore it.
     #[arg(long, value_parser = preset_parser(Family::Mpc), default_value = "fast")]
     preset: Preset,
@@ -359,6 +359,13 @@ struct FlyArgs {
     /// Plant RK4 rate, Hz (sub-steps within each control period).
     #[arg(long, default_value_t = 1000.0, value_name = "HZ", allow_negative_numbers = true)]
     integration_hz: f64,
+    /// Step the flight controller on a simulator's grid, as a simulator that steps at
+    /// PERIOD_MS does (rotorpy: 2 ms), each interval PERIOD_MS ± up to JITTER_MS (uniform,
+    /// seeded by SEED, default 1), on plant steps (raise --integration-hz for sub-millisecond
+    /// grids); the controller runs on its own schedule on those steps and is told each
+    /// interval. True-state flights only (--estimator truth).
+    #[arg(long, value_name = "PERIOD_MS[,JITTER_MS[,SEED]]", value_parser = parse_step_grid)]
+    step_grid: Option<sil_host::flight::StepGrid>,
     /// Vehicle parameters from a TOML file (any subset of mass_kg, gravity_mps2, inertia_kgm2,
     /// arm_m, rotor_inertia_kgm2, kf_ns2, km_nms2, kt_nspm, kr_nms, omega_max_radps, rotor_tau_s,
     /// rotor_gain; the rest stay OS4). Controllers are designed for it and the plant is it.
@@ -512,6 +519,26 @@ enum TargetArg {
     Setpoint([f64; 4]),
     /// Where the controller runs.
     Exec(Target),
+}
+
+fn parse_step_grid(s: &str) -> Result<sil_host::flight::StepGrid, String> {
+    let v: Vec<&str> = s.split(',').map(str::trim).collect();
+    if v.is_empty() || v.len() > 3 {
+        return Err(format!("'{s}' is not PERIOD_MS[,JITTER_MS[,SEED]]"));
+    }
+    let ms = |x: &str| {
+        x.parse::<f64>()
+            .map_err(|_| format!("'{x}' is not a number of milliseconds"))
+    };
+    let grid = sil_host::flight::StepGrid {
+        period_s: ms(v[0])? * 1e-3,
+        jitter_s: v.get(1).map_or(Ok(0.0), |x| ms(x))? * 1e-3,
+        seed: v
+            .get(2)
+            .map_or(Ok(1), |x| x.parse::<u64>().map_err(|_| format!("'{x}' is not a seed")))?,
+    };
+    grid.validate().map_err(|e| e.to_string())?;
+    Ok(grid)
 }
 
 fn parse_target_arg(s: &str) -> Result<TargetArg, String> {
@@ -756,6 +783,7 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
         bail!("--integration-hz must be at least 1 Hz");
     }
     cfg.integration_hz = a.integration_hz;
+    cfg.step_grid = a.step_grid;
     let exec = a
         .target
         .iter()

@@ -504,10 +504,10 @@ gust still blows, and the helix under `wind,mismatch` stays within 0.1 m (RMSE).
 stay near its undisturbed ones, so its disturbance was much smaller or had no constant part.
 - **MPC.** `thesis` runs the thesis' Appendix C problem at its 4 Hz; our set-point settles in ≈ 4.4 s against the \
 thesis' 6.9–8.5 s (the thesis' MPC had no reference preview and, in MATLAB, a soft output constraint). `fast` \
-re-solves at 200 Hz over a 1 s horizon with preview, feed-forward and a disturbance estimate: offset-free under \
+re-solves at 1 kHz (every IMU sample) over a 1 s horizon with preview, feed-forward and a disturbance estimate: offset-free under \
 `wind` (the set-point ends within 2 cm while the gust still blows), and stable under `mismatch` and on the \
 robustness sweep's slowest rotors thanks to heavy roll/pitch-rate weights (600; 30 lost the sweep's worst corner, \
-docs/book/src/model.md §8.6, at the price of a slower set-point: 3.5 s against 2.3 s). Its helix RMSE with `wind` is \
+docs/book/src/model.md §8.6). Its helix RMSE with `wind` is \
 within 15 % of the calm one: the 0.5 Hz, 0.2 N gust sits above the position loop's bandwidth, so feedback alone cannot \
 hold it off (a disturbance estimate held constant over the horizon left 1.46×); the estimate's rate is \
 extrapolated with a damped trend (T = 0.3 s), so the MPC anticipates where the gust is going rather than chasing it.
@@ -515,7 +515,7 @@ extrapolated with a damped trend (T = 0.3 s), so the MPC anticipates where the g
 each input for that long (zero-order hold), so the 0.178 s rotor lag and the 15 % heavier vehicle of `mismatch` \
 act on an open loop for a quarter of a second at a time; the attitude oscillation grows and the flight leaves the \
 reference by hundreds of metres to kilometres, on every scenario. The thesis ran its \
-MPC without rotor dynamics in the loop; our `fast` preset (200 Hz) holds the same plant to centimetres.
+MPC without rotor dynamics in the loop; our `fast` preset (1 kHz) holds the same plant to centimetres.
 - **Rotor lag under `mismatch`.** The plant's rotors then follow commands with τ = 0.178 s and gain 0.936, which \
 the controllers do not model; it costs damping, and every controller that runs at 200 Hz or faster stays stable.
 ";

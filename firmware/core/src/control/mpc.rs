@@ -140,39 +140,37 @@ impl MpcConfig {
     }
 
     /// The project's preset: 50 ms prediction steps over a 1 s horizon,
-    /// re-solved at 200 Hz, full-state weights, DARE terminal weight,
-    /// feed-forward of the previewed reference, disturbance estimate; with
-    /// [`MpcFast`]'s three moves (the first two steps' inputs, then one
-    /// held for the rest of the horizon).
+    /// re-solved at 1 kHz (every IMU sample), full-state weights, DARE
+    /// terminal weight, feed-forward of the previewed reference, disturbance
+    /// estimate; with [`MpcFast`]'s three moves (the first two steps'
+    /// inputs, then one held for the rest of the horizon).
     ///
     /// Three moves, not four: the QP has 12 variables instead of 16 (four
     /// independent blocks of 3, solved exactly by trying their 27 active
-    /// sets each; four moves would be 81 each), and it tracks no worse
-    /// (helix 28 mm calm, 35 mm under `wind,mismatch`, the robustness sweep
-    /// 100 %). Two moves were cheaper still but lost the sweep's worst
-    /// corner. The whole step's certified worst case fits a 1 kHz step
-    /// (QEMU: 57 k / 61 k instructions Euler / quaternion, 76 % / 82 % at
-    /// CPI 1.5 × margin 1.5; `src/bin/budget.rs`), though the preset
-    /// re-solves at 200 Hz, the rate it was tuned and studied at.
+    /// sets each; four moves would be 81 each). Two moves were cheaper
+    /// still but lost the robustness sweep's worst corner. The whole image
+    /// step (IMU sample, estimator with a fix, this MPC, output) is at worst
+    /// 63 k / 68 k instructions Euler / quaternion in QEMU, 85 % / 91 % of
+    /// a 1 kHz step at CPI 1.5 × margin 1.5 (`src/bin/budget.rs`).
     ///
-    /// Tuning: tight position weights for tracking; heavy roll/pitch-rate
-    /// weights, because with slow rotors a lightly damped attitude loop
-    /// diverges: under `mismatch` (0.178 s rotor lag) the rate weight 0.2 did
-    /// and 30 did not, but 30 still lost the robustness sweep's worst corner
-    /// (0.2 s lag, half the rotational drag, 30 % more inertia, 10 % stronger
-    /// rotors; 300 nearly held it, 600 holds it with margin, docs/book/src/model.md §8.6).
-    /// The price of 600 over 30: the calm helix's x RMSE 15 → 28 mm, the
-    /// set-point's x settling 2.3 → 3.5 s. The horizontal disturbance is predicted with a damped
-    /// trend (T = 0.3 s, rate through `s/(τs + 1)²` with τ = 50 ms, at most
-    /// 0.4 m/s² of extrapolated change): a 0.5 Hz gust moves through half its
-    /// swing within the 1 s horizon; holding the estimate left 0.016 m of x
-    /// RMS error over the gusty part of the helix, the trend leaves 0.007 m.
-    /// τ trades that against sensor noise: 30 ms left 0.006 m without noise
-    /// but lost most of the gain with it (`sil-host fly --noise 1`). The
-    /// moment estimate takes each step's whole rate innovation (τ = one
-    /// 5 ms period): with a 20 ms moment estimate the robustness sweep lost
-    /// 6 % of its vehicles (slow rotors with little rotational drag), with
-    /// 5 ms none diverges.
+    /// Tuning (docs/book/src/mpc.md): position weights 1 600 (z 240) and
+    /// velocity weights 60 (z 24) for tracking; heavy roll/pitch-rate
+    /// weights (600), because with slow rotors a lightly damped attitude
+    /// loop diverges (under `mismatch`, 0.178 s rotor lag, the rate weight
+    /// 0.2 did and 30 did not, but 30 lost the robustness sweep's worst
+    /// corner: 0.2 s lag, half the rotational drag, 30 % more inertia, 10 %
+    /// stronger rotors; docs/book/src/model.md §8.6). At 1 kHz the position
+    /// and velocity weights ×4 and ×3 over the 200 Hz preset's gave the
+    /// set-point's settling 3.5 → 3.0 s, the helix 28 → 21 mm calm and
+    /// 35 → 26 mm under `wind,mismatch`, the sweep's worst 0.28 → 0.13 m,
+    /// and rotorpy's Crazyflie circle 8.6 → 5.9 cm (the LQR's: 6.5 cm), for
+    /// a 10 % overshoot (was 6 %). The horizontal disturbance is predicted
+    /// with a damped trend (T = 0.3 s, rate through `s/(τs + 1)²` with
+    /// τ = 50 ms, at most 0.4 m/s² of extrapolated change): a 0.5 Hz gust
+    /// moves through half its swing within the 1 s horizon. The moment
+    /// estimate has τ = 4 ms (four 1 kHz steps): 2 ms lost one sweep vehicle
+    /// (fast rotors, 4.5 ms of latency), 5–6 ms doubled the helix error
+    /// under `wind,mismatch`, 10 ms doubled the sweep's worst.
     pub fn fast(form: AttitudeForm) -> Self {
         let a = match form {
             AttitudeForm::Euler => 1.0,
