@@ -297,7 +297,7 @@ fn the_json_reports_the_rate_flown_and_the_mpc_refuses_a_rate() {
         let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         (v["control_hz"].as_f64().unwrap(), v["steps"].as_u64().unwrap())
     };
-    assert_eq!(rate(&["--controller", "mpc"]), (200.0, 201));
+    assert_eq!(rate(&["--controller", "mpc"]), (1000.0, 1001));
     assert_eq!(rate(&["--controller", "mpc", "--preset", "thesis"]), (4.0, 5));
     assert_eq!(rate(&["--controller", "lqr", "--control-hz", "250"]), (250.0, 251));
     assert_eq!(rate(&["--controller", "pd"]), (500.0, 501));

@@ -495,7 +495,7 @@ impl Endpoint for Remote {
         self.seq += 1;
         let x: [f32; 13] = std::array::from_fn(|i| state[i] as f32);
         let sent = self.preview_to_send(sp, preview);
-        let step = self.client.step(self.seq, (t * 1e6) as u64, &x, sp, sent)?;
+        let step = self.client.step(self.seq, (t * 1e6).round() as u64, &x, sp, sent)?;
         Ok(report_of(&step))
     }
 

@@ -96,6 +96,16 @@ impl<const N: usize> Blocks<N> {
         Some(me)
     }
 
+    /// Each block's variables (indices into the QP's), block by block.
+    pub fn each(&self) -> impl Iterator<Item = &[u8]> {
+        let mut at = 0usize;
+        self.sizes[..self.count()].iter().map(move |&size| {
+            let idx = &self.order[at..at + size as usize];
+            at += size as usize;
+            idx
+        })
+    }
+
     /// Number of blocks.
     pub fn count(&self) -> usize {
         self.count as usize

@@ -568,6 +568,7 @@ fn the_fast_mpcs_qp_in_f32_is_within_its_certified_accuracy() {
     let mut rnd = xorshift(0x9e37_79b9_7f4a_7c15);
     let hinv = h.try_inverse().unwrap();
     let (mut worst_gap, mut worst_dz) = (0.0f64, 0.0f64);
+    let mut worst_cert = 0.0f64;
     for case in 0..3000 {
         let g = if case % 2 == 0 {
             let scale = 10f64.powf(5.0 * rnd());
@@ -626,6 +627,7 @@ fn the_fast_mpcs_qp_in_f32_is_within_its_certified_accuracy() {
             "case {case}: certificate {:e}",
             sol.gap
         );
+        worst_cert = worst_cert.max(sol.gap as f64 / (eps + rounding));
     }
-    eprintln!("worst gap / (1e-5 + f32 rounding) {worst_gap:.2e}, worst |Δz| / box width {worst_dz:.2e}");
+    eprintln!("worst gap / (1e-5 + f32 rounding) {worst_gap:.2e}, worst |Δz| / box width {worst_dz:.2e}, worst certificate / (1e-5 + f32 rounding) {worst_cert:.2e}");
 }
