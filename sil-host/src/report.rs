@@ -215,6 +215,15 @@ pub fn mpc_step_json(ctrl: &fc_core::control::AnyController<f32>, t: f64) -> Opt
         let eps = cfg.qp_accuracy;
         let hinv = h.try_inverse()?;
         let input_acc: Vec<Value> = (0..NZ).map(|i| json!((2.0 * eps * hinv[(i, i)]).sqrt())).collect();
+        // The same solve again on this host, timed: the median of 201 (ns).
+        let mut ns: Vec<u128> = (0..201)
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                std::hint::black_box(m.resolve_last_qp());
+                t0.elapsed().as_nanos()
+            })
+            .collect();
+        ns.sort_unstable();
         Some(json!({
             "t": t,
             "horizon": N,
@@ -241,6 +250,7 @@ pub fn mpc_step_json(ctrl: &fc_core::control::AnyController<f32>, t: f64) -> Opt
                 "input_units": input_acc,
                 "holds_for_every_solve": m.qp_active_sets().is_some() || cfg.qp_max_iterations >= m.iteration_bound(),
             },
+            "host_solve_ns_median": ns[ns.len() / 2] as f64,
             "gap": qp.solution.gap as f64,
             "residual": qp.solution.residual as f64,
             "objective": qp.solution.objective as f64,

@@ -308,7 +308,7 @@ fn the_json_reports_the_rate_flown_and_the_mpc_refuses_a_rate() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("--control-hz 1000: the MPC's preset fixes its own rate (200 Hz"),
+        err.contains("--control-hz 1000: the MPC's preset fixes its own rate (1000 Hz"),
         "{err}"
     );
 }
