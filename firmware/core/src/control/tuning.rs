@@ -98,8 +98,8 @@ pub struct Tuning {
     pub mpc: WeightScale,
     /// Time constant of the MPC's moment-disturbance estimate, s (0: the
     /// preset's, [`MpcConfig::observer_moment_tau_s`]). The fast preset's
-    /// 5 ms makes up for slow rotors on the OS4; rotorpy's Crazyflie flies
-    /// only with it slower (0.5 s; why is partly open: the book's HIL chapter).
+    /// 4 ms makes up for slow rotors on the OS4 and flies rotorpy's
+    /// Crazyflie and Hummingbird as it is.
     pub mpc_moment_tau_s: f32,
 }
 

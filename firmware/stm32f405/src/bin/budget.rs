@@ -136,14 +136,7 @@ mod target {
         let nav = unsafe { &mut *core::ptr::addr_of_mut!(NAV) };
         let f = nav.insert(Eskf::new(EskfConfig::BMI088).ok()?);
         let rest = REST;
-        let fix = |p: Vector3<f32>, yaw: f32| Fix {
-            age_s: 0.01,
-            pos_ned_m: Some(p),
-            pos_sigma_m: Vector3::repeat(0.002),
-            yaw_rad: Some(yaw),
-            yaw_sigma_rad: 0.0087,
-            ..Fix::EMPTY
-        };
+        let fix = mocap_fix;
         for _ in 0..30 {
             f.predict(&rest, 0.001).ok()?;
         }
@@ -391,13 +384,13 @@ mod target {
         }
     }
 
-    /// Worst instructions per step of the whole firmware loop (frames in,
-    /// controller, frames out) for controller `id` at period `dt`.
-    fn loop_worst(id: u8, dt: f32, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<u32> {
-        let cfg = FcConfig {
-            control_period_s: dt as f64,
-            ..FcConfig::default()
-        };
+    /// A fresh flight loop with `cfg`, started, its session opened over a
+    /// fresh link and controller `id` selected.
+    fn open_session(
+        cfg: FcConfig,
+        id: u8,
+        clock: &SysTickClock,
+    ) -> Option<(&'static mut FlightCore, &'static mut MemLink)> {
         let fc = fresh_core(cfg);
         fc.start().ok()?;
         let link = fresh_link();
@@ -417,6 +410,44 @@ mod target {
         while !link.rx.is_empty() {
             fc.service(link, clock, 0).ok()?;
         }
+        Some((fc, link))
+    }
+
+    /// The climbing circle's `n` preview points `pdt` s apart after `t`, as
+    /// `Preview` frames.
+    fn push_preview(link: &mut MemLink, t: f32, (n, pdt): (usize, f64)) {
+        for i in 1..=n {
+            let p = reference(t + i as f32 * pdt as f32);
+            push(
+                link,
+                &ToFc::Preview {
+                    k: i as u8,
+                    sp: setpoint_to_wire(&p),
+                },
+            );
+        }
+    }
+
+    /// A mocap fix (position σ 2 mm, heading σ 0.5°, 10 ms old).
+    fn mocap_fix(p: Vector3<f32>, yaw: f32) -> Fix {
+        Fix {
+            age_s: 0.01,
+            pos_ned_m: Some(p),
+            pos_sigma_m: Vector3::repeat(0.002),
+            yaw_rad: Some(yaw),
+            yaw_sigma_rad: 0.0087,
+            ..Fix::EMPTY
+        }
+    }
+
+    /// Worst instructions per step of the whole firmware loop (frames in,
+    /// controller, frames out) for controller `id` at period `dt`.
+    fn loop_worst(id: u8, dt: f32, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<u32> {
+        let cfg = FcConfig {
+            control_period_s: dt as f64,
+            ..FcConfig::default()
+        };
+        let (fc, link) = open_session(cfg, id, clock)?;
         let mut rng = Lcg(7);
         let mut offset = Vector3::<f32>::zeros();
         let mut worst = 0u32;
@@ -424,17 +455,8 @@ mod target {
             let t = k as f32 * dt;
             let sp = reference(t);
             push(link, &ToFc::Setpoint(setpoint_to_wire(&sp)));
-            if let Some((n, pdt)) = preview {
-                for i in 1..=n {
-                    let p = reference(t + i as f32 * pdt as f32);
-                    push(
-                        link,
-                        &ToFc::Preview {
-                            k: i as u8,
-                            sp: setpoint_to_wire(&p),
-                        },
-                    );
-                }
+            if let Some(p) = preview {
+                push_preview(link, t, p);
             }
             let mut e = state(&mut rng, &sp);
             // The position may not jump between frames (the loop refuses a
@@ -487,31 +509,9 @@ mod target {
     /// serviced before the step: on a vehicle an onboard trajectory
     /// generator gives it), the others extrapolate the set-point.
     fn image_step_worst(id: u8, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<(u32, u32)> {
-        let fc = fresh_core(FcConfig::default());
-        fc.start().ok()?;
-        let link = fresh_link();
-        push(
-            link,
-            &ToFc::Hello {
-                version: PROTOCOL_VERSION,
-            },
-        );
-        push(
-            link,
-            &ToFc::Select {
-                controller: id,
-                feedforward: true,
-            },
-        );
+        let (fc, link) = open_session(FcConfig::default(), id, clock)?;
         let start = Vector3::new(2.0, 0.0, -5.0);
-        let fix = |p: Vector3<f32>, yaw: f32| Fix {
-            age_s: 0.01,
-            pos_ned_m: Some(p),
-            pos_sigma_m: Vector3::repeat(0.002),
-            yaw_rad: Some(yaw),
-            yaw_sigma_rad: 0.0087,
-            ..Fix::EMPTY
-        };
+        let fix = mocap_fix;
         let imu_frame = |seq: u32, imu: &ImuSample| ToFc::Imu {
             seq,
             t_us: u64::from(seq) * 1_000,
@@ -536,17 +536,8 @@ mod target {
             seq += 1;
             let t = seq as f32 * 1e-3;
             push(link, &ToFc::Setpoint(setpoint_to_wire(&reference(t))));
-            if let Some((n, pdt)) = preview.filter(|_| k % 2 == 0) {
-                for i in 1..=n {
-                    let p = reference(t + i as f32 * pdt as f32);
-                    push(
-                        link,
-                        &ToFc::Preview {
-                            k: i as u8,
-                            sp: setpoint_to_wire(&p),
-                        },
-                    );
-                }
+            if let Some(p) = preview.filter(|_| k % 2 == 0) {
+                push_preview(link, t, p);
             }
             while !link.rx.is_empty() {
                 fc.service(link, clock, 0).ok()?;
