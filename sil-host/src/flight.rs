@@ -137,7 +137,7 @@ impl FlightConfig {
         if let Some(g) = &self.step_grid {
             g.validate()?;
             if self.sensors.is_some() {
-                anyhow::bail!("--step-grid steps a true-state flight; a sensor flight steps at its IMU's samples");
+                anyhow::bail!("--step-grid steps a true-state flight (add --estimator truth); a sensor flight steps at its IMU's samples");
             }
         }
         Ok(())
