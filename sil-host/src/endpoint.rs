@@ -135,11 +135,7 @@ impl<C: Controller<f32>> InProcess<C> {
         if let Some(last) = self.last_t {
             // In µs, as the flight controller over the wire measures it.
             let dt_us = ((t * 1e6).round() as u64).saturating_sub((last * 1e6).round() as u64);
-            if fc_core::control::plausible_step(dt_us as f64 * 1e-6, period) {
-                self.ctrl.elapsed(dt_us as f32 * 1e-6);
-            } else {
-                self.ctrl.resume();
-            }
+            fc_core::control::tell_interval(&mut self.ctrl, dt_us, period);
         }
         self.last_t = Some(t);
         for (k, p) in preview.iter().enumerate() {

@@ -92,17 +92,9 @@ impl StepGrid {
     /// The intervals of the grid, in plant ticks of `tick` s (each at least one).
     fn intervals(&self, tick: f64) -> impl FnMut() -> usize {
         let (period, jitter) = (self.period_s, self.jitter_s);
-        let mut state = self
-            .seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
+        let mut rng = crate::noise::SplitMix(self.seed);
         move || {
-            // xorshift64*: a uniform number in [−1, 1].
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            let u = (state.wrapping_mul(2_685_821_657_736_338_717) >> 11) as f64 / (1u64 << 53) as f64;
-            let dt = period + jitter * (2.0 * u - 1.0);
+            let dt = period + rng.uniform(-jitter, jitter);
             ((dt / tick).round() as usize).max(1)
         }
     }

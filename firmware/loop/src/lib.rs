@@ -642,12 +642,8 @@ impl FlightCore {
         now_us: u64,
     ) -> Result<ControlOutput<f32>, ControlError> {
         if let Some(t) = self.last_control_us {
-            let dt_us = now_us.saturating_sub(t);
-            if fc_core::control::plausible_step(dt_us as f64 * 1e-6, self.period_us() as f64 * 1e-6) {
-                self.ctrl.elapsed(dt_us as f32 * 1e-6);
-            } else {
-                self.ctrl.resume();
-            }
+            let period_s = self.period_us() as f64 * 1e-6;
+            fc_core::control::tell_interval(&mut self.ctrl, now_us.saturating_sub(t), period_s);
         }
         self.last_control_us = Some(now_us);
         self.ctrl.update(est, sp)

@@ -264,6 +264,19 @@ pub fn plausible_step<T: RealField + Copy>(dt_s: T, period_s: f64) -> bool {
     dt_s.is_finite() && dt_s > T::zero() && dt_s <= max
 }
 
+/// Tells `ctrl` the `dt_us` µs since its last update
+/// ([`Controller::elapsed`]), or resumes it ([`Controller::resume`]) when
+/// that interval is a gap for a controller of nominal period `period_s`
+/// ([`plausible_step`]). The one rule of the flight loop on the MCU and of
+/// the SIL, so that both hand the controller the same numbers.
+pub fn tell_interval<C: Controller<f32> + ?Sized>(ctrl: &mut C, dt_us: u64, period_s: f64) {
+    if plausible_step(dt_us as f64 * 1e-6, period_s) {
+        ctrl.elapsed(dt_us as f32 * 1e-6);
+    } else {
+        ctrl.resume();
+    }
+}
+
 /// Checks both inputs of a step.
 pub(crate) fn validate<T: RealField + Copy>(est: &StateEstimate<T>, sp: &Setpoint<T>) -> Result<(), ControlError> {
     if !est.is_valid() {

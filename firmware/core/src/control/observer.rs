@@ -85,7 +85,7 @@ pub struct AccelObserver<T: RealField + Copy> {
     /// `1/dt` of the nominal period, 1/s.
     inv_dt: T,
     /// The nominal period, s.
-    period: T,
+    period_s: f64,
     /// The measured interval the next update spans, s (`None`: the nominal
     /// period; see [`AccelObserver::elapsed`]).
     next_dt: Option<T>,
@@ -108,7 +108,7 @@ impl<T: RealField + Copy> AccelObserver<T> {
             two_stage: false,
             gain_moment: T::zero(),
             inv_dt: T::zero(),
-            period: T::zero(),
+            period_s: 0.0,
             next_dt: None,
             limit: T::zero(),
             d_stage: Vector3::zeros(),
@@ -132,7 +132,7 @@ impl<T: RealField + Copy> AccelObserver<T> {
             two_stage: false,
             gain_moment: lit(period_s / tau_moment_s),
             inv_dt: lit(1.0 / period_s),
-            period: lit(period_s),
+            period_s,
             next_dt: None,
             limit: lit(DISTURBANCE_LIMIT_G * gravity_mps2),
             d_stage: Vector3::zeros(),
@@ -186,8 +186,7 @@ impl<T: RealField + Copy> AccelObserver<T> {
     /// and its low-passes advance by `dt_s/τ` (at most 1). An implausible
     /// interval ([`super::plausible_step`]) is ignored.
     pub fn elapsed(&mut self, dt_s: T) {
-        let period = nalgebra::try_convert::<T, f64>(self.period).unwrap_or(0.0);
-        self.next_dt = super::plausible_step(dt_s, period).then_some(dt_s);
+        self.next_dt = super::plausible_step(dt_s, self.period_s).then_some(dt_s);
     }
 
     /// Updates the estimates with this step's velocity and rates (call
