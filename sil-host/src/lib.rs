@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod config;
+pub mod crtp;
 pub mod disturbance;
 pub mod endpoint;
 pub mod estimation;

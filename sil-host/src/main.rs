@@ -68,6 +68,11 @@ enum Command {
     /// as a ground station's commands, or a real ground station (--gcs) flies it. Prints a JSON
     /// summary.
     Px4Hil(Px4HilArgs),
+    /// Be a Crazyflie for cflib and cfclient: CRTP over UDP (cflib's `udp://` driver, one datagram
+    /// per packet), the flight controller flying the SIL's plant in real time on its own sensors
+    /// (estimator on), from rest on the ground. Connect with `udp://127.0.0.1:19850`. Prints a JSON
+    /// summary when --duration ends.
+    Crtp(CrtpArgs),
     /// Draw the report's position figures (position against time, the path seen from above) from
     /// a ULog: this project's (`fly --ulog`, `px4-hil --ulog`) or PX4's own. Flown position: the
     /// ground truth when the log has it, else vehicle_local_position; the set-point dashed.
@@ -87,6 +92,39 @@ struct PlotArgs {
     /// missing); STEM is the log's file name.
     #[arg(long, default_value = "figures", value_name = "DIR")]
     out: PathBuf,
+}
+
+#[derive(Args, Debug, Clone)]
+struct CrtpArgs {
+    /// The UDP address to listen on (cflib scans ports 19850–19859 of 127.0.0.1).
+    #[arg(long, default_value = "127.0.0.1:19850", value_name = "HOST:PORT")]
+    listen: std::net::SocketAddr,
+    /// The vehicle (a TOML file, see `sil-host fly --help`); rotorpy's Crazyflie by default.
+    #[arg(long, default_value = "vehicles/crazyflie-rotorpy.toml", value_name = "FILE")]
+    vehicle: PathBuf,
+    /// Hub distance from the centre of the Crazyflie's X, m.
+    #[arg(long, default_value_t = 0.043, value_name = "M")]
+    hub_m: f64,
+    /// Controller: `pd`, `lqr` or `mpc` (the fast MPC at its 1 kHz preset).
+    #[arg(long, value_parser = family_parser(), default_value = "mpc")]
+    controller: Family,
+    /// Form of the controller: `euler` or `quaternion`.
+    #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
+    model: AttitudeForm,
+    /// The estimator's position source: `mocap` (the SIL's motion capture: position and heading
+    /// at 100 Hz) or `external` (only the client's `send_extpos` / `send_extpose`).
+    #[arg(long, default_value = "mocap")]
+    position_source: String,
+    /// Send the plant's true pose (Crazyflie frame, JSON) to this UDP address every 10 ms: a
+    /// motion-capture stream for clients and tests.
+    #[arg(long, value_name = "HOST:PORT")]
+    truth_to: Option<std::net::SocketAddr>,
+    /// Stop after this long, s (default: run until killed).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// Seed of the sensor noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -967,6 +1005,7 @@ fn main() -> Result<()> {
         Command::Sweep(a) => sweep_cmd(a),
         Command::MpcStep(a) => mpc_step_cmd(a),
         Command::Px4Hil(a) => px4_hil(a.clone()),
+        Command::Crtp(a) => crtp_cmd(a),
         Command::Plot(a) => {
             let tracks = sil_host::ulog_plot::read_tracks(&a.ulog)?;
             let stem = a
@@ -1012,6 +1051,40 @@ fn main() -> Result<()> {
             )
         }
     }
+}
+
+fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
+    use fc_loop::params::{Airframe, Settings};
+    let vehicle = sil_host::config::load_vehicle(&a.vehicle)?;
+    let mut settings = Settings::os4();
+    settings.vehicle = vehicle.cast();
+    settings.airframe = Airframe::XCrazyflie;
+    settings.hub_m = a.hub_m as f32;
+    settings.controller = fc_core::control::ControllerSpec::new(a.controller, a.model);
+    settings
+        .check()
+        .map_err(|e| anyhow::anyhow!("the vehicle's settings are refused: {e} (--hub-m, --vehicle)"))?;
+    let position_source = match a.position_source.as_str() {
+        "mocap" => sil_host::crtp::PositionSource::Mocap,
+        "external" => sil_host::crtp::PositionSource::External,
+        other => bail!("unknown --position-source '{other}': use mocap or external"),
+    };
+    if let Some(d) = a.duration {
+        if !(d.is_finite() && d > 0.0 && d <= 1e6) {
+            bail!("--duration {d:?} is out of range: must be in (0, 1e6] s");
+        }
+    }
+    let summary = sil_host::crtp::run(&sil_host::crtp::CrtpConfig {
+        listen: a.listen,
+        settings,
+        vehicle,
+        position_source,
+        truth_to: a.truth_to,
+        duration_s: a.duration,
+        seed: a.seed,
+    })?;
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    Ok(())
 }
 
 fn px4_hil(a: Px4HilArgs) -> Result<()> {

@@ -70,6 +70,8 @@ pub struct Plant {
     /// Actual rotor speeds, rad/s.
     omega: Vector4<f64>,
     t: f64,
+    /// Resting on the ground ([`Plant::contact_ground`]).
+    grounded: bool,
 }
 
 /// `self + a·other`, the only operation RK4 needs.
@@ -160,7 +162,35 @@ impl Plant {
             body,
             omega: Vector4::repeat(w),
             t: 0.0,
+            grounded: false,
         }
+    }
+
+    /// Ground contact with a flat, rigid ground at `ground_down_m` (NED
+    /// down): a body that has sunk below it is put back on it at rest,
+    /// level at its heading (the ground takes the rest of the step's
+    /// motion). While it rests, the ground carries what the thrust does
+    /// not, so the accelerometer reads the support
+    /// ([`Plant::specific_force_frd`]); a thrust above the weight lifts it
+    /// off at the next step. Call after each [`Plant::step`].
+    pub fn contact_ground(&mut self, ground_down_m: f64) {
+        let x = self.quat_state();
+        if x[2] <= ground_down_m {
+            self.grounded = x[2] >= ground_down_m - 1e-9 && self.grounded;
+            return;
+        }
+        let yaw = fc_core::quat_to_euler(&x.fixed_rows::<4>(6).into_owned())[2];
+        let rest = fc_core::hover_quat_state(&Vector3::new(x[0], x[1], ground_down_m), yaw);
+        self.body = match self.body {
+            BodyState::Euler(_) => BodyState::Euler(quat_state_to_euler(&rest)),
+            BodyState::Quat(_) => BodyState::Quat(rest),
+        };
+        self.grounded = true;
+    }
+
+    /// Resting on the ground (after [`Plant::contact_ground`]).
+    pub fn grounded(&self) -> bool {
+        self.grounded
     }
 
     /// Sets the rotor speeds (rad/s, clamped to `[0, Ωmax]`).
@@ -223,7 +253,11 @@ impl Plant {
         let dx = self
             .vehicle
             .quat_derivative(&x, &self.realised_inputs(), gyro_speed(&self.omega), &d);
-        let acc = Vector3::new(dx[3], dx[4], dx[5]);
+        let mut acc = Vector3::new(dx[3], dx[4], dx[5]);
+        if self.grounded && acc[2] >= 0.0 {
+            // The ground supports it: no acceleration.
+            acc = Vector3::zeros();
+        }
         let r = fc_core::quat_to_rotation(&x.fixed_rows::<4>(6).into_owned());
         r.transpose() * (acc - Vector3::new(0.0, 0.0, p.gravity_mps2))
     }

@@ -1,0 +1,241 @@
+#!/usr/bin/env python3
+"""cflib (PyPI, unmodified) flies `sil-host crtp` through its public API only.
+
+Checked against the plant's truth (the `--truth-to` stream), not against what
+the firmware says of itself:
+
+1. `SyncCrazyflie('udp://...').open_link()` reaches fully connected (both
+   TOCs and every parameter value downloaded);
+2. a parameter set and read back; a refused write reads back unchanged;
+3. a `SyncLogger` of stateEstimate.x/y/z at 100 Hz: rate, timestamps, and the
+   estimate within 3 cm of the truth;
+4. arm (supervisor); `takeoff(0.5, 2)`, `go_to(1, 0.5, 0.8, 0, 3)`,
+   `land(0, 2)`: the truth within 5 cm of each goal, landed (motors off) at
+   the end;
+5. a second session with `--position-source external`: `send_extpos` of the
+   mocap stream is the only position source; `send_position_setpoint` climbs
+   and moves, the truth within 5 cm of each set-point; then
+   `send_notify_setpoint_stop` and the high-level `land`.
+
+Prints `crtp check: N passed, M failed`; exits 1 on any failure.
+Usage: crtp_cflib.py SIL_HOST
+"""
+import json
+import math
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import cflib.crtp
+from cflib.crazyflie import Crazyflie
+from cflib.crazyflie.log import LogConfig
+from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from cflib.crazyflie.syncLogger import SyncLogger
+
+PORT = 19850
+TRUTH_PORT = 19870
+URI = f'udp://127.0.0.1:{PORT}'
+TOL_M = 0.05
+CONTROLLER = sys.argv[2:]
+
+passed = 0
+failed = 0
+
+
+def check(ok, what):
+    global passed, failed
+    if ok:
+        passed += 1
+        print(f'  ok   {what}')
+    else:
+        failed += 1
+        print(f'  FAIL {what}')
+
+
+class Truth(threading.Thread):
+    """The plant's true pose, from sil-host's --truth-to stream."""
+
+    def __init__(self):
+        super().__init__(daemon=True)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(('127.0.0.1', TRUTH_PORT))
+        self.sock.settimeout(0.5)
+        self.last = None
+        self.stop = False
+
+    def run(self):
+        while not self.stop:
+            try:
+                self.last = json.loads(self.sock.recv(1024))
+            except socket.timeout:
+                pass
+
+    def pos(self):
+        t = self.last
+        return (t['x'], t['y'], t['z'])
+
+
+def start_sil(sil_host, *extra):
+    p = subprocess.Popen([sil_host, 'crtp', *CONTROLLER, '--listen', f'127.0.0.1:{PORT}', '--truth-to',
+                          f'127.0.0.1:{TRUTH_PORT}', '--duration', '120', *extra],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.5)
+    return p
+
+
+def near(truth, goal, what):
+    p = truth.pos()
+    err = math.dist(p, goal)
+    check(err <= TOL_M, f'{what}: truth ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) is {100 * err:.1f} cm '
+          f'from ({goal[0]}, {goal[1]}, {goal[2]}) (bound {100 * TOL_M:.0f} cm)')
+
+
+def connect():
+    """open_link, then cflib's own `fully_connected` (TOCs and every value in)."""
+    cf = Crazyflie(rw_cache=None)
+    full = threading.Event()
+    cf.fully_connected.add_callback(lambda uri: full.set())
+    scf = SyncCrazyflie(URI, cf=cf)
+    t0 = time.time()
+    scf.open_link()
+    check(full.wait(10), f'fully connected in {time.time() - t0:.2f} s')
+    return scf
+
+
+def estimator_settled(scf):
+    """cflib's own recipe (its autonomous examples): kalman.varP* spread under 1e-3."""
+    lg = LogConfig('kalman', 10)
+    for v in ('varPX', 'varPY', 'varPZ'):
+        lg.add_variable(f'kalman.{v}', 'float')
+    hist = []
+    deadline = time.time() + 10
+    with SyncLogger(scf, lg) as log:
+        for _, data, _ in log:
+            hist.append([data[f'kalman.{v}'] for v in ('varPX', 'varPY', 'varPZ')])
+            hist = hist[-10:]
+            if len(hist) == 10 and all(max(c) - min(c) < 0.001 for c in zip(*hist)):
+                return True
+            if time.time() > deadline:
+                return False
+
+
+def session_high_level(sil_host, truth):
+    print('session 1: the SIL\'s motion capture, the high-level commander')
+    sil = start_sil(sil_host)
+    try:
+        scf = connect()
+        cf = scf.cf
+        check(cf.platform.get_protocol_version() == 12 and cf.param.is_updated,
+              f'protocol {cf.platform.get_protocol_version()}, '
+              f'{sum(len(g) for g in cf.param.toc.toc.values())} params (all values read), '
+              f'{sum(len(g) for g in cf.log.toc.toc.values())} log variables')
+        before = float(cf.param.get_value('mpc.W_POS'))
+        cf.param.set_value('mpc.W_POS', before * 2)
+        time.sleep(0.3)
+        after = float(cf.param.get_value('mpc.W_POS'))
+        check(abs(after - 2 * before) < 1e-6, f'param mpc.W_POS set to {2 * before} reads back {after}')
+        cf.param.set_value('veh.MASS', -1.0)
+        time.sleep(0.3)
+        mass = float(cf.param.get_value('veh.MASS'))
+        check(abs(mass - 0.03) < 1e-6, f'a refused write (veh.MASS = -1) reads back the value in force, {mass}')
+
+        lg = LogConfig('position', 10)
+        for v in 'xyz':
+            lg.add_variable(f'stateEstimate.{v}', 'float')
+        stamps, errs = [], []
+        with SyncLogger(scf, lg) as log:
+            for ts, data, _ in log:
+                stamps.append(ts)
+                est = (data['stateEstimate.x'], data['stateEstimate.y'], data['stateEstimate.z'])
+                errs.append(math.dist(est, truth.pos()))
+                if len(stamps) == 100:
+                    break
+        # cflib starts a new block twice (after its creation, then start()); the
+        # second start re-phases the block's timer, as the firmware's does.
+        gaps = sorted(b - a for a, b in zip(stamps, stamps[1:]))
+        check(gaps[1] >= 9 and gaps[-1] == 10 and gaps[len(gaps) // 2] == 10,
+              f'SyncLogger at 100 Hz: 100 samples, timestamps 10 ms apart (gaps {gaps[0]}–{gaps[-1]} ms, '
+              f'one re-phase allowed)')
+        check(max(errs) < 0.03, f'stateEstimate within 3 cm of the truth (worst {100 * max(errs):.2f} cm)')
+
+        cf.supervisor.send_arming_request(True)
+        time.sleep(0.3)
+        check('Is armed' in cf.supervisor.read_state_list(), 'armed (supervisor state bits)')
+        hl = cf.high_level_commander
+        start = truth.pos()
+        hl.takeoff(0.5, 2.0)
+        time.sleep(3.0)
+        near(truth, (start[0], start[1], 0.5), 'takeoff(0.5, 2) after 3 s')
+        hl.go_to(1.0, 0.5, 0.8, 0.0, 3.0)
+        time.sleep(4.5)
+        near(truth, (1.0, 0.5, 0.8), 'go_to(1, 0.5, 0.8, 0, 3) after 4.5 s')
+        hl.land(0.0, 2.0)
+        time.sleep(3.5)
+        near(truth, (1.0, 0.5, 0.0), 'land(0, 2) after 3.5 s')
+        check(not truth.last['flying'], 'landed: motors off')
+        scf.close_link()
+    finally:
+        sil.terminate()
+        sil.wait()
+
+
+def session_extpos(sil_host, truth):
+    print('session 2: send_extpos as the only position source, send_position_setpoint')
+    sil = start_sil(sil_host, '--position-source', 'external')
+    try:
+        scf = connect()
+        cf = scf.cf
+        feeding = threading.Event()
+        feeding.set()
+
+        def feed():
+            # A motion-capture bridge: the truth stream forwarded at 100 Hz.
+            while feeding.is_set():
+                if truth.last:
+                    cf.extpos.send_extpos(*truth.pos())
+                time.sleep(0.01)
+
+        feeder = threading.Thread(target=feed, daemon=True)
+        feeder.start()
+        cf.param.set_value('kalman.resetEstimation', '1')
+        time.sleep(0.1)
+        cf.param.set_value('kalman.resetEstimation', '0')
+        check(estimator_settled(scf), 'estimator converged on extpos (kalman.varP* spread < 1e-3)')
+        cf.supervisor.send_arming_request(True)
+        time.sleep(0.3)
+        check('Is armed' in cf.supervisor.read_state_list(), 'armed on extpos')
+        for goal, secs in (((0.0, 0.0, 0.5), 3.0), ((0.5, -0.3, 0.7), 4.0)):
+            end = time.time() + secs
+            while time.time() < end:
+                cf.commander.send_position_setpoint(*goal, 0.0)
+                time.sleep(0.02)
+            near(truth, goal, f'send_position_setpoint{goal} for {secs:.0f} s')
+        cf.commander.send_notify_setpoint_stop()
+        cf.high_level_commander.land(0.0, 2.0)
+        time.sleep(3.5)
+        check(truth.last['z'] < TOL_M and not truth.last['flying'],
+              f'land after notify_setpoint_stop: z {truth.last["z"]:.3f} m, motors off')
+        feeding.clear()
+        feeder.join()
+        scf.close_link()
+    finally:
+        sil.terminate()
+        out, _ = sil.communicate()
+
+
+def main():
+    sil_host = sys.argv[1]
+    cflib.crtp.init_drivers()
+    truth = Truth()
+    truth.start()
+    session_high_level(sil_host, truth)
+    session_extpos(sil_host, truth)
+    truth.stop = True
+    print(f'crtp check: {passed} passed, {failed} failed')
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == '__main__':
+    main()
