@@ -26,6 +26,8 @@ echo "== clippy + build (the STM32F405 image and its QEMU harness binaries, thum
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --bins -- -D warnings
 # The MAVLink crate is no_std (the firmware-mavlink image links it), linted on the MCU target too.
 cargo clippy -p fc-mavlink --target thumbv7em-none-eabihf -- -D warnings
+# So is the CRTP crate (the Crazyflie's protocol).
+cargo clippy -p fc-crtp --target thumbv7em-none-eabihf -- -D warnings
 cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf
 echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run here)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
@@ -111,6 +113,9 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --
 echo "== a pymavlink ground station (tools/mav_gcs.py) lists, reads and sets parameters, arms and flies it against rotorpy"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration 60 \
     --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
+echo "== cflib (PyPI, pinned), unmodified, flies sil-host crtp over its udp:// driver; then cflib's own examples"
+python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "cflib==0.1.34"
+python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
 echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

@@ -12,7 +12,10 @@ the firmware says of itself:
 4. arm (supervisor); `takeoff(0.5, 2)`, `go_to(1, 0.5, 0.8, 0, 3)`,
    `land(0, 2)`: the truth within 5 cm of each goal, landed (motors off) at
    the end;
-5. a second session with `--position-source external`: `send_extpos` of the
+5. cflib's own examples, unchanged, from cflib's PyPI source distribution
+   (the installed version), with CFLIB_URI set: logging/basiclog_sync.py,
+   logging/basiclog.py, parameters/basicparam.py;
+6. a second session with `--position-source external`: `send_extpos` of the
    mocap stream is the only position source; `send_position_setpoint` climbs
    and moves, the truth within 5 cm of each set-point; then
    `send_notify_setpoint_stop` and the high-level `land`.
@@ -20,11 +23,15 @@ the firmware says of itself:
 Prints `crtp check: N passed, M failed`; exits 1 on any failure.
 Usage: crtp_cflib.py SIL_HOST
 """
+import importlib.metadata
 import json
 import math
+import os
+import pathlib
 import socket
 import subprocess
 import sys
+import tarfile
 import threading
 import time
 
@@ -225,6 +232,36 @@ def session_extpos(sil_host, truth):
         out, _ = sil.communicate()
 
 
+def session_examples(sil_host):
+    version = importlib.metadata.version('cflib')
+    print(f'session 3: cflib {version}\'s own examples, unchanged')
+    work = pathlib.Path('target/cflib-examples').resolve()
+    work.mkdir(parents=True, exist_ok=True)
+    sdist = work / f'cflib-{version}.tar.gz'
+    if not sdist.exists():
+        subprocess.run([sys.executable, '-m', 'pip', 'download', '--quiet', '--no-deps', '--no-binary', ':all:',
+                        f'cflib=={version}', '-d', str(work)], check=True)
+    with tarfile.open(sdist) as tar:
+        tar.extractall(work, filter='data')
+    examples = work / f'cflib-{version}' / 'examples'
+    env = dict(os.environ, CFLIB_URI=URI)
+    # What each prints when it worked (its own output, unchanged).
+    for script, expect in (('logging/basiclog_sync.py', "'stabilizer.roll'"),
+                           ('logging/basiclog.py', 'pm.vbat'),
+                           ('parameters/basicparam.py', 'Parameters downloaded')):
+        sil = start_sil(sil_host)
+        try:
+            r = subprocess.run([sys.executable, str(examples / script)], env=env, capture_output=True,
+                               text=True, timeout=60, cwd=examples / script.split('/')[0])
+            lines = r.stdout.count('\n')
+            check(r.returncode == 0 and expect in r.stdout,
+                  f'{script}: exit {r.returncode}, {lines} lines, "{expect}" in its output'
+                  + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+        finally:
+            sil.terminate()
+            sil.wait()
+
+
 def main():
     sil_host = sys.argv[1]
     cflib.crtp.init_drivers()
@@ -232,6 +269,7 @@ def main():
     truth.start()
     session_high_level(sil_host, truth)
     session_extpos(sil_host, truth)
+    session_examples(sil_host)
     truth.stop = True
     print(f'crtp check: {passed} passed, {failed} failed')
     sys.exit(1 if failed else 0)

@@ -1,1 +1,337 @@
-mod placeholder {}
+//! Packets, TOCs, log blocks and a vehicle session, against the formats
+//! cflib 0.1.34 parses and the Crazyflie firmware sends; and 10⁶ random and
+//! mutated packets.
+
+use crate::log::{self, LogBlocks};
+use crate::toc::{self, Name};
+use crate::vehicle::{param_entry, CrtpSink, CrtpVehicle, LOG_VARS, PARAM_COUNT};
+use crate::{CrtpError, Packet, Port};
+use fc_core::estimate::{Fix, ImuSample};
+use fc_loop::params::Settings;
+use hal_shim::host::MonotonicClock;
+use nalgebra::Vector3;
+
+/// Keeps what the vehicle sends.
+#[derive(Default)]
+struct Sent(Vec<Packet>);
+
+impl CrtpSink for Sent {
+    type Error = core::convert::Infallible;
+    fn send(&mut self, p: &Packet) -> Result<(), Self::Error> {
+        self.0.push(*p);
+        Ok(())
+    }
+}
+
+fn pk(port: Port, ch: u8, payload: &[u8]) -> Packet {
+    Packet::new(port, ch, payload).unwrap()
+}
+
+/// The answer to `p` (the last packet sent on `p`'s port).
+fn ask(v: &mut CrtpVehicle, p: Packet) -> Packet {
+    let mut out = Sent::default();
+    v.handle(&p, &mut out).unwrap();
+    *out.0.iter().rev().find(|a| a.port() == p.port()).expect("an answer")
+}
+
+#[test]
+fn headers_are_read_as_cflib_writes_them() {
+    // cflib sets bits 2–3 of the header; they are ignored.
+    let p = Packet::from_bytes(&[0x5D, 1, 2]).unwrap();
+    assert_eq!((p.port(), p.channel(), p.payload()), (5, 1, &[1u8, 2][..]));
+    assert!(Packet::from_bytes(&[0xFF]).unwrap().is_null());
+    assert_eq!(Packet::from_bytes(&[]), Err(CrtpError::Empty));
+    assert_eq!(Packet::from_bytes(&[0; 32]), Err(CrtpError::TooLong(31)));
+    let mut b = [0u8; crate::MAX_PACKET];
+    let n = pk(Port::Param, 2, &[1, 2, 3]).write_to(&mut b);
+    assert_eq!(&b[..n], &[0x22, 1, 2, 3]);
+}
+
+#[test]
+fn every_toc_entry_fits_one_packet_and_the_crc_follows_the_table() {
+    for (i, v) in LOG_VARS.iter().enumerate() {
+        let n = Name {
+            group: v.group,
+            name: v.name,
+            lower_group: false,
+        };
+        toc::item_packet(Port::Log, i as u16, v.kind, &n).expect("log name fits");
+    }
+    for i in 0..PARAM_COUNT {
+        let (n, t, _) = param_entry(i).unwrap();
+        let p = toc::item_packet(Port::Param, i as u16, t, &n).expect("param name fits");
+        // cflib: group and name split at the zeros after the type byte.
+        let text = &p.payload()[4..];
+        assert_eq!(text.iter().filter(|&&b| b == 0).count(), 2, "{p:?}");
+    }
+    assert_eq!(param_entry(PARAM_COUNT), None);
+    let entries = |t: u8| {
+        LOG_VARS.iter().enumerate().map(move |(i, v)| {
+            let n = Name {
+                group: v.group,
+                name: v.name,
+                lower_group: false,
+            };
+            (if i == 3 { t } else { v.kind }, n)
+        })
+    };
+    assert_ne!(
+        toc::crc(entries(log::types::FLOAT)),
+        toc::crc(entries(log::types::FP16))
+    );
+}
+
+#[test]
+fn log_blocks_answer_every_error_cflib_knows() {
+    let mut b = LogBlocks::new();
+    let float = |id: u16| [log::types::FLOAT, id as u8, (id >> 8) as u8];
+    assert_eq!(b.create(1, &float(0), 28), 0);
+    assert_eq!(b.create(1, &float(0), 28), log::EEXIST);
+    assert_eq!(b.append(9, &float(0), 28), log::ENOENT);
+    assert_eq!(b.append(1, &float(28), 28), log::ENOENT, "an id past the TOC");
+    assert_eq!(b.append(1, &[0x0F, 0, 0], 28), log::ENOEXEC, "no such type");
+    // 26 bytes of values: six more floats fit (7 · 4 = 28 > 26 does not).
+    let six: Vec<u8> = (0..5).flat_map(|_| float(1)).collect();
+    assert_eq!(b.append(1, &six, 28), 0);
+    assert_eq!(b.append(1, &float(2), 28), log::E2BIG);
+    for id in 2..=16 {
+        assert_eq!(b.create(id, &[], 28), 0);
+    }
+    assert_eq!(b.create(17, &[], 28), log::ENOMEM, "a 17th block");
+    assert_eq!(b.start(1, 10, 5_000), 0);
+    let p = b.next_due(5_000, |v| v as f32 + 0.5).unwrap();
+    assert_eq!(p.header() & 0xF3, 0x52);
+    // Block id, 24-bit ms timestamp (5), then the values.
+    assert_eq!(&p.payload()[..4], &[1, 5, 0, 0]);
+    assert_eq!(&p.payload()[4..8], &0.5f32.to_le_bytes());
+    assert!(b.next_due(14_999, |_| 0.0).is_none() && b.next_due(15_000, |_| 0.0).is_some());
+    assert_eq!(b.stop(1), 0);
+    assert!(b.next_due(99_000, |_| 0.0).is_none());
+    assert_eq!(b.delete(1), 0);
+    assert_eq!(b.delete(1), log::ENOENT);
+    // 128 variables in all: the 129th is refused.
+    let mut c = LogBlocks::new();
+    let u8s: Vec<u8> = (0..26).flat_map(|_| [log::types::U8, 0, 0]).collect();
+    for id in 0..4 {
+        assert_eq!(c.create(id, &u8s, 28), 0);
+    }
+    assert_eq!(c.create(4, &u8s[..24 * 3], 28), 0);
+    assert_eq!(c.create(5, &[log::types::U8, 0, 0], 28), log::ENOMEM);
+}
+
+#[test]
+fn values_are_sent_as_the_type_asked_for() {
+    let mut b = [0u8; 4];
+    assert_eq!(log::encode(3.7, log::types::FP16, &mut b), Some(2));
+    assert_eq!(
+        half::f16::from_le_bytes([b[0], b[1]]).to_f32(),
+        half::f16::from_f32(3.7).to_f32()
+    );
+    assert_eq!(log::encode(300.0, log::types::U8, &mut b), Some(1));
+    assert_eq!(b[0], 255, "saturated");
+    assert_eq!(log::encode(-2.9, log::types::I16, &mut b), Some(2));
+    assert_eq!(i16::from_le_bytes([b[0], b[1]]), -2);
+    assert_eq!(log::encode(1.0, 0, &mut b), None);
+}
+
+/// A vehicle at rest on the ground, aligned on a mocap fix (position and
+/// heading) for `ms` ms.
+fn at_rest(ms: u64) -> CrtpVehicle {
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    rest(&mut v, 0, ms);
+    v
+}
+
+fn rest(v: &mut CrtpVehicle, from_ms: u64, ms: u64) {
+    let clock = MonotonicClock::default();
+    let imu = ImuSample {
+        gyro_frd_radps: Vector3::zeros(),
+        accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+    };
+    let mut fix = Fix::EMPTY;
+    fix.pos_ned_m = Some(Vector3::zeros());
+    fix.pos_sigma_m = Vector3::repeat(0.005);
+    fix.yaw_rad = Some(0.0);
+    fix.yaw_sigma_rad = 0.02;
+    for k in from_ms..from_ms + ms {
+        let fixes = if k % 10 == 0 { &[fix][..] } else { &[] };
+        v.imu_step((k + 1) * 1000, &imu, fixes, &clock);
+    }
+}
+
+#[test]
+fn a_session_answers_as_a_crazyflie() {
+    let mut v = at_rest(0);
+    let src = ask(&mut v, pk(Port::Link, 1, &[0]));
+    assert_eq!(&src.payload()[..18], b"Bitcraze Crazyflie");
+    let echo = pk(Port::Link, 0, b"ping");
+    assert_eq!(ask(&mut v, echo), echo);
+    let ver = ask(&mut v, pk(Port::Platform, 1, &[0]));
+    assert_eq!(ver.payload(), &[0, 12, 0, 0, 0]);
+    let mem = ask(&mut v, pk(Port::Mem, 0, &[1]));
+    assert_eq!(mem.payload(), &[1, 0]);
+    // Param TOC info: count and CRC.
+    let info = ask(&mut v, pk(Port::Param, 0, &[toc::CMD_GET_INFO_V2]));
+    assert_eq!(
+        u16::from_le_bytes([info.payload()[1], info.payload()[2]]) as usize,
+        PARAM_COUNT
+    );
+    // Read VEH_MASS (id 0): [id, status 0, f32].
+    let r = ask(&mut v, pk(Port::Param, 1, &[0, 0]));
+    assert_eq!(&r.payload()[..3], &[0, 0, 0]);
+    assert_eq!(crate::f32_at(r.payload(), 3), Some(Settings::os4().vehicle.mass_kg));
+    // A write out of range is answered with the value in force.
+    let mut w = vec![0u8, 0];
+    w.extend_from_slice(&(-1.0f32).to_le_bytes());
+    let r = ask(&mut v, pk(Port::Param, 2, &w));
+    assert_eq!(crate::f32_at(r.payload(), 2), Some(Settings::os4().vehicle.mass_kg));
+    // Unknown id: ENOENT.
+    let r = ask(&mut v, pk(Port::Param, 1, &[0xFF, 0x7F]));
+    assert_eq!(r.payload(), &[0xFF, 0x7F, log::ENOENT]);
+}
+
+#[test]
+fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
+    let mut v = at_rest(5);
+    let no = ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1]));
+    assert_eq!(no.payload(), &[0x81, 0, 0], "refused while aligning");
+    let mut takeoff = vec![7u8, 0];
+    for x in [0.5f32, 0.0] {
+        takeoff.extend_from_slice(&x.to_le_bytes());
+    }
+    takeoff.push(0);
+    takeoff.extend_from_slice(&2.0f32.to_le_bytes());
+    let mut out = Sent::default();
+    v.handle(&pk(Port::HighLevel, 0, &takeoff), &mut out).unwrap();
+    assert!(!v.flying() && v.counters().refused == 1, "not armed: refused");
+    rest(&mut v, 5, 3000);
+    let yes = ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1]));
+    assert_eq!(yes.payload(), &[0x81, 1, 1]);
+    let bits = ask(&mut v, pk(Port::Supervisor, 0, &[0x0C]));
+    let bits = u16::from_le_bytes([bits.payload()[1], bits.payload()[2]]);
+    assert_eq!(bits & 0b1010, 0b1010, "armed, can fly: {bits:#x}");
+    v.handle(&pk(Port::HighLevel, 0, &takeoff), &mut out).unwrap();
+    assert!(v.flying());
+    // A NaN set-point is refused; the flight goes on.
+    let mut nan = vec![7u8];
+    for x in [f32::NAN, 0.0, 0.5, 0.0] {
+        nan.extend_from_slice(&x.to_le_bytes());
+    }
+    v.handle(&pk(Port::Generic, 0, &nan), &mut out).unwrap();
+    assert_eq!(v.counters().bad_value, 1);
+    assert!(v.flying());
+    // Thrust 0 on the legacy commander (cflib's goodbye) stops the motors.
+    let mut rpyt = vec![0u8; 12];
+    rpyt.extend_from_slice(&0u16.to_le_bytes());
+    v.handle(&pk(Port::Commander, 0, &rpyt), &mut out).unwrap();
+    assert!(!v.flying() && v.armed());
+}
+
+/// A small generator (SplitMix64), so the fuzz is the same every run.
+struct Mix(u64);
+
+impl Mix {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+}
+
+/// 10⁶ random and mutated packets (random ports, channels and lengths,
+/// wrong TOC ids, full log blocks, NaN set-points): nothing panics, every
+/// packet is counted, and a good session works afterwards.
+#[test]
+fn a_million_bad_packets_are_counted_and_the_session_survives() {
+    let mut v = at_rest(3000);
+    let mut out = Sent::default();
+    v.handle(&pk(Port::Supervisor, 1, &[0x01, 1]), &mut out).unwrap();
+    assert!(v.armed());
+    // Valid packets of every service, to mutate (no write that re-designs).
+    let nan = f32::NAN.to_le_bytes();
+    let seeds: Vec<Vec<u8>> = vec![
+        vec![0xF1, 0],
+        vec![0xD1, 0],
+        vec![0xD1, 2],
+        vec![0x50, 2, 0, 0],
+        vec![0x50, 3],
+        vec![0x51, 6, 1, 7, 0, 0, 7, 1, 0, 7, 2, 0],
+        vec![0x51, 8, 1, 10, 0],
+        vec![0x51, 5],
+        vec![0x20, 2, 0x30, 0],
+        vec![0x21, 24, 0],
+        vec![0x22, 24, 0, 0, 0, 0x48, 0x42],
+        vec![0x23, 8, 3, 0],
+        vec![0x40, 1],
+        vec![0x80, 7, 0, 0, 0, 0, 0x3F, 0, 0, 0, 0, 0, 0, 0, 0, 0x40],
+        vec![
+            0x80, 12, 0, 0, 0, 0, 0, 0, 0x3F, 0, 0, 0, 0, 0, 0, 0x3F, 0, 0, 0, 0, 0, 0, 0x40, 0x40,
+        ],
+        vec![
+            0x70, 7, nan[0], nan[1], nan[2], nan[3], 0, 0, 0, 0, 0, 0, 0x3F, 0, 0, 0, 0,
+        ],
+        vec![0x71, 0, 0, 0, 0, 0],
+        vec![0x60, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+        vec![0x90, 0x0C],
+        vec![0x30, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    ];
+    let mut g = Mix(42);
+    let n = 1_000_000u32;
+    let mut buf = [0u8; 40];
+    for i in 0..n {
+        let len = if i % 2 == 0 {
+            // Random: any header, 0–33 bytes.
+            let len = (g.next() % 34) as usize;
+            for b in buf.iter_mut().take(len) {
+                *b = g.next() as u8;
+            }
+            len
+        } else {
+            // A seed with one to three bytes changed, sometimes cut or grown.
+            let s = &seeds[(g.next() % seeds.len() as u64) as usize];
+            let mut len = s.len();
+            buf[..len].copy_from_slice(s);
+            for _ in 0..1 + g.next() % 3 {
+                let at = (g.next() % len as u64) as usize;
+                buf[at] = g.next() as u8;
+            }
+            match g.next() % 4 {
+                0 => len = (g.next() % len as u64) as usize,
+                1 => len = (len + 1 + (g.next() % 4) as usize).min(33),
+                _ => {}
+            }
+            len
+        };
+        match Packet::from_bytes(&buf[..len]) {
+            Ok(p) => {
+                // Every port, but not the emergency stop itself (supervisor
+                // or localization, channel 1, command 3): it locks the
+                // vehicle until restarted, as it should.
+                let stop = matches!(p.port(), 6 | 9) && p.channel() == 1 && p.payload().first() == Some(&3);
+                let p = if stop { pk(Port::Supervisor, 0, &[0x0C]) } else { p };
+                v.handle(&p, &mut out).unwrap();
+            }
+            Err(e) => v.count_malformed(e),
+        }
+        out.0.clear();
+        if i % 1000 == 0 {
+            rest(&mut v, 3000 + u64::from(i / 1000), 1);
+            v.poll(&mut out).unwrap();
+        }
+    }
+    let c = v.counters();
+    assert_eq!(c.total(), n + 1, "every packet counted once: {c:?}");
+    assert!(
+        c.handled > 0 && c.unsupported > 0 && c.short > 0 && c.malformed > 0,
+        "{c:?}"
+    );
+    // A good session afterwards.
+    let src = ask(&mut v, pk(Port::Link, 1, &[0]));
+    assert_eq!(&src.payload()[..18], b"Bitcraze Crazyflie");
+    let ver = ask(&mut v, pk(Port::Platform, 1, &[0]));
+    assert_eq!(ver.payload(), &[0, 12, 0, 0, 0]);
+    let r = ask(&mut v, pk(Port::Param, 1, &[0, 0]));
+    assert_eq!(&r.payload()[..3], &[0, 0, 0]);
+}
