@@ -340,10 +340,7 @@ impl CrtpVehicle {
 
     /// Checks the settings and designs the controller in place.
     pub fn start(&mut self) -> Result<(), Refusal> {
-        self.core.settings().check()?;
-        self.core.start().map_err(Refusal::Design)?;
-        self.core.open_session();
-        self.mixer = Some(self.core.settings().mixer()?);
+        self.mixer = Some(self.core.start_front_end()?);
         Ok(())
     }
 

@@ -335,6 +335,17 @@ impl FlightCore {
         self.install(self.settings.controller)
     }
 
+    /// For a protocol front end (MAVLink, CRTP): checks the settings,
+    /// designs their controller in place ([`FlightCore::start`]), opens the
+    /// session (set-points may come before samples) and returns the mixer
+    /// the settings give for the front end's motors.
+    pub fn start_front_end(&mut self) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
+        self.settings.check()?;
+        self.start().map_err(params::Refusal::Design)?;
+        self.open_session();
+        self.settings.mixer()
+    }
+
     /// The inputs to apply now `[U1 N, U2 N, U3 N, U4 N·m]`.
     pub fn output(&self) -> Input<f32> {
         self.u
