@@ -221,6 +221,11 @@ impl LogBlocks {
         self.blocks.clear();
     }
 
+    /// A started block is due at `now_us` (so the values need reading).
+    pub fn any_due(&self, now_us: u64) -> bool {
+        self.blocks.iter().any(|b| b.period_ms.is_some() && b.due_us <= now_us)
+    }
+
     /// The data packet of the first block due at `now_us` (its next time
     /// set; a block started with period 0 stops after it), with the values
     /// `value(var)` gives; `None` when none is due. Call until `None`.

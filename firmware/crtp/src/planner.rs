@@ -104,6 +104,18 @@ fn wrap(a: f32) -> f32 {
     }
 }
 
+/// Refuses a segment whose duration, ends or headings are absurd.
+fn check(from: &Reference, to_ned_m: &Vector3<f32>, to_yaw_rad: f32, duration_s: f32) -> Result<(), PlanError> {
+    if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= MAX_DURATION_S) {
+        return Err(PlanError::Duration);
+    }
+    let fine = |v: &Vector3<f32>| v.iter().all(|x| x.is_finite() && x.abs() <= MAX_DISTANCE_M);
+    if !fine(to_ned_m) || !fine(&from.pos_ned_m) || !to_yaw_rad.is_finite() || !from.yaw_rad.is_finite() {
+        return Err(PlanError::Position);
+    }
+    Ok(())
+}
+
 /// A planned segment.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Segment {
@@ -123,13 +135,7 @@ impl Segment {
         to_yaw_rad: f32,
         duration_s: f32,
     ) -> Result<Self, PlanError> {
-        if !(duration_s.is_finite() && duration_s > 0.0 && duration_s <= MAX_DURATION_S) {
-            return Err(PlanError::Duration);
-        }
-        let fine = |v: &Vector3<f32>| v.iter().all(|x| x.is_finite() && x.abs() <= MAX_DISTANCE_M);
-        if !fine(&to_ned_m) || !fine(&from.pos_ned_m) || !to_yaw_rad.is_finite() || !from.yaw_rad.is_finite() {
-            return Err(PlanError::Position);
-        }
+        check(from, &to_ned_m, to_yaw_rad, duration_s)?;
         let t = duration_s;
         let mut coef = [[0.0; 8]; 4];
         for (i, c) in coef.iter_mut().take(3).enumerate() {
@@ -160,13 +166,7 @@ impl Segment {
         to_yaw_rad: f32,
         duration_s: f32,
     ) -> Result<Self, PlanError> {
-        let mut seg = Self::plan(
-            start_us,
-            &Reference::at_rest(from.pos_ned_m, from.yaw_rad),
-            to_ned_m,
-            to_yaw_rad,
-            duration_s,
-        )?;
+        check(from, &to_ned_m, to_yaw_rad, duration_s)?;
         let yaw1 = from.yaw_rad + wrap(to_yaw_rad - from.yaw_rad);
         let ends = [
             (from.pos_ned_m[0], to_ned_m[0]),
@@ -174,10 +174,11 @@ impl Segment {
             (from.pos_ned_m[2], to_ned_m[2]),
             (from.yaw_rad, yaw1),
         ];
-        for (c, (a, b)) in seg.coef.iter_mut().zip(ends) {
-            *c = [a, b - a, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        }
-        Ok(seg)
+        Ok(Self {
+            start_us,
+            duration_s,
+            coef: ends.map(|(a, b)| [a, b - a, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        })
     }
 
     /// The reference at `now_us` (at rest at the goal after the end).
@@ -269,5 +270,20 @@ mod tests {
             assert_eq!(Segment::plan(0, &from, p, 0.0, 1.0), Err(PlanError::Position));
         }
         assert_eq!(Segment::plan(0, &from, to, f32::NAN, 1.0), Err(PlanError::Position));
+        assert_eq!(Segment::linear(0, &from, to, 0.0, 0.0), Err(PlanError::Duration));
+        assert_eq!(
+            Segment::linear(0, &from, Vector3::new(0.0, 2e3, 0.0), 0.0, 1.0),
+            Err(PlanError::Position)
+        );
+    }
+
+    /// A linear segment moves at constant velocity along the straight line.
+    #[test]
+    fn a_linear_segment_is_straight_at_constant_speed() {
+        let from = Reference::at_rest(Vector3::new(0.0, 0.0, -1.0), 0.0);
+        let seg = Segment::linear(0, &from, Vector3::new(2.0, 1.0, -1.0), 0.0, 2.0).unwrap();
+        let mid = seg.eval(1_000_000);
+        assert!((mid.pos_ned_m - Vector3::new(1.0, 0.5, -1.0)).norm() < 1e-6);
+        assert!((mid.vel_ned_mps - Vector3::new(1.0, 0.5, 0.0)).norm() < 1e-6);
     }
 }

@@ -528,6 +528,9 @@ impl CrtpVehicle {
         while let Some(p) = self.console.pop_front() {
             out.send(&p)?;
         }
+        if !self.log.any_due(self.now_us) {
+            return Ok(());
+        }
         let values = self.log_values();
         while let Some(p) = self
             .log
@@ -539,8 +542,8 @@ impl CrtpVehicle {
     }
 
     /// The log variables' values now, in [`LOG_VARS`] order.
-    pub fn log_values(&self) -> [f32; 28] {
-        let mut v = [0.0; 28];
+    pub fn log_values(&self) -> [f32; LOG_VARS.len()] {
+        let mut v = [0.0; LOG_VARS.len()];
         let deg = 180.0 / core::f32::consts::PI;
         if let Some(e) = self.core.navigator().estimate() {
             let p = frames::cf_from_ned(&e.pos_ned_m);
