@@ -30,7 +30,8 @@ fn rcc() -> &'static pac::rcc::RegisterBlock {
 
 /// Received bytes, filled by [`usart1_isr`], drained by [`Usart1::read`].
 static RX: Mutex<RefCell<heapless::Deque<u8, 1024>>> = Mutex::new(RefCell::new(heapless::Deque::new()));
-/// Bytes lost because the queue was full.
+/// Bytes lost: the receiver overran (ORE: a byte arrived while the last
+/// was still unread, which on silicon happens while reception is paused).
 static RX_OVERRUNS: Mutex<core::cell::Cell<u32>> = Mutex::new(core::cell::Cell::new(0));
 /// USART1's interrupt number on the STM32F405 (the PAC's `Interrupt::USART1`).
 pub const USART1_IRQ: u16 = pac::Interrupt::USART1 as u16;
@@ -38,18 +39,48 @@ pub const USART1_IRQ: u16 = pac::Interrupt::USART1 as u16;
 /// USART1 receive interrupt: moves every received byte into the queue (the
 /// interrupt itself wakes a main loop sleeping in WFI). Call from the
 /// interrupt handler of [`USART1_IRQ`].
+///
+/// A full queue pauses reception instead of dropping the byte: the byte
+/// stays in DR and the receive interrupt is masked until [`Usart1::read`]
+/// makes room. Under QEMU, whose USART takes the next byte only once DR is
+/// read, that is lossless flow control (a burst larger than the queue, such
+/// as a lockstep step's twenty preview frames, arrives whole). On silicon the
+/// sender does not wait: bytes arriving during the pause overrun (ORE) and
+/// are counted ([`rx_overruns`]), so the loss is seen, not silent.
 pub fn usart1_isr() {
     let u = usart1();
-    // Reading DR pops the byte and clears RXNE.
-    while u.sr().read().rxne().bit_is_set() {
-        let b = u.dr().read().dr().bits() as u8;
-        critical_section::with(|cs| {
-            if RX.borrow(cs).borrow_mut().push_back(b).is_err() {
+    loop {
+        let sr = u.sr().read();
+        if sr.ore().bit_is_set() {
+            // Cleared by the SR read above and the DR read below.
+            critical_section::with(|cs| {
                 let c = RX_OVERRUNS.borrow(cs);
                 c.set(c.get().wrapping_add(1));
-            }
+            });
+        }
+        if sr.rxne().bit_is_clear() {
+            break;
+        }
+        let full = critical_section::with(|cs| RX.borrow(cs).borrow().is_full());
+        if full {
+            // Masked at the NVIC, not with RXNEIE: QEMU's USART keeps its
+            // interrupt line raised while RXNE is set whatever RXNEIE says.
+            NVIC::mask(pac::Interrupt::USART1);
+            break;
+        }
+        // Reading DR pops the byte and clears RXNE.
+        let b = u.dr().read().dr().bits() as u8;
+        critical_section::with(|cs| {
+            // Not full (checked above; only this handler pushes).
+            let _ = RX.borrow(cs).borrow_mut().push_back(b);
         });
     }
+}
+
+/// Received bytes lost so far to receiver overruns (each one corrupts the
+/// frame it belonged to; the protocol counts that frame as bad).
+pub fn rx_overruns() -> u32 {
+    critical_section::with(|cs| RX_OVERRUNS.borrow(cs).get())
 }
 
 /// True if received bytes are waiting in the queue.
@@ -110,6 +141,12 @@ impl ByteLink for Usart1 {
                     }
                     None => break,
                 }
+            }
+            if n > 0 {
+                // Room again: resume reception if the interrupt paused it
+                // (a byte waiting in DR raises the interrupt at once).
+                // SAFETY: unmasking USART1's interrupt, as `init` does.
+                unsafe { NVIC::unmask(pac::Interrupt::USART1) };
             }
             Ok(n)
         })
