@@ -143,6 +143,15 @@ unsafe fn DefaultHandler(irqn: i16) {
     }
 }
 
+/// A fault (bad access, stack overflow into the guard, undefined
+/// instruction): says where, then ends as [`fail`] does (QEMU exits with
+/// failure; a board halts with the motors off).
+#[exception]
+unsafe fn HardFault(ef: &cortex_m_rt::ExceptionFrame) -> ! {
+    defmt::error!("hard fault at pc {=u32:#010x} (lr {=u32:#010x})", ef.pc(), ef.lr());
+    fail("hard fault")
+}
+
 #[panic_handler]
 fn panic(info: &PanicInfo) -> ! {
     // The core never panics on input; if anything does, say where.
