@@ -319,8 +319,22 @@ pub fn fly_target_with_progress(
         Target::Qemu => qemu.insert(Qemu::start(&firmware_elf()?)?).client()?,
     };
     // The vehicle's parameters are written over the link (ParamSet) before the selection.
-    let remote = Remote::open(client, cfg.spec, &cfg.vehicle)?;
-    let (mut res, _) = fly_endpoint(cfg, remote, None, |t, _| tick(t), rec)?;
+    let flown = Remote::open(client, cfg.spec, &cfg.vehicle)
+        .and_then(|remote| fly_endpoint(cfg, remote, None, |t, _| tick(t), rec));
+    let (mut res, _) = match (flown, qemu.take()) {
+        (Ok(r), q) => {
+            qemu = q;
+            r
+        }
+        // What the image logged is what says why it stopped answering.
+        (Err(e), Some(q)) => {
+            let log = q
+                .finish()
+                .unwrap_or_else(|d| vec![format!("(its log could not be decoded: {d})")]);
+            return Err(e.context(format!("the image in QEMU logged:\n  {}", log.join("\n  "))));
+        }
+        (Err(e), None) => return Err(e),
+    };
     if let Some(q) = qemu {
         // The telemetry's cycles are SysTick counts; under icount they count instructions.
         let k = 1.0 / SYSTICK_PER_INSTRUCTION;

@@ -358,7 +358,16 @@ impl FcClient {
         let mut out: Option<RemoteStep> = None;
         let mut telemetry = false;
         for _ in 0..8 {
-            match self.receive()? {
+            let got = self.receive().with_context(|| {
+                let have = match &out {
+                    None => "nothing",
+                    Some(r) if r.nav.is_some() => "actuator, telemetry and nav frames",
+                    Some(_) if telemetry => "actuator and telemetry frames",
+                    Some(_) => "the actuator frame",
+                };
+                format!("waiting for the answer to step {seq} (t {t_us} µs; {have} so far)")
+            })?;
+            match got {
                 FromFc::Actuator { seq: s, u, failsafe } if s == seq => {
                     out = Some(RemoteStep {
                         u,
