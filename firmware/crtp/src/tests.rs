@@ -335,3 +335,19 @@ fn a_million_bad_packets_are_counted_and_the_session_survives() {
     let r = ask(&mut v, pk(Port::Param, 1, &[0, 0]));
     assert_eq!(&r.payload()[..3], &[0, 0, 0]);
 }
+
+#[test]
+fn a_simulator_writes_the_flight_loops_table_by_index() {
+    use fc_loop::params::{index_of, Refusal, PARAMS};
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    let mass = index_of(b"VEH_MASS").unwrap();
+    // In range: applied (a re-design, the motors being off), the value in force returned.
+    assert_eq!(v.write_param(mass, 0.75), Ok(0.75));
+    assert_eq!((PARAMS[mass].get)(v.core().settings()), 0.75);
+    // Out of range or not a number: refused, the value in force kept.
+    assert!(matches!(v.write_param(mass, -1.0), Err(Refusal::Range { .. })));
+    assert!(matches!(v.write_param(mass, f32::NAN), Err(Refusal::Range { .. })));
+    assert_eq!((PARAMS[mass].get)(v.core().settings()), 0.75);
+    // No such entry.
+    assert_eq!(v.write_param(PARAMS.len(), 1.0), Err(Refusal::Unknown));
+}

@@ -344,6 +344,17 @@ impl CrtpVehicle {
         Ok(())
     }
 
+    /// Writes entry `index` of the flight loop's parameter table
+    /// (`fc_loop::params::PARAMS`, the same ids as the CRTP table's first
+    /// entries) as a client's write is: checked, applied, re-designing only
+    /// while the motors are off. Returns the value in force. For a board's
+    /// or a simulator's configuration (our protocol's `ParamSet`).
+    pub fn write_param(&mut self, index: usize, value: f32) -> Result<f32, Refusal> {
+        let param = PARAMS.get(index).ok_or(Refusal::Unknown)?;
+        self.param_write(index, value)?;
+        Ok((param.get)(self.core.settings()))
+    }
+
     /// Armed.
     pub fn armed(&self) -> bool {
         self.armed
