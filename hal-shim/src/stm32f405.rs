@@ -1,4 +1,4 @@
-//! STM32F405 implementations: USART1 as the byte link, SysTick as the cycle
+//! STM32F405 implementations: USART1 and USART6 as byte links, SysTick as the cycle
 //! clock (DWT CYCCNT on silicon is the same interface; QEMU does not model it,
 //! and under `-icount shift=0` SysTick advances with executed instructions),
 //! TIM2 as the loop timer, TIM3 as PWM outputs.
@@ -15,10 +15,61 @@ use cortex_m::peripheral::{DWT, NVIC, SCB, SYST};
 use critical_section::Mutex;
 use stm32f4::stm32f405 as pac;
 
-/// The USART1 register block (the PAC's handle).
-fn usart1() -> &'static pac::usart1::RegisterBlock {
-    // SAFETY: the PAC's pointer to USART1's registers; this driver is its only user.
-    unsafe { &*pac::USART1::ptr() }
+/// The USARTs this driver serves: USART1 (the host link: PA9/PA10; QEMU's
+/// first `-serial`) and USART6 (the Crazyflie's syslink to its nRF51:
+/// PC6/PC7; QEMU's sixth `-serial`). Both sit on APB2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Port {
+    /// USART1.
+    Usart1,
+    /// USART6.
+    Usart6,
+}
+
+/// USART1's received bytes, filled by [`usart_isr`], drained by [`Usart::read`].
+static RX1: Mutex<RefCell<heapless::Deque<u8, 1024>>> = Mutex::new(RefCell::new(heapless::Deque::new()));
+/// USART6's (syslink frames are at most 70 bytes; the nRF51 sends one per
+/// radio packet).
+static RX6: Mutex<RefCell<heapless::Deque<u8, 256>>> = Mutex::new(RefCell::new(heapless::Deque::new()));
+/// Bytes each port lost: the receiver overran (ORE: a byte arrived while the
+/// last was still unread, which on silicon happens while reception is paused).
+static RX_OVERRUNS: Mutex<core::cell::Cell<[u32; 2]>> = Mutex::new(core::cell::Cell::new([0; 2]));
+
+impl Port {
+    /// The register block (the PAC's handle; USART6 shares USART1's layout).
+    fn regs(self) -> &'static pac::usart1::RegisterBlock {
+        // SAFETY: the PAC's pointers to the USARTs' registers; this driver
+        // is their only user.
+        unsafe {
+            match self {
+                Port::Usart1 => &*pac::USART1::ptr(),
+                Port::Usart6 => &*pac::USART6::ptr(),
+            }
+        }
+    }
+
+    /// Its interrupt.
+    fn irq(self) -> pac::Interrupt {
+        match self {
+            Port::Usart1 => pac::Interrupt::USART1,
+            Port::Usart6 => pac::Interrupt::USART6,
+        }
+    }
+
+    /// Runs `f` on its receive queue, in a critical section.
+    fn with_queue<R>(self, f: impl FnOnce(&mut heapless::deque::DequeView<u8>) -> R) -> R {
+        critical_section::with(|cs| match self {
+            Port::Usart1 => f(RX1.borrow_ref_mut(cs).as_mut_view()),
+            Port::Usart6 => f(RX6.borrow_ref_mut(cs).as_mut_view()),
+        })
+    }
+
+    /// The port whose interrupt number is `irqn`, if one is served.
+    pub fn of_irq(irqn: i16) -> Option<Self> {
+        [Port::Usart1, Port::Usart6]
+            .into_iter()
+            .find(|p| p.irq() as i16 == irqn)
+    }
 }
 
 /// The RCC register block (the PAC's handle): enable bits only.
@@ -28,87 +79,82 @@ fn rcc() -> &'static pac::rcc::RegisterBlock {
     unsafe { &*pac::RCC::ptr() }
 }
 
-/// Received bytes, filled by [`usart1_isr`], drained by [`Usart1::read`].
-static RX: Mutex<RefCell<heapless::Deque<u8, 1024>>> = Mutex::new(RefCell::new(heapless::Deque::new()));
-/// Bytes lost: the receiver overran (ORE: a byte arrived while the last
-/// was still unread, which on silicon happens while reception is paused).
-static RX_OVERRUNS: Mutex<core::cell::Cell<u32>> = Mutex::new(core::cell::Cell::new(0));
-/// USART1's interrupt number on the STM32F405 (the PAC's `Interrupt::USART1`).
-pub const USART1_IRQ: u16 = pac::Interrupt::USART1 as u16;
-
-/// USART1 receive interrupt: moves every received byte into the queue (the
-/// interrupt itself wakes a main loop sleeping in WFI). Call from the
-/// interrupt handler of [`USART1_IRQ`].
+/// A USART's receive interrupt: moves every received byte into its queue
+/// (the interrupt itself wakes a main loop sleeping in WFI). Call from the
+/// interrupt handler of the port's interrupt ([`Port::of_irq`]).
 ///
 /// A full queue pauses reception instead of dropping the byte: the byte
-/// stays in DR and the receive interrupt is masked until [`Usart1::read`]
-/// makes room. Under QEMU, whose USART takes the next byte only once DR is
-/// read, that is lossless flow control (a burst larger than the queue, such
-/// as a lockstep step's twenty preview frames, arrives whole). On silicon the
+/// stays in DR and the interrupt is masked until [`Usart::read`] makes
+/// room. Under QEMU, whose USART takes the next byte only once DR is read,
+/// that is lossless flow control (a burst larger than the queue, such as a
+/// lockstep step's twenty preview frames, arrives whole). On silicon the
 /// sender does not wait: bytes arriving during the pause overrun (ORE) and
 /// are counted ([`rx_overruns`]), so the loss is seen, not silent.
-pub fn usart1_isr() {
-    let u = usart1();
+pub fn usart_isr(port: Port) {
+    let u = port.regs();
     loop {
         let sr = u.sr().read();
         if sr.ore().bit_is_set() {
             // Cleared by the SR read above and the DR read below.
             critical_section::with(|cs| {
                 let c = RX_OVERRUNS.borrow(cs);
-                c.set(c.get().wrapping_add(1));
+                let mut n = c.get();
+                n[port as usize] = n[port as usize].wrapping_add(1);
+                c.set(n);
             });
         }
         if sr.rxne().bit_is_clear() {
             break;
         }
-        let full = critical_section::with(|cs| RX.borrow(cs).borrow().is_full());
-        if full {
+        if port.with_queue(|q| q.is_full()) {
             // Masked at the NVIC, not with RXNEIE: QEMU's USART keeps its
             // interrupt line raised while RXNE is set whatever RXNEIE says.
-            NVIC::mask(pac::Interrupt::USART1);
+            NVIC::mask(port.irq());
             break;
         }
         // Reading DR pops the byte and clears RXNE.
         let b = u.dr().read().dr().bits() as u8;
-        critical_section::with(|cs| {
-            // Not full (checked above; only this handler pushes).
-            let _ = RX.borrow(cs).borrow_mut().push_back(b);
-        });
+        // Not full (checked above; only this handler pushes).
+        let _ = port.with_queue(|q| q.push_back(b));
     }
 }
 
-/// Received bytes lost so far to receiver overruns (each one corrupts the
-/// frame it belonged to; the protocol counts that frame as bad).
-pub fn rx_overruns() -> u32 {
-    critical_section::with(|cs| RX_OVERRUNS.borrow(cs).get())
+/// Received bytes `port` lost so far to receiver overruns (each one
+/// corrupts the frame it belonged to; the protocol counts that frame as bad).
+pub fn rx_overruns(port: Port) -> u32 {
+    critical_section::with(|cs| RX_OVERRUNS.borrow(cs).get()[port as usize])
 }
 
-/// True if received bytes are waiting in the queue.
+/// True if received bytes are waiting in any port's queue.
 pub fn rx_pending() -> bool {
-    critical_section::with(|cs| !RX.borrow(cs).borrow().is_empty())
+    !(Port::Usart1.with_queue(|q| q.is_empty()) && Port::Usart6.with_queue(|q| q.is_empty()))
 }
 
-/// USART1 (PA9/PA10 on real boards; `-serial` 0 under QEMU's netduinoplus2).
-/// Reception is interrupt-driven into a 1 KiB queue ([`usart1_isr`]); reads
-/// never wait; writes wait for TXE at most a bounded number of polls per byte.
-pub struct Usart1 {
-    _private: (),
+/// A USART as a byte link ([`Port`]). Reception is interrupt-driven into a
+/// queue (1 KiB for USART1, 256 B for USART6; [`usart_isr`]); reads never wait; writes wait for TXE at
+/// most a bounded number of polls per byte.
+pub struct Usart {
+    port: Port,
 }
 
 /// A write gave up waiting for the transmitter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TxTimeout;
 
-impl Usart1 {
-    /// Enables the clock and the peripheral at `baud` for a `pclk_hz` bus clock.
+impl Usart {
+    /// Enables the clock and the peripheral `port` at `baud` for a `pclk_hz`
+    /// bus clock (APB2 for both ports).
     ///
-    /// Must be called once, before any other use of USART1.
-    pub fn init(pclk_hz: u32, baud: u32) -> Self {
-        rcc().apb2enr().modify(|_, w| w.usart1en().enabled());
+    /// Must be called once per port, before any other use of it.
+    pub fn init(port: Port, pclk_hz: u32, baud: u32) -> Self {
+        rcc().apb2enr().modify(|_, w| match port {
+            Port::Usart1 => w.usart1en().enabled(),
+            Port::Usart6 => w.usart6en().enabled(),
+        });
         // BRR = f_pclk / baud (16× oversampling): mantissa and fraction are
         // the quotient's integer part and 1/16ths, i.e. the quotient itself.
         let div = (pclk_hz / baud.max(1)).clamp(16, 0xFFFF);
-        let u = usart1();
+        let u = port.regs();
         u.brr().write(|w| {
             w.div_mantissa()
                 .set((div >> 4) as u16)
@@ -117,21 +163,26 @@ impl Usart1 {
         });
         u.cr1()
             .write(|w| w.ue().enabled().te().enabled().re().enabled().rxneie().enabled());
-        // SAFETY: unmasking USART1's interrupt; its handler only moves bytes
-        // into the queue under a critical section.
-        unsafe { NVIC::unmask(pac::Interrupt::USART1) };
-        Self { _private: () }
+        // SAFETY: unmasking the port's interrupt; its handler only moves
+        // bytes into the queue under a critical section.
+        unsafe { NVIC::unmask(port.irq()) };
+        Self { port }
+    }
+
+    /// Which port this is.
+    pub fn port(&self) -> Port {
+        self.port
     }
 }
 
 /// Polls per byte before a write gives up.
 const TX_SPIN: u32 = 1_000_000;
 
-impl ByteLink for Usart1 {
+impl ByteLink for Usart {
     type Error = TxTimeout;
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
-        critical_section::with(|cs| {
-            let mut q = RX.borrow(cs).borrow_mut();
+        let port = self.port;
+        port.with_queue(|q| {
             let mut n = 0;
             while n < buf.len() {
                 match q.pop_front() {
@@ -145,23 +196,24 @@ impl ByteLink for Usart1 {
             if n > 0 {
                 // Room again: resume reception if the interrupt paused it
                 // (a byte waiting in DR raises the interrupt at once).
-                // SAFETY: unmasking USART1's interrupt, as `init` does.
-                unsafe { NVIC::unmask(pac::Interrupt::USART1) };
+                // SAFETY: unmasking the port's interrupt, as `init` does.
+                unsafe { NVIC::unmask(port.irq()) };
             }
             Ok(n)
         })
     }
     fn write_all(&mut self, bytes: &[u8]) -> Result<(), Self::Error> {
+        let u = self.port.regs();
         for &b in bytes {
             let mut spins = 0;
-            while usart1().sr().read().txe().bit_is_clear() {
+            while u.sr().read().txe().bit_is_clear() {
                 spins += 1;
                 if spins > TX_SPIN {
                     return Err(TxTimeout);
                 }
             }
             // Writing DR sends the byte.
-            usart1().dr().write(|w| w.dr().set(u16::from(b)));
+            u.dr().write(|w| w.dr().set(u16::from(b)));
         }
         Ok(())
     }

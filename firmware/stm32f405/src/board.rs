@@ -11,7 +11,7 @@ use cortex_m_semihosting::debug;
 #[cfg(feature = "log-rtt")]
 use defmt_rtt as _;
 use fc_stm32f405::{bring_up_clocks, PCLK2_HZ, SYSCLK_HZ};
-use hal_shim::stm32f405::{SysTickClock, Usart1};
+use hal_shim::stm32f405::{Port, SysTickClock, Usart};
 
 // Log lines carry the SysTick time in µs.
 defmt::timestamp!("{=u64:us}", {
@@ -102,15 +102,19 @@ pub fn fail(why: &str) -> ! {
 /// The clock tree first (every rate assumes 168 MHz: a board whose
 /// crystal or PLL does not start would run every timer and the UART at the
 /// wrong rate; it refuses to fly instead), then SysTick and USART1.
-pub fn bring_up() -> (SysTickClock, Usart1) {
+pub fn bring_up() -> (SysTickClock, Usart) {
     if let Err(e) = bring_up_clocks() {
         defmt::error!("clock tree bring-up failed: {=str}", e.reason());
         fail("no clock");
     }
-    (SysTickClock::start(SYSCLK_HZ), Usart1::init(PCLK2_HZ, 115_200))
+    (
+        SysTickClock::start(SYSCLK_HZ),
+        Usart::init(Port::Usart1, PCLK2_HZ, 115_200),
+    )
 }
 
 /// The loop's clock, µs since boot.
+#[allow(dead_code, reason = "firmware-crtp keeps the time of its IMU samples instead")]
 pub fn now_us(clock: &SysTickClock) -> u64 {
     clock.ticks() / u64::from(SYSCLK_HZ / 1_000_000)
 }
@@ -135,11 +139,11 @@ fn SysTick() {
     hal_shim::stm32f405::systick_isr();
 }
 
-/// Every device interrupt lands here; USART1's moves bytes into the queue.
+/// Every device interrupt lands here; a USART's moves bytes into its queue.
 #[exception]
 unsafe fn DefaultHandler(irqn: i16) {
-    if irqn == hal_shim::stm32f405::USART1_IRQ as i16 {
-        hal_shim::stm32f405::usart1_isr();
+    if let Some(port) = Port::of_irq(irqn) {
+        hal_shim::stm32f405::usart_isr(port);
     }
 }
 

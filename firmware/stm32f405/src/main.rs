@@ -50,7 +50,7 @@ mod target {
                 counters.oversized,
                 counters.out_of_order,
                 counters.invalid_values,
-                hal_shim::stm32f405::rx_overruns()
+                hal_shim::stm32f405::rx_overruns(hal_shim::stm32f405::Port::Usart1)
             );
         }
         *last = (session, failsafe, counters, ctrl);

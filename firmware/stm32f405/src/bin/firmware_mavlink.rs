@@ -23,7 +23,7 @@ mod target {
     use fc_mavlink::params::Settings;
     use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer, VehicleCounters};
     use fc_mavlink::{encode, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
-    use hal_shim::stm32f405::{TxTimeout, Usart1};
+    use hal_shim::stm32f405::{TxTimeout, Usart};
     use hal_shim::ByteLink;
 
     /// This vehicle's MAVLink system id (component: MAV_COMP_ID_AUTOPILOT1).
@@ -31,7 +31,7 @@ mod target {
 
     /// Both peers on USART1.
     struct Link<'a> {
-        usart: &'a mut Usart1,
+        usart: &'a mut Usart,
         seq: u8,
     }
 
