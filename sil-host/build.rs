@@ -1,10 +1,10 @@
 //! Builds the STM32F405 firmware images (`fc-stm32f405`, binaries
-//! `firmware` and `firmware-mavlink`, release, `thumbv7em-none-eabihf`) with cargo, so that `sil-host fly
+//! `firmware`, `firmware-mavlink` and `firmware-crtp`, release, `thumbv7em-none-eabihf`) with cargo, so that `sil-host fly
 //! --target qemu` and the report's QEMU table always fly the image of the
 //! sources beside them. It goes to its own target directory
 //! (`target/firmware-image`) so this nested cargo never waits on the outer
-//! one's lock. Their paths reach the crate as `SIL_FIRMWARE_ELF_BUILT` and
-//! `SIL_FIRMWARE_MAVLINK_ELF_BUILT`; when
+//! one's lock. Their paths reach the crate as `SIL_FIRMWARE_ELF_BUILT`,
+//! `SIL_FIRMWARE_MAVLINK_ELF_BUILT` and `SIL_FIRMWARE_CRTP_ELF_BUILT`; when
 //! the build fails (say the thumbv7em target is not installed) the host
 //! still builds, that variable is empty and `SIL_FIRMWARE_BUILD_ERROR` says why.
 use std::path::PathBuf;
@@ -27,6 +27,7 @@ fn main() {
     let target_dir = root.join("target").join("firmware-image");
     let elf = target_dir.join("thumbv7em-none-eabihf/release/firmware");
     let mavlink_elf = target_dir.join("thumbv7em-none-eabihf/release/firmware-mavlink");
+    let crtp_elf = target_dir.join("thumbv7em-none-eabihf/release/firmware-crtp");
     let result = if std::env::var_os("SIL_SKIP_FIRMWARE_BUILD").is_some() {
         Err("SIL_SKIP_FIRMWARE_BUILD is set".to_string())
     } else {
@@ -39,12 +40,14 @@ fn main() {
                 "cargo:rustc-env=SIL_FIRMWARE_MAVLINK_ELF_BUILT={}",
                 mavlink_elf.display()
             );
+            println!("cargo:rustc-env=SIL_FIRMWARE_CRTP_ELF_BUILT={}", crtp_elf.display());
             println!("cargo:rustc-env=SIL_FIRMWARE_BUILD_ERROR=");
         }
         Err(e) => {
             println!("cargo:warning=the firmware image was not built: {e}");
             println!("cargo:rustc-env=SIL_FIRMWARE_ELF_BUILT=");
             println!("cargo:rustc-env=SIL_FIRMWARE_MAVLINK_ELF_BUILT=");
+            println!("cargo:rustc-env=SIL_FIRMWARE_CRTP_ELF_BUILT=");
             println!("cargo:rustc-env=SIL_FIRMWARE_BUILD_ERROR={}", e.replace('\n', " "));
         }
     }
@@ -63,6 +66,8 @@ fn build(root: &std::path::Path, target_dir: &std::path::Path) -> Result<(), Str
             "firmware",
             "--bin",
             "firmware-mavlink",
+            "--bin",
+            "firmware-crtp",
         ])
         .arg("--release")
         .args(["--target", "thumbv7em-none-eabihf", "--target-dir"])

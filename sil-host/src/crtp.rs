@@ -25,6 +25,8 @@ use hal_shim::host::MonotonicClock;
 use nalgebra::Vector3;
 use serde::Serialize;
 use std::net::{SocketAddr, UdpSocket};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// cflib's first UDP port (its scan probes 19850–19859).
@@ -58,6 +60,27 @@ pub struct CrtpConfig {
     pub duration_s: Option<f64>,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// Where the vehicle runs.
+    pub target: CrtpTarget,
+    /// Set from elsewhere (a signal handler) to end the flight at the next
+    /// step, with the summary written and QEMU stopped.
+    pub stop: Arc<AtomicBool>,
+}
+
+/// Where `sil-host crtp`'s vehicle runs.
+#[derive(Debug, Clone)]
+pub enum CrtpTarget {
+    /// In this process, served over UDP at [`CrtpConfig::listen`].
+    InProcess,
+    /// The `firmware-crtp` image in QEMU: its USART6 (syslink) a TCP server
+    /// at `syslink` for `tools/nrf51_bridge.py`, which serves cflib; the
+    /// plant's sensors on its USART1.
+    Qemu {
+        /// USART6's address.
+        syslink: String,
+        /// How long to wait for the bridge, s.
+        wait_s: f64,
+    },
 }
 
 /// What a session did.
@@ -67,10 +90,17 @@ pub struct CrtpSummary {
     pub duration_s: f64,
     /// IMU steps that ran late by more than 5 ms of wall time (a slow host).
     pub late_steps: u64,
-    /// Packets: handled, null, refused by kind.
-    pub packets: Counters,
-    /// Packets sent.
-    pub sent: u64,
+    /// Simulated seconds per wall-clock second: 1 when the vehicle keeps up
+    /// with real time; below 1 when it cannot (QEMU's emulated instructions).
+    pub realtime_factor: f64,
+    /// Where the vehicle ran: `in-process` or `qemu`.
+    pub target: &'static str,
+    /// Packets: handled, null, refused by kind (in-process).
+    pub packets: Option<Counters>,
+    /// Packets sent (in-process).
+    pub sent: Option<u64>,
+    /// The image's log (QEMU).
+    pub firmware_log: Vec<String>,
     /// The plant's final position, Crazyflie frame, m.
     pub final_position_m: [f64; 3],
 }
@@ -149,11 +179,175 @@ fn battery_v(flown_s: f64, thrust_fraction: f64) -> f32 {
     (4.2 - 0.3 * (flown_s / 420.0).min(1.0) - 0.3 * thrust_fraction.clamp(0.0, 1.0)) as f32
 }
 
+/// The plant's side of the image's USART1 (our framed protocol): the
+/// vehicle's parameters, then one `Imu` (and its fixes) per step, each
+/// answered with `Actuator`.
+struct SimLink {
+    stream: std::net::TcpStream,
+    decoder: fc_proto::FrameDecoder,
+    seq: u32,
+}
+
+impl SimLink {
+    fn write(&mut self, m: &fc_proto::ToFc) -> Result<()> {
+        use std::io::Write;
+        let mut buf = [0u8; fc_proto::MAX_FRAME];
+        let n = fc_proto::encode(m, &mut buf).map_err(|e| anyhow::anyhow!("encoding {m:?}: {e:?}"))?;
+        self.stream
+            .write_all(&buf[..n])
+            .context("writing to the image's USART1")
+    }
+
+    /// Reads frames until `want` takes one.
+    fn read_until<T>(&mut self, mut want: impl FnMut(fc_proto::FromFc) -> Option<T>) -> Result<T> {
+        use std::io::Read;
+        let mut buf = [0u8; 256];
+        loop {
+            let n = self.stream.read(&mut buf).context("reading the image's USART1")?;
+            if n == 0 {
+                anyhow::bail!("the image closed USART1");
+            }
+            for &b in &buf[..n] {
+                if let Some(Ok(m)) = self.decoder.push::<fc_proto::FromFc>(b) {
+                    if let Some(t) = want(m) {
+                        return Ok(t);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Writes the parameters of `s` that differ from the image's boot
+    /// values (the OS4's) and checks each answer.
+    fn set_params(&mut self, s: &Settings) -> Result<()> {
+        use fc_loop::params::differences;
+        for (i, p, value) in differences(s, &Settings::os4()) {
+            self.write(&fc_proto::ToFc::ParamSet { index: i as u16, value })?;
+            let (got, refusal) = self.read_until(|m| match m {
+                fc_proto::FromFc::Param {
+                    index, value, refusal, ..
+                } if usize::from(index) == i => Some((value, refusal)),
+                _ => None,
+            })?;
+            if refusal != 0 || got != value {
+                anyhow::bail!(
+                    "the image refused {} = {value} (refusal {refusal}, in force {got})",
+                    p.id
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// One IMU step: the fixes, the sample, the inputs of its answer.
+    fn step(
+        &mut self,
+        t_us: u64,
+        imu: &fc_core::estimate::ImuSample,
+        fixes: &[fc_core::estimate::Fix],
+    ) -> Result<nalgebra::Vector4<f32>> {
+        for f in fixes {
+            self.write(&fc_proto::ToFc::Fix(fc_loop::fix_to_wire(f)))?;
+        }
+        self.seq += 1;
+        let seq = self.seq;
+        self.write(&fc_proto::ToFc::Imu {
+            seq,
+            t_us,
+            gyro: imu.gyro_frd_radps.into(),
+            accel: imu.accel_frd_mps2.into(),
+        })?;
+        let u = self.read_until(|m| match m {
+            fc_proto::FromFc::Actuator { seq: s, u, .. } if s == seq => Some(u),
+            _ => None,
+        })?;
+        Ok(nalgebra::Vector4::from(u))
+    }
+}
+
+/// The vehicle behind the plant.
+#[allow(clippy::large_enum_variant, reason = "one per run, on run()'s stack")]
+enum Fc<'a> {
+    /// In this process, answering cflib over UDP.
+    Local {
+        vehicle: Box<CrtpVehicle>,
+        socket: &'a UdpSocket,
+        out: Udp<'a>,
+        clock: MonotonicClock,
+    },
+    /// The `firmware-crtp` image in QEMU.
+    Image { qemu: crate::link::Qemu, link: SimLink },
+}
+
+impl Fc<'_> {
+    /// Serves what cflib sent (in-process only: the image's come through the bridge).
+    fn serve(&mut self, buf: &mut [u8]) -> Result<()> {
+        let Fc::Local {
+            vehicle, socket, out, ..
+        } = self
+        else {
+            return Ok(());
+        };
+        loop {
+            match socket.recv_from(buf) {
+                Ok((n, from)) => {
+                    out.to = Some(from);
+                    match Packet::from_bytes(&buf[..n]) {
+                        Ok(p) => vehicle.handle(&p, out)?,
+                        Err(e) => vehicle.count_malformed(e),
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return Ok(()),
+                // A previous client's port closed (ICMP): not this client's error.
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => continue,
+                Err(e) => return Err(e).context("receiving CRTP"),
+            }
+        }
+    }
+
+    /// One IMU step; returns the inputs and whether the motors turn.
+    fn step(
+        &mut self,
+        t_us: u64,
+        r: &crate::sensors::Readings,
+        battery: impl Fn(f32) -> f32,
+    ) -> Result<(nalgebra::Vector4<f32>, bool)> {
+        match self {
+            Fc::Local {
+                vehicle, out, clock, ..
+            } => {
+                let u = vehicle.imu_step(t_us, &r.imu, &r.fixes, clock);
+                vehicle.set_battery(battery(u[0]), 0);
+                vehicle.poll(out)?;
+                Ok((u, vehicle.flying()))
+            }
+            // The image's battery comes from the nRF51 (the bridge).
+            Fc::Image { link, .. } => {
+                let u = link.step(t_us, &r.imu, &r.fixes)?;
+                Ok((u, u != nalgebra::Vector4::zeros()))
+            }
+        }
+    }
+
+    fn armed(&self) -> Option<bool> {
+        match self {
+            Fc::Local { vehicle, .. } => Some(vehicle.armed()),
+            Fc::Image { .. } => None,
+        }
+    }
+}
+
 /// Runs the server until `duration_s` (or forever).
 pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
-    let socket = UdpSocket::bind(cfg.listen).with_context(|| format!("binding UDP {}", cfg.listen))?;
-    socket.set_nonblocking(true)?;
-    eprintln!("crtp: listening on udp://{}", socket.local_addr()?);
+    let socket = match cfg.target {
+        CrtpTarget::InProcess => {
+            let s = UdpSocket::bind(cfg.listen).with_context(|| format!("binding UDP {}", cfg.listen))?;
+            s.set_nonblocking(true)?;
+            eprintln!("crtp: listening on udp://{}", s.local_addr()?);
+            Some(s)
+        }
+        CrtpTarget::Qemu { .. } => None,
+    };
     let truth = match cfg.truth_to {
         Some(to) => {
             let s = UdpSocket::bind("127.0.0.1:0")?;
@@ -161,8 +355,37 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
         }
         None => None,
     };
-    let mut vehicle = CrtpVehicle::new(cfg.settings)
-        .map_err(|e| anyhow::anyhow!("the flight controller's settings are refused: {e}"))?;
+    let mut fc = match (&cfg.target, &socket) {
+        (CrtpTarget::Qemu { syslink, wait_s }, _) => {
+            let elf = crate::link::firmware_crtp_elf()?;
+            let mut qemu = crate::link::Qemu::start_with_syslink(&elf, syslink, *wait_s)?;
+            eprintln!("crtp: the image's syslink (USART6) waits on tcp:{syslink} for tools/nrf51_bridge.py");
+            let stream = qemu.connect()?;
+            stream.set_read_timeout(Some(Duration::from_secs(10)))?;
+            let mut link = SimLink {
+                stream,
+                decoder: fc_proto::FrameDecoder::new(),
+                seq: 0,
+            };
+            link.set_params(&cfg.settings)?;
+            eprintln!("crtp: the image is up, the vehicle's parameters written");
+            Fc::Image { qemu, link }
+        }
+        (CrtpTarget::InProcess, Some(socket)) => Fc::Local {
+            vehicle: Box::new(
+                CrtpVehicle::new(cfg.settings)
+                    .map_err(|e| anyhow::anyhow!("the flight controller's settings are refused: {e}"))?,
+            ),
+            socket,
+            out: Udp {
+                socket,
+                to: None,
+                sent: 0,
+            },
+            clock: MonotonicClock::default(),
+        },
+        (CrtpTarget::InProcess, None) => anyhow::bail!("no UDP socket"),
+    };
     let pc = PlantConfig {
         params: cfg.vehicle,
         ..PlantConfig::nominal(AttitudeForm::Quaternion)
@@ -171,12 +394,6 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
     plant.set_rotor_speeds(nalgebra::Vector4::zeros());
     plant.contact_ground(0.0);
     let mut sensors = Sensors::new(SensorConfig::new(FixProfile::Mocap, cfg.seed), IMU_PERIOD_S)?;
-    let clock = MonotonicClock::default();
-    let mut out = Udp {
-        socket: &socket,
-        to: None,
-        sent: 0,
-    };
     let u1_max = 4.0 * cfg.vehicle.kf_ns2 * cfg.vehicle.omega_max_radps.powi(2);
     let start = Instant::now();
     let mut step: u64 = 0;
@@ -185,25 +402,11 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
     let mut buf = [0u8; 256];
     loop {
         let t = step as f64 * IMU_PERIOD_S;
-        if cfg.duration_s.is_some_and(|d| t > d) {
+        if cfg.duration_s.is_some_and(|d| t > d) || cfg.stop.load(Ordering::Relaxed) {
             break;
         }
         // Packets that arrived, answered at once.
-        loop {
-            match socket.recv_from(&mut buf) {
-                Ok((n, from)) => {
-                    out.to = Some(from);
-                    match Packet::from_bytes(&buf[..n]) {
-                        Ok(p) => vehicle.handle(&p, &mut out)?,
-                        Err(e) => vehicle.count_malformed(e),
-                    }
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-                // A previous client's port closed (ICMP): not this client's error.
-                Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => continue,
-                Err(e) => return Err(e).context("receiving CRTP"),
-            }
-        }
+        fc.serve(&mut buf)?;
         // The simulated millisecond, in step with the wall clock.
         let due = start + Duration::from_secs_f64(t);
         let now = Instant::now();
@@ -219,33 +422,53 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
             readings.fixes.clear();
         }
         let t_us = (t * 1e6).round() as u64;
-        let u = vehicle.imu_step(t_us, &readings.imu, &readings.fixes, &clock);
-        if vehicle.flying() {
+        let (u, flying) = fc.step(t_us, &readings, |u1| battery_v(flown_s, f64::from(u1) / u1_max))?;
+        if flying {
             flown_s += IMU_PERIOD_S;
         }
-        vehicle.set_battery(battery_v(flown_s, f64::from(u[0]) / u1_max), 0);
         plant.step(&u.cast::<f64>(), IMU_PERIOD_S);
         plant.contact_ground(0.0);
-        vehicle.poll(&mut out)?;
         if let Some((s, to)) = &truth {
             if step.is_multiple_of(TRUTH_EVERY) {
                 let x = plant.quat_state();
                 let p = cf_of(&plant.position());
+                let armed = fc.armed().map_or("null".to_string(), |a| a.to_string());
                 // Body FRD → NED as body FLU → (x, y, z up): (w, x, −y, −z).
                 let line = format!(
-                    "{{\"t\":{t:.3},\"x\":{:.5},\"y\":{:.5},\"z\":{:.5},\"qx\":{:.6},\"qy\":{:.6},\"qz\":{:.6},\"qw\":{:.6},\"armed\":{},\"flying\":{}}}",
-                    p[0], p[1], p[2], x[7], -x[8], -x[9], x[6], vehicle.armed(), vehicle.flying()
+                    "{{\"t\":{t:.3},\"x\":{:.5},\"y\":{:.5},\"z\":{:.5},\"qx\":{:.6},\"qy\":{:.6},\"qz\":{:.6},\"qw\":{:.6},\"armed\":{armed},\"flying\":{flying}}}",
+                    p[0], p[1], p[2], x[7], -x[8], -x[9], x[6]
                 );
                 let _ = s.send_to(line.as_bytes(), to);
             }
         }
         step += 1;
     }
-    Ok(CrtpSummary {
-        duration_s: step as f64 * IMU_PERIOD_S,
-        late_steps: late,
-        packets: vehicle.counters().into(),
-        sent: out.sent,
-        final_position_m: cf_of(&plant.position()),
+    let final_position_m = cf_of(&plant.position());
+    let duration_s = step as f64 * IMU_PERIOD_S;
+    let realtime_factor = duration_s / start.elapsed().as_secs_f64().max(1e-9);
+    Ok(match fc {
+        Fc::Local { vehicle, out, .. } => CrtpSummary {
+            duration_s,
+            late_steps: late,
+            realtime_factor,
+            target: "in-process",
+            packets: Some(vehicle.counters().into()),
+            sent: Some(out.sent),
+            firmware_log: Vec::new(),
+            final_position_m,
+        },
+        Fc::Image { qemu, link } => {
+            drop(link);
+            CrtpSummary {
+                duration_s,
+                late_steps: late,
+                realtime_factor,
+                target: "qemu",
+                packets: None,
+                sent: None,
+                firmware_log: qemu.finish()?,
+                final_position_m,
+            }
+        }
     })
 }

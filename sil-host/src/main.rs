@@ -125,6 +125,17 @@ struct CrtpArgs {
     /// Seed of the sensor noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Where the vehicle runs: `in-process` (served on --listen) or `qemu` (the `firmware-crtp`
+    /// image: cflib reaches it through `tools/nrf51_bridge.py` on --syslink).
+    #[arg(long, default_value = "in-process", value_parser = ["in-process", "qemu"])]
+    target: String,
+    /// With `--target qemu`: the TCP address of the image's USART6 (syslink), where
+    /// `tools/nrf51_bridge.py --syslink` connects.
+    #[arg(long, default_value = "127.0.0.1:19880", value_name = "HOST:PORT")]
+    syslink: String,
+    /// With `--target qemu`: how long the image waits for the bridge to connect, s.
+    #[arg(long, default_value_t = 30.0, value_name = "S")]
+    bridge_wait: f64,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -1074,7 +1085,20 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
             bail!("--duration {d:?} is out of range: must be in (0, 1e6] s");
         }
     }
+    if !(a.bridge_wait.is_finite() && a.bridge_wait >= 1.0 && a.bridge_wait <= 3600.0) {
+        bail!(
+            "--bridge-wait {:?} is out of range: must be in [1, 3600] s",
+            a.bridge_wait
+        );
+    }
+    // SIGINT/SIGTERM end the flight at the next step: the summary is written
+    // and QEMU (with --target qemu) stopped, not left orphaned.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed))
+        .context("installing the SIGINT/SIGTERM handler")?;
     let summary = sil_host::crtp::run(&sil_host::crtp::CrtpConfig {
+        stop,
         listen: a.listen,
         settings,
         vehicle,
@@ -1082,6 +1106,13 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
         truth_to: a.truth_to,
         duration_s: a.duration,
         seed: a.seed,
+        target: match a.target.as_str() {
+            "qemu" => sil_host::crtp::CrtpTarget::Qemu {
+                syslink: a.syslink.clone(),
+                wait_s: a.bridge_wait,
+            },
+            _ => sil_host::crtp::CrtpTarget::InProcess,
+        },
     })?;
     println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())

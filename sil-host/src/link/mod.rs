@@ -8,5 +8,7 @@ pub mod qemu;
 pub mod server;
 
 pub use client::{FcClient, Remote, RemoteStep};
-pub use qemu::{decode_defmt, firmware_elf, firmware_mavlink_elf, qemu_command, Qemu, SYSTICK_PER_INSTRUCTION};
+pub use qemu::{
+    decode_defmt, firmware_crtp_elf, firmware_elf, firmware_mavlink_elf, qemu_command, Qemu, SYSTICK_PER_INSTRUCTION,
+};
 pub use server::{serve, ServeOptions};

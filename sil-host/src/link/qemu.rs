@@ -27,6 +27,12 @@ pub fn firmware_mavlink_elf() -> Result<std::path::PathBuf> {
     built_elf("SIL_FIRMWARE_MAVLINK_ELF", env!("SIL_FIRMWARE_MAVLINK_ELF_BUILT"))
 }
 
+/// The image that speaks CRTP over syslink (binary `firmware-crtp`):
+/// `$SIL_FIRMWARE_CRTP_ELF` if set, else the one the build script built.
+pub fn firmware_crtp_elf() -> Result<std::path::PathBuf> {
+    built_elf("SIL_FIRMWARE_CRTP_ELF", env!("SIL_FIRMWARE_CRTP_ELF_BUILT"))
+}
+
 fn built_elf(var: &str, built: &str) -> Result<std::path::PathBuf> {
     if let Some(p) = std::env::var_os(var) {
         return Ok(p.into());
@@ -78,6 +84,8 @@ pub struct Qemu {
     /// The guest's semihosting output (its defmt log frames).
     out: std::path::PathBuf,
     elf: std::path::PathBuf,
+    /// How long the firmware may take to say it is up, from the start.
+    up_within: Duration,
 }
 
 /// Decodes defmt log frames (`bytes`) with the format table of `elf`; one
@@ -108,11 +116,32 @@ pub fn decode_defmt(elf: &std::path::Path, bytes: &[u8]) -> Result<Vec<String>> 
 impl Qemu {
     /// Starts the image at `elf`.
     pub fn start(elf: &std::path::Path) -> Result<Self> {
+        Self::spawn(elf, &[], Duration::from_secs(10))
+    }
+
+    /// Starts the image at `elf` with USART6 (QEMU's sixth `-serial`) also a
+    /// TCP server at `syslink`: the Crazyflie's link to its nRF51 radio,
+    /// for `tools/nrf51_bridge.py`. QEMU starts the guest once both USART1
+    /// and USART6 have a client, so nothing the image says at boot
+    /// (`RADIO_READY`) is lost; the bridge has `wait_s` to connect.
+    pub fn start_with_syslink(elf: &std::path::Path, syslink: &str, wait_s: f64) -> Result<Self> {
+        let usart6 = format!("tcp:{syslink},server=on,wait=on,nodelay=on");
+        let serials = ["null", "null", "null", "null", usart6.as_str()];
+        Self::spawn(elf, &serials, Duration::from_secs_f64(wait_s.clamp(1.0, 3600.0)))
+    }
+
+    /// Starts QEMU with USART1 on a local TCP server and `more` as the
+    /// chardevs of USART2, 3, ….
+    fn spawn(elf: &std::path::Path, more: &[&str], up_within: Duration) -> Result<Self> {
         let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
         let addr = format!("127.0.0.1:{port}");
         let log = std::env::temp_dir().join(format!("sil-host-qemu-{port}.log"));
         let out = std::env::temp_dir().join(format!("sil-host-qemu-{port}.defmt"));
-        let child = qemu_command(&format!("tcp:{addr},server=on,wait=on,nodelay=on"), elf)
+        let mut cmd = qemu_command(&format!("tcp:{addr},server=on,wait=on,nodelay=on"), elf);
+        for m in more {
+            cmd.args(["-serial", m]);
+        }
+        let child = cmd
             // Semihosting output: the firmware's defmt log.
             .stdout(std::fs::File::create(&out)?)
             // QEMU's own messages go to a log file: an unread pipe would fill and stall it.
@@ -125,6 +154,7 @@ impl Qemu {
             log,
             out,
             elf: elf.to_path_buf(),
+            up_within,
         })
     }
 
@@ -179,23 +209,27 @@ impl Qemu {
 }
 
 impl Qemu {
-    /// Waits (up to 10 s from `t0`) until the firmware has logged that its
-    /// USART is up (`up: protocol vN, waiting on USART1`, or `up: MAVLink 2, …`).
+    /// Waits (up to 10 s from `t0`, or what [`Qemu::start_with_syslink`]
+    /// allows) until the firmware has logged that its USART is up
+    /// (`up: protocol vN, waiting on USART1`, `up: MAVLink 2, …`, `up: CRTP …`).
     fn wait_until_up(&mut self, t0: Instant) -> Result<()> {
         loop {
             let bytes = std::fs::read(&self.out).unwrap_or_default();
             if !bytes.is_empty()
                 && decode_defmt(&self.elf, &bytes)?
                     .iter()
-                    .any(|l| l.contains("up: protocol") || l.contains("up: MAVLink"))
+                    .any(|l| l.contains("up: protocol") || l.contains("up: MAVLink") || l.contains("up: CRTP"))
             {
                 return Ok(());
             }
             if let Ok(Some(st)) = self.child.try_wait() {
                 bail!("qemu exited before the firmware was up: {st}");
             }
-            if t0.elapsed() > Duration::from_secs(10) {
-                bail!("the firmware did not log that it is up within 10 s");
+            if t0.elapsed() > self.up_within {
+                bail!(
+                    "the firmware did not log that it is up within {:.0} s",
+                    self.up_within.as_secs_f64()
+                );
             }
             std::thread::sleep(Duration::from_millis(10));
         }
