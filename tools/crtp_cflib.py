@@ -20,14 +20,21 @@ the firmware says of itself:
    and moves, the truth within 5 cm of each set-point; then
    `send_notify_setpoint_stop` and the high-level `land`.
 
-Prints `crtp check: N passed, M failed`; exits 1 on any failure.
-Usage: crtp_cflib.py SIL_HOST
+With `--qemu` the same sessions fly the `firmware-crtp` image in QEMU
+(`sil-host crtp --target qemu`): cflib reaches it through
+`tools/nrf51_bridge.py`, which plays the Crazyflie's nRF51 radio (syslink on
+the image's USART6); the plant feeds its sensors on USART1.
+
+Prints `crtp check: N passed, M failed` (`crtp qemu check: ...` with --qemu);
+exits 1 on any failure.
+Usage: crtp_cflib.py SIL_HOST [--qemu] [sil-host crtp options]
 """
 import importlib.metadata
 import json
 import math
 import os
 import pathlib
+import signal
 import socket
 import subprocess
 import sys
@@ -45,7 +52,10 @@ PORT = 19850
 TRUTH_PORT = 19870
 URI = f'udp://127.0.0.1:{PORT}'
 TOL_M = 0.05
-CONTROLLER = sys.argv[2:]
+QEMU = '--qemu' in sys.argv[2:]
+CONTROLLER = [a for a in sys.argv[2:] if a != '--qemu']
+SYSLINK = '127.0.0.1:19880'
+BRIDGE = pathlib.Path(__file__).resolve().parent / 'nrf51_bridge.py'
 
 passed = 0
 failed = 0
@@ -71,6 +81,7 @@ class Truth(threading.Thread):
         self.sock.settimeout(0.5)
         self.last = None
         self.stop = False
+        self.walls = []  # (plant s, wall s) of each sleep()
 
     def run(self):
         while not self.stop:
@@ -83,13 +94,85 @@ class Truth(threading.Thread):
         t = self.last
         return (t['x'], t['y'], t['z'])
 
+    def t(self):
+        return self.last['t'] if self.last else 0.0
 
-def start_sil(sil_host, *extra):
-    p = subprocess.Popen([sil_host, 'crtp', *CONTROLLER, '--listen', f'127.0.0.1:{PORT}', '--truth-to',
-                          f'127.0.0.1:{TRUTH_PORT}', '--duration', '120', *extra],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(0.5)
-    return p
+    def sleep(self, secs, every=None):
+        """Waits `secs` of the plant's time (the truth stream's `t`), calling
+        `every()` each 20 ms of it meanwhile (a set-point stream at 50 Hz). In
+        the SIL the plant keeps wall time; in QEMU it runs slower (the emulated
+        image), and a flight's phases are timed on the vehicle's clock, as
+        cflib's durations are."""
+        t0 = self.t()
+        w0 = time.time()
+        called = None
+        while self.t() < t0 + secs and time.time() < w0 + 50 * secs:
+            if every and (called is None or self.t() >= called + 0.02):
+                called = self.t()
+                every()
+            time.sleep(0.002)
+        self.walls.append((self.t() - t0, time.time() - w0))
+
+
+class Sil:
+    """`sil-host crtp`, and with --qemu the nRF51 bridge in front of the image."""
+
+    def __init__(self, sil_host, *extra, truth=None):
+        if truth:
+            truth.last = None  # the previous session's clock is not this one's
+        target = ['--target', 'qemu', '--syslink', SYSLINK] if QEMU else []
+        self.sil = subprocess.Popen([sil_host, 'crtp', *CONTROLLER, *target, '--listen', f'127.0.0.1:{PORT}',
+                                     '--truth-to', f'127.0.0.1:{TRUTH_PORT}', '--duration', '120', *extra],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.bridge = None
+        if QEMU:
+            self.bridge = subprocess.Popen([sys.executable, str(BRIDGE), '--syslink', SYSLINK, '--listen',
+                                            f'127.0.0.1:{PORT}'], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                           text=True)
+            # The image is up once its parameters are written (sil-host says so).
+            deadline = time.time() + 60
+            while time.time() < deadline and self.sil.poll() is None:
+                line = self.sil.stderr.readline()
+                if 'parameters written' in line:
+                    break
+        # sil-host's stderr, drained (a full pipe would stall it) and kept.
+        self.err = []
+        threading.Thread(target=lambda: self.err.extend(self.sil.stderr), daemon=True).start()
+        time.sleep(0.5)
+
+    def stop(self):
+        """Stops both (sil-host stops its QEMU on SIGTERM); returns sil-host's
+        summary and the bridge's line."""
+        self.sil.terminate()
+        try:
+            out, _ = self.sil.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.sil.kill()
+            out, _ = self.sil.communicate()
+        out += ''.join(self.err[-20:])
+        bridge = ''
+        if self.bridge:
+            # It ends when QEMU closes USART6; SIGINT is its Ctrl-C otherwise.
+            try:
+                bridge, _ = self.bridge.communicate(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.bridge.send_signal(signal.SIGINT)
+                bridge, _ = self.bridge.communicate()
+        return out, bridge
+
+
+def start_sil(sil_host, *extra, truth=None):
+    return Sil(sil_host, *extra, truth=truth)
+
+
+def report(sil, failed_before):
+    """Stops the session; when one of its checks failed, shows what sil-host
+    (its summary, with the image's log in QEMU) and the bridge said."""
+    out, bridge = sil.stop()
+    if QEMU:
+        print(f'  the bridge relayed: {bridge.strip()}')
+    if failed > failed_before:
+        print(f'sil-host said:\n{out[-4000:]}\nthe bridge said: {bridge.strip()}')
 
 
 def near(truth, goal, what):
@@ -130,7 +213,8 @@ def estimator_settled(scf):
 
 def session_high_level(sil_host, truth):
     print('session 1: the SIL\'s motion capture, the high-level commander')
-    sil = start_sil(sil_host)
+    failed_before = failed
+    sil = start_sil(sil_host, truth=truth)
     try:
         scf = connect()
         cf = scf.cf
@@ -173,24 +257,24 @@ def session_high_level(sil_host, truth):
         hl = cf.high_level_commander
         start = truth.pos()
         hl.takeoff(0.5, 2.0)
-        time.sleep(3.0)
+        truth.sleep(3.0)
         near(truth, (start[0], start[1], 0.5), 'takeoff(0.5, 2) after 3 s')
         hl.go_to(1.0, 0.5, 0.8, 0.0, 3.0)
-        time.sleep(4.5)
+        truth.sleep(4.5)
         near(truth, (1.0, 0.5, 0.8), 'go_to(1, 0.5, 0.8, 0, 3) after 4.5 s')
         hl.land(0.0, 2.0)
-        time.sleep(3.5)
+        truth.sleep(3.5)
         near(truth, (1.0, 0.5, 0.0), 'land(0, 2) after 3.5 s')
         check(not truth.last['flying'], 'landed: motors off')
         scf.close_link()
     finally:
-        sil.terminate()
-        sil.wait()
+        report(sil, failed_before)
 
 
 def session_extpos(sil_host, truth):
     print('session 2: send_extpos as the only position source, send_position_setpoint')
-    sil = start_sil(sil_host, '--position-source', 'external')
+    failed_before = failed
+    sil = start_sil(sil_host, '--position-source', 'external', truth=truth)
     try:
         scf = connect()
         cf = scf.cf
@@ -198,11 +282,15 @@ def session_extpos(sil_host, truth):
         feeding.set()
 
         def feed():
-            # A motion-capture bridge: the truth stream forwarded at 100 Hz.
+            # A motion-capture system: each truth sample (100 Hz of the plant's
+            # time) forwarded as it arrives.
+            last = None
             while feeding.is_set():
-                if truth.last:
-                    cf.extpos.send_extpos(*truth.pos())
-                time.sleep(0.01)
+                sample = truth.last
+                if sample is not None and sample is not last:
+                    cf.extpos.send_extpos(sample['x'], sample['y'], sample['z'])
+                    last = sample
+                time.sleep(0.002)
 
         feeder = threading.Thread(target=feed, daemon=True)
         feeder.start()
@@ -214,22 +302,18 @@ def session_extpos(sil_host, truth):
         time.sleep(0.3)
         check('Is armed' in cf.supervisor.read_state_list(), 'armed on extpos')
         for goal, secs in (((0.0, 0.0, 0.5), 3.0), ((0.5, -0.3, 0.7), 4.0)):
-            end = time.time() + secs
-            while time.time() < end:
-                cf.commander.send_position_setpoint(*goal, 0.0)
-                time.sleep(0.02)
+            truth.sleep(secs, every=lambda: cf.commander.send_position_setpoint(*goal, 0.0))
             near(truth, goal, f'send_position_setpoint{goal} for {secs:.0f} s')
         cf.commander.send_notify_setpoint_stop()
         cf.high_level_commander.land(0.0, 2.0)
-        time.sleep(3.5)
+        truth.sleep(3.5)
         check(truth.last['z'] < TOL_M and not truth.last['flying'],
               f'land after notify_setpoint_stop: z {truth.last["z"]:.3f} m, motors off')
         feeding.clear()
         feeder.join()
         scf.close_link()
     finally:
-        sil.terminate()
-        out, _ = sil.communicate()
+        report(sil, failed_before)
 
 
 def session_examples(sil_host):
@@ -258,8 +342,7 @@ def session_examples(sil_host):
                   f'{script}: exit {r.returncode}, {lines} lines, "{expect}" in its output'
                   + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
         finally:
-            sil.terminate()
-            sil.wait()
+            sil.stop()
 
 
 def main():
@@ -271,7 +354,10 @@ def main():
     session_extpos(sil_host, truth)
     session_examples(sil_host)
     truth.stop = True
-    print(f'crtp check: {passed} passed, {failed} failed')
+    plant = sum(p for p, _ in truth.walls)
+    wall = sum(w for _, w in truth.walls)
+    print(f'the plant flew {plant:.1f} s in {wall:.1f} s of wall time (real-time factor {plant / max(wall, 1e-9):.2f})')
+    print(f'crtp{" qemu" if QEMU else ""} check: {passed} passed, {failed} failed')
     sys.exit(1 if failed else 0)
 
 
