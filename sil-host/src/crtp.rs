@@ -25,8 +25,8 @@ use hal_shim::host::MonotonicClock;
 use nalgebra::Vector3;
 use serde::Serialize;
 use std::net::{SocketAddr, UdpSocket};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// cflib's first UDP port (its scan probes 19850–19859).
