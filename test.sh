@@ -33,7 +33,7 @@ echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run her
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
 cargo board-build  # the alias a user with a board runs (.cargo/config.toml; `cargo board-run` flashes it)
 echo "== image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
-size target/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
+size target/thumbv7em-none-eabihf/release/firmware target/thumbv7em-none-eabihf/release/firmware-crtp target/hardware/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
 echo "== API docs (warnings denied; the doctests run with the tests below)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 echo "== the book (docs/book, mdBook): built with its warnings refused, every internal link and anchor checked"
@@ -116,6 +116,8 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration
 echo "== cflib (PyPI, pinned), unmodified, flies sil-host crtp over its udp:// driver; then cflib's own examples"
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "cflib==0.1.34"
 python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
+echo "== the same cflib sessions against the firmware-crtp image in QEMU, through tools/nrf51_bridge.py (syslink on USART6)"
+python3 tools/crtp_cflib.py target/release/sil-host --qemu | tee -a "$log"
 echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp|crtp-qemu) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

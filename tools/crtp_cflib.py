@@ -25,7 +25,7 @@ With `--qemu` the same sessions fly the `firmware-crtp` image in QEMU
 `tools/nrf51_bridge.py`, which plays the Crazyflie's nRF51 radio (syslink on
 the image's USART6); the plant feeds its sensors on USART1.
 
-Prints `crtp check: N passed, M failed` (`crtp qemu check: ...` with --qemu);
+Prints `crtp check: N passed, M failed` (`crtp-qemu check: ...` with --qemu);
 exits 1 on any failure.
 Usage: crtp_cflib.py SIL_HOST [--qemu] [sil-host crtp options]
 """
@@ -357,7 +357,7 @@ def main():
     plant = sum(p for p, _ in truth.walls)
     wall = sum(w for _, w in truth.walls)
     print(f'the plant flew {plant:.1f} s in {wall:.1f} s of wall time (real-time factor {plant / max(wall, 1e-9):.2f})')
-    print(f'crtp{" qemu" if QEMU else ""} check: {passed} passed, {failed} failed')
+    print(f'crtp{"-qemu" if QEMU else ""} check: {passed} passed, {failed} failed')
     sys.exit(1 if failed else 0)
 
 
