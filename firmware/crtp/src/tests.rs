@@ -351,3 +351,26 @@ fn a_simulator_writes_the_flight_loops_table_by_index() {
     // No such entry.
     assert_eq!(v.write_param(PARAMS.len(), 1.0), Err(Refusal::Unknown));
 }
+
+/// cfclient's flight tab reads `deck.bc*` (an exception without them): each
+/// is in the TOC as the firmware's deck drivers declare it, `PARAM_UINT8 |
+/// PARAM_RONLY` (0x48), and reads 0: no deck attached. A write of another
+/// value is refused and changes nothing.
+#[test]
+fn decks_are_read_only_and_absent() {
+    let mut v = at_rest(10);
+    let decks: Vec<usize> = (0..PARAM_COUNT)
+        .filter(|&i| param_entry(i).is_some_and(|(n, _, _)| n.group == "deck"))
+        .collect();
+    assert_eq!(decks.len(), 8);
+    for &i in &decks {
+        let (n, t, _) = param_entry(i).unwrap();
+        assert_eq!(t, 0x48, "deck.{}", n.name);
+        let id = (i as u16).to_le_bytes();
+        let r = ask(&mut v, pk(Port::Param, 1, &id));
+        // A read's answer: id, status 0, the value.
+        assert_eq!(r.payload(), &[id[0], id[1], 0, 0][..], "deck.{} reads 0", n.name);
+        let r = ask(&mut v, pk(Port::Param, 2, &[id[0], id[1], 1]));
+        assert_eq!(r.payload(), &[id[0], id[1], 0][..], "deck.{} stays 0", n.name);
+    }
+}

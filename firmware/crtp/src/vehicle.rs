@@ -121,6 +121,10 @@ pub mod param_types {
     pub const U8: u8 = 0x08;
     /// `float`.
     pub const FLOAT: u8 = 0x06;
+    /// Flag: read-only (`PARAM_RONLY`); cflib refuses to write it.
+    pub const RONLY: u8 = 0x40;
+    /// The type's bits (size, integer or float, signedness) under the flags.
+    pub const TYPE: u8 = 0x0F;
 }
 
 /// A parameter under a Crazyflie name, beside [`PARAMS`].
@@ -136,6 +140,9 @@ pub enum Extra {
     EnHighLevel,
     /// `pid_attitude.*`: the PD controller's attitude gain [`PARAMS`] index.
     Alias(usize),
+    /// `deck.bc*`: read-only, 0: no expansion deck is attached. cfclient's
+    /// flight tab reads them to offer height hold and command-based flight.
+    Deck,
 }
 
 /// The index in [`PARAMS`] of the parameter named `id` (a compile-time
@@ -162,7 +169,7 @@ const fn param_index(id: &str) -> usize {
 const CTL_ID: usize = param_index("CTL_ID");
 
 /// The Crazyflie-named parameters after [`PARAMS`] in the param TOC.
-pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 10] = [
+pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 18] = [
     ("kalman", "resetEstimation", param_types::U8, Extra::ResetEstimation),
     ("stabilizer", "controller", param_types::U8, Extra::Controller),
     ("stabilizer", "estimator", param_types::U8, Extra::Estimator),
@@ -203,7 +210,18 @@ pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 10] = [
         param_types::FLOAT,
         Extra::Alias(param_index("PD_YAW_D")),
     ),
+    ("deck", "bcFlow", DECK, Extra::Deck),
+    ("deck", "bcFlow2", DECK, Extra::Deck),
+    ("deck", "bcZRanger", DECK, Extra::Deck),
+    ("deck", "bcZRanger2", DECK, Extra::Deck),
+    ("deck", "bcLighthouse4", DECK, Extra::Deck),
+    ("deck", "bcLoco", DECK, Extra::Deck),
+    ("deck", "bcDWM1000", DECK, Extra::Deck),
+    ("deck", "bcLedRing", DECK, Extra::Deck),
 ];
+
+/// A deck's attached flag: `PARAM_UINT8 | PARAM_RONLY`, as the firmware's deck drivers declare it.
+const DECK: u8 = param_types::U8 | param_types::RONLY;
 
 /// Entries in the param TOC.
 pub const PARAM_COUNT: usize = PARAMS.len() + EXTRA_PARAMS.len();
@@ -864,6 +882,7 @@ impl CrtpVehicle {
             Some(Extra::Estimator) => 2.0,
             Some(Extra::EnHighLevel) => 1.0,
             Some(Extra::Alias(i)) => (PARAMS[i].get)(s),
+            Some(Extra::Deck) => 0.0,
         })
     }
 
@@ -896,6 +915,8 @@ impl CrtpVehicle {
             }
             Some(Extra::Estimator) if value == 2.0 => return Ok(()),
             Some(Extra::EnHighLevel) if value == 1.0 => return Ok(()),
+            // Read-only: the value in force, 0, is the only one taken.
+            Some(Extra::Deck) if value == 0.0 => return Ok(()),
             Some(_) => return Err(Refusal::Range { lo: value, hi: value }),
         };
         self.core.apply_param(index, value, !self.flying())?;
@@ -977,7 +998,7 @@ impl CrtpVehicle {
     /// Appends parameter `id`'s value `v` in its type.
     fn put_value(&self, r: &mut Packet, id: usize, v: f32) {
         let t = param_entry(id).map_or(param_types::FLOAT, |(_, t, _)| t);
-        let _ = match t {
+        let _ = match t & param_types::TYPE {
             param_types::U8 => r.extend(&[v as u8]),
             _ => r.extend(&v.to_le_bytes()),
         };
@@ -1313,7 +1334,7 @@ fn log_name(v: &LogVar) -> Name<'static> {
 
 /// A parameter value of param type `t` in `b`, as f32.
 fn read_value(t: u8, b: &[u8]) -> Option<f32> {
-    match t {
+    match t & param_types::TYPE {
         param_types::U8 => b.first().map(|&v| f32::from(v)),
         param_types::FLOAT => f32_at(b, 0),
         _ => None,
