@@ -118,6 +118,19 @@ python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ig
 python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
 echo "== the same cflib sessions against the firmware-crtp image in QEMU, through tools/nrf51_bridge.py (syslink on USART6)"
 python3 tools/crtp_cflib.py target/release/sil-host --qemu | tee -a "$log"
+echo "== cfclient (PyPI, pinned, in its own venv), unmodified, connects under Xvfb; a screenshot of its flight tab"
+if ! command -v Xvfb >/dev/null || ! command -v xdotool >/dev/null || ! command -v import >/dev/null; then
+    echo "== installing Xvfb, xdotool, ImageMagick and Qt's X11 libraries (apt)"
+    if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends xvfb xdotool imagemagick \
+        libgl1 libegl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1 libxcb-randr0 \
+        libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 libfontconfig1 libdbus-1-3 fonts-dejavu-core >/dev/null
+fi
+[ -x target/cfclient-venv/bin/cfclient ] || python3 -m venv target/cfclient-venv
+target/cfclient-venv/bin/python -m pip install --quiet --disable-pip-version-check "cfclient==2026.8.1"
+python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/cfclient \
+    --out target/cfclient-flight-tab.png | tee -a "$log"
 echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp|crtp-qemu) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp|crtp-qemu|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
