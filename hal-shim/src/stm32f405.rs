@@ -438,6 +438,20 @@ impl PwmActuators {
     }
 }
 
+/// Every motor output off at once, from whatever state the program is in
+/// (a fault handler's first act): TIM3's four compare values set to 0 and
+/// loaded now by an update event, not at the end of the PWM period. Returns
+/// the compare values read back. Harmless if [`PwmActuators`] never started
+/// (the outputs were never driven).
+pub fn motors_off_now() -> [u32; 4] {
+    let t = tim3();
+    for ch in 0..4 {
+        t.ccr(ch).write(|w| w.ccr().set(0));
+    }
+    t.egr().write(|w| w.ug().update());
+    core::array::from_fn(|ch| u32::from(t.ccr(ch).read().ccr().bits()))
+}
+
 impl crate::ActuatorOutput for PwmActuators {
     fn apply(&mut self, u: [f32; 4]) {
         let duty = (self.to_duty)(&u);

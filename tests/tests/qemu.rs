@@ -354,3 +354,71 @@ fn qemu_flight_does_not_depend_on_the_hosts_load() {
         "{m1} {x1} vs {m2} {x2}"
     );
 }
+
+/// A deliberate HardFault (the `fault` program, linked with the images'
+/// `board.rs`): its motors run at half duty on TIM3, then it executes an
+/// undefined instruction. The board's handler must turn the motors off (all
+/// four compare values 0, loaded at once), say over defmt where the fault
+/// was — a pc inside the program's `main`, found by `nm` in the ELF — and end
+/// the run as a failure (QEMU's exit status).
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn a_hard_fault_turns_the_motors_off_and_says_where() {
+    let st = cargo()
+        .args(["build", "-q", "--release", "-p", "fc-stm32f405", "--bin", "fault"])
+        .args(["--target", "thumbv7em-none-eabihf"])
+        .status()
+        .expect("cargo");
+    assert!(st.success(), "building the fault program for thumbv7em failed");
+    let elf = root().join("target/thumbv7em-none-eabihf/release/fault");
+    let out = sil_host::link::qemu_command("null", &elf)
+        .output()
+        .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
+    assert!(!out.status.success(), "a hard fault must end the run as a failure");
+    let log = sil_host::link::decode_defmt(&elf, &out.stdout).expect("the program's defmt log");
+    let all = log.join("\n");
+    let running = log
+        .iter()
+        .find(|l| l.contains("fault: motors running"))
+        .unwrap_or_else(|| panic!("no 'motors running' line:\n{all}"));
+    assert!(
+        !running.contains("compare [0, 0, 0, 0]"),
+        "the motors were not running:\n{all}"
+    );
+    let fault = log
+        .iter()
+        .find(|l| l.contains("hard fault at pc"))
+        .unwrap_or_else(|| panic!("no hard-fault line:\n{all}"));
+    assert!(fault.contains("motors off (TIM3 compare [0, 0, 0, 0])"), "{fault}");
+    assert!(
+        log.last().is_some_and(|l| l.contains("hard fault; not flying")),
+        "{all}"
+    );
+    // Where: the pc of the undefined instruction, inside `main` (nm: address and size).
+    let pc = fault
+        .split("pc 0x")
+        .nth(1)
+        .and_then(|s| u32::from_str_radix(&s[..8], 16).ok())
+        .unwrap_or_else(|| panic!("no pc in {fault}"));
+    let nm = Command::new("nm")
+        .args(["-S", "-C"])
+        .arg(&elf)
+        .output()
+        .expect("binutils `nm` (with gcc)");
+    let syms = String::from_utf8_lossy(&nm.stdout);
+    let (start, size) = syms
+        .lines()
+        .find(|l| l.ends_with("fault::target::__cortex_m_rt_main"))
+        .and_then(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            Some((
+                u32::from_str_radix(f[0], 16).ok()? & !1,
+                u32::from_str_radix(f[1], 16).ok()?,
+            ))
+        })
+        .unwrap_or_else(|| panic!("no main in nm's list:\n{syms}"));
+    assert!(
+        (start..start + size).contains(&pc),
+        "pc {pc:#010x} outside main ({start:#010x}, {size} B): {fault}"
+    );
+}

@@ -152,12 +152,19 @@ unsafe fn DefaultHandler(irqn: i16) {
 /// failure; a board halts with the motors off).
 #[exception]
 unsafe fn HardFault(ef: &cortex_m_rt::ExceptionFrame) -> ! {
-    defmt::error!("hard fault at pc {=u32:#010x} (lr {=u32:#010x})", ef.pc(), ef.lr());
+    let ccr = hal_shim::stm32f405::motors_off_now();
+    defmt::error!(
+        "hard fault at pc {=u32:#010x} (lr {=u32:#010x}); motors off (TIM3 compare {})",
+        ef.pc(),
+        ef.lr(),
+        ccr
+    );
     fail("hard fault")
 }
 
 #[panic_handler]
 fn panic(info: &PanicInfo) -> ! {
+    hal_shim::stm32f405::motors_off_now();
     // The core never panics on input; if anything does, say where.
     if let Some(l) = info.location() {
         defmt::error!("panic at {=str}:{=u32}", l.file(), l.line());
