@@ -106,16 +106,15 @@ pub fn usart_isr(port: Port) {
         if sr.rxne().bit_is_clear() {
             break;
         }
-        if port.with_queue(|q| q.is_full()) {
+        // One critical section per byte: DR is read (popping the byte and
+        // clearing RXNE) only when the queue has room for it.
+        let taken = port.with_queue(|q| !q.is_full() && q.push_back(u.dr().read().dr().bits() as u8).is_ok());
+        if !taken {
             // Masked at the NVIC, not with RXNEIE: QEMU's USART keeps its
             // interrupt line raised while RXNE is set whatever RXNEIE says.
             NVIC::mask(port.irq());
             break;
         }
-        // Reading DR pops the byte and clears RXNE.
-        let b = u.dr().read().dr().bits() as u8;
-        // Not full (checked above; only this handler pushes).
-        let _ = port.with_queue(|q| q.push_back(b));
     }
 }
 
@@ -423,9 +422,7 @@ impl PwmActuators {
     /// What the timer holds: the auto-reload value and the four compare
     /// values, read back from TIM3 (for checks; duty = compare / (reload + 1)).
     pub fn registers(&self) -> (u32, [u32; 4]) {
-        let t = tim3();
-        let ccr = core::array::from_fn(|ch| u32::from(t.ccr(ch).read().ccr().bits()));
-        (u32::from(t.arr().read().arr().bits()), ccr)
+        (u32::from(tim3().arr().read().arr().bits()), tim3_compares())
     }
 
     fn set(&mut self, duty: [f32; 4]) {
@@ -449,6 +446,12 @@ pub fn motors_off_now() -> [u32; 4] {
         t.ccr(ch).write(|w| w.ccr().set(0));
     }
     t.egr().write(|w| w.ug().update());
+    tim3_compares()
+}
+
+/// TIM3's four compare values, read back.
+fn tim3_compares() -> [u32; 4] {
+    let t = tim3();
     core::array::from_fn(|ch| u32::from(t.ccr(ch).read().ccr().bits()))
 }
 

@@ -43,7 +43,7 @@ mod target {
             |c: &Counters| c.bad_crc + c.bad_cobs + c.bad_message + c.oversized + c.out_of_order + c.invalid_values;
         if bad(&counters) != bad(&last.2) {
             defmt::warn!(
-                "link errors: crc {=u32} cobs {=u32} message {=u32} oversized {=u32} order {=u32} values {=u32} (bytes lost to a full receive queue {=u32})",
+                "link errors: crc {=u32} cobs {=u32} message {=u32} oversized {=u32} order {=u32} values {=u32} (receiver overruns {=u32})",
                 counters.bad_crc,
                 counters.bad_cobs,
                 counters.bad_message,
