@@ -161,10 +161,6 @@ class Sil:
         return out, bridge
 
 
-def start_sil(sil_host, *extra, truth=None):
-    return Sil(sil_host, *extra, truth=truth)
-
-
 def report(sil, failed_before):
     """Stops the session; when one of its checks failed, shows what sil-host
     (its summary, with the image's log in QEMU) and the bridge said."""
@@ -214,7 +210,7 @@ def estimator_settled(scf):
 def session_high_level(sil_host, truth):
     print('session 1: the SIL\'s motion capture, the high-level commander')
     failed_before = failed
-    sil = start_sil(sil_host, truth=truth)
+    sil = Sil(sil_host, truth=truth)
     try:
         scf = connect()
         cf = scf.cf
@@ -274,7 +270,7 @@ def session_high_level(sil_host, truth):
 def session_extpos(sil_host, truth):
     print('session 2: send_extpos as the only position source, send_position_setpoint')
     failed_before = failed
-    sil = start_sil(sil_host, '--position-source', 'external', truth=truth)
+    sil = Sil(sil_host, '--position-source', 'external', truth=truth)
     try:
         scf = connect()
         cf = scf.cf
@@ -333,7 +329,7 @@ def session_examples(sil_host):
     for script, expect in (('logging/basiclog_sync.py', "'stabilizer.roll'"),
                            ('logging/basiclog.py', 'pm.vbat'),
                            ('parameters/basicparam.py', 'Parameters downloaded')):
-        sil = start_sil(sil_host)
+        sil = Sil(sil_host)
         try:
             r = subprocess.run([sys.executable, str(examples / script)], env=env, capture_output=True,
                                text=True, timeout=60, cwd=examples / script.split('/')[0])
