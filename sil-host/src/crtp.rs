@@ -183,57 +183,19 @@ fn battery_v(flown_s: f64, thrust_fraction: f64) -> f32 {
 /// vehicle's parameters, then one `Imu` (and its fixes) per step, each
 /// answered with `Actuator`.
 struct SimLink {
-    stream: std::net::TcpStream,
-    decoder: fc_proto::FrameDecoder,
+    client: crate::link::FcClient,
     seq: u32,
 }
 
 impl SimLink {
-    fn write(&mut self, m: &fc_proto::ToFc) -> Result<()> {
-        use std::io::Write;
-        let mut buf = [0u8; fc_proto::MAX_FRAME];
-        let n = fc_proto::encode(m, &mut buf).map_err(|e| anyhow::anyhow!("encoding {m:?}: {e:?}"))?;
-        self.stream
-            .write_all(&buf[..n])
-            .context("writing to the image's USART1")
-    }
-
-    /// Reads frames until `want` takes one.
-    fn read_until<T>(&mut self, mut want: impl FnMut(fc_proto::FromFc) -> Option<T>) -> Result<T> {
-        use std::io::Read;
-        let mut buf = [0u8; 256];
-        loop {
-            let n = self.stream.read(&mut buf).context("reading the image's USART1")?;
-            if n == 0 {
-                anyhow::bail!("the image closed USART1");
-            }
-            for &b in &buf[..n] {
-                if let Some(Ok(m)) = self.decoder.push::<fc_proto::FromFc>(b) {
-                    if let Some(t) = want(m) {
-                        return Ok(t);
-                    }
-                }
-            }
-        }
-    }
-
     /// Writes the parameters of `s` that differ from the image's boot
     /// values (the OS4's) and checks each answer.
     fn set_params(&mut self, s: &Settings) -> Result<()> {
         use fc_loop::params::differences;
         for (i, p, value) in differences(s, &Settings::os4()) {
-            self.write(&fc_proto::ToFc::ParamSet { index: i as u16, value })?;
-            let (got, refusal) = self.read_until(|m| match m {
-                fc_proto::FromFc::Param {
-                    index, value, refusal, ..
-                } if usize::from(index) == i => Some((value, refusal)),
-                _ => None,
-            })?;
-            if refusal != 0 || got != value {
-                anyhow::bail!(
-                    "the image refused {} = {value} (refusal {refusal}, in force {got})",
-                    p.id
-                );
+            let got = self.client.set_param(i, value)?;
+            if got != value {
+                anyhow::bail!("the image took {} = {value} as {got}", p.id);
             }
         }
         Ok(())
@@ -246,21 +208,14 @@ impl SimLink {
         imu: &fc_core::estimate::ImuSample,
         fixes: &[fc_core::estimate::Fix],
     ) -> Result<nalgebra::Vector4<f32>> {
-        for f in fixes {
-            self.write(&fc_proto::ToFc::Fix(fc_loop::fix_to_wire(f)))?;
-        }
         self.seq += 1;
-        let seq = self.seq;
-        self.write(&fc_proto::ToFc::Imu {
-            seq,
+        let u = self.client.imu_actuator(
+            self.seq,
             t_us,
-            gyro: imu.gyro_frd_radps.into(),
-            accel: imu.accel_frd_mps2.into(),
-        })?;
-        let u = self.read_until(|m| match m {
-            fc_proto::FromFc::Actuator { seq: s, u, .. } if s == seq => Some(u),
-            _ => None,
-        })?;
+            imu.gyro_frd_radps.into(),
+            imu.accel_frd_mps2.into(),
+            fixes.iter().map(fc_loop::fix_to_wire),
+        )?;
         Ok(nalgebra::Vector4::from(u))
     }
 }
@@ -363,8 +318,7 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
             let stream = qemu.connect()?;
             stream.set_read_timeout(Some(Duration::from_secs(10)))?;
             let mut link = SimLink {
-                stream,
-                decoder: fc_proto::FrameDecoder::new(),
+                client: crate::link::FcClient::over(stream),
                 seq: 0,
             };
             link.set_params(&cfg.settings)?;

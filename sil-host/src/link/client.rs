@@ -210,6 +210,34 @@ impl FcClient {
         bail!("no answer to ParamSet {name}")
     }
 
+    /// One IMU step of an image that answers `Imu` with `Actuator` alone (no
+    /// session, telemetry or `Nav`: `firmware-crtp`, whose clients speak
+    /// CRTP on another port): the fixes, the sample of step `seq`, then the
+    /// inputs of its answer.
+    pub fn imu_actuator(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        gyro: [f32; 3],
+        accel: [f32; 3],
+        fixes: impl IntoIterator<Item = fc_proto::WireFix>,
+    ) -> Result<[f32; 4]> {
+        for f in fixes {
+            self.send(&ToFc::Fix(f))?;
+        }
+        self.send(&ToFc::Imu { seq, t_us, gyro, accel })?;
+        loop {
+            let got = self
+                .receive()
+                .with_context(|| format!("waiting for the answer to step {seq} (t {t_us} µs)"))?;
+            if let FromFc::Actuator { seq: s, u, .. } = got {
+                if s == seq {
+                    return Ok(u);
+                }
+            }
+        }
+    }
+
     /// Writes the vehicle's parameters that differ from what the flight
     /// controller has (as read back), so that its controllers are
     /// designed for `vehicle` (`--vehicle` over a link).
