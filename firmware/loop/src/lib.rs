@@ -242,6 +242,32 @@ pub struct FlightCore {
     last_control_us: Option<u64>,
 }
 
+/// Our protocol's answer to a parameter request (`ParamRead`, `ParamSet`)
+/// under `settings`: parameter `index`'s id and value in force, and why a
+/// write was refused (`refusal`; 0 when it was not, `Unknown`'s code for an
+/// index past the table). For a board whose simulator writes its
+/// parameters as [`FlightCore`] answers them (`firmware-crtp`).
+pub fn param_answer(settings: &params::Settings, index: u16, refusal: Option<params::Refusal>) -> FromFc {
+    let p = params::PARAMS.get(usize::from(index));
+    let mut id = [0u8; 16];
+    if let Some(p) = p {
+        // Ids are at most 16 characters (MAVLink's `param_id`); cut, not panic.
+        let n = p.id.len().min(id.len());
+        id[..n].copy_from_slice(&p.id.as_bytes()[..n]);
+    }
+    FromFc::Param {
+        index,
+        count: params::PARAMS.len() as u16,
+        id,
+        value: p.map_or(f32::NAN, |p| (p.get)(settings)),
+        refusal: match (p, refusal) {
+            (None, _) => params::Refusal::Unknown.code(),
+            (_, Some(r)) => r.code(),
+            (_, None) => 0,
+        },
+    }
+}
+
 /// A wire fix as the estimator's type.
 pub fn fix_from_wire(w: &WireFix) -> Fix {
     Fix {
@@ -491,22 +517,7 @@ impl FlightCore {
     /// Answers a parameter request of our protocol: parameter `index`'s
     /// value, and why a write was refused (0: it was not).
     fn send_param<O: Outbox>(&self, index: u16, refusal: Option<params::Refusal>, out: &mut O) -> Result<(), O::Error> {
-        let p = params::PARAMS.get(usize::from(index));
-        let mut id = [0u8; 16];
-        if let Some(p) = p {
-            id[..p.id.len()].copy_from_slice(p.id.as_bytes());
-        }
-        out.send(&FromFc::Param {
-            index,
-            count: params::PARAMS.len() as u16,
-            id,
-            value: p.map_or(f32::NAN, |p| (p.get)(&self.settings)),
-            refusal: match (p, refusal) {
-                (None, _) => params::Refusal::Unknown.code(),
-                (_, Some(r)) => r.code(),
-                (_, None) => 0,
-            },
-        })
+        out.send(&param_answer(&self.settings, index, refusal))
     }
 
     /// Designs `spec` in place of the running controller (as a `Select`

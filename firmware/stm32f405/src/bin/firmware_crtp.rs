@@ -29,8 +29,8 @@ mod target {
     use fc_core::estimate::{Fix, ImuSample};
     use fc_crtp::syslink::{Syslink, SyslinkCounters};
     use fc_crtp::vehicle::CrtpVehicle;
-    use fc_loop::fix_from_wire;
-    use fc_loop::params::{Settings, PARAMS};
+    use fc_loop::params::Settings;
+    use fc_loop::{fix_from_wire, param_answer};
     use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME};
     use fc_stm32f405::PCLK2_HZ;
     use hal_shim::stm32f405::{rx_overruns, Port, SysTickClock, TxTimeout, Usart};
@@ -77,29 +77,8 @@ mod target {
     ) -> Result<(), TxTimeout> {
         match m {
             ToFc::ParamSet { index, value } => {
-                let i = usize::from(index);
-                let (value, refusal) = match v.write_param(i, value) {
-                    Ok(x) => (x, 0),
-                    Err(e) => (
-                        PARAMS.get(i).map_or(f32::NAN, |p| (p.get)(v.core().settings())),
-                        e.code(),
-                    ),
-                };
-                let mut id = [0u8; 16];
-                if let Some(p) = PARAMS.get(i) {
-                    let n = p.id.len().min(16);
-                    id[..n].copy_from_slice(&p.id.as_bytes()[..n]);
-                }
-                send(
-                    sim,
-                    &FromFc::Param {
-                        index,
-                        count: PARAMS.len() as u16,
-                        id,
-                        value,
-                        refusal,
-                    },
-                )
+                let refusal = v.write_param(usize::from(index), value).err();
+                send(sim, &param_answer(v.core().settings(), index, refusal))
             }
             ToFc::Fix(w) => {
                 if fixes.push(fix_from_wire(&w)).is_err() {
