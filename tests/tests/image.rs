@@ -30,8 +30,8 @@
 //! `firmware-crtp` (the same loop behind CRTP over syslink, the Crazyflie's
 //! radio link): flash ≤ 352 KiB — the CRTP services (TOCs of 70 parameters
 //! and 28 log variables, log blocks, the high-level commander's polynomial
-//! planner, syslink) add ≈ 64 KiB to the plain image (353 772 B against
-//! 288 296 B) —, static RAM ≤ 20 KiB (19 580 B: ≈ 2.8 KiB more)
+//! planner, syslink) add ≈ 65 KiB to the plain image (347 212 B against
+//! 280 880 B) —, static RAM ≤ 20 KiB (19 580 B: ≈ 2.8 KiB more)
 //! (the vehicle's log blocks, downlink queue of 16 packets and USART6's
 //! receive queue on top of the loop).
 
