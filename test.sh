@@ -10,12 +10,14 @@ cd "$(dirname "$0")"
 # rust-toolchain.toml pins stable + thumbv7em-none-eabihf; make sure both are present.
 rustup show active-toolchain >/dev/null
 rustup target list --installed | grep -qx thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
-# QEMU (Debian's qemu-system-arm) for the processor-in-the-loop tests.
-if ! command -v qemu-system-arm >/dev/null; then
-    echo "== installing qemu-system-arm (apt)"
+# QEMU (Debian's qemu-system-arm) for the processor-in-the-loop tests, and
+# the ARM binutils that turn the Crazyflie image into the .bin its
+# bootloader flashes.
+if ! command -v qemu-system-arm >/dev/null || ! command -v arm-none-eabi-objcopy >/dev/null; then
+    echo "== installing qemu-system-arm and binutils-arm-none-eabi (apt)"
     if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
     $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends qemu-system-arm >/dev/null
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends qemu-system-arm binutils-arm-none-eabi >/dev/null
 fi
 
 echo "== format"
@@ -29,11 +31,28 @@ cargo clippy -p fc-mavlink --target thumbv7em-none-eabihf -- -D warnings
 # So is the CRTP crate (the Crazyflie's protocol).
 cargo clippy -p fc-crtp --target thumbv7em-none-eabihf -- -D warnings
 cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf
+echo "== clippy + build (the Crazyflie 2.1 image, its boot shim and its board crate on thumbv7em-none-eabihf)"
+cargo clippy -p fc-crazyflie --target thumbv7em-none-eabihf --bins -- -D warnings
+cargo build -p fc-crazyflie --release --target thumbv7em-none-eabihf
 echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run here)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
 cargo board-build  # the alias a user with a board runs (.cargo/config.toml; `cargo board-run` flashes it)
+cargo clippy -p fc-crazyflie --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
+cargo cf-build  # the Crazyflie 2.1 image as flashed (the book's "The Crazyflie 2.1")
+# The file cfloader and dfu-util write at 0x08004000: it must begin with the
+# image's vector table (initial SP at the top of the 128 KiB SRAM, a Thumb
+# reset vector inside the image).
+arm-none-eabi-objcopy -O binary target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie target/hardware/firmware-crazyflie.bin
+python3 - target/hardware/firmware-crazyflie.bin <<'PY'
+import struct, sys
+b = open(sys.argv[1], "rb").read()
+sp, reset = struct.unpack("<II", b[:8])
+assert sp == 0x20020000, hex(sp)
+assert 0x08004000 < reset < 0x08004000 + len(b) and reset & 1, hex(reset)
+print(f"firmware-crazyflie.bin: {len(b)} B for 0x08004000, SP {sp:#x}, reset {reset:#x}")
+PY
 echo "== image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
-size target/thumbv7em-none-eabihf/release/firmware target/thumbv7em-none-eabihf/release/firmware-crtp target/hardware/thumbv7em-none-eabihf/release/firmware  # binutils (with gcc) reads the ARM ELF
+size target/thumbv7em-none-eabihf/release/firmware target/thumbv7em-none-eabihf/release/firmware-crtp target/thumbv7em-none-eabihf/release/firmware-crazyflie target/hardware/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie  # binutils (with gcc) reads the ARM ELF
 echo "== API docs (warnings denied; the doctests run with the tests below)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 echo "== the book (docs/book, mdBook): built with its warnings refused, every internal link and anchor checked"

@@ -1,10 +1,12 @@
-//! Builds the STM32F405 firmware images (`fc-stm32f405`, binaries
-//! `firmware`, `firmware-mavlink` and `firmware-crtp`, release, `thumbv7em-none-eabihf`) with cargo, so that `sil-host fly
+//! Builds the firmware images (`fc-stm32f405`'s `firmware`,
+//! `firmware-mavlink` and `firmware-crtp`; `fc-crazyflie`'s
+//! `firmware-crazyflie` and `boot-shim`; release, `thumbv7em-none-eabihf`) with cargo, so that `sil-host fly
 //! --target qemu` and the report's QEMU table always fly the image of the
 //! sources beside them. It goes to its own target directory
 //! (`target/firmware-image`) so this nested cargo never waits on the outer
 //! one's lock. Their paths reach the crate as `SIL_FIRMWARE_ELF_BUILT`,
-//! `SIL_FIRMWARE_MAVLINK_ELF_BUILT` and `SIL_FIRMWARE_CRTP_ELF_BUILT`; when
+//! `SIL_FIRMWARE_MAVLINK_ELF_BUILT`, `SIL_FIRMWARE_CRTP_ELF_BUILT`,
+//! `SIL_FIRMWARE_CRAZYFLIE_ELF_BUILT` and `SIL_BOOT_SHIM_ELF_BUILT`; when
 //! the build fails (say the thumbv7em target is not installed) the host
 //! still builds, that variable is empty and `SIL_FIRMWARE_BUILD_ERROR` says why.
 use std::path::PathBuf;
@@ -28,6 +30,8 @@ fn main() {
     let elf = target_dir.join("thumbv7em-none-eabihf/release/firmware");
     let mavlink_elf = target_dir.join("thumbv7em-none-eabihf/release/firmware-mavlink");
     let crtp_elf = target_dir.join("thumbv7em-none-eabihf/release/firmware-crtp");
+    let crazyflie_elf = target_dir.join("thumbv7em-none-eabihf/release/firmware-crazyflie");
+    let shim_elf = target_dir.join("thumbv7em-none-eabihf/release/boot-shim");
     let result = if std::env::var_os("SIL_SKIP_FIRMWARE_BUILD").is_some() {
         Err("SIL_SKIP_FIRMWARE_BUILD is set".to_string())
     } else {
@@ -41,6 +45,11 @@ fn main() {
                 mavlink_elf.display()
             );
             println!("cargo:rustc-env=SIL_FIRMWARE_CRTP_ELF_BUILT={}", crtp_elf.display());
+            println!(
+                "cargo:rustc-env=SIL_FIRMWARE_CRAZYFLIE_ELF_BUILT={}",
+                crazyflie_elf.display()
+            );
+            println!("cargo:rustc-env=SIL_BOOT_SHIM_ELF_BUILT={}", shim_elf.display());
             println!("cargo:rustc-env=SIL_FIRMWARE_BUILD_ERROR=");
         }
         Err(e) => {
@@ -48,6 +57,8 @@ fn main() {
             println!("cargo:rustc-env=SIL_FIRMWARE_ELF_BUILT=");
             println!("cargo:rustc-env=SIL_FIRMWARE_MAVLINK_ELF_BUILT=");
             println!("cargo:rustc-env=SIL_FIRMWARE_CRTP_ELF_BUILT=");
+            println!("cargo:rustc-env=SIL_FIRMWARE_CRAZYFLIE_ELF_BUILT=");
+            println!("cargo:rustc-env=SIL_BOOT_SHIM_ELF_BUILT=");
             println!("cargo:rustc-env=SIL_FIRMWARE_BUILD_ERROR={}", e.replace('\n', " "));
         }
     }
@@ -68,6 +79,12 @@ fn build(root: &std::path::Path, target_dir: &std::path::Path) -> Result<(), Str
             "firmware-mavlink",
             "--bin",
             "firmware-crtp",
+            "-p",
+            "fc-crazyflie",
+            "--bin",
+            "firmware-crazyflie",
+            "--bin",
+            "boot-shim",
         ])
         .arg("--release")
         .args(["--target", "thumbv7em-none-eabihf", "--target-dir"])
@@ -94,7 +111,7 @@ fn build(root: &std::path::Path, target_dir: &std::path::Path) -> Result<(), Str
             .collect::<Vec<_>>()
             .join(" / ");
         Err(format!(
-            "cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf failed: {last}"
+            "cargo build -p fc-stm32f405 -p fc-crazyflie --release --target thumbv7em-none-eabihf failed: {last}"
         ))
     }
 }

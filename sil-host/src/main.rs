@@ -386,7 +386,9 @@ struct FlyArgs {
     /// flight-controller core in this process, reached only through the framed wire protocol) or
     /// `tcp:HOST:PORT` (a flight controller behind the protocol, e.g. `sil-host serve`) or `qemu`
     /// (the thumbv7em image in qemu-system-arm's netduinoplus2 over the emulated USART; the JSON
-    /// then adds instructions per step; ≈ 4-9 ms of real time per step). Give it twice for both,
+    /// then adds instructions per step; ≈ 4-9 ms of real time per step) or `qemu-crazyflie` (the
+    /// Crazyflie 2.1 image, linked at 0x08004000, booted through QEMU's stand-in for the
+    /// Crazyflie bootloader). Give it twice for both,
     /// e.g. `--target 1,2,-3,45 --target framed`.
     #[arg(long, value_name = "X,Y,Z,YAW_DEG|TARGET", value_parser = parse_target_arg, allow_hyphen_values = true)]
     target: Vec<TargetArg>,
@@ -437,7 +439,7 @@ struct FlyArgs {
     /// reference, the motors and the flight's parameters, under PX4's topic names.
     #[arg(long, value_name = "PATH")]
     ulog: Option<PathBuf>,
-    /// With `--target qemu`: print the firmware's own log (defmt over semihosting, decoded with
+    /// With `--target qemu` or `qemu-crazyflie`: print the firmware's own log (defmt over semihosting, decoded with
     /// the image's format table) to standard error after the flight.
     #[arg(long)]
     firmware_log: bool,

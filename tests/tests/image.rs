@@ -98,3 +98,55 @@ fn the_crtp_image_fits_its_flash_and_static_ram_budgets() {
     let elf = sil_host::link::firmware_crtp_elf().expect("building the thumbv7em CRTP image");
     check("crtp image", &elf, 352 * 1024, 20 * 1024);
 }
+
+/// What the ELF at `elf` loads: each LOAD program header's physical
+/// address and size in memory (`readelf -lW`).
+fn load_segments(elf: &std::path::Path) -> Vec<(u64, u64)> {
+    let out = Command::new("readelf")
+        .args(["-lW"])
+        .arg(elf)
+        .output()
+        .expect("binutils `readelf` (installed with gcc)");
+    assert!(out.status.success(), "readelf -lW failed");
+    let hex = |s: &str| u64::from_str_radix(s.trim_start_matches("0x"), 16).expect("hex");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter(|l| l.trim_start().starts_with("LOAD"))
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            // LOAD offset vaddr paddr filesz memsz flags align: flash holds
+            // what is at its physical address (the .data initialisers too).
+            (hex(f[3]), hex(f[4]))
+        })
+        .filter(|&(_, size)| size > 0)
+        .collect()
+}
+
+/// The Crazyflie 2.1 image (the flight loop and its motors, in the
+/// bootloader's layout): flash ≤ 288 KiB and static RAM ≤ 17 KiB, as the
+/// plain image it grows from; everything it puts in flash is at or above
+/// 0x08004000, so flashing it (`cfloader`, `dfu-util -s 0x08004000`)
+/// leaves Bitcraze's bootloader in sector 0 untouched, and its vector table
+/// is the first thing there. The boot shim (QEMU's stand-in for that
+/// bootloader) fits the 16 KiB sector.
+#[test]
+fn the_crazyflie_image_fits_its_budgets_and_leaves_the_bootloader_sector_alone() {
+    let elf = sil_host::link::firmware_crazyflie_elf().expect("building the Crazyflie image");
+    check("crazyflie image", &elf, 288 * 1024, 17 * 1024);
+    let flash: Vec<(u64, u64)> = load_segments(&elf)
+        .into_iter()
+        .filter(|(a, _)| FLASH.contains(a))
+        .collect();
+    assert!(!flash.is_empty());
+    for (addr, size) in &flash {
+        assert!(
+            *addr >= 0x0800_4000,
+            "a segment at {addr:#x} ({size} B) would overwrite the bootloader"
+        );
+    }
+    assert_eq!(flash.iter().map(|s| s.0).min(), Some(0x0800_4000), "{flash:x?}");
+    let shim = sil_host::link::boot_shim_elf().expect("building the boot shim");
+    for (addr, size) in load_segments(&shim).into_iter().filter(|(a, _)| FLASH.contains(a)) {
+        assert!(addr + size <= 0x0800_4000, "the shim reaches {:#x}", addr + size);
+    }
+}

@@ -37,6 +37,42 @@ pub fn bring_up_clocks() -> Result<(), ClockError> {
     }
 }
 
+/// The image's flight-loop log (used by every board's image): a line for
+/// each change of session, controller, failsafe or link-error counts.
+#[cfg(target_os = "none")]
+pub fn log_changes(fc: &fc_loop::FlightCore, last: &mut (bool, bool, fc_proto::Counters, u32)) {
+    let (session, failsafe, counters, ctrl) = (fc.session_open(), fc.failsafe(), fc.counters(), fc.selections());
+    if session && !last.0 {
+        defmt::info!("session open (protocol v{=u16})", fc_proto::PROTOCOL_VERSION);
+    }
+    if ctrl != last.3 {
+        defmt::info!("controller selected ({=u32} so far)", ctrl);
+    }
+    if failsafe != last.1 {
+        if failsafe {
+            defmt::warn!("failsafe: no valid sensor frame in time; level, descending");
+        } else {
+            defmt::info!("failsafe cleared: valid sensor frames again");
+        }
+    }
+    let bad = |c: &fc_proto::Counters| {
+        c.bad_crc + c.bad_cobs + c.bad_message + c.oversized + c.out_of_order + c.invalid_values
+    };
+    if bad(&counters) != bad(&last.2) {
+        defmt::warn!(
+            "link errors: crc {=u32} cobs {=u32} message {=u32} oversized {=u32} order {=u32} values {=u32} (receiver overruns {=u32})",
+            counters.bad_crc,
+            counters.bad_cobs,
+            counters.bad_message,
+            counters.oversized,
+            counters.out_of_order,
+            counters.invalid_values,
+            hal_shim::stm32f405::rx_overruns(hal_shim::stm32f405::Port::Usart1)
+        );
+    }
+    *last = (session, failsafe, counters, ctrl);
+}
+
 /// Ends a QEMU harness program: exits QEMU through semihosting with
 /// success (`ok`) or failure, which is the harness's verdict for its caller.
 #[cfg(target_os = "none")]

@@ -22,39 +22,7 @@ mod target {
     use cortex_m_rt::entry;
     use fc_loop::{FcConfig, FlightCore};
     use fc_proto::{Counters, PROTOCOL_VERSION};
-
-    /// Logs what changed in the link and failsafe state since the last call.
-    fn log_changes(fc: &FlightCore, last: &mut (bool, bool, Counters, u32)) {
-        let (session, failsafe, counters, ctrl) = (fc.session_open(), fc.failsafe(), fc.counters(), fc.selections());
-        if session && !last.0 {
-            defmt::info!("session open (protocol v{=u16})", PROTOCOL_VERSION);
-        }
-        if ctrl != last.3 {
-            defmt::info!("controller selected ({=u32} so far)", ctrl);
-        }
-        if failsafe != last.1 {
-            if failsafe {
-                defmt::warn!("failsafe: no valid sensor frame in time; level, descending");
-            } else {
-                defmt::info!("failsafe cleared: valid sensor frames again");
-            }
-        }
-        let bad =
-            |c: &Counters| c.bad_crc + c.bad_cobs + c.bad_message + c.oversized + c.out_of_order + c.invalid_values;
-        if bad(&counters) != bad(&last.2) {
-            defmt::warn!(
-                "link errors: crc {=u32} cobs {=u32} message {=u32} oversized {=u32} order {=u32} values {=u32} (receiver overruns {=u32})",
-                counters.bad_crc,
-                counters.bad_cobs,
-                counters.bad_message,
-                counters.oversized,
-                counters.out_of_order,
-                counters.invalid_values,
-                hal_shim::stm32f405::rx_overruns(hal_shim::stm32f405::Port::Usart1)
-            );
-        }
-        *last = (session, failsafe, counters, ctrl);
-    }
+    use fc_stm32f405::log_changes;
 
     #[entry]
     fn main() -> ! {

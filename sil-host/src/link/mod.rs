@@ -9,6 +9,7 @@ pub mod server;
 
 pub use client::{FcClient, Remote, RemoteStep};
 pub use qemu::{
-    decode_defmt, firmware_crtp_elf, firmware_elf, firmware_mavlink_elf, qemu_command, Qemu, SYSTICK_PER_INSTRUCTION,
+    boot_shim_elf, decode_defmt, firmware_crazyflie_elf, firmware_crtp_elf, firmware_elf, firmware_mavlink_elf,
+    qemu_command, qemu_command_booting, Boot, Qemu, SYSTICK_PER_INSTRUCTION,
 };
 pub use server::{serve, ServeOptions};

@@ -33,6 +33,20 @@ pub fn firmware_crtp_elf() -> Result<std::path::PathBuf> {
     built_elf("SIL_FIRMWARE_CRTP_ELF", env!("SIL_FIRMWARE_CRTP_ELF_BUILT"))
 }
 
+/// The Crazyflie 2.1 image (`fc-crazyflie`'s `firmware-crazyflie`, linked
+/// at 0x08004000): `$SIL_FIRMWARE_CRAZYFLIE_ELF` if set, else the one the
+/// build script built.
+pub fn firmware_crazyflie_elf() -> Result<std::path::PathBuf> {
+    built_elf("SIL_FIRMWARE_CRAZYFLIE_ELF", env!("SIL_FIRMWARE_CRAZYFLIE_ELF_BUILT"))
+}
+
+/// QEMU's stand-in for the Crazyflie bootloader (`fc-crazyflie`'s
+/// `boot-shim`, 16 KiB at 0x08000000): `$SIL_BOOT_SHIM_ELF` if set, else
+/// the one the build script built.
+pub fn boot_shim_elf() -> Result<std::path::PathBuf> {
+    built_elf("SIL_BOOT_SHIM_ELF", env!("SIL_BOOT_SHIM_ELF_BUILT"))
+}
+
 fn built_elf(var: &str, built: &str) -> Result<std::path::PathBuf> {
     if let Some(p) = std::env::var_os(var) {
         return Ok(p.into());
@@ -61,15 +75,54 @@ fn built_elf(var: &str, built: &str) -> Result<std::path::PathBuf> {
 /// (`-icount shift=0`: one instruction per ns of virtual time), semihosting to
 /// standard output, USART1 on the chardev `serial` (e.g. `null` or
 /// `tcp:HOST:PORT,server=on`), the ELF `elf` loaded. (The cargo runner in
-/// `.cargo/config.toml` spells the same options.)
+/// `.cargo/config.toml` spells the same options.) [`Boot::Shim`] loads a
+/// boot program at 0x08000000 first and `elf` (linked behind it) beside it.
 pub fn qemu_command(serial: &str, elf: &std::path::Path) -> std::process::Command {
+    qemu_command_booting(serial, &Boot::Direct(elf.to_path_buf()))
+}
+
+/// How the emulated chip reaches the image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Boot {
+    /// The image's vector table is at 0x08000000: the core resets into it.
+    Direct(std::path::PathBuf),
+    /// A boot program at 0x08000000 (`shim`) jumps to the image, linked
+    /// behind it (the Crazyflie's bootloader layout).
+    Shim {
+        /// The boot program.
+        shim: std::path::PathBuf,
+        /// The image it starts.
+        image: std::path::PathBuf,
+    },
+}
+
+impl Boot {
+    /// The image (whose defmt table decodes the log).
+    pub fn image(&self) -> &std::path::Path {
+        match self {
+            Boot::Direct(p) | Boot::Shim { image: p, .. } => p,
+        }
+    }
+}
+
+/// [`qemu_command`] for either way of booting.
+pub fn qemu_command_booting(serial: &str, boot: &Boot) -> std::process::Command {
     let mut c = std::process::Command::new("qemu-system-arm");
     c.args(["-machine", "netduinoplus2", "-display", "none", "-monitor", "none"])
         .args(["-icount", "shift=0"])
         .args(["-semihosting-config", "enable=on,target=native"])
-        .args(["-serial", serial])
-        .arg("-kernel")
-        .arg(elf);
+        .args(["-serial", serial]);
+    match boot {
+        Boot::Direct(elf) => {
+            c.arg("-kernel").arg(elf);
+        }
+        Boot::Shim { shim, image } => {
+            c.arg("-kernel")
+                .arg(shim)
+                .arg("-device")
+                .arg(format!("loader,file={}", image.display()));
+        }
+    }
     c
 }
 
@@ -116,7 +169,13 @@ pub fn decode_defmt(elf: &std::path::Path, bytes: &[u8]) -> Result<Vec<String>> 
 impl Qemu {
     /// Starts the image at `elf`.
     pub fn start(elf: &std::path::Path) -> Result<Self> {
-        Self::spawn(elf, &[], Duration::from_secs(10))
+        Self::spawn(&Boot::Direct(elf.to_path_buf()), &[], Duration::from_secs(10))
+    }
+
+    /// Starts QEMU booting as `boot` says (the Crazyflie image through its
+    /// boot shim), USART1 on a local TCP server.
+    pub fn start_booting(boot: &Boot) -> Result<Self> {
+        Self::spawn(boot, &[], Duration::from_secs(10))
     }
 
     /// Starts the image at `elf` with USART6 (QEMU's sixth `-serial`) also a
@@ -127,17 +186,21 @@ impl Qemu {
     pub fn start_with_syslink(elf: &std::path::Path, syslink: &str, wait_s: f64) -> Result<Self> {
         let usart6 = format!("tcp:{syslink},server=on,wait=on,nodelay=on");
         let serials = ["null", "null", "null", "null", usart6.as_str()];
-        Self::spawn(elf, &serials, Duration::from_secs_f64(wait_s.clamp(1.0, 3600.0)))
+        Self::spawn(
+            &Boot::Direct(elf.to_path_buf()),
+            &serials,
+            Duration::from_secs_f64(wait_s.clamp(1.0, 3600.0)),
+        )
     }
 
     /// Starts QEMU with USART1 on a local TCP server and `more` as the
     /// chardevs of USART2, 3, ….
-    fn spawn(elf: &std::path::Path, more: &[&str], up_within: Duration) -> Result<Self> {
+    fn spawn(boot: &Boot, more: &[&str], up_within: Duration) -> Result<Self> {
         let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
         let addr = format!("127.0.0.1:{port}");
         let log = std::env::temp_dir().join(format!("sil-host-qemu-{port}.log"));
         let out = std::env::temp_dir().join(format!("sil-host-qemu-{port}.defmt"));
-        let mut cmd = qemu_command(&format!("tcp:{addr},server=on,wait=on,nodelay=on"), elf);
+        let mut cmd = qemu_command_booting(&format!("tcp:{addr},server=on,wait=on,nodelay=on"), boot);
         for m in more {
             cmd.args(["-serial", m]);
         }
@@ -153,7 +216,7 @@ impl Qemu {
             addr,
             log,
             out,
-            elf: elf.to_path_buf(),
+            elf: boot.image().to_path_buf(),
             up_within,
         })
     }
