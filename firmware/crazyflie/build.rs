@@ -33,7 +33,10 @@ fn main() {
         let dir = out.join(bin);
         fs::create_dir_all(&dir).expect("OUT_DIR is writable");
         fs::write(dir.join("board-memory.x"), map).expect("OUT_DIR is writable");
-        println!("cargo:rustc-link-arg-bin={bin}=-L{}", dir.display());
+        // `-L` and the directory as two arguments: flip-link (the linker
+        // wrapper) reads search paths only in that form.
+        println!("cargo:rustc-link-arg-bin={bin}=-L");
+        println!("cargo:rustc-link-arg-bin={bin}={}", dir.display());
         // No page alignment: otherwise the linker loads the ELF and program
         // headers into the 16 KiB below 0x08004000 (the bootloader's sector),
         // and a flasher or QEMU would write them over the bootloader.

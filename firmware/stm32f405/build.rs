@@ -10,7 +10,10 @@ fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     let src = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR")).join("memory.x");
     fs::copy(&src, out.join("board-memory.x")).expect("memory.x beside build.rs");
-    println!("cargo:rustc-link-arg-bins=-L{}", out.display());
+    // `-L` and the directory as two arguments: flip-link (the linker wrapper)
+    // reads search paths only in that form.
+    println!("cargo:rustc-link-arg-bins=-L");
+    println!("cargo:rustc-link-arg-bins={}", out.display());
     println!("cargo:rerun-if-changed={}", src.display());
     println!("cargo:rerun-if-changed=build.rs");
 }

@@ -191,6 +191,21 @@ pub fn set(tim2: &tim2::RegisterBlock, tim4: &tim3::RegisterBlock, out: &MotorOu
     tim4.ccr4().write(|w| unsafe { w.ccr().bits(m4 as u16) });
 }
 
+/// Every motor off at once (a fault handler's first act): the four
+/// compares set to 0 and loaded now by an update event rather than at the
+/// end of the period; returns them read back, M1..M4.
+pub fn off_now(tim2: &tim2::RegisterBlock, tim4: &tim3::RegisterBlock) -> [u32; 4] {
+    set(tim2, tim4, &MotorOutput::OFF);
+    tim2.egr().write(|w| w.ug().update());
+    tim4.egr().write(|w| w.ug().update());
+    [
+        tim2.ccr2().read().ccr().bits(),
+        tim2.ccr4().read().ccr().bits(),
+        tim2.ccr1().read().ccr().bits(),
+        u32::from(tim4.ccr4().read().ccr().bits()),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -389,5 +404,11 @@ mod tests {
         chip.with(|_, _, _, t2, t4| set(t2, t4, &out));
         assert_eq!(&chip.tim2[CCR1..CCR1 + 4], &[33, 11, 0, 22]);
         assert_eq!(chip.tim4[CCR1 + 3], 44);
+        // A fault: all four to 0 now (update events), read back in motor order.
+        chip.tim2[EGR] = 0;
+        chip.tim4[EGR] = 0;
+        assert_eq!(chip.with(|_, _, _, t2, t4| off_now(t2, t4)), [0; 4]);
+        assert_eq!(&chip.tim2[CCR1..CCR1 + 4], &[0; 4]);
+        assert_eq!((chip.tim4[CCR1 + 3], chip.tim2[EGR], chip.tim4[EGR]), (0, 1, 1));
     }
 }

@@ -147,24 +147,88 @@ unsafe fn DefaultHandler(irqn: i16) {
     }
 }
 
-/// A fault (bad access, stack overflow into the guard, undefined
-/// instruction): says where, then ends as [`fail`] does (QEMU exits with
-/// failure; a board halts with the motors off).
-#[exception]
-unsafe fn HardFault(ef: &cortex_m_rt::ExceptionFrame) -> ! {
-    let ccr = hal_shim::stm32f405::motors_off_now();
-    defmt::error!(
-        "hard fault at pc {=u32:#010x} (lr {=u32:#010x}); motors off (TIM3 compare {})",
-        ef.pc(),
-        ef.lr(),
-        ccr
-    );
-    fail("hard fault")
+/// What stops the motors in a fault, as a function's address: the
+/// STM32F405 board's TIM3 ([`hal_shim::stm32f405::motors_off_now`]) unless
+/// the image names its own at boot ([`on_fault_stop_motors`]).
+static MOTORS_OFF: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(0);
+
+/// Names the function that turns this board's motors off at once and
+/// returns their four compare values read back (a fault handler's first act).
+#[allow(dead_code, reason = "only boards whose motors are not on TIM3 call it")]
+pub fn on_fault_stop_motors(f: fn() -> [u32; 4]) {
+    MOTORS_OFF.store(f as usize, core::sync::atomic::Ordering::Relaxed);
+}
+
+fn stop_motors() -> [u32; 4] {
+    match MOTORS_OFF.load(core::sync::atomic::Ordering::Relaxed) {
+        0 => hal_shim::stm32f405::motors_off_now(),
+        f => {
+            // SAFETY: only `on_fault_stop_motors` stores, and it stores a `fn() -> [u32; 4]`.
+            let f = unsafe { core::mem::transmute::<usize, fn() -> [u32; 4]>(f) };
+            f()
+        }
+    }
+}
+
+// The HardFault vector. A stack overflow (the stack, linked by flip-link
+// beneath the statics, ran off the start of RAM) faults while the
+// processor stacks the exception frame, so the handler starts with the
+// stack pointer below the stack: any push would fault again and lock the
+// core up. This entry therefore checks MSP first and, if it is below the
+// stack's lowest address (`_stack_end`), restarts the stack at its top
+// (the overflowed frames are lost anyway; nothing returns) and passes no
+// frame. Then `board_hard_fault` (Rust) stops the motors and says why.
+core::arch::global_asm!(
+    ".section .text.HardFault, \"ax\"",
+    ".global HardFault",
+    ".type HardFault, %function",
+    ".thumb_func",
+    "HardFault:",
+    "    mrs   r1, msp",
+    "    mov   r0, r1",
+    "    ldr   r2, =_stack_end",
+    "    cmp   r1, r2",
+    "    bhs   1f",
+    "    ldr   r2, =_stack_start",
+    "    mov   sp, r2",
+    "    movs  r0, #0",
+    "1:  b     board_hard_fault",
+    ".ltorg",
+);
+
+/// A fault (bad access, undefined instruction, a stack overflow): stops the
+/// motors, says where (or that the stack overflowed), then ends as [`fail`]
+/// does (QEMU exits with failure; a board halts with the motors off).
+/// `frame` is the stacked exception frame, null when the stack overflowed;
+/// `sp` the stack pointer at the fault.
+#[no_mangle]
+unsafe extern "C" fn board_hard_fault(frame: *const cortex_m_rt::ExceptionFrame, sp: u32) -> ! {
+    let ccr = stop_motors();
+    // SAFETY: non-null only when MSP was inside the stack, where the
+    // processor stacked the frame.
+    match unsafe { frame.as_ref() } {
+        Some(ef) => defmt::error!(
+            "hard fault at pc {=u32:#010x} (lr {=u32:#010x}); motors off (compare {})",
+            ef.pc(),
+            ef.lr(),
+            ccr
+        ),
+        None => defmt::error!(
+            "stack overflow: sp {=u32:#010x} ran past the stack's end; motors off (compare {})",
+            sp,
+            ccr
+        ),
+    }
+    fail(if frame.is_null() {
+        "stack overflow"
+    } else {
+        "hard fault"
+    })
 }
 
 #[panic_handler]
 fn panic(info: &PanicInfo) -> ! {
-    hal_shim::stm32f405::motors_off_now();
+    stop_motors();
     // The core never panics on input; if anything does, say where.
     if let Some(l) = info.location() {
         defmt::error!("panic at {=str}:{=u32}", l.file(), l.line());

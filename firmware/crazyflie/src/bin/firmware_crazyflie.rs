@@ -51,6 +51,7 @@ mod target {
             )
         };
         motors::apply_to(rcc, gpioa, gpiob, tim2, tim4);
+        board::on_fault_stop_motors(motors_off_now);
         let vtor = unsafe { (*cortex_m::peripheral::SCB::PTR).vtor.read() };
         defmt::info!("Crazyflie 2.1 image: vector table at {=u32:#010x}", vtor);
         let Some(fc) = flight_core() else {
@@ -105,6 +106,13 @@ mod target {
             log_changes(fc, &mut last);
             board::idle();
         }
+    }
+
+    /// The fault handlers' first act on this board: TIM2/TIM4's compares to 0 now.
+    fn motors_off_now() -> [u32; 4] {
+        // SAFETY: a fault handler owns the chip from here on.
+        let (tim2, tim4) = unsafe { (&*pac::TIM2::ptr(), &*pac::TIM4::ptr()) };
+        motors::off_now(tim2, tim4)
     }
 
     /// The flight loop, in static RAM (see the `firmware` image), with the
