@@ -32,7 +32,7 @@ mod target {
         // 256 bytes a frame, kept alive through the call.
         let frame = core::hint::black_box([n; 64]);
         DEPTH.store(n, Ordering::Relaxed);
-        if n % 64 == 0 {
+        if n.is_multiple_of(64) {
             for c in &CANARY {
                 if c.load(Ordering::Relaxed) != 0xC0FF_EE00 {
                     board::fail("the canary changed: the stack overwrote a static");
