@@ -6,6 +6,7 @@
 //!   Crazyflie bootloader's 16 KiB sector 0, as Bitcraze's own image is
 //!   linked, so `cfloader` (radio) and `dfu-util -s 0x08004000` flash it
 //!   and the bootloader stays;
+//!   (`fault-crazyflie`, the fault test's program, is linked the same way);
 //! - `boot-shim`: the 16 KiB at 0x08000000 (QEMU's stand-in for that bootloader).
 //!
 //! RAM is the STM32F405's 128 KiB in both. Host builds ignore the maps.
@@ -29,7 +30,11 @@ MEMORY
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    for (bin, map) in [("firmware-crazyflie", IMAGE), ("boot-shim", SHIM)] {
+    for (bin, map) in [
+        ("firmware-crazyflie", IMAGE),
+        ("fault-crazyflie", IMAGE),
+        ("boot-shim", SHIM),
+    ] {
         let dir = out.join(bin);
         fs::create_dir_all(&dir).expect("OUT_DIR is writable");
         fs::write(dir.join("board-memory.x"), map).expect("OUT_DIR is writable");

@@ -389,7 +389,7 @@ fn a_hard_fault_turns_the_motors_off_and_says_where() {
         .iter()
         .find(|l| l.contains("hard fault at pc"))
         .unwrap_or_else(|| panic!("no hard-fault line:\n{all}"));
-    assert!(fault.contains("motors off (compare [0, 0, 0, 0])"), "{fault}");
+    assert!(fault.contains("motors off (TIM3 compare [0, 0, 0, 0])"), "{fault}");
     assert!(
         log.last().is_some_and(|l| l.contains("hard fault; not flying")),
         "{all}"
@@ -469,10 +469,63 @@ fn a_stack_overflow_is_caught_below_the_statics_and_turns_the_motors_off() {
         .iter()
         .find(|l| l.contains("stack overflow: sp 0x1fff"))
         .unwrap_or_else(|| panic!("no stack-overflow line with a stack pointer below RAM:\n{all}"));
-    assert!(caught.contains("motors off (compare [0, 0, 0, 0])"), "{caught}");
+    assert!(caught.contains("motors off (TIM3 compare [0, 0, 0, 0])"), "{caught}");
     assert!(!all.contains("canary"), "{all}");
     assert!(
         log.last().is_some_and(|l| l.contains("stack overflow; not flying")),
+        "{all}"
+    );
+}
+
+/// The fault path on the Crazyflie's layout and motors: `fault-crazyflie`,
+/// booted through the boot shim, runs the four motors on TIM2/TIM4 and
+/// executes an undefined instruction; the HardFault handler zeroes those
+/// four compares (the image registered its own motors-off: TIM3's would
+/// leave the Crazyflie's motors spinning) and ends the run as a failure.
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn a_hard_fault_on_the_crazyflie_layout_stops_its_four_motors() {
+    let st = cargo()
+        .args([
+            "build",
+            "-q",
+            "--release",
+            "-p",
+            "fc-crazyflie",
+            "--bin",
+            "fault-crazyflie",
+            "--bin",
+            "boot-shim",
+        ])
+        .args(["--target", "thumbv7em-none-eabihf"])
+        .status()
+        .expect("cargo");
+    assert!(
+        st.success(),
+        "building fault-crazyflie and boot-shim for thumbv7em failed"
+    );
+    let dir = root().join("target/thumbv7em-none-eabihf/release");
+    let boot = sil_host::link::Boot::Shim {
+        shim: dir.join("boot-shim"),
+        image: dir.join("fault-crazyflie"),
+    };
+    let out = sil_host::link::qemu_command_booting("null", &boot)
+        .output()
+        .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
+    let log = sil_host::link::decode_defmt(boot.image(), &out.stdout).expect("the program's defmt log");
+    let all = log.join("\n");
+    assert_eq!(out.status.code(), Some(1), "{all}");
+    assert!(
+        all.contains("fault-crazyflie: motors running, compare [128, 128, 128, 128]"),
+        "{all}"
+    );
+    let fault = log
+        .iter()
+        .find(|l| l.contains("hard fault at pc 0x0800"))
+        .unwrap_or_else(|| panic!("no hard-fault line:\n{all}"));
+    assert!(fault.contains("motors off (TIM2/TIM4 compare [0, 0, 0, 0])"), "{fault}");
+    assert!(
+        log.last().is_some_and(|l| l.contains("hard fault; not flying")),
         "{all}"
     );
 }

@@ -153,18 +153,19 @@ unsafe fn DefaultHandler(irqn: i16) {
 static MOTORS_OFF: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(0);
 
 /// Names the function that turns this board's motors off at once and
-/// returns their four compare values read back (a fault handler's first act).
+/// returns their timers' name and four compare values read back (a fault
+/// handler's first act).
 #[allow(dead_code, reason = "only boards whose motors are not on TIM3 call it")]
-pub fn on_fault_stop_motors(f: fn() -> [u32; 4]) {
+pub fn on_fault_stop_motors(f: fn() -> (&'static str, [u32; 4])) {
     MOTORS_OFF.store(f as usize, core::sync::atomic::Ordering::Relaxed);
 }
 
-fn stop_motors() -> [u32; 4] {
+fn stop_motors() -> (&'static str, [u32; 4]) {
     match MOTORS_OFF.load(core::sync::atomic::Ordering::Relaxed) {
-        0 => hal_shim::stm32f405::motors_off_now(),
+        0 => ("TIM3", hal_shim::stm32f405::motors_off_now()),
         f => {
-            // SAFETY: only `on_fault_stop_motors` stores, and it stores a `fn() -> [u32; 4]`.
-            let f = unsafe { core::mem::transmute::<usize, fn() -> [u32; 4]>(f) };
+            // SAFETY: only `on_fault_stop_motors` stores, and it stores such a function.
+            let f = unsafe { core::mem::transmute::<usize, fn() -> (&'static str, [u32; 4])>(f) };
             f()
         }
     }
@@ -203,19 +204,21 @@ core::arch::global_asm!(
 /// `sp` the stack pointer at the fault.
 #[no_mangle]
 unsafe extern "C" fn board_hard_fault(frame: *const cortex_m_rt::ExceptionFrame, sp: u32) -> ! {
-    let ccr = stop_motors();
+    let (timers, ccr) = stop_motors();
     // SAFETY: non-null only when MSP was inside the stack, where the
     // processor stacked the frame.
     match unsafe { frame.as_ref() } {
         Some(ef) => defmt::error!(
-            "hard fault at pc {=u32:#010x} (lr {=u32:#010x}); motors off (compare {})",
+            "hard fault at pc {=u32:#010x} (lr {=u32:#010x}); motors off ({=str} compare {})",
             ef.pc(),
             ef.lr(),
+            timers,
             ccr
         ),
         None => defmt::error!(
-            "stack overflow: sp {=u32:#010x} ran past the stack's end; motors off (compare {})",
+            "stack overflow: sp {=u32:#010x} ran past the stack's end; motors off ({=str} compare {})",
             sp,
+            timers,
             ccr
         ),
     }

@@ -109,10 +109,10 @@ mod target {
     }
 
     /// The fault handlers' first act on this board: TIM2/TIM4's compares to 0 now.
-    fn motors_off_now() -> [u32; 4] {
+    fn motors_off_now() -> (&'static str, [u32; 4]) {
         // SAFETY: a fault handler owns the chip from here on.
         let (tim2, tim4) = unsafe { (&*pac::TIM2::ptr(), &*pac::TIM4::ptr()) };
-        motors::off_now(tim2, tim4)
+        ("TIM2/TIM4", motors::off_now(tim2, tim4))
     }
 
     /// The flight loop, in static RAM (see the `firmware` image), with the

@@ -1,0 +1,62 @@
+//! A deliberate HardFault on the Crazyflie 2.1 image's layout, for the
+//! fault test (`tests/tests/qemu.rs`): booted through the boot shim, the
+//! board's handlers (`board.rs`), the Crazyflie's four motors on TIM2/TIM4
+//! at about half duty, then an undefined instruction. The handler must
+//! zero the four compares (the image's own motors-off, not TIM3's), log
+//! over defmt, and end the run as a failure.
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
+
+#[cfg(target_os = "none")]
+#[path = "../../../stm32f405/src/board.rs"]
+#[allow(dead_code, reason = "the fault test uses only the handlers and bring-up")]
+mod board;
+
+#[cfg(target_os = "none")]
+mod target {
+    use crate::board;
+    use cortex_m_rt::entry;
+    use fc_crazyflie::motors::{self, MotorOutput};
+    use stm32f4::stm32f405 as pac;
+
+    fn motors_off_now() -> (&'static str, [u32; 4]) {
+        // SAFETY: the fault handler owns the chip from here on.
+        let (tim2, tim4) = unsafe { (&*pac::TIM2::ptr(), &*pac::TIM4::ptr()) };
+        ("TIM2/TIM4", motors::off_now(tim2, tim4))
+    }
+
+    #[entry]
+    fn main() -> ! {
+        let (_clock, _usart) = board::bring_up();
+        // SAFETY: the only code that touches these blocks.
+        let (rcc, gpioa, gpiob, tim2, tim4) = unsafe {
+            (
+                &*pac::RCC::ptr(),
+                &*pac::GPIOA::ptr(),
+                &*pac::GPIOB::ptr(),
+                &*pac::TIM2::ptr(),
+                &*pac::TIM4::ptr(),
+            )
+        };
+        motors::apply_to(rcc, gpioa, gpiob, tim2, tim4);
+        board::on_fault_stop_motors(motors_off_now);
+        let half = MotorOutput {
+            compare: [128; 4],
+            saturated: false,
+        };
+        motors::set(tim2, tim4, &half);
+        let ccr = [
+            tim2.ccr2().read().ccr().bits(),
+            tim2.ccr4().read().ccr().bits(),
+            tim2.ccr1().read().ccr().bits(),
+            u32::from(tim4.ccr4().read().ccr().bits()),
+        ];
+        defmt::info!("fault-crazyflie: motors running, compare {}", ccr);
+        cortex_m::asm::udf()
+    }
+}
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    println!("fault-crazyflie runs on the MCU behind the boot shim (tests/tests/qemu.rs)");
+}
