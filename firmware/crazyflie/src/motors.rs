@@ -252,6 +252,14 @@ mod tests {
         let o_low = output(&c, [hover; 4], 3.7);
         assert!(o_full.compare[0] < o_low.compare[0]);
         assert_eq!((o_full.compare[0], o_low.compare[0]), (138, 156));
+        // The curve's maximum, 120 mN (2.98 V): the book's table.
+        assert_eq!(
+            (
+                output(&c, [0.12; 4], 4.2).compare[0],
+                output(&c, [0.12; 4], 3.7).compare[0]
+            ),
+            (182, 206)
+        );
         assert!(!o_full.saturated);
     }
 

@@ -2,7 +2,7 @@
 //! behind Bitcraze's bootloader; its reset handler points VTOR at its own
 //! vector table (cortex-m-rt's `set-vtor`).
 //!
-//! What it runs today: the flight loop ([`fc_loop::FlightCore`]) in
+//! What it runs today: the flight loop (`fc_loop::FlightCore`) in
 //! lockstep on USART1, as the `firmware` image does, and the Crazyflie's
 //! motors on TIM2/TIM4: every step's inputs go through the loop's mixer
 //! (`MOT_FRAME` 4, the Crazyflie's M1–M4, hubs 46 mm out; the vehicle's
