@@ -32,3 +32,30 @@ pub mod supervisor;
 pub mod watchdog;
 
 pub use error::SensorError;
+
+/// Where the IMU task gets its sample: the BMI088 on the board
+/// ([`bmi088::Bmi088`]), or in QEMU (which models no I2C) the simulator's
+/// sample that arrived over a USART. The IMU task is the same either way;
+/// only this implementation is swapped.
+pub trait ImuSource {
+    /// The newest sample, body FRD, or why there is none.
+    fn sample(&mut self) -> Result<bmi088::ImuSample, SensorError>;
+}
+
+impl<I: embedded_hal::i2c::I2c> ImuSource for bmi088::Bmi088<I> {
+    fn sample(&mut self) -> Result<bmi088::ImuSample, SensorError> {
+        self.read()
+    }
+}
+
+/// Where the barometer task gets its sample (the BMP388, or a simulator's).
+pub trait BaroSource {
+    /// The newest compensated sample, or why there is none.
+    fn sample(&mut self) -> Result<bmp388::BaroSample, SensorError>;
+}
+
+impl<I: embedded_hal::i2c::I2c> BaroSource for bmp388::Bmp388<I> {
+    fn sample(&mut self) -> Result<bmp388::BaroSample, SensorError> {
+        bmp388::Bmp388::sample(self)
+    }
+}

@@ -350,6 +350,51 @@ mod tests {
         assert_eq!(fly(&mut s, f32::NAN, 1000), Command::MotorsOff);
     }
 
+    /// The supervisor takes its IMU results from an [`crate::ImuSource`]:
+    /// here the BMI088 driver on a mock bus whose accelerometer stops
+    /// answering mid-flight.
+    #[test]
+    fn a_bmi088_that_stops_answering_puts_the_flight_into_failsafe() {
+        use crate::{bmi088::Bmi088, ImuSource};
+        use embedded_hal::i2c::NoAcknowledgeSource;
+        use embedded_hal_mock::eh1::i2c::{Mock, Transaction as T};
+        let good = |k: u8| {
+            vec![
+                T::write_read(0x69, vec![0x02], vec![k, 0, 0, 0, 0, 0]),
+                T::write_read(0x18, vec![0x12], vec![0, 0, 0, 0, 0x55, 0x05]),
+            ]
+        };
+        let nack = vec![
+            T::write_read(0x69, vec![0x02], vec![0; 6]),
+            T::write_read(0x18, vec![0x12], vec![0; 6])
+                .with_error(ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address)),
+        ];
+        let mut t = Vec::new();
+        for k in 0..5 {
+            t.extend(good(k));
+        }
+        for _ in 0..12 {
+            t.extend(nack.clone());
+        }
+        let mut i2c = Mock::new(&t);
+        let mut imu = Bmi088::new(i2c.clone());
+        let mut s = Supervisor::new(Config::DEFAULT, 0);
+        s.arm(&ready()).unwrap();
+        let mut commands = Vec::new();
+        for k in 0..17u64 {
+            let now = k * 1000;
+            let r = imu.sample();
+            s.imu_result(now, &r);
+            commands.push(s.step(now, 1.0));
+        }
+        // Five good samples, then silence: flying until 10 ms after the last
+        // good one (4 ms), failsafe from 15 ms on.
+        assert!(commands[..15].iter().all(|c| *c == Command::Fly), "{commands:?}");
+        assert_eq!(&commands[15..], &[Command::FailsafeDescent; 2]);
+        assert_eq!((s.counters().imu_bus, s.counters().imu_timeouts), (12, 1));
+        i2c.done();
+    }
+
     #[test]
     fn a_silent_imu_in_flight_is_a_counted_failsafe_descent_and_recovers() {
         let mut s = Supervisor::new(Config::DEFAULT, 0);
