@@ -151,6 +151,8 @@ python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ig
 python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
 echo "== the same cflib sessions against the firmware-crtp image in QEMU, through tools/nrf51_bridge.py (syslink on USART6)"
 python3 tools/crtp_cflib.py target/release/sil-host --qemu | tee -a "$log"
+echo "== and against the Crazyflie 2.1 image (linked at 0x08004000, booted by QEMU's stand-in for its bootloader, motors on TIM2/TIM4)"
+python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
 echo "== cfclient (PyPI, pinned, in its own venv), unmodified, connects under Xvfb; a screenshot of its flight tab"
 if ! command -v Xvfb >/dev/null || ! command -v xdotool >/dev/null || ! command -v import >/dev/null; then
     echo "== installing Xvfb, xdotool, ImageMagick and Qt's X11 libraries (apt)"
@@ -166,4 +168,4 @@ python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/
     --out target/cfclient-flight-tab.png | tee -a "$log"
 echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp|crtp-qemu|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

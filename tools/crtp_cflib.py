@@ -23,17 +23,21 @@ the firmware says of itself:
 With `--qemu` the same sessions fly the `firmware-crtp` image in QEMU
 (`sil-host crtp --target qemu`): cflib reaches it through
 `tools/nrf51_bridge.py`, which plays the Crazyflie's nRF51 radio (syslink on
-the image's USART6); the plant feeds its sensors on USART1.
+the image's USART6); the plant feeds its sensors on USART1. With
+`--qemu-crazyflie` they fly the Crazyflie 2.1 image instead (`--target
+qemu-crazyflie`: linked at 0x0800_4000, booted by QEMU's stand-in for the
+bootloader, its motors on TIM2/TIM4).
 
-Prints `crtp check: N passed, M failed` (`crtp-qemu check: ...` with --qemu);
-exits 1 on any failure.
-Usage: crtp_cflib.py SIL_HOST [--qemu] [sil-host crtp options]
+Prints `crtp check: N passed, M failed` (`crtp-qemu check: ...` with --qemu,
+`crtp-qemu-crazyflie check: ...` with --qemu-crazyflie); exits 1 on any failure.
+Usage: crtp_cflib.py SIL_HOST [--qemu | --qemu-crazyflie] [sil-host crtp options]
 """
 import importlib.metadata
 import json
 import math
 import os
 import pathlib
+import re
 import signal
 import socket
 import subprocess
@@ -52,8 +56,9 @@ PORT = 19850
 TRUTH_PORT = 19870
 URI = f'udp://127.0.0.1:{PORT}'
 TOL_M = 0.05
-QEMU = '--qemu' in sys.argv[2:]
-CONTROLLER = [a for a in sys.argv[2:] if a != '--qemu']
+CRAZYFLIE = '--qemu-crazyflie' in sys.argv[2:]
+QEMU = '--qemu' in sys.argv[2:] or CRAZYFLIE
+CONTROLLER = [a for a in sys.argv[2:] if a not in ('--qemu', '--qemu-crazyflie')]
 SYSLINK = '127.0.0.1:19880'
 BRIDGE = pathlib.Path(__file__).resolve().parent / 'nrf51_bridge.py'
 
@@ -120,7 +125,8 @@ class Sil:
     def __init__(self, sil_host, *extra, truth=None):
         if truth:
             truth.last = None  # the previous session's clock is not this one's
-        target = ['--target', 'qemu', '--syslink', SYSLINK] if QEMU else []
+        image = 'qemu-crazyflie' if CRAZYFLIE else 'qemu'
+        target = ['--target', image, '--syslink', SYSLINK] if QEMU else []
         self.sil = subprocess.Popen([sil_host, 'crtp', *CONTROLLER, *target, '--listen', f'127.0.0.1:{PORT}',
                                      '--truth-to', f'127.0.0.1:{TRUTH_PORT}', '--duration', '120', *extra],
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -137,8 +143,15 @@ class Sil:
                     break
         # sil-host's stderr, drained (a full pipe would stall it) and kept.
         self.err = []
-        threading.Thread(target=lambda: self.err.extend(self.sil.stderr), daemon=True).start()
+        threading.Thread(target=self._drain, daemon=True).start()
         time.sleep(0.5)
+
+    def _drain(self):
+        try:
+            for line in self.sil.stderr:
+                self.err.append(line)
+        except (ValueError, OSError):
+            pass  # `stop` closed the pipe: sil-host has ended
 
     def stop(self):
         """Stops both (sil-host stops its QEMU on SIGTERM); returns sil-host's
@@ -167,6 +180,16 @@ def report(sil, failed_before):
     out, bridge = sil.stop()
     if QEMU:
         print(f'  the bridge relayed: {bridge.strip()}')
+    if CRAZYFLIE:
+        # The image logs, once a second armed, the four TIM2/TIM4 compares the
+        # thrust curve gave. Hovering rotorpy's 30 g Crazyflie takes 74 mN a
+        # rotor: 2.4 V at the motor, compare ≈ 147 of 255 at 4.2 V.
+        sets = [tuple(int(x) for x in m.group(1).split(','))
+                for m in re.finditer(r'motors: compare \[([0-9, ]+)\]', out)]
+        hover = [c for c in sets if all(120 <= x <= 175 for x in c) and max(c) - min(c) <= 20]
+        check(len(sets) >= 3 and len(hover) >= 1 and all(max(c) <= 255 for c in sets),
+              f'the Crazyflie image drove TIM2/TIM4: {len(sets)} compare sets logged armed, '
+              f'{len(hover)} at hover (e.g. {hover[:1]})')
     if failed > failed_before:
         print(f'sil-host said:\n{out[-4000:]}\nthe bridge said: {bridge.strip()}')
 
@@ -353,7 +376,8 @@ def main():
     plant = sum(p for p, _ in truth.walls)
     wall = sum(w for _, w in truth.walls)
     print(f'the plant flew {plant:.1f} s in {wall:.1f} s of wall time (real-time factor {plant / max(wall, 1e-9):.2f})')
-    print(f'crtp{"-qemu" if QEMU else ""} check: {passed} passed, {failed} failed')
+    label = '-qemu-crazyflie' if CRAZYFLIE else '-qemu' if QEMU else ''
+    print(f'crtp{label} check: {passed} passed, {failed} failed')
     sys.exit(1 if failed else 0)
 
 

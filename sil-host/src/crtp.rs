@@ -72,14 +72,18 @@ pub struct CrtpConfig {
 pub enum CrtpTarget {
     /// In this process, served over UDP at [`CrtpConfig::listen`].
     InProcess,
-    /// The `firmware-crtp` image in QEMU: its USART6 (syslink) a TCP server
-    /// at `syslink` for `tools/nrf51_bridge.py`, which serves cflib; the
-    /// plant's sensors on its USART1.
+    /// The `firmware-crtp` image in QEMU (or, with `crazyflie`, the
+    /// Crazyflie 2.1 image booted through its boot shim): its USART6
+    /// (syslink) a TCP server at `syslink` for `tools/nrf51_bridge.py`,
+    /// which serves cflib; the plant's sensors on its USART1.
     Qemu {
         /// USART6's address.
         syslink: String,
         /// How long to wait for the bridge, s.
         wait_s: f64,
+        /// Fly `firmware-crazyflie` (linked at 0x0800_4000, booted by
+        /// `boot-shim`) instead of `firmware-crtp`.
+        crazyflie: bool,
     },
 }
 
@@ -311,9 +315,23 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
         None => None,
     };
     let mut fc = match (&cfg.target, &socket) {
-        (CrtpTarget::Qemu { syslink, wait_s }, _) => {
-            let elf = crate::link::firmware_crtp_elf()?;
-            let mut qemu = crate::link::Qemu::start_with_syslink(&elf, syslink, *wait_s)?;
+        (
+            CrtpTarget::Qemu {
+                syslink,
+                wait_s,
+                crazyflie,
+            },
+            _,
+        ) => {
+            let boot = if *crazyflie {
+                crate::link::Boot::Shim {
+                    shim: crate::link::boot_shim_elf()?,
+                    image: crate::link::firmware_crazyflie_elf()?,
+                }
+            } else {
+                crate::link::Boot::Direct(crate::link::firmware_crtp_elf()?)
+            };
+            let mut qemu = crate::link::Qemu::start_with_syslink(&boot, syslink, *wait_s)?;
             eprintln!("crtp: the image's syslink (USART6) waits on tcp:{syslink} for tools/nrf51_bridge.py");
             let stream = qemu.connect()?;
             stream.set_read_timeout(Some(Duration::from_secs(10)))?;

@@ -255,9 +255,6 @@ pub enum Target {
     Tcp(String),
     /// The thumbv7em firmware image in QEMU's netduinoplus2, over the emulated USART.
     Qemu,
-    /// The Crazyflie 2.1 image (linked at 0x08004000) in QEMU, booted
-    /// through the stand-in for its bootloader, over the emulated USART1.
-    QemuCrazyflie,
 }
 
 impl std::str::FromStr for Target {
@@ -267,11 +264,10 @@ impl std::str::FromStr for Target {
             "in-process" => Ok(Target::InProcess),
             "framed" => Ok(Target::Framed),
             "qemu" => Ok(Target::Qemu),
-            "qemu-crazyflie" => Ok(Target::QemuCrazyflie),
             _ => match s.strip_prefix("tcp:") {
                 Some(addr) if !addr.is_empty() => Ok(Target::Tcp(addr.to_string())),
                 _ => Err(format!(
-                    "unknown target '{s}': use in-process, framed, qemu, qemu-crazyflie or tcp:HOST:PORT"
+                    "unknown target '{s}': use in-process, framed, qemu or tcp:HOST:PORT"
                 )),
             },
         }
@@ -297,9 +293,7 @@ pub fn fly_target_with_progress(
     progress: Option<&dyn Fn(f64)>,
     rec: Recording<'_>,
 ) -> anyhow::Result<FlightResult> {
-    use crate::link::{
-        boot_shim_elf, firmware_crazyflie_elf, firmware_elf, Boot, FcClient, Qemu, Remote, SYSTICK_PER_INSTRUCTION,
-    };
+    use crate::link::{firmware_elf, FcClient, Qemu, Remote, SYSTICK_PER_INSTRUCTION};
     cfg.validate()?;
     let tick = |t: f64| {
         if let Some(p) = progress {
@@ -323,13 +317,6 @@ pub fn fly_target_with_progress(
         Target::Framed => FcClient::local()?,
         Target::Tcp(addr) => FcClient::tcp(addr)?,
         Target::Qemu => qemu.insert(Qemu::start(&firmware_elf()?)?).client()?,
-        Target::QemuCrazyflie => {
-            let boot = Boot::Shim {
-                shim: boot_shim_elf()?,
-                image: firmware_crazyflie_elf()?,
-            };
-            qemu.insert(Qemu::start_booting(&boot)?).client()?
-        }
     };
     // The vehicle's parameters are written over the link (ParamSet) before the selection.
     let flown = Remote::open(client, cfg.spec, &cfg.vehicle)

@@ -125,15 +125,17 @@ struct CrtpArgs {
     /// Seed of the sensor noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Where the vehicle runs: `in-process` (served on --listen) or `qemu` (the `firmware-crtp`
-    /// image: cflib reaches it through `tools/nrf51_bridge.py` on --syslink).
-    #[arg(long, default_value = "in-process", value_parser = ["in-process", "qemu"])]
+    /// Where the vehicle runs: `in-process` (served on --listen), `qemu` (the `firmware-crtp`
+    /// image: cflib reaches it through `tools/nrf51_bridge.py` on --syslink) or `qemu-crazyflie`
+    /// (the Crazyflie 2.1 image, booted behind QEMU's stand-in for its bootloader, its motors on
+    /// TIM2/TIM4).
+    #[arg(long, default_value = "in-process", value_parser = ["in-process", "qemu", "qemu-crazyflie"])]
     target: String,
-    /// With `--target qemu`: the TCP address of the image's USART6 (syslink), where
+    /// With `--target qemu` or `qemu-crazyflie`: the TCP address of the image's USART6 (syslink), where
     /// `tools/nrf51_bridge.py --syslink` connects.
     #[arg(long, default_value = "127.0.0.1:19880", value_name = "HOST:PORT")]
     syslink: String,
-    /// With `--target qemu`: how long the image waits for the bridge to connect, s.
+    /// With `--target qemu` or `qemu-crazyflie`: how long the image waits for the bridge to connect, s.
     #[arg(long, default_value_t = 30.0, value_name = "S")]
     bridge_wait: f64,
 }
@@ -386,9 +388,7 @@ struct FlyArgs {
     /// flight-controller core in this process, reached only through the framed wire protocol) or
     /// `tcp:HOST:PORT` (a flight controller behind the protocol, e.g. `sil-host serve`) or `qemu`
     /// (the thumbv7em image in qemu-system-arm's netduinoplus2 over the emulated USART; the JSON
-    /// then adds instructions per step; ≈ 4-9 ms of real time per step) or `qemu-crazyflie` (the
-    /// Crazyflie 2.1 image, linked at 0x08004000, booted through QEMU's stand-in for the
-    /// Crazyflie bootloader). Give it twice for both,
+    /// then adds instructions per step; ≈ 4-9 ms of real time per step). Give it twice for both,
     /// e.g. `--target 1,2,-3,45 --target framed`.
     #[arg(long, value_name = "X,Y,Z,YAW_DEG|TARGET", value_parser = parse_target_arg, allow_hyphen_values = true)]
     target: Vec<TargetArg>,
@@ -439,7 +439,7 @@ struct FlyArgs {
     /// reference, the motors and the flight's parameters, under PX4's topic names.
     #[arg(long, value_name = "PATH")]
     ulog: Option<PathBuf>,
-    /// With `--target qemu` or `qemu-crazyflie`: print the firmware's own log (defmt over semihosting, decoded with
+    /// With `--target qemu`: print the firmware's own log (defmt over semihosting, decoded with
     /// the image's format table) to standard error after the flight.
     #[arg(long)]
     firmware_log: bool,
@@ -1109,9 +1109,10 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
         duration_s: a.duration,
         seed: a.seed,
         target: match a.target.as_str() {
-            "qemu" => sil_host::crtp::CrtpTarget::Qemu {
+            "qemu" | "qemu-crazyflie" => sil_host::crtp::CrtpTarget::Qemu {
                 syslink: a.syslink.clone(),
                 wait_s: a.bridge_wait,
+                crazyflie: a.target == "qemu-crazyflie",
             },
             _ => sil_host::crtp::CrtpTarget::InProcess,
         },

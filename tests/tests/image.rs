@@ -122,9 +122,10 @@ fn load_segments(elf: &std::path::Path) -> Vec<(u64, u64)> {
         .collect()
 }
 
-/// The Crazyflie 2.1 image (the flight loop and its motors, in the
-/// bootloader's layout): flash ≤ 288 KiB and static RAM ≤ 17 KiB, as the
-/// plain image it grows from; everything it puts in flash is at or above
+/// The Crazyflie 2.1 image (the CRTP image's loop and the Crazyflie's
+/// motors, in the bootloader's layout): flash ≤ 352 KiB and static RAM ≤
+/// 20 KiB, as `firmware-crtp` (the motors, their thrust curve and the fault
+/// hook add ≈ 3 KiB of flash to its 347 376 B); everything it puts in flash is at or above
 /// 0x08004000, so flashing it (`cfloader`, `dfu-util -s 0x08004000`)
 /// leaves Bitcraze's bootloader in sector 0 untouched, and its vector table
 /// is the first thing there. The boot shim (QEMU's stand-in for that
@@ -132,7 +133,7 @@ fn load_segments(elf: &std::path::Path) -> Vec<(u64, u64)> {
 #[test]
 fn the_crazyflie_image_fits_its_budgets_and_leaves_the_bootloader_sector_alone() {
     let elf = sil_host::link::firmware_crazyflie_elf().expect("building the Crazyflie image");
-    check("crazyflie image", &elf, 288 * 1024, 17 * 1024);
+    check("crazyflie image", &elf, 352 * 1024, 20 * 1024);
     let flash: Vec<(u64, u64)> = load_segments(&elf)
         .into_iter()
         .filter(|(a, _)| FLASH.contains(a))

@@ -533,32 +533,55 @@ fn a_hard_fault_on_the_crazyflie_layout_stops_its_four_motors() {
 /// The Crazyflie 2.1 image (linked at 0x08004000) booted as on the
 /// board: QEMU resets into the boot shim at 0x08000000 (the stand-in for
 /// Bitcraze's bootloader), which jumps to the image; the image points VTOR
-/// at its own vector table, without which no USART1 interrupt would reach
-/// it. It then flies rotorpy's Crazyflie vehicle in lockstep exactly as the
-/// core does in-process, its motors driven through the Crazyflie's thrust curve.
+/// at its own vector table, without which no USART interrupt would reach
+/// it. Both its links answer: syslink on USART6 says `RADIO_READY` (the
+/// frame `syslink.c` expects: 0xBC 0xCF, type 0x0B, length 0, Fletcher-8),
+/// and our protocol on USART1 answers a parameter write with the value in
+/// force. (cflib flies it in `./test.sh`: `tools/crtp_cflib.py --qemu-crazyflie`.)
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
-fn the_crazyflie_image_boots_behind_its_bootloader_and_flies_as_in_process() {
-    let mut cfg = setpoint(Family::Lqr, 3.0);
-    cfg.vehicle = sil_host::config::load_vehicle(&root().join("vehicles/crazyflie-rotorpy.toml")).unwrap();
-    let local = fly(&cfg).unwrap();
-    let pil = fly_target(&cfg, &Target::QemuCrazyflie).unwrap();
-    let log = pil.firmware_log.join("\n");
+fn the_crazyflie_image_boots_behind_its_bootloader_and_answers_both_links() {
+    use std::io::Read;
+    let syslink = {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        l.local_addr().unwrap().to_string()
+    };
+    let boot = sil_host::link::Boot::Shim {
+        shim: sil_host::link::boot_shim_elf().unwrap(),
+        image: sil_host::link::firmware_crazyflie_elf().unwrap(),
+    };
+    let mut qemu = sil_host::link::Qemu::start_with_syslink(&boot, &syslink, 20.0).unwrap();
+    // The radio's side: connect once QEMU listens, then read the boot frame.
+    let radio = std::thread::spawn(move || {
+        let t0 = std::time::Instant::now();
+        let mut s = loop {
+            match std::net::TcpStream::connect(&syslink) {
+                Ok(s) => break s,
+                Err(_) if t0.elapsed() < std::time::Duration::from_secs(20) => {
+                    std::thread::sleep(std::time::Duration::from_millis(20))
+                }
+                Err(e) => panic!("USART6 never listened: {e}"),
+            }
+        };
+        s.set_read_timeout(Some(std::time::Duration::from_secs(20))).unwrap();
+        let mut frame = [0u8; 6];
+        s.read_exact(&mut frame).unwrap();
+        frame
+    });
+    let mut client = qemu.client().unwrap();
+    let frame = radio.join().unwrap();
+    // 0x0B + 0 = 0x0B, and 0x0B + 0x0B = 0x16 (Fletcher-8 over type and length).
+    assert_eq!(frame, [0xBC, 0xCF, 0x0B, 0x00, 0x0B, 0x16], "not RADIO_READY");
+    let mass = fc_loop::params::PARAMS
+        .iter()
+        .position(|p| p.id == "VEH_MASS")
+        .expect("VEH_MASS");
+    assert!((client.set_param(mass, 0.031).unwrap() - 0.031).abs() < 1e-7);
+    let log = qemu.finish().unwrap().join("\n");
     assert!(
         log.contains("INFO Crazyflie 2.1 image: vector table at 0x08004000"),
         "{log}"
     );
-    assert!(log.contains("INFO session open") && !log.contains("ERROR"), "{log}");
-    assert_eq!(local.steps, pil.steps);
-    for (a, b) in [
-        (local.metrics.x.rmse_m, pil.metrics.x.rmse_m),
-        (local.metrics.y.rmse_m, pil.metrics.y.rmse_m),
-        (local.metrics.z.rmse_m, pil.metrics.z.rmse_m),
-    ] {
-        assert!(
-            (a - b).abs() <= 1e-9 * a.max(1.0),
-            "RMSE {a} in-process vs {b} on the Crazyflie image"
-        );
-    }
-    assert_eq!(pil.link_counters.expect("counters").failsafe_entries, 0, "{log}");
+    assert!(log.contains("INFO up: CRTP over syslink on USART6"), "{log}");
+    assert!(!log.contains("ERROR"), "{log}");
 }

@@ -409,6 +409,11 @@ impl CrtpVehicle {
         self.motors
     }
 
+    /// The battery voltage the nRF51 last reported, V (4.2 until it does).
+    pub fn battery_v(&self) -> f32 {
+        self.vbat_v
+    }
+
     /// The battery: voltage, V, and the Crazyflie's `pm.state` (0 on
     /// battery, 1 charging, 2 charged, 3 low, 4 shut down).
     pub fn set_battery(&mut self, vbat_v: f32, state: i8) {

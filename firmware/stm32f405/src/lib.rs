@@ -9,6 +9,8 @@
 
 pub mod clocks;
 #[cfg(target_os = "none")]
+pub mod crtp_image;
+#[cfg(target_os = "none")]
 pub mod stack;
 
 pub use clocks::{ClockError, ClockPlan};

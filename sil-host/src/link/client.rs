@@ -164,7 +164,15 @@ impl FcClient {
                 }
                 Transport::Tcp(s) => {
                     let mut buf = [0u8; 512];
-                    let n = s.read(&mut buf).context("reading from the flight controller")?;
+                    // A signal (SIGINT/SIGTERM, whose handler asks the flight
+                    // to stop at its next step) interrupts a blocking read:
+                    // read again rather than end the flight with an error.
+                    let n = loop {
+                        match s.read(&mut buf) {
+                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                            r => break r.context("reading from the flight controller")?,
+                        }
+                    };
                     if n == 0 {
                         bail!("the flight controller closed the connection");
                     }

@@ -172,25 +172,15 @@ impl Qemu {
         Self::spawn(&Boot::Direct(elf.to_path_buf()), &[], Duration::from_secs(10))
     }
 
-    /// Starts QEMU booting as `boot` says (the Crazyflie image through its
-    /// boot shim), USART1 on a local TCP server.
-    pub fn start_booting(boot: &Boot) -> Result<Self> {
-        Self::spawn(boot, &[], Duration::from_secs(10))
-    }
-
-    /// Starts the image at `elf` with USART6 (QEMU's sixth `-serial`) also a
+    /// Starts the image as `boot` says with USART6 (QEMU's sixth `-serial`) also a
     /// TCP server at `syslink`: the Crazyflie's link to its nRF51 radio,
     /// for `tools/nrf51_bridge.py`. QEMU starts the guest once both USART1
     /// and USART6 have a client, so nothing the image says at boot
     /// (`RADIO_READY`) is lost; the bridge has `wait_s` to connect.
-    pub fn start_with_syslink(elf: &std::path::Path, syslink: &str, wait_s: f64) -> Result<Self> {
+    pub fn start_with_syslink(boot: &Boot, syslink: &str, wait_s: f64) -> Result<Self> {
         let usart6 = format!("tcp:{syslink},server=on,wait=on,nodelay=on");
         let serials = ["null", "null", "null", "null", usart6.as_str()];
-        Self::spawn(
-            &Boot::Direct(elf.to_path_buf()),
-            &serials,
-            Duration::from_secs_f64(wait_s.clamp(1.0, 3600.0)),
-        )
+        Self::spawn(boot, &serials, Duration::from_secs_f64(wait_s.clamp(1.0, 3600.0)))
     }
 
     /// Starts QEMU with USART1 on a local TCP server and `more` as the
