@@ -361,22 +361,45 @@ fn qemu_flight_does_not_depend_on_the_hosts_load() {
 /// four compare values 0, loaded at once), say over defmt where the fault
 /// was — a pc inside the program's `main`, found by `nm` in the ELF — and end
 /// the run as a failure (QEMU's exit status).
+/// Builds `bins` of `package` for thumbv7em (release), runs `boot` in QEMU
+/// and returns the program's decoded defmt log, joined, and QEMU's exit code.
+fn run_fault_program(package: &str, bins: &[&str], boot: &sil_host::link::Boot) -> (Vec<String>, String, Option<i32>) {
+    let mut c = cargo();
+    c.args([
+        "build",
+        "-q",
+        "--release",
+        "-p",
+        package,
+        "--target",
+        "thumbv7em-none-eabihf",
+    ]);
+    for b in bins {
+        c.args(["--bin", b]);
+    }
+    assert!(
+        c.status().expect("cargo").success(),
+        "building {bins:?} for thumbv7em failed"
+    );
+    let out = sil_host::link::qemu_command_booting("null", boot)
+        .output()
+        .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
+    let log = sil_host::link::decode_defmt(boot.image(), &out.stdout).expect("the program's defmt log");
+    let all = log.join("\n");
+    (log, all, out.status.code())
+}
+
+/// A thumbv7em release program of the workspace (its ELF).
+fn release_elf(name: &str) -> PathBuf {
+    root().join("target/thumbv7em-none-eabihf/release").join(name)
+}
+
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn a_hard_fault_turns_the_motors_off_and_says_where() {
-    let st = cargo()
-        .args(["build", "-q", "--release", "-p", "fc-stm32f405", "--bin", "fault"])
-        .args(["--target", "thumbv7em-none-eabihf"])
-        .status()
-        .expect("cargo");
-    assert!(st.success(), "building the fault program for thumbv7em failed");
-    let elf = root().join("target/thumbv7em-none-eabihf/release/fault");
-    let out = sil_host::link::qemu_command("null", &elf)
-        .output()
-        .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
-    assert!(!out.status.success(), "a hard fault must end the run as a failure");
-    let log = sil_host::link::decode_defmt(&elf, &out.stdout).expect("the program's defmt log");
-    let all = log.join("\n");
+    let elf = release_elf("fault");
+    let (log, all, code) = run_fault_program("fc-stm32f405", &["fault"], &sil_host::link::Boot::Direct(elf.clone()));
+    assert!(code != Some(0), "a hard fault must end the run as a failure");
     let running = log
         .iter()
         .find(|l| l.contains("fault: motors running"))
@@ -435,28 +458,10 @@ fn a_hard_fault_turns_the_motors_off_and_says_where() {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn a_stack_overflow_is_caught_below_the_statics_and_turns_the_motors_off() {
-    let st = cargo()
-        .args([
-            "build",
-            "-q",
-            "--release",
-            "-p",
-            "fc-stm32f405",
-            "--bin",
-            "stack-overflow",
-        ])
-        .args(["--target", "thumbv7em-none-eabihf"])
-        .status()
-        .expect("cargo");
-    assert!(st.success(), "building the stack-overflow program for thumbv7em failed");
-    let elf = root().join("target/thumbv7em-none-eabihf/release/stack-overflow");
-    let out = sil_host::link::qemu_command("null", &elf)
-        .output()
-        .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
-    let log = sil_host::link::decode_defmt(&elf, &out.stdout).expect("the program's defmt log");
-    let all = log.join("\n");
+    let boot = sil_host::link::Boot::Direct(release_elf("stack-overflow"));
+    let (log, all, code) = run_fault_program("fc-stm32f405", &["stack-overflow"], &boot);
     assert_eq!(
-        out.status.code(),
+        code,
         Some(1),
         "QEMU must exit with the program's failure, not abort on a lockup:\n{all}"
     );
@@ -485,36 +490,12 @@ fn a_stack_overflow_is_caught_below_the_statics_and_turns_the_motors_off() {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn a_hard_fault_on_the_crazyflie_layout_stops_its_four_motors() {
-    let st = cargo()
-        .args([
-            "build",
-            "-q",
-            "--release",
-            "-p",
-            "fc-crazyflie",
-            "--bin",
-            "fault-crazyflie",
-            "--bin",
-            "boot-shim",
-        ])
-        .args(["--target", "thumbv7em-none-eabihf"])
-        .status()
-        .expect("cargo");
-    assert!(
-        st.success(),
-        "building fault-crazyflie and boot-shim for thumbv7em failed"
-    );
-    let dir = root().join("target/thumbv7em-none-eabihf/release");
     let boot = sil_host::link::Boot::Shim {
-        shim: dir.join("boot-shim"),
-        image: dir.join("fault-crazyflie"),
+        shim: release_elf("boot-shim"),
+        image: release_elf("fault-crazyflie"),
     };
-    let out = sil_host::link::qemu_command_booting("null", &boot)
-        .output()
-        .expect("qemu-system-arm not found (Debian package qemu-system-arm)");
-    let log = sil_host::link::decode_defmt(boot.image(), &out.stdout).expect("the program's defmt log");
-    let all = log.join("\n");
-    assert_eq!(out.status.code(), Some(1), "{all}");
+    let (log, all, code) = run_fault_program("fc-crazyflie", &["fault-crazyflie", "boot-shim"], &boot);
+    assert_eq!(code, Some(1), "{all}");
     assert!(
         all.contains("fault-crazyflie: motors running, compare [128, 128, 128, 128]"),
         "{all}"

@@ -206,6 +206,39 @@ pub fn off_now(tim2: &tim2::RegisterBlock, tim4: &tim3::RegisterBlock) -> [u32; 
     ]
 }
 
+/// On the chip: [`apply_to`] on the real RCC, GPIOA, GPIOB, TIM2 and TIM4
+/// (motors off, counters running); returns the two timers for [`set`].
+///
+/// # Safety
+/// The caller is the only code that touches those peripherals (the image's
+/// start-up, once).
+#[cfg(target_os = "none")]
+pub unsafe fn start_on_chip() -> (&'static tim2::RegisterBlock, &'static tim3::RegisterBlock) {
+    use stm32f4::stm32f405 as pac;
+    // SAFETY: the blocks' fixed addresses; exclusive by the caller's contract.
+    let (rcc, gpioa, gpiob, tim2, tim4) = unsafe {
+        (
+            &*pac::RCC::ptr(),
+            &*pac::GPIOA::ptr(),
+            &*pac::GPIOB::ptr(),
+            &*pac::TIM2::ptr(),
+            &*pac::TIM4::ptr(),
+        )
+    };
+    apply_to(rcc, gpioa, gpiob, tim2, tim4);
+    (tim2, tim4)
+}
+
+/// On the chip, from a fault handler (which owns the chip from then on):
+/// [`off_now`] on TIM2/TIM4, named for the fault's log line.
+#[cfg(target_os = "none")]
+pub fn off_now_on_chip() -> (&'static str, [u32; 4]) {
+    use stm32f4::stm32f405 as pac;
+    // SAFETY: the blocks' fixed addresses; a fault handler is the only code left running.
+    let (tim2, tim4) = unsafe { (&*pac::TIM2::ptr(), &*pac::TIM4::ptr()) };
+    ("TIM2/TIM4", off_now(tim2, tim4))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

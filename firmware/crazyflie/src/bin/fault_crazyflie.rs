@@ -17,29 +17,13 @@ mod target {
     use crate::board;
     use cortex_m_rt::entry;
     use fc_crazyflie::motors::{self, MotorOutput};
-    use stm32f4::stm32f405 as pac;
-
-    fn motors_off_now() -> (&'static str, [u32; 4]) {
-        // SAFETY: the fault handler owns the chip from here on.
-        let (tim2, tim4) = unsafe { (&*pac::TIM2::ptr(), &*pac::TIM4::ptr()) };
-        ("TIM2/TIM4", motors::off_now(tim2, tim4))
-    }
 
     #[entry]
     fn main() -> ! {
         let (_clock, _usart) = board::bring_up();
-        // SAFETY: the only code that touches these blocks.
-        let (rcc, gpioa, gpiob, tim2, tim4) = unsafe {
-            (
-                &*pac::RCC::ptr(),
-                &*pac::GPIOA::ptr(),
-                &*pac::GPIOB::ptr(),
-                &*pac::TIM2::ptr(),
-                &*pac::TIM4::ptr(),
-            )
-        };
-        motors::apply_to(rcc, gpioa, gpiob, tim2, tim4);
-        board::on_fault_stop_motors(motors_off_now);
+        // SAFETY: the only code that touches the motor peripherals.
+        let (tim2, tim4) = unsafe { motors::start_on_chip() };
+        board::on_fault_stop_motors(motors::off_now_on_chip);
         let half = MotorOutput {
             compare: [128; 4],
             saturated: false,

@@ -28,33 +28,17 @@ mod target {
     use fc_crazyflie::motors::{self, MotorOutput, CF21_LEGACY_PROPELLERS};
     use fc_crtp::vehicle::CrtpVehicle;
     use fc_loop::params::{Airframe, Settings};
-    use stm32f4::stm32f405 as pac;
 
     /// Hub distance from the centre, m (Bitcraze's `ARM_LENGTH`).
     const HUB_M: f32 = 0.046;
 
-    /// The fault handlers' first act on this board: TIM2/TIM4's compares to 0 now.
-    fn motors_off_now() -> (&'static str, [u32; 4]) {
-        // SAFETY: a fault handler owns the chip from here on.
-        let (tim2, tim4) = unsafe { (&*pac::TIM2::ptr(), &*pac::TIM4::ptr()) };
-        ("TIM2/TIM4", motors::off_now(tim2, tim4))
-    }
-
     #[entry]
     fn main() -> ! {
         let (clock, sim) = board::bring_up();
-        // SAFETY: the only code that touches these blocks; single core.
-        let (rcc, gpioa, gpiob, tim2, tim4) = unsafe {
-            (
-                &*pac::RCC::ptr(),
-                &*pac::GPIOA::ptr(),
-                &*pac::GPIOB::ptr(),
-                &*pac::TIM2::ptr(),
-                &*pac::TIM4::ptr(),
-            )
-        };
-        motors::apply_to(rcc, gpioa, gpiob, tim2, tim4);
-        board::on_fault_stop_motors(motors_off_now);
+        // SAFETY: the only code that touches the motor peripherals.
+        let (tim2, tim4) = unsafe { motors::start_on_chip() };
+        board::on_fault_stop_motors(motors::off_now_on_chip);
+        // SAFETY: a read of SCB.VTOR, which nothing writes after reset.
         let vtor = unsafe { (*cortex_m::peripheral::SCB::PTR).vtor.read() };
         defmt::info!("Crazyflie 2.1 image: vector table at {=u32:#010x}", vtor);
         let Some(v) = vehicle() else {
