@@ -10,7 +10,8 @@
 //! | failsafe descent | on | off | blink 5 Hz |
 //! | fault (tumbled, sensor lost on the ground, hard fault) | off | off | on |
 
-use embedded_hal::digital::OutputPin;
+use embedded_hal::digital::{ErrorType, OutputPin};
+use stm32f4::stm32f405::{gpioi, rcc};
 
 /// What the board is doing, for the LEDs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -87,6 +88,74 @@ impl<P: OutputPin> Leds<P> {
     }
 }
 
+/// One LED's pin on GPIOC or GPIOD (the F405's GPIOC–GPIOI share one
+/// register layout), driven through BSRR: a set or a reset of that bit
+/// alone, so no read-modify-write races another pin's.
+pub struct LedPin {
+    port: &'static gpioi::RegisterBlock,
+    pin: u8,
+}
+
+impl ErrorType for LedPin {
+    type Error = core::convert::Infallible;
+}
+
+impl OutputPin for LedPin {
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        // SAFETY: BSRR takes any value; bit `pin` (< 16) sets that pin.
+        self.port.bsrr().write(|w| unsafe { w.bits(1 << self.pin) });
+        Ok(())
+    }
+
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        // SAFETY: bit `pin + 16` resets that pin.
+        self.port.bsrr().write(|w| unsafe { w.bits(1 << (self.pin + 16)) });
+        Ok(())
+    }
+}
+
+/// The GPIOC and GPIOD clocks on, the five LEDs dark (driven to their
+/// unlit level first, then made push-pull outputs), and the five pins in
+/// [`Lit`]'s order: PD2, PC1, PC2, PC0, PC3.
+pub fn apply_to(
+    rcc: &rcc::RegisterBlock,
+    gpioc: &'static gpioi::RegisterBlock,
+    gpiod: &'static gpioi::RegisterBlock,
+) -> Leds<LedPin> {
+    rcc.ahb1enr().modify(|_, w| w.gpiocen().enabled().gpioden().enabled());
+    let mut leds = Leds::new([
+        LedPin { port: gpiod, pin: 2 },
+        LedPin { port: gpioc, pin: 1 },
+        LedPin { port: gpioc, pin: 2 },
+        LedPin { port: gpioc, pin: 0 },
+        LedPin { port: gpioc, pin: 3 },
+    ]);
+    let _ = leds.show([false; 5]);
+    gpioc.moder().modify(|_, w| {
+        w.moder(0)
+            .output()
+            .moder(1)
+            .output()
+            .moder(2)
+            .output()
+            .moder(3)
+            .output()
+    });
+    gpiod.moder().modify(|_, w| w.moder(2).output());
+    leds
+}
+
+/// On the chip: [`apply_to`] on the real RCC, GPIOC and GPIOD.
+///
+/// # Safety
+/// The caller is the only code that touches those pins (the image's start-up, once).
+#[cfg(target_os = "none")]
+pub unsafe fn start_on_chip() -> Leds<LedPin> {
+    use stm32f4::stm32f405 as pac;
+    // SAFETY: the blocks' fixed addresses; exclusive by the caller's contract.
+    unsafe { apply_to(&*pac::RCC::ptr(), &*pac::GPIOC::ptr(), &*pac::GPIOD::ptr()) }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -106,6 +175,40 @@ mod tests {
         let mut leds = Leds::new(core::array::from_fn(|i| pins[i].clone()));
         leds.show(pattern(Indication::Fault, 0)).unwrap();
         pins.iter_mut().for_each(Mock::done);
+    }
+
+    #[test]
+    fn the_pins_are_the_boards_and_are_driven_through_bsrr() {
+        // GPIOC, GPIOD and RCC in host memory (reset values 0).
+        let gpioc: &'static mut [u32; 16] = Box::leak(Box::new([0; 16]));
+        let gpiod: &'static mut [u32; 16] = Box::leak(Box::new([0; 16]));
+        let mut rcc = [0u32; 64];
+        let (pc, pd) = (gpioc.as_mut_ptr(), gpiod.as_mut_ptr());
+        // SAFETY: each array is larger than its register block, u32 aligned
+        // and lives for the test; the PAC's registers are volatile cells.
+        let mut leds = unsafe { apply_to(&*rcc.as_mut_ptr().cast(), &*pc.cast(), &*pd.cast()) };
+        let (moder, bsrr, ahb1enr) = (0, 6, 0x30 / 4);
+        // GPIOC (bit 2) and GPIOD (bit 3) clocks; PC0–PC3 and PD2 outputs (0b01).
+        assert_eq!(rcc[ahb1enr], 1 << 2 | 1 << 3);
+        // SAFETY: reads of the arrays the register blocks were.
+        let (c, d) = unsafe { (*pc.cast::<[u32; 16]>(), *pd.cast::<[u32; 16]>()) };
+        assert_eq!((c[moder], d[moder]), (0x55, 0b01 << 4));
+        // Dark first: the last write to each port before the mode switch was
+        // an unlit level (PC3 red right: set, high = dark; PD2 blue: reset, low = dark).
+        assert_eq!((c[bsrr], d[bsrr]), (1 << 3, 1 << (2 + 16)));
+        // Lighting red left (PC0, active low) resets bit 0; its neighbours are untouched.
+        leds.show([false, false, false, true, false]).unwrap();
+        // SAFETY: as above.
+        let c = unsafe { *pc.cast::<[u32; 16]>() };
+        assert_eq!(c[bsrr], 1 << 3, "the last pin written is PC3, dark (set)");
+        let mut red_left = LedPin {
+            // SAFETY: as above.
+            port: unsafe { &*pc.cast() },
+            pin: 0,
+        };
+        red_left.set_low().unwrap();
+        // SAFETY: as above.
+        assert_eq!(unsafe { (*pc.cast::<[u32; 16]>())[bsrr] }, 1 << 16);
     }
 
     #[test]

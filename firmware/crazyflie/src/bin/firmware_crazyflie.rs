@@ -10,9 +10,10 @@
 //! Crazyflie's M1–M4, hubs 46 mm out; the vehicle's parameters as written)
 //! and the Crazyflie 2.1's thrust curve at the battery voltage the nRF51
 //! reports, to the four compare registers; disarmed, they are 0. A fault
-//! zeroes them first. Not yet wired: the BMI088 and BMP388 on I2C3 (the
-//! drivers are in this crate's library), the LEDs, the IWDG and the
-//! interrupt priorities of the board's own clock. In QEMU the `boot-shim`
+//! zeroes them first. The LEDs show booting, aligning, ready, armed and
+//! failsafe (`fc_crazyflie::leds`; QEMU models no GPIO). Not yet wired: the
+//! BMI088 and BMP388 on I2C3 (the drivers are in this crate's library), the
+//! IWDG and the interrupt priorities of the board's own clock. In QEMU the `boot-shim`
 //! binary stands in for the bootloader.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
@@ -25,19 +26,32 @@ mod board;
 mod target {
     use crate::board;
     use cortex_m_rt::entry;
+    use fc_crazyflie::leds::{self, pattern, Indication};
     use fc_crazyflie::motors::{self, MotorOutput, CF21_LEGACY_PROPELLERS};
     use fc_crtp::vehicle::CrtpVehicle;
+    use fc_loop::nav::NavMode;
     use fc_loop::params::{Airframe, Settings};
 
     /// Hub distance from the centre, m (Bitcraze's `ARM_LENGTH`).
     const HUB_M: f32 = 0.046;
+
+    /// The fault handlers' first act: the motors off, then the LEDs to "fault".
+    fn on_fault() -> (&'static str, [u32; 4]) {
+        let stopped = motors::off_now_on_chip();
+        // SAFETY: a fault handler is the only code left running.
+        let _ = unsafe { leds::start_on_chip() }.show(pattern(Indication::Fault, 0));
+        stopped
+    }
 
     #[entry]
     fn main() -> ! {
         let (clock, sim) = board::bring_up();
         // SAFETY: the only code that touches the motor peripherals.
         let (tim2, tim4) = unsafe { motors::start_on_chip() };
-        board::on_fault_stop_motors(motors::off_now_on_chip);
+        board::on_fault_stop_motors(on_fault);
+        // SAFETY: the only code that touches the LED pins.
+        let mut leds = unsafe { leds::start_on_chip() };
+        let _ = leds.show(pattern(Indication::Booting, 0));
         // SAFETY: a read of SCB.VTOR, which nothing writes after reset.
         let vtor = unsafe { (*cortex_m::peripheral::SCB::PTR).vtor.read() };
         defmt::info!("Crazyflie 2.1 image: vector table at {=u32:#010x}", vtor);
@@ -52,7 +66,7 @@ mod target {
         };
         let mut designs = v.core().selections();
         let (mut saturated, mut saturations) = (false, 0u32);
-        let mut armed_steps: u32 = 0;
+        let (mut armed_steps, mut steps) = (0u32, 0u32);
         let mut drive = |v: &CrtpVehicle, u: &nalgebra::Vector4<f32>| {
             // The vehicle's parameters (and so its mixer) change only with a new design.
             if v.core().selections() != designs {
@@ -67,6 +81,15 @@ mod target {
                 MotorOutput::OFF
             };
             motors::set(tim2, tim4, &out);
+            // The LEDs, on the steps' clock (1 kHz: `steps` is ms).
+            steps = steps.wrapping_add(1);
+            let shown = match (v.armed(), v.core().navigator().mode()) {
+                (true, NavMode::Failsafe) => Indication::Failsafe,
+                (true, _) => Indication::Armed,
+                (false, NavMode::Aligning) => Indication::Aligning,
+                (false, _) => Indication::Ready,
+            };
+            let _ = leds.show(pattern(shown, steps));
             // Once a second of armed flight (at 1 kHz), what the motors get.
             armed_steps = if v.armed() { armed_steps.wrapping_add(1) } else { 0 };
             if armed_steps % 1000 == 500 {
