@@ -124,9 +124,9 @@ fn load_segments(elf: &std::path::Path) -> Vec<(u64, u64)> {
 
 /// The Crazyflie 2.1 image (the CRTP image's loop and the Crazyflie's
 /// motors, in the bootloader's layout): flash ≤ 352 KiB and static RAM ≤
-/// 20 KiB, as `firmware-crtp` (the motors, their thrust curve and the fault
-/// hook and the LEDs add ≈ 4 KiB of flash to its 347 376 B); everything it puts in flash is at or above
-/// 0x08004000, so flashing it (`cfloader`, `dfu-util -s 0x08004000`)
+/// 20 KiB, as `firmware-crtp` (the motors, their thrust curve, the fault
+/// hook and the LEDs add ≈ 4 KiB of flash to its 347 376 B); everything it
+/// puts in flash is at or above 0x08004000, so flashing it (`cfloader`, `dfu-util -s 0x08004000`)
 /// leaves Bitcraze's bootloader in sector 0 untouched, and its vector table
 /// is the first thing there. The boot shim (QEMU's stand-in for that
 /// bootloader) fits the 16 KiB sector.
