@@ -177,7 +177,7 @@ impl<I: I2c> Bmi088<I> {
         }
     }
 
-    fn expect(&mut self, dev: &'static str, addr: u8, r: u8, wrote: u8, mask: u8) -> Result<(), SensorError> {
+    fn check_read_back(&mut self, dev: &'static str, addr: u8, r: u8, wrote: u8, mask: u8) -> Result<(), SensorError> {
         let read = self.read_reg(dev, addr, r)?;
         if read & mask == wrote & mask {
             Ok(())
@@ -206,8 +206,8 @@ impl<I: I2c> Bmi088<I> {
         let io = (io & !(val::INT3_LVL | val::INT3_OD)) | val::INT3_LVL;
         self.write_reg(GYRO, GYRO_ADDR, reg::INT3_INT4_IO_CONF, io)?;
         self.write_reg(GYRO, GYRO_ADDR, reg::INT3_INT4_IO_MAP, val::MAP_DRDY_INT3)?;
-        self.expect(GYRO, GYRO_ADDR, reg::GYRO_RANGE, val::GYRO_RANGE_2000DPS, 0x07)?;
-        self.expect(GYRO, GYRO_ADDR, reg::GYRO_BANDWIDTH, val::GYRO_BW_1000HZ_116HZ, 0x0F)?;
+        self.check_read_back(GYRO, GYRO_ADDR, reg::GYRO_RANGE, val::GYRO_RANGE_2000DPS, 0x07)?;
+        self.check_read_back(GYRO, GYRO_ADDR, reg::GYRO_BANDWIDTH, val::GYRO_BW_1000HZ_116HZ, 0x0F)?;
 
         // Accelerometer: soft reset, then on and active, then configured.
         self.check_id(ACC, ACCEL_ADDR, ACCEL_CHIP_ID)?;
@@ -219,8 +219,8 @@ impl<I: I2c> Bmi088<I> {
         delay.delay_ms(wait::ACC_ACTIVE_MS);
         self.write_reg(ACC, ACCEL_ADDR, reg::ACC_CONF, val::ACC_CONF_OSR4_1600HZ)?;
         self.write_reg(ACC, ACCEL_ADDR, reg::ACC_RANGE, val::ACC_RANGE_24G)?;
-        self.expect(ACC, ACCEL_ADDR, reg::ACC_CONF, val::ACC_CONF_OSR4_1600HZ, 0xFF)?;
-        self.expect(ACC, ACCEL_ADDR, reg::ACC_RANGE, val::ACC_RANGE_24G, 0x03)?;
+        self.check_read_back(ACC, ACCEL_ADDR, reg::ACC_CONF, val::ACC_CONF_OSR4_1600HZ, 0xFF)?;
+        self.check_read_back(ACC, ACCEL_ADDR, reg::ACC_RANGE, val::ACC_RANGE_24G, 0x03)?;
         let flags = self.read_reg(ACC, ACCEL_ADDR, reg::ACC_ERR)?;
         if flags != 0 {
             return Err(SensorError::DeviceError { device: ACC, flags });

@@ -198,6 +198,11 @@ pub fn off_now(tim2: &tim2::RegisterBlock, tim4: &tim3::RegisterBlock) -> [u32; 
     set(tim2, tim4, &MotorOutput::OFF);
     tim2.egr().write(|w| w.ug().update());
     tim4.egr().write(|w| w.ug().update());
+    compares(tim2, tim4)
+}
+
+/// The four compare values read back, M1..M4 (the order of [`set`]).
+pub fn compares(tim2: &tim2::RegisterBlock, tim4: &tim3::RegisterBlock) -> [u32; 4] {
     [
         tim2.ccr2().read().ccr().bits(),
         tim2.ccr4().read().ccr().bits(),

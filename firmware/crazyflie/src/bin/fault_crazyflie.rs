@@ -29,13 +29,10 @@ mod target {
             saturated: false,
         };
         motors::set(tim2, tim4, &half);
-        let ccr = [
-            tim2.ccr2().read().ccr().bits(),
-            tim2.ccr4().read().ccr().bits(),
-            tim2.ccr1().read().ccr().bits(),
-            u32::from(tim4.ccr4().read().ccr().bits()),
-        ];
-        defmt::info!("fault-crazyflie: motors running, compare {}", ccr);
+        defmt::info!(
+            "fault-crazyflie: motors running, compare {}",
+            motors::compares(tim2, tim4)
+        );
         cortex_m::asm::udf()
     }
 }

@@ -51,7 +51,8 @@ mod target {
         board::on_fault_stop_motors(on_fault);
         // SAFETY: the only code that touches the LED pins.
         let mut leds = unsafe { leds::start_on_chip() };
-        let _ = leds.show(pattern(Indication::Booting, 0));
+        let mut last_lit = pattern(Indication::Booting, 0);
+        let _ = leds.show(last_lit);
         // SAFETY: a read of SCB.VTOR, which nothing writes after reset.
         let vtor = unsafe { (*cortex_m::peripheral::SCB::PTR).vtor.read() };
         defmt::info!("Crazyflie 2.1 image: vector table at {=u32:#010x}", vtor);
@@ -89,7 +90,12 @@ mod target {
                 (false, NavMode::Aligning) => Indication::Aligning,
                 (false, _) => Indication::Ready,
             };
-            let _ = leds.show(pattern(shown, steps));
+            // Five pin writes only when what they show changes.
+            let lit = pattern(shown, steps);
+            if lit != last_lit {
+                last_lit = lit;
+                let _ = leds.show(lit);
+            }
             // Once a second of armed flight (at 1 kHz), what the motors get.
             armed_steps = if v.armed() { armed_steps.wrapping_add(1) } else { 0 };
             if armed_steps % 1000 == 500 {
