@@ -118,6 +118,32 @@ pub fn usart_isr(port: Port) {
     }
 }
 
+/// Takes up to `buf.len()` bytes of `port`'s receive queue (what
+/// [`usart_isr`] moved there) into `buf`, never waiting; returns how many.
+/// What [`Usart::read`] does, for code that receives in the port's own
+/// interrupt while another owner transmits.
+pub fn read_queued(port: Port, buf: &mut [u8]) -> usize {
+    port.with_queue(|q| {
+        let mut n = 0;
+        while n < buf.len() {
+            match q.pop_front() {
+                Some(b) => {
+                    buf[n] = b;
+                    n += 1;
+                }
+                None => break,
+            }
+        }
+        if n > 0 {
+            // Room again: resume reception if the interrupt paused it
+            // (a byte waiting in DR raises the interrupt at once).
+            // SAFETY: unmasking the port's interrupt, as `Usart::init` does.
+            unsafe { NVIC::unmask(port.irq()) };
+        }
+        n
+    })
+}
+
 /// Received bytes `port` lost so far to receiver overruns (each one
 /// corrupts the frame it belonged to; the protocol counts that frame as bad).
 pub fn rx_overruns(port: Port) -> u32 {
@@ -180,26 +206,7 @@ const TX_SPIN: u32 = 1_000_000;
 impl ByteLink for Usart {
     type Error = TxTimeout;
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
-        let port = self.port;
-        port.with_queue(|q| {
-            let mut n = 0;
-            while n < buf.len() {
-                match q.pop_front() {
-                    Some(b) => {
-                        buf[n] = b;
-                        n += 1;
-                    }
-                    None => break,
-                }
-            }
-            if n > 0 {
-                // Room again: resume reception if the interrupt paused it
-                // (a byte waiting in DR raises the interrupt at once).
-                // SAFETY: unmasking the port's interrupt, as `init` does.
-                unsafe { NVIC::unmask(port.irq()) };
-            }
-            Ok(n)
-        })
+        Ok(read_queued(self.port, buf))
     }
     fn write_all(&mut self, bytes: &[u8]) -> Result<(), Self::Error> {
         let u = self.port.regs();
@@ -222,6 +229,7 @@ impl ByteLink for Usart {
 /// millisecond and its interrupt ([`systick_isr`]) counts the reloads, so
 /// [`SysTickClock::ticks`] is a 64-bit tick count and the main loop wakes at
 /// least once a millisecond (the failsafe timer needs no other timer).
+#[derive(Debug, Clone, Copy)]
 pub struct SysTickClock {
     hz: u32,
 }

@@ -77,7 +77,7 @@ pub enum TimeBase {
     /// time does not increase is not flown and is counted as out of order.
     Lockstep,
     /// Free-running (a vehicle): the caller's real clock, the `now_us` of
-    /// [`FlightCore::service`] and [`FlightCore::check_timeout`]; the
+    /// [`FlightCore::service`] and [`Loop::check_timeout`]; the
     /// frames' `t_us` is not used.
     FreeRunning,
 }
@@ -209,14 +209,41 @@ pub fn setpoint_from_wire(w: &WireSetpoint) -> Option<Setpoint<f32>> {
 /// ```
 #[derive(Debug)]
 pub struct FlightCore {
+    /// Everything but the controller.
+    lp: Loop,
+    /// The running controller.
+    ctrl: AnyController<f32>,
+}
+
+/// The flight loop without its controller: the link's decoder and
+/// counters, the session, the parameters, the estimator and its schedule,
+/// the failsafe, the output held.
+///
+/// [`FlightCore`] is a `Loop` and its controller, stepped in one call. An
+/// image that runs the estimator and the controller at two interrupt
+/// priorities keeps them apart: the `Loop` is shared (the sample's
+/// interrupt steps the estimator in it, [`Loop::on_frame`]), the controller
+/// belongs to the controller's task alone, which runs the [`Job`]s the
+/// `Loop` hands it ([`run_job`]) and touches the `Loop` only for short,
+/// bounded moments, through an RTIC [`Mutex`]. Both ways run the same
+/// code, in the same order, so their outputs are identical.
+#[derive(Debug)]
+pub struct Loop {
     cfg: FcConfig,
     /// The parameters (vehicle, controller, failsafe; the motor settings
     /// are a front end's): `settings.vehicle` is what the controllers are
     /// designed for.
     settings: params::Settings,
-    ctrl: AnyController<f32>,
-    /// What `ctrl` was built from (rebuilt when a new selection fails).
+    /// What the controller was built from (rebuilt when a new selection fails).
     spec: ControllerSpec,
+    /// The controller's period, µs (cached at each design: the estimator's
+    /// schedule and the failsafe timer need it without the controller).
+    period_us: u64,
+    /// The controller takes a set-point preview (an MPC).
+    takes_preview: bool,
+    /// Preview set-points received since the controller last ran, applied
+    /// before its next step ([`Loop::apply_previews`]).
+    previews: [Option<Setpoint<f32>>; PREVIEW_SLOTS],
     sp: Setpoint<f32>,
     decoder: FrameDecoder<MAX_FRAME>,
     counters: Counters,
@@ -298,6 +325,249 @@ pub fn fix_to_wire(f: &Fix) -> WireFix {
     }
 }
 
+/// Preview set-points a [`Loop`] holds between two controller steps, by
+/// index: 0..=N for the MPCs' horizon N (they take 1..=N).
+pub const PREVIEW_SLOTS: usize = fc_core::control::regulation::HORIZON + 1;
+
+/// Work for the controller's task: everything that needs the controller.
+#[derive(Debug, Clone, Copy)]
+pub enum Job {
+    /// A sensor or IMU step: fly it if `control` says so, then answer it.
+    Step(Step),
+    /// Design this controller in place of the running one (`Select`).
+    Select(ControllerSpec),
+    /// Write a parameter (`ParamSet`); a re-design only if `allow_redesign`.
+    Param {
+        /// Index in [`params::PARAMS`].
+        index: u16,
+        /// Its new value.
+        value: f32,
+        /// The vehicle is not flying (no step of the session yet).
+        allow_redesign: bool,
+    },
+}
+
+/// A step the estimator (or a state frame) has taken: what its answer needs.
+#[derive(Debug, Clone, Copy)]
+pub struct Step {
+    /// The frame's sequence number.
+    pub seq: u32,
+    /// The cycle clock when the step began (`None`: it was not flown; the
+    /// answer reports 0 cycles).
+    pub t0: Option<u32>,
+    /// The answer carries the estimator's `Nav` and `NavBias` messages.
+    pub nav: bool,
+    /// The controller's step, when it is due.
+    pub control: Option<ControlJob>,
+}
+
+/// One controller step: its inputs, as the loop prepared them.
+#[derive(Debug, Clone, Copy)]
+pub struct ControlJob {
+    /// Time of the step, µs, on the time base's clock.
+    pub now_us: u64,
+    /// The state to fly from (NED, body FRD).
+    pub est: StateEstimate<f32>,
+    /// The set-point to fly to.
+    pub sp: Setpoint<f32>,
+    /// After a gap or the failsafe: the controller forgets the step before.
+    pub resume: bool,
+    /// The estimator's failsafe flies `sp`: the preview follows it.
+    pub preview_along: bool,
+    /// Time since the controller's last step, µs (none before the first).
+    pub interval_us: Option<u64>,
+    /// The controller's period, s.
+    pub period_s: f64,
+}
+
+impl ControlJob {
+    /// Runs the step on `ctrl`: resume, preview, the measured interval,
+    /// then the update.
+    pub fn fly(&self, ctrl: &mut AnyController<f32>) -> Result<ControlOutput<f32>, ControlError> {
+        if self.resume {
+            ctrl.resume();
+        }
+        if self.preview_along {
+            Navigator::preview_along(ctrl, &self.sp);
+        }
+        if let Some(dt) = self.interval_us {
+            fc_core::control::tell_interval(ctrl, dt, self.period_s);
+        }
+        ctrl.update(&self.est, &self.sp)
+    }
+}
+
+/// A design's inputs, copied out of the [`Loop`] so that the design (which
+/// takes milliseconds to tens of them) runs without it.
+#[derive(Debug, Clone, Copy)]
+pub struct Design {
+    /// The vehicle designed for.
+    pub vehicle: VehicleParams<f32>,
+    /// Gains and weights.
+    pub tuning: fc_core::control::Tuning,
+    /// The loop's control period, s (PD, LQR).
+    pub control_period_s: f64,
+    /// The controller flying now: designed again if the new one fails.
+    pub running: ControllerSpec,
+}
+
+impl Design {
+    /// Designs `spec` into `ctrl`. On failure the running controller is
+    /// designed again (the slot no longer holds it), or the fallback PD if
+    /// even that fails. Returns the result and what flies afterwards.
+    pub fn run(
+        &self,
+        ctrl: &mut AnyController<f32>,
+        spec: ControllerSpec,
+    ) -> (Result<(), ControlError>, ControllerSpec) {
+        let build = |s: ControllerSpec, c: &mut AnyController<f32>| {
+            s.build_in(c, self.vehicle, self.control_period_s, None, &self.tuning)
+        };
+        match build(spec, ctrl) {
+            Ok(()) => (Ok(()), spec),
+            Err(e) if build(self.running, ctrl).is_ok() => (Err(e), self.running),
+            Err(e) => {
+                // PD designs cannot fail: nothing to check.
+                let _ = build(FALLBACK_CONTROLLER, ctrl);
+                (Err(e), FALLBACK_CONTROLLER)
+            }
+        }
+    }
+}
+
+/// What a parameter write does ([`Loop::plan_param`]).
+#[derive(Debug, Clone, Copy)]
+pub enum ParamPlan {
+    /// The value in force: nothing.
+    Unchanged,
+    /// New settings, no design.
+    Set(params::Settings),
+    /// New settings whose controller is designed first.
+    Redesign(params::Settings),
+}
+
+/// A [`Loop`] reached directly: the [`Mutex`] of a caller that owns it
+/// (in-process; RTIC's own proxies are the other kind).
+pub use rtic_core::Exclusive;
+/// Access to a shared [`Loop`] for a bounded moment (RTIC's resource lock).
+pub use rtic_core::Mutex;
+
+/// The answers to one step: `Actuator`, `Telemetry` and, for an `Imu`
+/// step, `Nav` and `NavBias`.
+pub type Answers = heapless::Vec<FromFc, 4>;
+
+/// Runs `job` on the controller's side: the controller `ctrl`, the shared
+/// loop `lp` locked only to read the step's previews and to record its
+/// result, the answers to `out`. [`FlightCore`] calls it directly; an image
+/// whose controller runs in its own task calls it there.
+pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
+    lp: &mut M,
+    ctrl: &mut AnyController<f32>,
+    job: Job,
+    out: &mut O,
+    clock: &C,
+) -> Result<(), O::Error> {
+    match job {
+        Job::Step(step) => {
+            let result = step.control.map(|c| {
+                lp.lock(|l| l.apply_previews(ctrl));
+                c.fly(ctrl)
+            });
+            let answers = lp.lock(|l| l.finish(&step, result, clock));
+            answers.iter().try_for_each(|m| out.send(m))
+        }
+        Job::Select(spec) => {
+            let design = lp.lock(|l| l.design());
+            let (r, flying) = design.run(ctrl, spec);
+            lp.lock(|l| {
+                l.installed(spec, r.is_ok(), flying, ctrl);
+                match r {
+                    Ok(()) => l.selections = l.selections.wrapping_add(1),
+                    Err(_) => l.counters.invalid_values = l.counters.invalid_values.wrapping_add(1),
+                }
+            });
+            Ok(())
+        }
+        Job::Param {
+            index,
+            value,
+            allow_redesign,
+        } => {
+            let r = lp
+                .lock(|l| l.plan_param(usize::from(index), value, allow_redesign))
+                .and_then(|plan| apply_plan(lp, ctrl, plan));
+            let answer = lp.lock(|l| {
+                if r.is_err() {
+                    l.counters.invalid_values = l.counters.invalid_values.wrapping_add(1);
+                }
+                param_answer(&l.settings, index, r.err())
+            });
+            out.send(&answer)
+        }
+    }
+}
+
+/// Carries out a parameter write's plan: a re-design runs on `ctrl` with
+/// the loop unlocked; a refusal leaves everything as it was.
+pub fn apply_plan<M: Mutex<T = Loop>>(
+    lp: &mut M,
+    ctrl: &mut AnyController<f32>,
+    plan: ParamPlan,
+) -> Result<(), params::Refusal> {
+    match plan {
+        ParamPlan::Unchanged => Ok(()),
+        ParamPlan::Set(next) => {
+            lp.lock(|l| l.settings = next);
+            Ok(())
+        }
+        ParamPlan::Redesign(next) => {
+            let (old, design) = lp.lock(|l| (l.settings, l.design()));
+            let (r, flying) = Design {
+                vehicle: next.vehicle,
+                tuning: next.tuning,
+                ..design
+            }
+            .run(ctrl, next.controller);
+            match r {
+                Ok(()) => {
+                    lp.lock(|l| {
+                        l.installed(next.controller, true, flying, ctrl);
+                        if next.controller != old.controller {
+                            l.selections = l.selections.wrapping_add(1);
+                        }
+                        l.settings = next;
+                    });
+                    Ok(())
+                }
+                Err(e) => {
+                    // Back to the old settings, and their controller (it
+                    // was designed from them before).
+                    let (r_old, flying) = Design {
+                        running: flying,
+                        ..design
+                    }
+                    .run(ctrl, old.controller);
+                    lp.lock(|l| l.installed(old.controller, r_old.is_ok(), flying, ctrl));
+                    Err(params::Refusal::Design(e))
+                }
+            }
+        }
+    }
+}
+
+impl core::ops::Deref for FlightCore {
+    type Target = Loop;
+    fn deref(&self) -> &Loop {
+        &self.lp
+    }
+}
+
+impl core::ops::DerefMut for FlightCore {
+    fn deref_mut(&mut self) -> &mut Loop {
+        &mut self.lp
+    }
+}
+
 impl FlightCore {
     /// A flight controller running the quaternion LQR until told otherwise,
     /// motors off until the first valid sensor frame:
@@ -324,10 +594,150 @@ impl FlightCore {
     pub fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {
         let params = settings.vehicle;
         Self {
+            ctrl: AnyController::PdEuler(PdEuler::new(params, PdEulerGains::tuned(), ReferenceMode::Feedforward)),
+            lp: Loop::unstarted_with(cfg, settings),
+        }
+    }
+
+    /// The loop and its controller apart: for an image that runs them in
+    /// two tasks ([`run_job`]).
+    pub fn split(&mut self) -> (&mut Loop, &mut AnyController<f32>) {
+        (&mut self.lp, &mut self.ctrl)
+    }
+
+    /// Designs the settings' controller (by default the boot controller,
+    /// [`BOOT_CONTROLLER`]) in place for their vehicle. On error (settings
+    /// [`params::Settings::check`] refuses, or a failed design) the loop
+    /// keeps flying the fallback PD.
+    pub fn start(&mut self) -> Result<(), ControlError> {
+        self.lp.settings.check().map_err(|_| ControlError::InvalidParameter)?;
+        // Unstarted, the previous controller is the fallback PD.
+        self.install(self.lp.settings.controller)
+    }
+
+    /// For a protocol front end (MAVLink, CRTP): checks the settings,
+    /// designs their controller in place ([`FlightCore::start`]), opens the
+    /// session (set-points may come before samples) and returns the mixer
+    /// the settings give for the front end's motors.
+    pub fn start_front_end(&mut self) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
+        self.lp.settings.check()?;
+        self.start().map_err(params::Refusal::Design)?;
+        self.lp.open_session();
+        self.lp.settings.mixer()
+    }
+
+    /// One IMU sample `imu` taken at `t_us`, as an `Imu` message of
+    /// sequence `seq` is handled (answers to `out`): for front ends that
+    /// need nothing else of the protocol (the image links only this path).
+    pub fn imu_step<O: Outbox, C: CycleClock>(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        imu: &ImuSample,
+        out: &mut O,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), O::Error> {
+        if !self.lp.session {
+            self.lp.counters.unexpected = self.lp.counters.unexpected.wrapping_add(1);
+            return Ok(());
+        }
+        self.lp.counters.ok = self.lp.counters.ok.wrapping_add(1);
+        let step = self.lp.on_imu(seq, t_us, imu, clock, now_us);
+        self.run(Job::Step(step), out, clock)
+    }
+
+    /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
+    /// settings checked; a change of the vehicle, the controller or its
+    /// gains and weights re-designs it, which only `allow_redesign` permits
+    /// (a front end says whether the vehicle is disarmed). A refusal leaves
+    /// everything as it was.
+    pub fn apply_param(&mut self, index: usize, value: f32, allow_redesign: bool) -> Result<(), params::Refusal> {
+        let plan = self.lp.plan_param(index, value, allow_redesign)?;
+        apply_plan(&mut Exclusive(&mut self.lp), &mut self.ctrl, plan)
+    }
+
+    /// Designs `spec` in place of the running controller (as a `Select`
+    /// does); on failure the running one keeps flying and the error is
+    /// returned. Not in flight: a design takes milliseconds to tens of them.
+    pub fn try_select(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
+        self.install(spec)?;
+        self.lp.selections = self.lp.selections.wrapping_add(1);
+        Ok(())
+    }
+
+    /// Reads what the link has (bounded), handles every complete frame,
+    /// writes replies, then applies the failsafe timer at time `now_us`.
+    pub fn service<L: ByteLink, C: CycleClock>(
+        &mut self,
+        link: &mut L,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), L::Error> {
+        let mut buf = [0u8; 64];
+        for _ in 0..self.lp.cfg.max_reads_per_service {
+            let n = link.read(&mut buf)?;
+            if n == 0 {
+                break;
+            }
+            for &b in &buf[..n.min(buf.len())] {
+                if let Some(frame) = self.lp.decoder.push::<ToFc>(b) {
+                    let job = self.lp.on_frame(frame, &mut Framed(link), clock, now_us)?;
+                    if let Some(job) = job {
+                        self.run(job, &mut Framed(link), clock)?;
+                    }
+                }
+            }
+        }
+        self.lp.check_timeout(now_us);
+        Ok(())
+    }
+
+    /// Handles one decoded message as if it had arrived on the link at
+    /// `now_us`, its answers to `out`: the entry of front ends that speak
+    /// another protocol (MAVLink) and translate into this one.
+    pub fn handle_message<O: Outbox, C: CycleClock>(
+        &mut self,
+        msg: ToFc,
+        out: &mut O,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), O::Error> {
+        match self.lp.on_message(msg, out, clock, now_us)? {
+            Some(job) => self.run(job, out, clock),
+            None => Ok(()),
+        }
+    }
+
+    /// Runs a job of the loop on this controller.
+    fn run<O: Outbox, C: CycleClock>(&mut self, job: Job, out: &mut O, clock: &C) -> Result<(), O::Error> {
+        run_job(&mut Exclusive(&mut self.lp), &mut self.ctrl, job, out, clock)
+    }
+
+    /// Designs `spec` in place of the running controller; on failure the
+    /// running one is designed again, or the fallback PD if even that
+    /// fails, and the error is returned.
+    fn install(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
+        let (r, flying) = self.lp.design().run(&mut self.ctrl, spec);
+        self.lp.installed(spec, r.is_ok(), flying, &self.ctrl);
+        r
+    }
+}
+
+impl Loop {
+    /// The loop with `settings`, nothing designed yet: its controller is
+    /// the tuned Euler PD ([`FALLBACK_CONTROLLER`], which has no period of
+    /// its own) until a design ([`FlightCore::start`]). Built in place
+    /// (inlined), so that no stack copy of it is made.
+    #[inline(always)]
+    fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {
+        Self {
             cfg,
             settings,
-            ctrl: AnyController::PdEuler(PdEuler::new(params, PdEulerGains::tuned(), ReferenceMode::Feedforward)),
             spec: FALLBACK_CONTROLLER,
+            period_us: schedule::period_us(cfg.control_period_s),
+            takes_preview: false,
+            previews: [None; PREVIEW_SLOTS],
             sp: Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0),
             decoder: FrameDecoder::new(),
             counters: Counters::default(),
@@ -349,27 +759,6 @@ impl FlightCore {
     /// The estimator of sensor flights.
     pub fn navigator(&self) -> &Navigator {
         &self.nav
-    }
-
-    /// Designs the settings' controller (by default the boot controller,
-    /// [`BOOT_CONTROLLER`]) in place for their vehicle. On error (settings
-    /// [`params::Settings::check`] refuses, or a failed design) the loop
-    /// keeps flying the fallback PD.
-    pub fn start(&mut self) -> Result<(), ControlError> {
-        self.settings.check().map_err(|_| ControlError::InvalidParameter)?;
-        // Unstarted, the previous controller is the fallback PD.
-        self.install(self.settings.controller)
-    }
-
-    /// For a protocol front end (MAVLink, CRTP): checks the settings,
-    /// designs their controller in place ([`FlightCore::start`]), opens the
-    /// session (set-points may come before samples) and returns the mixer
-    /// the settings give for the front end's motors.
-    pub fn start_front_end(&mut self) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
-        self.settings.check()?;
-        self.start().map_err(params::Refusal::Design)?;
-        self.open_session();
-        self.settings.mixer()
     }
 
     /// The inputs to apply now `[U1 N, U2 N, U3 N, U4 N·m]`.
@@ -446,26 +835,6 @@ impl FlightCore {
         }
     }
 
-    /// One IMU sample `imu` taken at `t_us`, as an `Imu` message of
-    /// sequence `seq` is handled (answers to `out`): for front ends that
-    /// need nothing else of the protocol (the image links only this path).
-    pub fn imu_step<O: Outbox, C: CycleClock>(
-        &mut self,
-        seq: u32,
-        t_us: u64,
-        imu: &ImuSample,
-        out: &mut O,
-        clock: &C,
-        now_us: u64,
-    ) -> Result<(), O::Error> {
-        if !self.session {
-            self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
-            return Ok(());
-        }
-        self.counters.ok = self.counters.ok.wrapping_add(1);
-        self.on_imu(seq, t_us, imu, out, clock, now_us)
-    }
-
     /// Queues a position fix for the next `Imu` step, as a `Fix` message does.
     pub fn push_fix(&mut self, fix: &Fix) {
         self.nav.push_fix(fix);
@@ -476,81 +845,70 @@ impl FlightCore {
         &self.settings
     }
 
-    /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
-    /// settings checked; a change of the vehicle, the controller or its
-    /// gains and weights re-designs it, which only `allow_redesign` permits
-    /// (a front end says whether the vehicle is disarmed). A refusal leaves
-    /// everything as it was.
-    pub fn apply_param(&mut self, index: usize, value: f32, allow_redesign: bool) -> Result<(), params::Refusal> {
-        use params::Refusal;
+    /// What writing `value` to parameter `index` does: the whole settings
+    /// checked; a change of the vehicle, the controller or its gains and
+    /// weights needs a re-design, which only `allow_redesign` permits.
+    pub fn plan_param(&self, index: usize, value: f32, allow_redesign: bool) -> Result<ParamPlan, params::Refusal> {
         let next = params::write(&self.settings, index, value)?;
         // `index` is known (`params::write` refused it otherwise). A
         // parameter writes only its own field: its value says whether
         // anything changed, its flag whether the change re-designs.
         let p = &params::PARAMS[index];
         if (p.get)(&next).to_bits() == (p.get)(&self.settings).to_bits() {
-            return Ok(());
+            return Ok(ParamPlan::Unchanged);
         }
-        if p.redesign && !allow_redesign {
-            return Err(Refusal::Armed);
+        match (p.redesign, allow_redesign) {
+            (false, _) => Ok(ParamPlan::Set(next)),
+            (true, true) => Ok(ParamPlan::Redesign(next)),
+            (true, false) => Err(params::Refusal::Armed),
         }
-        if p.redesign {
-            let old = self.settings;
-            self.settings.vehicle = next.vehicle;
-            self.settings.tuning = next.tuning;
-            let selected = next.controller != old.controller;
-            if let Err(e) = self.install(next.controller) {
-                // Back to the old settings, and their controller (it was
-                // designed from them before).
-                self.settings = old;
-                let _ = self.install(old.controller);
-                return Err(Refusal::Design(e));
-            }
-            if selected {
-                self.selections = self.selections.wrapping_add(1);
-            }
-        }
-        self.settings = next;
-        Ok(())
     }
 
-    /// Answers a parameter request of our protocol: parameter `index`'s
-    /// value, and why a write was refused (0: it was not).
-    fn send_param<O: Outbox>(&self, index: u16, refusal: Option<params::Refusal>, out: &mut O) -> Result<(), O::Error> {
-        out.send(&param_answer(&self.settings, index, refusal))
+    /// A design's inputs under the settings in force.
+    pub fn design(&self) -> Design {
+        Design {
+            vehicle: self.settings.vehicle,
+            tuning: self.settings.tuning,
+            control_period_s: self.cfg.control_period_s,
+            running: self.spec,
+        }
     }
 
-    /// Designs `spec` in place of the running controller (as a `Select`
-    /// does); on failure the running one keeps flying and the error is
-    /// returned. Not in flight: a design takes milliseconds to tens of them.
-    pub fn try_select(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
-        self.install(spec)?;
-        self.selections = self.selections.wrapping_add(1);
-        Ok(())
-    }
-
-    /// Reads what the link has (bounded), handles every complete frame,
-    /// writes replies, then applies the failsafe timer at time `now_us`.
-    pub fn service<L: ByteLink, C: CycleClock>(
+    /// Records a design: `requested` was asked for (and `ok` if it was
+    /// built), `flying` flies now on `ctrl`. Previews held for the
+    /// controller it replaced are dropped.
+    pub fn installed(
         &mut self,
-        link: &mut L,
-        clock: &C,
-        now_us: u64,
-    ) -> Result<(), L::Error> {
-        let mut buf = [0u8; 64];
-        for _ in 0..self.cfg.max_reads_per_service {
-            let n = link.read(&mut buf)?;
-            if n == 0 {
-                break;
-            }
-            for &b in &buf[..n.min(buf.len())] {
-                if let Some(frame) = self.decoder.push::<ToFc>(b) {
-                    self.handle(frame, &mut Framed(link), clock, now_us)?;
+        requested: ControllerSpec,
+        ok: bool,
+        flying: ControllerSpec,
+        ctrl: &AnyController<f32>,
+    ) {
+        self.spec = flying;
+        if ok {
+            self.settings.controller = requested;
+        }
+        self.period_us = schedule::period_us(ctrl.period_s().unwrap_or(self.cfg.control_period_s));
+        self.takes_preview = ctrl.preview_request().is_some();
+        self.previews = [None; PREVIEW_SLOTS];
+    }
+
+    /// Hands the previews received since the controller's last step to
+    /// `ctrl` (counted if it refuses one it takes).
+    pub fn apply_previews(&mut self, ctrl: &mut AnyController<f32>) {
+        for (k, slot) in self.previews.iter_mut().enumerate() {
+            if let Some(sp) = slot.take() {
+                if ctrl.set_preview(k, &sp).is_err() && self.takes_preview {
+                    self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
                 }
             }
         }
-        self.check_timeout(now_us);
-        Ok(())
+    }
+
+    /// The frame decoder of the loop's link: bytes in, frames out for
+    /// [`Loop::on_frame`].
+    pub fn decoder(&mut self) -> &mut FrameDecoder<MAX_FRAME> {
+        &mut self.decoder
     }
 
     /// Applies the failsafe timer at real time `now_us` (free-running only:
@@ -571,7 +929,7 @@ impl FlightCore {
 
     /// The running controller's period, µs.
     fn period_us(&self) -> u64 {
-        schedule::period_us(self.ctrl.period_s().unwrap_or(self.cfg.control_period_s))
+        self.period_us
     }
 
     /// Enters the failsafe if the last valid step is more than the timeout
@@ -592,39 +950,6 @@ impl FlightCore {
                 );
             }
         }
-    }
-
-    /// Designs `spec` in place of the running controller. If the design
-    /// fails, the previous controller is designed again (it was designed
-    /// from the same parameters before, so it succeeds; should it not, the
-    /// tuned Euler PD, which cannot fail, flies) and the failure is counted.
-    fn select(&mut self, spec: ControllerSpec) {
-        match self.install(spec) {
-            Ok(()) => self.selections = self.selections.wrapping_add(1),
-            Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
-        }
-    }
-
-    /// Designs `spec` in place of the running controller; on failure the
-    /// running one is designed again (the slot no longer holds it), or the
-    /// fallback PD if even that fails, and the error is returned.
-    fn install(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
-        let ts = self.cfg.control_period_s;
-        let result = spec.build_in(&mut self.ctrl, self.settings.vehicle, ts, None, &self.settings.tuning);
-        if result.is_ok() {
-            self.spec = spec;
-            self.settings.controller = spec;
-        } else if self
-            .spec
-            .build_in(&mut self.ctrl, self.settings.vehicle, ts, None, &self.settings.tuning)
-            .is_err()
-        {
-            self.spec = FALLBACK_CONTROLLER;
-            // PD designs cannot fail: nothing to check.
-            let _ =
-                FALLBACK_CONTROLLER.build_in(&mut self.ctrl, self.settings.vehicle, ts, None, &self.settings.tuning);
-        }
-        result
     }
 
     /// A state a multirotor can be in, reached from the last flown one:
@@ -654,32 +979,42 @@ impl FlightCore {
             .is_some_and(|t| !fc_core::control::plausible_step(now_us.saturating_sub(t) as f64 * 1e-6, period_s))
     }
 
-    /// The controller's step at `now_us`, told the measured interval since
-    /// its last one (a 2 ms simulator under a 1 ms controller, a late
-    /// sample), or resumed when that interval is a gap.
-    fn control_step(
+    /// The controller's step at `now_us` from `est` to `sp`: told the
+    /// measured interval since its last one (a 2 ms simulator under a 1 ms
+    /// controller, a late sample), or resumed when that interval is a gap.
+    fn control_job(
         &mut self,
-        est: &StateEstimate<f32>,
-        sp: &Setpoint<f32>,
         now_us: u64,
-    ) -> Result<ControlOutput<f32>, ControlError> {
-        if let Some(t) = self.last_control_us {
-            let period_s = self.period_us() as f64 * 1e-6;
-            fc_core::control::tell_interval(&mut self.ctrl, now_us.saturating_sub(t), period_s);
-        }
+        est: StateEstimate<f32>,
+        sp: Setpoint<f32>,
+        resume: bool,
+        preview_along: bool,
+    ) -> ControlJob {
+        let interval_us = self.last_control_us.map(|t| now_us.saturating_sub(t));
         self.last_control_us = Some(now_us);
-        self.ctrl.update(est, sp)
+        ControlJob {
+            now_us,
+            est,
+            sp,
+            resume,
+            preview_along,
+            interval_us,
+            period_s: self.period_us() as f64 * 1e-6,
+        }
     }
 
-    fn handle<O: Outbox, C: CycleClock>(
+    /// One decoded frame (or why it did not decode) as if it had arrived at
+    /// `now_us`: counted, its immediate answers (handshake, heartbeat,
+    /// parameter reads) to `out`, and what the controller must do returned.
+    pub fn on_frame<O: Outbox, C: CycleClock>(
         &mut self,
         frame: Result<ToFc, FrameError>,
-        link: &mut O,
+        out: &mut O,
         clock: &C,
         now_us: u64,
-    ) -> Result<(), O::Error> {
+    ) -> Result<Option<Job>, O::Error> {
         match frame {
-            Ok(m) => self.handle_message(m, link, clock, now_us),
+            Ok(m) => self.on_message(m, out, clock, now_us),
             Err(e) => {
                 match e {
                     FrameError::Oversized => self.counters.oversized = self.counters.oversized.wrapping_add(1),
@@ -689,21 +1024,19 @@ impl FlightCore {
                         self.counters.bad_message = self.counters.bad_message.wrapping_add(1)
                     }
                 }
-                Ok(())
+                Ok(None)
             }
         }
     }
 
-    /// Handles one decoded message as if it had arrived on the link at
-    /// `now_us`, its answers to `out`: the entry of front ends that speak
-    /// another protocol (MAVLink) and translate into this one.
-    pub fn handle_message<O: Outbox, C: CycleClock>(
+    /// One decoded message (see [`Loop::on_frame`]).
+    pub fn on_message<O: Outbox, C: CycleClock>(
         &mut self,
         msg: ToFc,
-        link: &mut O,
+        out: &mut O,
         clock: &C,
         now_us: u64,
-    ) -> Result<(), O::Error> {
+    ) -> Result<Option<Job>, O::Error> {
         self.counters.ok = self.counters.ok.wrapping_add(1);
         match msg {
             ToFc::Hello { version } => {
@@ -711,16 +1044,13 @@ impl FlightCore {
                 if accepted {
                     self.open_session();
                 }
-                link.send(&FromFc::HelloAck {
+                out.send(&FromFc::HelloAck {
                     version: PROTOCOL_VERSION,
                     accepted,
-                })
+                })?;
             }
-            _ if !self.session => {
-                self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
-                Ok(())
-            }
-            ToFc::Heartbeat { seq } => link.send(&FromFc::Heartbeat { seq }),
+            _ if !self.session => self.counters.unexpected = self.counters.unexpected.wrapping_add(1),
+            ToFc::Heartbeat { seq } => out.send(&FromFc::Heartbeat { seq })?,
             ToFc::Select {
                 controller,
                 feedforward,
@@ -728,50 +1058,51 @@ impl FlightCore {
                 // An id no controller has is a message this end cannot read
                 // (as an unknown enum index was in protocol v2's decoder).
                 match ControllerSpec::from_wire(controller, feedforward) {
-                    Ok(spec) => self.select(spec),
+                    Ok(spec) => return Ok(Some(Job::Select(spec))),
                     Err(_) => self.counters.bad_message = self.counters.bad_message.wrapping_add(1),
                 }
-                Ok(())
             }
-            ToFc::Setpoint(w) => {
-                match setpoint_from_wire(&w) {
-                    Some(sp) => self.sp = sp,
-                    None => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
-                }
-                Ok(())
-            }
+            ToFc::Setpoint(w) => match setpoint_from_wire(&w) {
+                Some(sp) => self.sp = sp,
+                None => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
+            },
             ToFc::Preview { k, sp } => {
-                let ok = setpoint_from_wire(&sp).is_some_and(|s| self.ctrl.set_preview(k as usize, &s).is_ok());
-                if !ok && self.ctrl.preview_request().is_some() {
-                    self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
+                // Held for the controller's next step ([`Loop::apply_previews`]).
+                match (setpoint_from_wire(&sp), self.previews.get_mut(usize::from(k))) {
+                    (Some(sp), Some(slot)) => *slot = Some(sp),
+                    _ if self.takes_preview => {
+                        self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1)
+                    }
+                    _ => {}
                 }
-                Ok(())
             }
-            ToFc::Sensor { seq, t_us, state } => self.on_sensor(seq, t_us, &state, link, clock, now_us),
-            ToFc::ParamRead { index } => self.send_param(index, None, link),
+            ToFc::Sensor { seq, t_us, state } => {
+                return Ok(Some(Job::Step(self.on_sensor(seq, t_us, &state, clock, now_us))))
+            }
+            ToFc::ParamRead { index } => out.send(&param_answer(&self.settings, index, None))?,
             ToFc::ParamSet { index, value } => {
                 // Re-designs only before the session's first step: a
                 // controller is not re-designed under a flying vehicle.
-                let r = self.apply_param(usize::from(index), value, self.last_seq.is_none());
-                if r.is_err() {
-                    self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
-                }
-                self.send_param(index, r.err(), link)
+                return Ok(Some(Job::Param {
+                    index,
+                    value,
+                    allow_redesign: self.last_seq.is_none(),
+                }));
             }
             ToFc::Fix(w) => {
                 // Queued in the navigator for the next `Imu` step; a full
                 // queue drops and counts it (`Nav.fixes_rejected`).
                 self.nav.push_fix(&fix_from_wire(&w));
-                Ok(())
             }
             ToFc::Imu { seq, t_us, gyro, accel } => {
                 let imu = ImuSample {
                     gyro_frd_radps: Vector3::from(gyro),
                     accel_frd_mps2: Vector3::from(accel),
                 };
-                self.on_imu(seq, t_us, &imu, link, clock, now_us)
+                return Ok(Some(Job::Step(self.on_imu(seq, t_us, &imu, clock, now_us))));
             }
         }
+        Ok(None)
     }
 
     /// The sequence and time checks of a control step (`Sensor` or `Imu`):
@@ -799,50 +1130,37 @@ impl FlightCore {
         })
     }
 
-    /// One IMU step: the estimator integrates the sample (with the fixes
-    /// received since the last step); when the controller is due it flies
-    /// the estimate — the mission's setpoint, or the estimator's failsafe
-    /// hold-and-descend; while aligning, hover thrust and no torque. Every
-    /// step is answered (the output held since the controller last ran)
-    /// with a `Nav` message added.
-    fn on_imu<O: Outbox, C: CycleClock>(
-        &mut self,
-        seq: u32,
-        t_us: u64,
-        imu: &ImuSample,
-        link: &mut O,
-        clock: &C,
-        now_us: u64,
-    ) -> Result<(), O::Error> {
+    /// One IMU step's estimator half: the estimator integrates the sample
+    /// (with the fixes received since the last step); when the controller
+    /// is due, the step it is to fly — the mission's setpoint, or the
+    /// estimator's failsafe hold-and-descend; while aligning, hover thrust
+    /// and no torque. Every step is answered (the output held since the
+    /// controller last ran) with a `Nav` message added ([`Loop::finish`]).
+    pub fn on_imu<C: CycleClock>(&mut self, seq: u32, t_us: u64, imu: &ImuSample, clock: &C, now_us: u64) -> Step {
         let Some(now) = self.accept_step(seq, t_us, now_us) else {
-            return self.reply(seq, 0, 0, link);
+            return Step {
+                seq,
+                t0: None,
+                nav: false,
+                control: None,
+            };
         };
         let lockstep = self.cfg.time_base == TimeBase::Lockstep;
         let t0 = clock.now();
         let stepped = self.nav.step(now, imu, &[]);
         // Asked at every step, so that the grid follows the steps' times.
-        let control = self.schedule.due(now, self.period_us());
-        let mut iterations = 0u16;
+        let due = self.schedule.due(now, self.period_us());
+        let mut control = None;
         match (stepped, self.nav.estimate()) {
             (Ok(mode @ (NavMode::Navigating | NavMode::Failsafe)), Some(est)) => {
                 self.nav_failsafe = mode == NavMode::Failsafe;
-                if control {
-                    if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
-                        self.ctrl.resume();
+                if due {
+                    let resume = self.failsafe || (lockstep && self.gap_since_last_step(now));
+                    if resume {
                         self.failsafe = false;
                     }
                     let sp = self.nav.setpoint(now, &self.sp);
-                    if self.nav_failsafe {
-                        Navigator::preview_along(&mut self.ctrl, &sp);
-                    }
-                    match self.control_step(&est, &sp, now) {
-                        Ok(o) => {
-                            self.u = o.u;
-                            iterations = o.status.iterations;
-                            self.last_valid_us = Some(now);
-                        }
-                        Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
-                    }
+                    control = Some(self.control_job(now, est, sp, resume, self.nav_failsafe));
                 }
             }
             (Ok(_), _) => {
@@ -854,14 +1172,94 @@ impl FlightCore {
             }
             (Err(_), _) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
         }
-        let cycles = clock.since(t0);
-        self.reply(seq, cycles, iterations, link)?;
-        self.send_nav(seq, link)
+        Step {
+            seq,
+            t0: Some(t0),
+            nav: true,
+            control,
+        }
     }
 
-    /// Sends the `Nav` and `NavBias` messages of step `seq` (one covariance
-    /// diagonal for both, one message on the stack at a time).
-    fn send_nav<O: Outbox>(&self, seq: u32, link: &mut O) -> Result<(), O::Error> {
+    /// A full-state step (`Sensor`): checked, then the controller's step.
+    fn on_sensor<C: CycleClock>(&mut self, seq: u32, t_us: u64, state: &[f32; 13], clock: &C, now_us: u64) -> Step {
+        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
+        let mut step = Step {
+            seq,
+            t0: None,
+            nav: false,
+            control: None,
+        };
+        // Not flown, but answered (the held output, the counter in the
+        // telemetry), so that a lockstep client waiting on this `seq` does
+        // not block.
+        let Some(now) = self.accept_step(seq, t_us, now_us) else {
+            return step;
+        };
+        self.nav_failsafe = false;
+        let est = StateEstimate::from_quat_state(&QuatState::from_column_slice(state));
+        if !est.is_valid() || !self.plausible(&est, now) {
+            self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
+            return step;
+        }
+        self.last_pos = Some((est.pos_ned_m, now));
+        // Valid data again after a gap: the controller keeps its estimates
+        // and forgets only the step before (see `Controller::resume`).
+        let resume = self.failsafe || (lockstep && self.gap_since_last_step(now));
+        if resume {
+            self.failsafe = false;
+        }
+        step.t0 = Some(clock.now());
+        step.control = Some(self.control_job(now, est, self.sp, resume, false));
+        step
+    }
+
+    /// Records the controller's result for `step` (`None`: it did not run)
+    /// and returns the step's answers: the output now held, the telemetry,
+    /// and the estimator's state for an `Imu` step.
+    pub fn finish<C: CycleClock>(
+        &mut self,
+        step: &Step,
+        result: Option<Result<ControlOutput<f32>, ControlError>>,
+        clock: &C,
+    ) -> Answers {
+        let mut iterations = 0u16;
+        if let (Some(job), Some(r)) = (&step.control, result) {
+            match r {
+                Ok(o) => {
+                    self.u = o.u;
+                    iterations = o.status.iterations;
+                    self.last_valid_us = Some(job.now_us);
+                }
+                Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
+            }
+        }
+        let cycles = step.t0.map_or(0, |t0| clock.since(t0));
+        let failsafe = self.failsafe || self.nav_failsafe;
+        let mut answers = Answers::new();
+        // Four pushes into a Vec of four: none fails.
+        let _ = answers.push(FromFc::Actuator {
+            seq: step.seq,
+            u: [self.u[0], self.u[1], self.u[2], self.u[3]],
+            failsafe,
+        });
+        let _ = answers.push(FromFc::Telemetry {
+            seq: step.seq,
+            cycles,
+            qp_iterations: iterations,
+            counters: self.counters,
+            failsafe,
+        });
+        if step.nav {
+            let (nav, bias) = self.nav_messages(step.seq);
+            let _ = answers.push(nav);
+            let _ = answers.push(bias);
+        }
+        answers
+    }
+
+    /// The `Nav` and `NavBias` messages of step `seq` (one covariance
+    /// diagonal for both).
+    fn nav_messages(&self, seq: u32) -> (FromFc, FromFc) {
         let (mode, est) = match (self.nav.mode(), self.nav.estimate()) {
             (NavMode::Navigating, Some(e)) => (1, Some(e)),
             (NavMode::Failsafe, Some(e)) => (2, Some(e)),
@@ -869,7 +1267,7 @@ impl FlightCore {
         };
         let s = self.nav.estimator().sigmas();
         let c = self.nav.counters();
-        link.send(&FromFc::Nav {
+        let nav = FromFc::Nav {
             seq,
             mode,
             pos: est.map_or([0.0; 3], |e| e.pos_ned_m.into()),
@@ -885,78 +1283,15 @@ impl FlightCore {
                 .wrapping_add(c.fix_invalid)
                 .wrapping_add(self.nav.fixes_dropped()),
             failsafe_entries: self.nav.failsafe_entries(),
-        })?;
+        };
         let (bg, ba) = self.nav.estimator().biases();
-        link.send(&FromFc::NavBias {
+        let bias = FromFc::NavBias {
             seq,
             gyro_bias: bg.into(),
             accel_bias: ba.into(),
             sigma: [s[9], s[10], s[11], s[12], s[13], s[14]],
-        })
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn on_sensor<O: Outbox, C: CycleClock>(
-        &mut self,
-        seq: u32,
-        t_us: u64,
-        state: &[f32; 13],
-        link: &mut O,
-        clock: &C,
-        now_us: u64,
-    ) -> Result<(), O::Error> {
-        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
-        let Some(now) = self.accept_step(seq, t_us, now_us) else {
-            // Not flown, but answered (the held output, the counter in the
-            // telemetry), so that a lockstep client waiting on this `seq`
-            // does not block.
-            return self.reply(seq, 0, 0, link);
         };
-        self.nav_failsafe = false;
-        let est = StateEstimate::from_quat_state(&QuatState::from_column_slice(state));
-        let mut cycles = 0u32;
-        let mut iterations = 0u16;
-        if !est.is_valid() || !self.plausible(&est, now) {
-            self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
-        } else {
-            self.last_pos = Some((est.pos_ned_m, now));
-            if self.failsafe || (lockstep && self.gap_since_last_step(now)) {
-                // Valid data again after a gap: the controller keeps its
-                // estimates and forgets only the step before (see `Controller::resume`).
-                self.ctrl.resume();
-                self.failsafe = false;
-            }
-            let t0 = clock.now();
-            let sp = self.sp;
-            let out = self.control_step(&est, &sp, now);
-            cycles = clock.since(t0);
-            match out {
-                Ok(o) => {
-                    self.u = o.u;
-                    iterations = o.status.iterations;
-                    self.last_valid_us = Some(now);
-                }
-                Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
-            }
-        }
-        self.reply(seq, cycles, iterations, link)
-    }
-
-    /// Answers sensor frame `seq`: the output now held, then the telemetry.
-    fn reply<O: Outbox>(&self, seq: u32, cycles: u32, iterations: u16, link: &mut O) -> Result<(), O::Error> {
-        let u = [self.u[0], self.u[1], self.u[2], self.u[3]];
-        link.send(&FromFc::Actuator {
-            seq,
-            u,
-            failsafe: self.failsafe || self.nav_failsafe,
-        })?;
-        link.send(&FromFc::Telemetry {
-            seq,
-            cycles,
-            qp_iterations: iterations,
-            counters: self.counters,
-            failsafe: self.failsafe || self.nav_failsafe,
-        })
+        (nav, bias)
     }
 }
 
