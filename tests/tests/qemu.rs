@@ -260,6 +260,30 @@ fn qemu_sensor_flight_matches_in_process() {
         };
         let (states, inputs) = (worst(1..14), worst(17..21));
         assert!(states < 1e-5, "{family:?}: states differ by {states:e} (relative)");
+        // The image's tasks (data-ready at priority 3, controller at 2,
+        // link at 1) measured every step against one 1 kHz period at CPI
+        // 1.5 with a 1.5 margin (74 667 instructions): none late, none dropped.
+        let log = pil.firmware_log.join("\n");
+        let timing = pil
+            .firmware_log
+            .iter()
+            .rev()
+            .find_map(|l| l.split_once("timing: ").map(|(_, t)| t))
+            .unwrap_or_else(|| panic!("{family:?}: no timing line in the firmware log:\n{log}"));
+        let numbers: Vec<u64> = timing
+            .split(|c: char| !c.is_ascii_digit())
+            .filter_map(|w| w.parse().ok())
+            .collect();
+        let [steps, estimate, answer, deadline, missed, jobs, answers, tx] = numbers[..] else {
+            panic!("{family:?}: timing line {timing:?}")
+        };
+        println!("{family:?} sensor flight in QEMU, image tasks: {timing}");
+        assert!(steps >= 1000 && deadline == 74_666, "{timing}");
+        assert_eq!((missed, jobs, answers, tx), (0, 0, 0, 0), "{family:?}: {timing}");
+        assert!(
+            estimate > 0 && estimate < 25_000 && answer <= deadline,
+            "{family:?}: {timing}"
+        );
         assert!(inputs < 1e-3, "{family:?}: inputs differ by {inputs:e} (relative)");
         let (e, f) = (local.estimation.unwrap(), pil.estimation.unwrap());
         assert!(
@@ -345,12 +369,15 @@ fn qemu_flight_does_not_depend_on_the_hosts_load() {
         assert_eq!(r.link_counters.expect("counters").failsafe_entries, 0);
         assert_eq!(r.failsafe_steps, 0);
     }
-    // The instruction counts are the guest's own, taken inside each step;
-    // they may differ by the 1 ms SysTick interrupt (≈ 20 instructions)
-    // landing inside a step or not, as that phase follows the host's timing.
+    // The instruction counts are the guest's own, from each sample's
+    // estimate to its controller's answer; they may differ by the 1 ms
+    // SysTick interrupt (≈ 20 instructions) landing inside a step or not,
+    // and by the controller task still writing the previous step's answer
+    // frames when the host's next sample pre-empts it (the sample task has
+    // the higher priority): both phases follow the host's timing.
     let ((m1, x1), (m2, x2)) = (calm.instructions_per_step.unwrap(), busy.instructions_per_step.unwrap());
     assert!(
-        (m1 - m2).abs() < 5.0 && (x1 - x2).abs() < 60.0,
+        (m1 - m2).abs() < 50.0 && (x1 - x2).abs() < 2_000.0,
         "{m1} {x1} vs {m2} {x2}"
     );
 }

@@ -119,12 +119,14 @@ pub fn now_us(clock: &SysTickClock) -> u64 {
     clock.ticks() / u64::from(SYSCLK_HZ / 1_000_000)
 }
 
-/// Idles until the next interrupt (a received byte or a SysTick wrap).
+/// Idles until the next interrupt (a received byte or a SysTick wrap):
+/// the polling images' wait (`firmware`'s RTIC idle task has its own).
 /// Interrupts are masked across the check and WFI: a byte arriving in
 /// between leaves its interrupt pending, which makes WFI return at once, so
 /// no wake-up is lost; the handler runs when the mask lifts. Under QEMU a
 /// halted CPU lets the emulator deliver the next byte without executing
 /// guest instructions (so idle time does not count as instructions).
+#[allow(dead_code, reason = "firmware's RTIC tasks wait in their idle task instead")]
 pub fn idle() {
     cortex_m::interrupt::free(|_| {
         if !hal_shim::stm32f405::rx_pending() {

@@ -12,6 +12,7 @@ pub mod clocks;
 pub mod crtp_image;
 #[cfg(target_os = "none")]
 pub mod stack;
+pub mod timing;
 
 pub use clocks::{ClockError, ClockPlan};
 
@@ -42,7 +43,7 @@ pub fn bring_up_clocks() -> Result<(), ClockError> {
 /// The image's flight-loop log (used by every board's image): a line for
 /// each change of session, controller, failsafe or link-error counts.
 #[cfg(target_os = "none")]
-pub fn log_changes(fc: &fc_loop::FlightCore, last: &mut (bool, bool, fc_proto::Counters, u32)) {
+pub fn log_changes(fc: &fc_loop::Loop, last: &mut (bool, bool, fc_proto::Counters, u32)) {
     let (session, failsafe, counters, ctrl) = (fc.session_open(), fc.failsafe(), fc.counters(), fc.selections());
     if session && !last.0 {
         defmt::info!("session open (protocol v{=u16})", fc_proto::PROTOCOL_VERSION);

@@ -44,6 +44,11 @@
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
+// The PAC's interrupt vectors (its `rt` feature, which RTIC needs for the
+// `firmware` image, makes cortex-m-rt take them from the PAC).
+#[cfg(target_os = "none")]
+use stm32f4 as _;
+
 #[cfg(target_os = "none")]
 mod target {
     use cortex_m_rt::entry;

@@ -8,9 +8,14 @@
 //! agree to a few ulps.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
+
+// The PAC's interrupt vectors (its `rt` feature, which RTIC needs for the
+// `firmware` image, makes cortex-m-rt take them from the PAC).
 use fc_core::control::{AttitudeForm, Controller, MpcConfig, MpcFast, Setpoint, StateEstimate};
 use fc_core::VehicleParams;
 use nalgebra::Vector3;
+#[cfg(target_os = "none")]
+use stm32f4 as _;
 
 /// Flies the loop, reporting each step's QP iterations and inputs.
 fn run(mut out: impl FnMut(u32, u32, [f32; 4])) {
