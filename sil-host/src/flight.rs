@@ -52,6 +52,11 @@ pub struct FlightConfig {
     /// its schedule, as behind a simulator that steps at 2 ms, 3 ms or an
     /// uneven grid.
     pub step_grid: Option<StepGrid>,
+    /// Over a link: parameter reads (`ParamRead`, cycling through the
+    /// table) sent with every step, right after its sample, as a ground
+    /// station polling the parameters would; their answers are read and
+    /// dropped. 0: none.
+    pub param_flood: u16,
 }
 
 /// A simulator's step grid: steps `period ± jitter` apart (uniform, from a
@@ -100,6 +105,11 @@ impl StepGrid {
     }
 }
 
+/// Most parameter reads sent with one step (`--param-flood`): 16 reads a
+/// 1 kHz step are 16 000 a second, several hundred times what a ground
+/// station asks.
+pub const MAX_PARAM_FLOOD: u16 = 16;
+
 /// Fastest plant integration rate accepted, Hz.
 pub const MAX_INTEGRATION_HZ: f64 = 100_000.0;
 
@@ -126,6 +136,12 @@ impl FlightConfig {
         if !(ch.is_finite() && ch > 0.0 && ch <= ih) {
             anyhow::bail!("--control-hz {ch:?} is out of range: must be > 0 and at most --integration-hz ({ih} Hz)");
         }
+        if self.param_flood > MAX_PARAM_FLOOD {
+            anyhow::bail!(
+                "--param-flood {} is out of range: at most {MAX_PARAM_FLOOD} reads a step",
+                self.param_flood
+            );
+        }
         if let Some(g) = &self.step_grid {
             g.validate()?;
             if self.sensors.is_some() {
@@ -150,6 +166,7 @@ impl FlightConfig {
             sensors: None,
             sensor_gap: None,
             step_grid: None,
+            param_flood: 0,
         }
     }
 }
@@ -301,6 +318,9 @@ pub fn fly_target_with_progress(
         }
     };
     if *target == Target::InProcess {
+        if cfg.param_flood > 0 {
+            anyhow::bail!("--param-flood needs a flight controller behind a link (--target framed, tcp:… or qemu)");
+        }
         let ep = InProcess::new(build_for(cfg)?);
         return fly_endpoint(cfg, ep, None, |t, _| tick(t), rec).map(|(r, _)| r);
     }
@@ -312,12 +332,13 @@ pub fn fly_target_with_progress(
     // Refused before anything starts: a controller with no wire id.
     cfg.spec.to_wire().map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut qemu = None;
-    let client = match target {
+    let mut client = match target {
         Target::InProcess => anyhow::bail!("an in-process flight has no link"),
         Target::Framed => FcClient::local()?,
         Target::Tcp(addr) => FcClient::tcp(addr)?,
         Target::Qemu => qemu.insert(Qemu::start(&firmware_elf()?)?).client()?,
     };
+    client.flood_param_reads(cfg.param_flood);
     // The vehicle's parameters are written over the link (ParamSet) before the selection.
     let flown = Remote::open(client, cfg.spec, &cfg.vehicle)
         .and_then(|remote| fly_endpoint(cfg, remote, None, |t, _| tick(t), rec));

@@ -443,6 +443,12 @@ struct FlyArgs {
     /// the image's format table) to standard error after the flight.
     #[arg(long)]
     firmware_log: bool,
+    /// Over a link (framed, tcp, qemu): send N parameter reads with every step, right after its
+    /// sample, as a ground station flooding the flight controller would (at most 16); their
+    /// answers are dropped. With `--target qemu --firmware-log`, the image's timing line shows
+    /// what the flood cost its tasks.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    param_flood: u16,
 }
 
 #[derive(Args, Debug)]
@@ -835,6 +841,7 @@ fn fly_cmd(a: &FlyArgs) -> Result<()> {
     }
     cfg.integration_hz = a.integration_hz;
     cfg.step_grid = a.step_grid;
+    cfg.param_flood = a.param_flood;
     let exec = a
         .target
         .iter()

@@ -129,6 +129,22 @@ fn inputs_that_cannot_be_flown_are_refused_by_name_before_flying() {
             vec!["fly", "--controller", "lqr", "--integration-hz", "1e12"],
             "--integration-hz",
         ),
+        (
+            vec!["fly", "--controller", "lqr", "--duration", "0.1", "--param-flood", "2"],
+            "--param-flood needs a flight controller behind a link",
+        ),
+        (
+            vec![
+                "fly",
+                "--controller",
+                "lqr",
+                "--target",
+                "framed",
+                "--param-flood",
+                "17",
+            ],
+            "--param-flood 17 is out of range",
+        ),
         (vec!["open-loop", "--u", "6,0,0,0", "--duration", "1e300"], "--duration"),
         (
             vec!["open-loop", "--u", "6,0,0,0", "--integration-hz", "1e12"],

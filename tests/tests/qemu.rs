@@ -222,6 +222,95 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
     }
 }
 
+/// The last `timing:` line of the image's log and its eight figures:
+/// steps, worst data-ready → estimate and → answer (instructions), the
+/// deadline, late steps, dropped jobs, dropped answers, transmit timeouts.
+fn last_timing(log: &[String]) -> (String, [u64; 8]) {
+    let line = log
+        .iter()
+        .rev()
+        .find_map(|l| l.split_once("timing: ").map(|(_, t)| t.to_string()))
+        .unwrap_or_else(|| panic!("no timing line in the firmware log:\n{}", log.join("\n")));
+    let numbers: Vec<u64> = line
+        .split(|c: char| !c.is_ascii_digit())
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    let figures = numbers[..]
+        .try_into()
+        .unwrap_or_else(|_| panic!("timing line {line:?}"));
+    (line, figures)
+}
+
+/// The fast MPC flying from sensors while a ground station reads
+/// parameters on the same port at its capacity: one `ParamRead` frame (≈ 9
+/// bytes) a 1 kHz step is what USART1 carries at 115 200 baud. Every byte
+/// is received at the top priority, so the flood costs the controller its
+/// receive interrupts; every step still meets its deadline, and the samples'
+/// estimates are not delayed.
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn the_fast_mpc_meets_every_deadline_under_a_parameter_read_flood() {
+    let mut cfg = FlightConfig::new(
+        Family::Mpc,
+        AttitudeForm::Quaternion,
+        Scenario::default_for(ScenarioKind::Helix),
+    );
+    cfg.scenario.duration_s = 3.0;
+    cfg.sensors = Some(sil_host::sensors::SensorConfig::new(
+        sil_host::sensors::FixProfile::Mocap,
+        9,
+    ));
+    cfg.param_flood = 1;
+    let pil = fly_target(&cfg, &Target::Qemu).unwrap();
+    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx]) = last_timing(&pil.firmware_log);
+    println!("fast MPC with a parameter read a step, image tasks: {timing}");
+    assert!(steps >= 3000, "{timing}");
+    assert!(estimate > 0 && estimate < 25_000 && answer <= deadline, "{timing}");
+    assert_eq!((missed, jobs, answers, tx), (0, 0, 0, 0), "{timing}");
+    let c = pil.link_counters.expect("counters");
+    assert_eq!(c.failsafe_entries + c.bad_crc + c.bad_cobs + c.bad_message, 0, "{c:?}");
+    assert!(pil.metrics.x.rmse_m < 0.1, "{}", pil.metrics.x.rmse_m);
+}
+
+/// A parameter write that re-designs the fast MPC, sent before the first
+/// step (our protocol's "disarmed") and followed at once by the samples:
+/// the design runs in the controller's task, so the samples' estimates are
+/// not delayed (data-ready → estimate stays an estimator step's), while the
+/// first step's answer waits for the design (one late step, counted).
+#[test]
+#[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
+fn a_redesign_delays_the_controller_task_not_the_samples() {
+    use fc_core::control::ControllerSpec;
+    use sil_host::link::StepInput;
+    let mut q = sil_host::link::Qemu::start(&sil_host::link::firmware_elf().unwrap()).unwrap();
+    let mut c = q.client().unwrap();
+    c.open(ControllerSpec::new(Family::Mpc, AttitudeForm::Quaternion))
+        .unwrap();
+    let mass = fc_loop::params::PARAMS.iter().position(|p| p.id == "VEH_MASS").unwrap();
+    c.send_param_set(mass, 0.7).unwrap();
+    // At rest (aligning), 1.1 s of samples in lockstep.
+    for seq in 1..=1100u32 {
+        let rest = StepInput::Imu {
+            gyro: [0.0; 3],
+            accel: [0.0, 0.0, -9.81],
+            fixes: &[],
+        };
+        c.step_with(seq, u64::from(seq) * 1000, rest, None, &[]).unwrap();
+    }
+    drop(c);
+    let log = q.finish().unwrap();
+    let all = log.join("\n");
+    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx]) = last_timing(&log);
+    println!("re-design before the first step, image tasks: {timing}");
+    assert!(steps >= 1000, "{timing}");
+    assert!(
+        estimate > 0 && estimate < 25_000,
+        "a sample waited for the design: {timing}\n{all}"
+    );
+    assert!(answer > 10 * deadline, "the design took no time? {timing}");
+    assert_eq!((missed, jobs, answers, tx), (1, 0, 0, 0), "{timing}\n{all}");
+}
+
 /// The sensor flight on the real image: the same IMU samples and fixes go
 /// to the image over USART1 (protocol v5 and later) as to the in-process estimator,
 /// and the image's estimator and controller fly the same flight.
@@ -263,20 +352,7 @@ fn qemu_sensor_flight_matches_in_process() {
         // The image's tasks (data-ready at priority 3, controller at 2,
         // link at 1) measured every step against one 1 kHz period at CPI
         // 1.5 with a 1.5 margin (74 667 instructions): none late, none dropped.
-        let log = pil.firmware_log.join("\n");
-        let timing = pil
-            .firmware_log
-            .iter()
-            .rev()
-            .find_map(|l| l.split_once("timing: ").map(|(_, t)| t))
-            .unwrap_or_else(|| panic!("{family:?}: no timing line in the firmware log:\n{log}"));
-        let numbers: Vec<u64> = timing
-            .split(|c: char| !c.is_ascii_digit())
-            .filter_map(|w| w.parse().ok())
-            .collect();
-        let [steps, estimate, answer, deadline, missed, jobs, answers, tx] = numbers[..] else {
-            panic!("{family:?}: timing line {timing:?}")
-        };
+        let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx]) = last_timing(&pil.firmware_log);
         println!("{family:?} sensor flight in QEMU, image tasks: {timing}");
         assert!(steps >= 1000 && deadline == 74_666, "{timing}");
         assert_eq!((missed, jobs, answers, tx), (0, 0, 0, 0), "{family:?}: {timing}");

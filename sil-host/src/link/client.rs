@@ -97,6 +97,10 @@ pub struct FcClient {
     pending: Vec<FromFc>,
     /// The setpoint the flight controller holds (it keeps the last one sent).
     last_setpoint: Option<WireSetpoint>,
+    /// Parameter reads sent with every step ([`FcClient::flood_param_reads`]).
+    flood: u16,
+    /// The next parameter the flood reads.
+    flood_next: u16,
 }
 
 impl FcClient {
@@ -130,6 +134,8 @@ impl FcClient {
             decoder: FrameDecoder::new(),
             pending: Vec::new(),
             last_setpoint: None,
+            flood: 0,
+            flood_next: 0,
         }
     }
 
@@ -185,6 +191,22 @@ impl FcClient {
                 }
             }
         }
+    }
+
+    /// Sends `n` parameter reads (`ParamRead`, cycling through the table)
+    /// with every step from now on, right after the step's sample, and
+    /// drops their answers: a ground station flooding the flight controller
+    /// while it flies. 0 stops it.
+    pub fn flood_param_reads(&mut self, n: u16) {
+        self.flood = n;
+    }
+
+    /// Sends a parameter write (`ParamSet`) without waiting for its answer,
+    /// as a ground station's write that crosses the next samples: the
+    /// answer comes before a later step's and is dropped with the flood's.
+    pub fn send_param_set(&mut self, index: usize, value: f32) -> Result<()> {
+        let index = u16::try_from(index).map_err(|_| anyhow::anyhow!("parameter index {index} is past u16"))?;
+        self.send(&ToFc::ParamSet { index, value })
     }
 
     /// Writes parameter `index` = `value` (`ParamSet`) and returns the
@@ -391,9 +413,15 @@ impl FcClient {
                 true
             }
         };
+        let count = fc_loop::params::PARAMS.len() as u16;
+        for _ in 0..self.flood {
+            self.send(&ToFc::ParamRead { index: self.flood_next })?;
+            self.flood_next = (self.flood_next + 1) % count;
+        }
         let mut out: Option<RemoteStep> = None;
         let mut telemetry = false;
-        for _ in 0..8 {
+        // The step's four answers, the flood's, and some slack.
+        for _ in 0..8 + usize::from(self.flood) {
             let got = self.receive().with_context(|| {
                 let have = match &out {
                     None => "nothing",

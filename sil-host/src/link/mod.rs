@@ -7,7 +7,7 @@ pub mod client;
 pub mod qemu;
 pub mod server;
 
-pub use client::{FcClient, Remote, RemoteStep};
+pub use client::{FcClient, Remote, RemoteStep, StepInput};
 pub use qemu::{
     boot_shim_elf, decode_defmt, firmware_crazyflie_elf, firmware_crtp_elf, firmware_elf, firmware_mavlink_elf,
     qemu_command, qemu_command_booting, Boot, Qemu, SYSTICK_PER_INSTRUCTION,
