@@ -60,7 +60,7 @@ mod target {
     use fc_core::estimate::{Eskf, EskfConfig, Fix, ImuSample};
     use fc_core::{euler_to_quat, VehicleParams};
     use fc_loop::nav::Navigator;
-    use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
+    use fc_loop::{run_job, setpoint_to_wire, Exclusive, FcConfig, FlightCore, Framed, Outbox};
     use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use fc_stm32f405::SYSCLK_HZ;
     use hal_shim::stm32f405::SysTickClock;
@@ -503,17 +503,18 @@ mod target {
     /// flies the controller `id`: an `Imu` sample in (pseudo-random rates
     /// up to 1 rad/s, specific force −g ± 2 m/s²) with a mocap fix at
     /// *every* step (a real one arrives every tenth), the estimator, the
-    /// controller (due at every sample at 1 kHz) and its output. Returns
-    /// `(step, with frames)`: `step` is what the image itself reports for the
+    /// controller (due at every sample at 1 kHz) and its output
+    /// ([`ImageStep`]): `step` is what the image itself reports for the
     /// step (`Telemetry.cycles`: from the IMU sample to the actuator output,
     /// the figure a QEMU flight's `instructions_per_step` is made of);
-    /// `with frames` adds the lockstep link's work (decoding the `Fix` and
+    /// `framed` adds the lockstep link's work (decoding the `Fix` and
     /// `Imu` frames, encoding `Actuator`, `Telemetry`, `Nav` and `NavBias`),
     /// which on a vehicle is the link task's, below the IMU and the
-    /// controller. Every other step has the reference preview (its frames
+    /// controller; `imu_task` and `control_task` are the two halves as
+    /// `firmware`'s tasks run them. Every other step has the reference preview (its frames
     /// serviced before the step: on a vehicle an onboard trajectory
     /// generator gives it), the others extrapolate the set-point.
-    fn image_step_worst(id: u8, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<(u32, u32)> {
+    fn image_step_worst(id: u8, preview: Option<(usize, f64)>, clock: &SysTickClock) -> Option<ImageStep> {
         let (fc, link) = open_session(FcConfig::default(), id, clock)?;
         let start = Vector3::new(2.0, 0.0, -5.0);
         let fix = mocap_fix;
@@ -537,6 +538,7 @@ mod target {
         }
         let mut rng = Lcg(17);
         let (mut worst, mut worst_framed) = (0u32, 0u32);
+        let (mut worst_imu, mut worst_control) = (0u32, 0u32);
         for k in 0..STEPS {
             seq += 1;
             let t = seq as f32 * 1e-3;
@@ -556,16 +558,84 @@ mod target {
             );
             push(link, &imu_frame(seq, &rng.imu()));
             let t0 = clock.now();
-            while !link.rx.is_empty() {
-                fc.service(link, clock, 0).ok()?;
+            // As the image's tasks run it: each frame decoded, the loop's
+            // half (the IMU task: the estimator and the controller's
+            // inputs), then the controller's (`run_job`) until its first
+            // answer (the output) is handed over.
+            while let Some(b) = link.rx.pop_front() {
+                let Some(frame) = fc.decoder().push::<ToFc>(b) else {
+                    continue;
+                };
+                if let Some((imu, control)) = as_tasks(fc, frame, link, clock)? {
+                    worst_imu = worst_imu.max(imu);
+                    worst_control = worst_control.max(control);
+                }
             }
             worst_framed = worst_framed.max(clock.since(t0));
             worst = worst.max(link.step_cycles()?);
         }
         // Every step navigated and flown (nothing refused as invalid).
         let c = fc.counters();
-        (fc.navigator().estimate().is_some() && c.invalid_values == 0 && link.tx_bytes > 0)
-            .then_some((instructions(worst), instructions(worst_framed)))
+        (fc.navigator().estimate().is_some() && c.invalid_values == 0 && link.tx_bytes > 0).then_some(ImageStep {
+            step: instructions(worst),
+            framed: instructions(worst_framed),
+            imu_task: instructions(worst_imu),
+            control_task: instructions(worst_control),
+        })
+    }
+
+    /// One decoded frame as `firmware`'s tasks run it: the loop's half,
+    /// then the controller's until its first answer. Returns the two
+    /// halves' ticks when the frame was a step; `None` if anything failed.
+    #[inline(never)]
+    fn as_tasks(
+        fc: &mut FlightCore,
+        frame: Result<ToFc, fc_proto::FrameError>,
+        link: &mut MemLink,
+        clock: &SysTickClock,
+    ) -> Option<Option<(u32, u32)>> {
+        let ts = clock.now();
+        let Some(job) = fc.on_frame(frame, &mut Framed(&mut *link), clock, 0).ok()? else {
+            return Some(None);
+        };
+        let te = clock.now();
+        let (lp, ctrl) = fc.split();
+        let mut out = FirstAnswer {
+            link: Framed(link),
+            clock,
+            at: None,
+        };
+        run_job(&mut Exclusive(lp), ctrl, job, &mut out, clock).ok()?;
+        Some(Some((te.wrapping_sub(ts), out.at?.wrapping_sub(te))))
+    }
+
+    /// The image step's worst figures, instructions.
+    #[derive(Clone, Copy)]
+    struct ImageStep {
+        /// Sample to output, as the image reports it (`Telemetry.cycles`).
+        step: u32,
+        /// With the lockstep link's frames decoded and encoded.
+        framed: u32,
+        /// The IMU task: the decoded sample to the estimate and the controller's inputs.
+        imu_task: u32,
+        /// The controller task: its inputs to its output handed over.
+        control_task: u32,
+    }
+
+    /// An outbox that notes when its first message is sent (the step's
+    /// output, `Actuator`).
+    struct FirstAnswer<'a, 'c> {
+        link: Framed<'a, MemLink>,
+        clock: &'c SysTickClock,
+        at: Option<u32>,
+    }
+
+    impl Outbox for FirstAnswer<'_, '_> {
+        type Error = ();
+        fn send(&mut self, m: &FromFc) -> Result<(), ()> {
+            self.at.get_or_insert_with(|| self.clock.now());
+            self.link.send(m)
+        }
     }
 
     /// One table row; returns whether it fits.
@@ -680,14 +750,24 @@ mod target {
             // image step (frames, estimator with a fix, MPC) is its budget.
             if r.family == Family::Mpc && r.preset == Preset::Project {
                 let (m, stack) = with_stack(|| image_step_worst(id, spec.preview(), &clock));
-                let step = (m.map(|w| w.0), stack);
+                let step = (m.map(|w| w.step), stack);
                 ok &= check(name, form, hz, "image step (IMU + fix in, ESKF, MPC, output)", step);
                 check(
                     name,
                     form,
                     hz,
                     "image step with the PIL link's frames, info",
-                    (m.map(|w| w.1), stack),
+                    (m.map(|w| w.framed), stack),
+                );
+                // The image's two tasks apart (`firmware`'s data-ready and
+                // controller tasks): the sample's, then the controller's.
+                ok &= check(name, form, hz, "IMU task (sample to estimate)", (m.map(|w| w.imu_task), stack));
+                ok &= check(
+                    name,
+                    form,
+                    hz,
+                    "controller task (estimate to output)",
+                    (m.map(|w| w.control_task), stack),
                 );
                 match step.0 {
                     Some(w) if w <= IMAGE_STEP_BUDGET => {
