@@ -72,7 +72,10 @@ fn every_controller_fits_its_cycle_budget() {
             task("controller task (estimate to output)"),
         );
         assert!(imu <= 20_000.0, "{form}: IMU task {imu} instructions");
-        assert!(imu + control <= 74_600.0, "{form}: IMU task {imu} + controller task {control}");
+        assert!(
+            imu + control <= 74_600.0,
+            "{form}: IMU task {imu} + controller task {control}"
+        );
     }
     // The fast MPC at 1 kHz: the whole image step (IMU sample and a fix in,
     // estimator, MPC, output) within 74 600 instructions (× CPI 1.5 × margin

@@ -761,7 +761,13 @@ mod target {
                 );
                 // The image's two tasks apart (`firmware`'s data-ready and
                 // controller tasks): the sample's, then the controller's.
-                ok &= check(name, form, hz, "IMU task (sample to estimate)", (m.map(|w| w.imu_task), stack));
+                ok &= check(
+                    name,
+                    form,
+                    hz,
+                    "IMU task (sample to estimate)",
+                    (m.map(|w| w.imu_task), stack),
+                );
                 ok &= check(
                     name,
                     form,
