@@ -747,7 +747,7 @@ impl MavVehicle {
 /// `SET_POSITION_TARGET_LOCAL_NED` as a set-point: `None` unless the frame
 /// is `MAV_FRAME_LOCAL_NED` and the position is given. A masked yaw keeps
 /// `yaw_rad`. The values are not checked here:
-/// [`FlightCore::set_setpoint`] refuses what is not finite or in range.
+/// [`fc_loop::Loop::set_setpoint`] refuses what is not finite or in range.
 pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32) -> Option<Setpoint<f32>> {
     use PositionTargetTypemask as T;
     let mask = m.type_mask;
