@@ -432,9 +432,11 @@ fn stm32_drivers_behave_in_qemu() {
     };
     // TIM2 fires periodically (QEMU's timer model has its own clock, so the
     // count is not the silicon's 20, and it varies from run to run and with
-    // the host's load: 13–50 seen; it must not be stuck or run away).
+    // the host's load: 13–50 seen, and 4 with the 2-core host also building
+    // the workspace and running the other QEMU tests; it must not be stuck
+    // or run away).
     let periods = nums("drivers: loop timer 1000 Hz: ")[0];
-    assert!((5..=200).contains(&periods), "{periods}");
+    assert!((1..=200).contains(&periods), "{periods}");
     // PWM: 400 Hz from 84 MHz needs prescaler 4 → ARR 52 499; duties 0.5, 0.25,
     // 2.0 (clamped to 1) and NaN (motor off).
     let v = nums("drivers: pwm arr ");
