@@ -477,14 +477,10 @@ pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
             answers.iter().try_for_each(|m| out.send(m))
         }
         Job::Select(spec) => {
-            let design = lp.lock(|l| l.design());
-            let (r, flying) = design.run(ctrl, spec);
-            lp.lock(|l| {
-                l.installed(spec, r.is_ok(), flying, ctrl);
-                match r {
-                    Ok(()) => l.selections = l.selections.wrapping_add(1),
-                    Err(_) => l.counters.invalid_values = l.counters.invalid_values.wrapping_add(1),
-                }
+            let r = install(lp, ctrl, spec);
+            lp.lock(|l| match r {
+                Ok(()) => l.selections = l.selections.wrapping_add(1),
+                Err(_) => l.counters.invalid_values = l.counters.invalid_values.wrapping_add(1),
             });
             Ok(())
         }
@@ -505,6 +501,20 @@ pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
             out.send(&answer)
         }
     }
+}
+
+/// Designs `spec` on `ctrl` in place of the running controller, the loop
+/// unlocked while it runs; on failure the running one is designed again, or
+/// the fallback PD if even that fails ([`Design::run`]), and the error is
+/// returned. The loop records what flies ([`Loop::installed`]).
+pub fn install<M: Mutex<T = Loop>>(
+    lp: &mut M,
+    ctrl: &mut AnyController<f32>,
+    spec: ControllerSpec,
+) -> Result<(), ControlError> {
+    let (r, flying) = lp.lock(|l| l.design()).run(ctrl, spec);
+    lp.lock(|l| l.installed(spec, r.is_ok(), flying, ctrl));
+    r
 }
 
 /// Carries out a parameter write's plan: a re-design runs on `ctrl` with
@@ -714,13 +724,9 @@ impl FlightCore {
         run_job(&mut Exclusive(&mut self.lp), &mut self.ctrl, job, out, clock)
     }
 
-    /// Designs `spec` in place of the running controller; on failure the
-    /// running one is designed again, or the fallback PD if even that
-    /// fails, and the error is returned.
+    /// [`install`] on this loop's controller.
     fn install(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
-        let (r, flying) = self.lp.design().run(&mut self.ctrl, spec);
-        self.lp.installed(spec, r.is_ok(), flying, &self.ctrl);
-        r
+        install(&mut Exclusive(&mut self.lp), &mut self.ctrl, spec)
     }
 }
 
@@ -979,6 +985,19 @@ impl Loop {
             .is_some_and(|t| !fc_core::control::plausible_step(now_us.saturating_sub(t) as f64 * 1e-6, period_s))
     }
 
+    /// Whether the controller's step at `now_us` resumes (valid data again
+    /// after the failsafe or, in lockstep, a gap: the controller keeps its
+    /// estimates and forgets only the step before, see
+    /// `Controller::resume`); the failsafe ends here.
+    fn take_resume(&mut self, now_us: u64) -> bool {
+        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
+        let resume = self.failsafe || (lockstep && self.gap_since_last_step(now_us));
+        if resume {
+            self.failsafe = false;
+        }
+        resume
+    }
+
     /// The controller's step at `now_us` from `est` to `sp`: told the
     /// measured interval since its last one (a 2 ms simulator under a 1 ms
     /// controller, a late sample), or resumed when that interval is a gap.
@@ -1145,7 +1164,6 @@ impl Loop {
                 control: None,
             };
         };
-        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
         let t0 = clock.now();
         let stepped = self.nav.step(now, imu, &[]);
         // Asked at every step, so that the grid follows the steps' times.
@@ -1155,10 +1173,7 @@ impl Loop {
             (Ok(mode @ (NavMode::Navigating | NavMode::Failsafe)), Some(est)) => {
                 self.nav_failsafe = mode == NavMode::Failsafe;
                 if due {
-                    let resume = self.failsafe || (lockstep && self.gap_since_last_step(now));
-                    if resume {
-                        self.failsafe = false;
-                    }
+                    let resume = self.take_resume(now);
                     let sp = self.nav.setpoint(now, &self.sp);
                     control = Some(self.control_job(now, est, sp, resume, self.nav_failsafe));
                 }
@@ -1182,7 +1197,6 @@ impl Loop {
 
     /// A full-state step (`Sensor`): checked, then the controller's step.
     fn on_sensor<C: CycleClock>(&mut self, seq: u32, t_us: u64, state: &[f32; 13], clock: &C, now_us: u64) -> Step {
-        let lockstep = self.cfg.time_base == TimeBase::Lockstep;
         let mut step = Step {
             seq,
             t0: None,
@@ -1202,12 +1216,7 @@ impl Loop {
             return step;
         }
         self.last_pos = Some((est.pos_ned_m, now));
-        // Valid data again after a gap: the controller keeps its estimates
-        // and forgets only the step before (see `Controller::resume`).
-        let resume = self.failsafe || (lockstep && self.gap_since_last_step(now));
-        if resume {
-            self.failsafe = false;
-        }
+        let resume = self.take_resume(now);
         step.t0 = Some(clock.now());
         step.control = Some(self.control_job(now, est, self.sp, resume, false));
         step
