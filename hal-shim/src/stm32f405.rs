@@ -125,14 +125,9 @@ pub fn usart_isr(port: Port) {
 pub fn read_queued(port: Port, buf: &mut [u8]) -> usize {
     port.with_queue(|q| {
         let mut n = 0;
-        while n < buf.len() {
-            match q.pop_front() {
-                Some(b) => {
-                    buf[n] = b;
-                    n += 1;
-                }
-                None => break,
-            }
+        for (slot, b) in buf.iter_mut().zip(core::iter::from_fn(|| q.pop_front())) {
+            *slot = b;
+            n += 1;
         }
         if n > 0 {
             // Room again: resume reception if the interrupt paused it

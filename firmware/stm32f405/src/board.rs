@@ -14,9 +14,12 @@ use fc_stm32f405::{bring_up_clocks, PCLK2_HZ, SYSCLK_HZ};
 use hal_shim::stm32f405::{Port, SysTickClock, Usart};
 
 // Log lines carry the SysTick time in µs.
-defmt::timestamp!("{=u64:us}", {
-    hal_shim::stm32f405::ticks_now() / u64::from(SYSCLK_HZ / 1_000_000)
-});
+defmt::timestamp!("{=u64:us}", { us_of(hal_shim::stm32f405::ticks_now()) });
+
+/// SysTick ticks (the 168 MHz core clock) as µs.
+pub fn us_of(ticks: u64) -> u64 {
+    ticks / u64::from(SYSCLK_HZ / 1_000_000)
+}
 
 /// defmt's global logger over semihosting (QEMU's stdout): defmt frames
 /// (rzCOBS-encoded) written with SYS_WRITE to the host's `:tt`. Used under
@@ -116,7 +119,7 @@ pub fn bring_up() -> (SysTickClock, Usart) {
 /// The loop's clock, µs since boot.
 #[allow(dead_code, reason = "firmware-crtp keeps the time of its IMU samples instead")]
 pub fn now_us(clock: &SysTickClock) -> u64 {
-    clock.ticks() / u64::from(SYSCLK_HZ / 1_000_000)
+    us_of(clock.ticks())
 }
 
 /// Idles until the next interrupt (a received byte or a SysTick wrap):

@@ -42,8 +42,8 @@ mod app {
     use fc_core::control::AnyController;
     use fc_loop::{run_job, FcConfig, FlightCore, Job, Loop, Mutex, Outbox};
     use fc_proto::{encode, Counters, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
+    use fc_stm32f405::log_changes;
     use fc_stm32f405::timing::{StepTiming, Timing};
-    use fc_stm32f405::{log_changes, SYSCLK_HZ};
     use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, SysTickClock, TxTimeout, Usart};
     use hal_shim::ByteLink;
     use heapless::spsc::{Consumer, Producer, Queue};
@@ -151,7 +151,7 @@ mod app {
                     // Data-ready: the sample is whole (on a board, the
                     // gyro's line; here, the `Imu` frame's last byte).
                     let entry = ticks_now();
-                    let now_us = entry / u64::from(SYSCLK_HZ / 1_000_000);
+                    let now_us = board::us_of(entry);
                     // The deferred outbox never fails.
                     let job = lp.on_frame(frame, &mut out, clock, now_us).unwrap_or(None)?;
                     Some((job, entry))
