@@ -477,11 +477,9 @@ pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
             answers.iter().try_for_each(|m| out.send(m))
         }
         Job::Select(spec) => {
-            let r = install(lp, ctrl, spec);
-            lp.lock(|l| match r {
-                Ok(()) => l.selections = l.selections.wrapping_add(1),
-                Err(_) => l.counters.invalid_values = l.counters.invalid_values.wrapping_add(1),
-            });
+            if select(lp, ctrl, spec).is_err() {
+                lp.lock(|l| l.counters.invalid_values = l.counters.invalid_values.wrapping_add(1));
+            }
             Ok(())
         }
         Job::Param {
@@ -515,6 +513,40 @@ pub fn install<M: Mutex<T = Loop>>(
     let (r, flying) = lp.lock(|l| l.design()).run(ctrl, spec);
     lp.lock(|l| l.installed(spec, r.is_ok(), flying, ctrl));
     r
+}
+
+/// Selects `spec` (as a `Select` does): [`install`], counted as a
+/// selection when it was built; on failure the running controller keeps
+/// flying and the error is returned.
+pub fn select<M: Mutex<T = Loop>>(
+    lp: &mut M,
+    ctrl: &mut AnyController<f32>,
+    spec: ControllerSpec,
+) -> Result<(), ControlError> {
+    install(lp, ctrl, spec)?;
+    lp.lock(|l| l.selections = l.selections.wrapping_add(1));
+    Ok(())
+}
+
+/// Starts a protocol front end's loop `lp` with its controller `ctrl`
+/// ([`FlightCore::start_front_end`]): the settings checked, their
+/// controller designed in place, the session opened (set-points may come
+/// before samples); returns the mixer the settings give for its motors.
+pub fn start_front_end(
+    lp: &mut Loop,
+    ctrl: &mut AnyController<f32>,
+) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
+    lp.settings.check()?;
+    let spec = lp.settings.controller;
+    install(&mut Exclusive(&mut *lp), ctrl, spec).map_err(params::Refusal::Design)?;
+    lp.open_session();
+    lp.settings.mixer()
+}
+
+/// The controller a loop flies before its first design: the tuned Euler
+/// PD ([`FALLBACK_CONTROLLER`], which needs no design) for `vehicle`.
+pub fn fallback_controller(vehicle: VehicleParams<f32>) -> AnyController<f32> {
+    AnyController::PdEuler(PdEuler::new(vehicle, PdEulerGains::tuned(), ReferenceMode::Feedforward))
 }
 
 /// Carries out a parameter write's plan: a re-design runs on `ctrl` with
@@ -602,9 +634,8 @@ impl FlightCore {
     /// checks the settings and designs their controller for their vehicle,
     /// in place.
     pub fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {
-        let params = settings.vehicle;
         Self {
-            ctrl: AnyController::PdEuler(PdEuler::new(params, PdEulerGains::tuned(), ReferenceMode::Feedforward)),
+            ctrl: fallback_controller(settings.vehicle),
             lp: Loop::unstarted_with(cfg, settings),
         }
     }
@@ -630,10 +661,7 @@ impl FlightCore {
     /// session (set-points may come before samples) and returns the mixer
     /// the settings give for the front end's motors.
     pub fn start_front_end(&mut self) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
-        self.lp.settings.check()?;
-        self.start().map_err(params::Refusal::Design)?;
-        self.lp.open_session();
-        self.lp.settings.mixer()
+        start_front_end(&mut self.lp, &mut self.ctrl)
     }
 
     /// One IMU sample `imu` taken at `t_us`, as an `Imu` message of
@@ -648,13 +676,10 @@ impl FlightCore {
         clock: &C,
         now_us: u64,
     ) -> Result<(), O::Error> {
-        if !self.lp.session {
-            self.lp.counters.unexpected = self.lp.counters.unexpected.wrapping_add(1);
-            return Ok(());
+        match self.lp.imu_job(seq, t_us, imu, clock, now_us) {
+            Some(job) => self.run(job, out, clock),
+            None => Ok(()),
         }
-        self.lp.counters.ok = self.lp.counters.ok.wrapping_add(1);
-        let step = self.lp.on_imu(seq, t_us, imu, clock, now_us);
-        self.run(Job::Step(step), out, clock)
     }
 
     /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
@@ -671,9 +696,7 @@ impl FlightCore {
     /// does); on failure the running one keeps flying and the error is
     /// returned. Not in flight: a design takes milliseconds to tens of them.
     pub fn try_select(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
-        self.install(spec)?;
-        self.lp.selections = self.lp.selections.wrapping_add(1);
-        Ok(())
+        select(&mut Exclusive(&mut self.lp), &mut self.ctrl, spec)
     }
 
     /// Reads what the link has (bounded), handles every complete frame,
@@ -736,7 +759,7 @@ impl Loop {
     /// its own) until a design ([`FlightCore::start`]). Built in place
     /// (inlined), so that no stack copy of it is made.
     #[inline(always)]
-    fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {
+    pub fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {
         Self {
             cfg,
             settings,
@@ -868,6 +891,40 @@ impl Loop {
             (true, true) => Ok(ParamPlan::Redesign(next)),
             (true, false) => Err(params::Refusal::Armed),
         }
+    }
+
+    /// Applies a plan that needs no design ([`Loop::plan_param`]); a
+    /// re-design's settings are returned, for the controller's side
+    /// ([`apply_plan`]).
+    pub fn apply_unless_design(&mut self, plan: ParamPlan) -> Option<params::Settings> {
+        match plan {
+            ParamPlan::Unchanged => None,
+            ParamPlan::Set(next) => {
+                self.settings = next;
+                None
+            }
+            ParamPlan::Redesign(next) => Some(next),
+        }
+    }
+
+    /// An `Imu` message's estimator half ([`Loop::on_imu`]) as a front end
+    /// that speaks another protocol takes it: `None` (counted as
+    /// unexpected) before the session opens, else the job for the
+    /// controller.
+    pub fn imu_job<C: CycleClock>(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        imu: &ImuSample,
+        clock: &C,
+        now_us: u64,
+    ) -> Option<Job> {
+        if !self.session {
+            self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
+            return None;
+        }
+        self.counters.ok = self.counters.ok.wrapping_add(1);
+        Some(Job::Step(self.on_imu(seq, t_us, imu, clock, now_us)))
     }
 
     /// A design's inputs under the settings in force.

@@ -202,6 +202,9 @@ pub enum Refusal {
     Design(ControlError),
     /// The change re-designs the controller: only while disarmed.
     Armed,
+    /// A re-design is under way (in the controller's task): write again
+    /// once it is answered.
+    Busy,
 }
 
 impl Refusal {
@@ -215,6 +218,7 @@ impl Refusal {
             Refusal::Mixer(_) => 5,
             Refusal::Design(_) => 6,
             Refusal::Armed => 7,
+            Refusal::Busy => 8,
         }
     }
 }
@@ -231,6 +235,7 @@ impl core::fmt::Display for Refusal {
             Refusal::Mixer(MixerError::Parameter(_)) => f.write_str("mixer needs a positive value"),
             Refusal::Design(_) => f.write_str("controller design failed"),
             Refusal::Armed => f.write_str("disarm first"),
+            Refusal::Busy => f.write_str("a re-design is under way"),
         }
     }
 }

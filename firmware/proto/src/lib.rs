@@ -285,7 +285,8 @@ pub enum FromFc {
         /// 0: read, or written as asked; else why not: 1 no such
         /// parameter, 2 out of range, 3 not a whole number, 4 no such
         /// controller, 5 the motors cannot be mixed, 6 the controller could
-        /// not be designed, 7 re-design refused in flight.
+        /// not be designed, 7 re-design refused in flight, 8 a re-design
+        /// is under way (write again once it is answered).
         refusal: u8,
     },
 }
