@@ -9,7 +9,8 @@
 //!   (`fault-crazyflie`, the fault test's program, is linked the same way);
 //! - `boot-shim`: the 16 KiB at 0x08000000 (QEMU's stand-in for that bootloader).
 //!
-//! RAM is the STM32F405's 128 KiB in both. Host builds ignore the maps.
+//! RAM is the STM32F405's 128 KiB in both. Host builds ignore the maps
+//! (and are linked without `--nmagic`).
 use std::{env, fs, path::PathBuf};
 
 const IMAGE: &str = "/* Crazyflie 2.1 (STM32F405RG): sector 0 holds Bitcraze's bootloader. */
@@ -45,7 +46,10 @@ fn main() {
         // No page alignment: otherwise the linker loads the ELF and program
         // headers into the 16 KiB below 0x08004000 (the bootloader's sector),
         // and a flasher or QEMU would write them over the bootloader.
-        println!("cargo:rustc-link-arg-bin={bin}=--nmagic");
+        // (The host's `cc` knows no such flag: host builds leave it out.)
+        if env::var("TARGET").is_ok_and(|t| t.starts_with("thumb")) {
+            println!("cargo:rustc-link-arg-bin={bin}=--nmagic");
+        }
     }
     println!("cargo:rerun-if-changed=build.rs");
 }
