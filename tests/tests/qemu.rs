@@ -244,10 +244,11 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
     }
 }
 
-/// The last `timing:` line of the image's log and its eight figures:
+/// The last `timing:` line of the image's log and its nine figures:
 /// steps, worst data-ready → estimate and → answer (instructions), the
-/// deadline, late steps, dropped jobs, dropped answers, transmit timeouts.
-fn last_timing(log: &[String]) -> (String, [u64; 8]) {
+/// deadline, late steps, dropped jobs, dropped answers, transmit timeouts,
+/// samples whose estimate missed the deadline.
+fn last_timing(log: &[String]) -> (String, [u64; 9]) {
     let line = log
         .iter()
         .rev()
@@ -284,11 +285,12 @@ fn the_fast_mpc_meets_every_deadline_under_a_parameter_read_flood() {
     ));
     cfg.param_flood = 1;
     let pil = fly_target(&cfg, &Target::Qemu).unwrap();
-    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx]) = last_timing(&pil.firmware_log);
+    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed]) =
+        last_timing(&pil.firmware_log);
     println!("fast MPC with a parameter read a step, image tasks: {timing}");
     assert!(steps >= 3000, "{timing}");
     assert!(estimate > 0 && estimate < 25_000 && answer <= deadline, "{timing}");
-    assert_eq!((missed, jobs, answers, tx), (0, 0, 0, 0), "{timing}");
+    assert_eq!((missed, jobs, answers, tx, imu_missed), (0, 0, 0, 0, 0), "{timing}");
     let c = pil.link_counters.expect("counters");
     assert_eq!(c.failsafe_entries + c.bad_crc + c.bad_cobs + c.bad_message, 0, "{c:?}");
     // Reads change nothing: the flight is the in-process one (as in
@@ -333,7 +335,7 @@ fn a_redesign_delays_the_controller_task_not_the_samples() {
     drop(c);
     let log = q.finish().unwrap();
     let all = log.join("\n");
-    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx]) = last_timing(&log);
+    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed]) = last_timing(&log);
     println!("re-design before the first step, image tasks: {timing}");
     assert!(steps >= 1000, "{timing}");
     assert!(
@@ -341,7 +343,11 @@ fn a_redesign_delays_the_controller_task_not_the_samples() {
         "a sample waited for the design: {timing}\n{all}"
     );
     assert!(answer > 10 * deadline, "the design took no time? {timing}");
-    assert_eq!((missed, jobs, answers, tx), (1, 0, 0, 0), "{timing}\n{all}");
+    assert_eq!(
+        (missed, jobs, answers, tx, imu_missed),
+        (1, 0, 0, 0, 0),
+        "{timing}\n{all}"
+    );
 }
 
 /// The sensor flight on the real image: the same IMU samples and fixes go
@@ -385,10 +391,15 @@ fn qemu_sensor_flight_matches_in_process() {
         // The image's tasks (data-ready at priority 3, controller at 2,
         // link at 1) measured every step against one 1 kHz period at CPI
         // 1.5 with a 1.5 margin (74 667 instructions): none late, none dropped.
-        let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx]) = last_timing(&pil.firmware_log);
+        let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed]) =
+            last_timing(&pil.firmware_log);
         println!("{family:?} sensor flight in QEMU, image tasks: {timing}");
         assert!(steps >= 1000 && deadline == 74_666, "{timing}");
-        assert_eq!((missed, jobs, answers, tx), (0, 0, 0, 0), "{family:?}: {timing}");
+        assert_eq!(
+            (missed, jobs, answers, tx, imu_missed),
+            (0, 0, 0, 0, 0),
+            "{family:?}: {timing}"
+        );
         assert!(
             estimate > 0 && estimate < 25_000 && answer <= deadline,
             "{family:?}: {timing}"

@@ -15,8 +15,10 @@
 //! STM32 says `RADIO_READY` at boot; the nRF51 echoes it and reports the
 //! battery (`PM_BATTERY_STATE`: flags, V, A).
 
-use crate::vehicle::{CrtpSink, CrtpVehicle};
+use crate::vehicle::{CrtpCore, CrtpSink};
 use crate::{f32_at, CrtpError, Packet, MAX_PACKET};
+use core::borrow::BorrowMut;
+use fc_loop::Mutex;
 use hal_shim::ByteLink;
 
 /// Largest syslink payload, bytes (`SYSLINK_MTU`).
@@ -352,9 +354,14 @@ impl<const Q: usize> CrtpSink for Downlink<Q> {
     }
 }
 
-/// The STM32's side of syslink in front of a [`CrtpVehicle`]: frames in,
+/// The STM32's side of syslink in front of a CRTP vehicle: frames in,
 /// radio packets to the vehicle, one downlink packet per uplink packet,
 /// battery reports to the vehicle. `Q` is the downlink queue's capacity.
+///
+/// The vehicle is reached through a [`Mutex`] and locked one packet at a
+/// time, never while the radio's USART is written: in-process it is the
+/// [`crate::vehicle::CrtpVehicle`] itself, on an image a short lock of the
+/// [`CrtpCore`] the IMU task shares.
 #[derive(Debug)]
 pub struct Syslink<const Q: usize> {
     decoder: Decoder,
@@ -398,14 +405,22 @@ impl<const Q: usize> Syslink<Q> {
         send(link, &ready)
     }
 
-    /// Log blocks that are due go to the downlink queue.
-    pub fn poll(&mut self, vehicle: &mut CrtpVehicle) {
+    /// What the vehicle has waiting (a re-designing write's answer,
+    /// console lines, the log blocks sampled) goes to the downlink queue.
+    pub fn poll<M: Mutex>(&mut self, vehicle: &mut M)
+    where
+        M::T: BorrowMut<CrtpCore>,
+    {
         // A full queue drops the block's sample (counted), as a radio would.
-        let _ = vehicle.poll(&mut self.down);
+        let down = &mut self.down;
+        let _ = vehicle.lock(|v| v.borrow_mut().poll(down));
     }
 
     /// Feeds the bytes `rx` from the nRF51; answers on `link`.
-    pub fn receive<L: ByteLink>(&mut self, rx: &[u8], vehicle: &mut CrtpVehicle, link: &mut L) -> Result<(), L::Error> {
+    pub fn receive<M: Mutex, L: ByteLink>(&mut self, rx: &[u8], vehicle: &mut M, link: &mut L) -> Result<(), L::Error>
+    where
+        M::T: BorrowMut<CrtpCore>,
+    {
         for &b in rx {
             match self.decoder.push(b) {
                 None => {}
@@ -420,12 +435,15 @@ impl<const Q: usize> Syslink<Q> {
     }
 
     /// Acts on one frame.
-    fn dispatch<L: ByteLink>(
+    fn dispatch<M: Mutex, L: ByteLink>(
         &mut self,
         p: &SyslinkPacket,
-        vehicle: &mut CrtpVehicle,
+        vehicle: &mut M,
         link: &mut L,
-    ) -> Result<(), L::Error> {
+    ) -> Result<(), L::Error>
+    where
+        M::T: BorrowMut<CrtpCore>,
+    {
         match p.ty() {
             types::RADIO_RAW | types::RADIO_RAW_BROADCAST => {
                 self.counters.radio = self.counters.radio.wrapping_add(1);
@@ -434,12 +452,16 @@ impl<const Q: usize> Syslink<Q> {
                     // The radio acknowledges a null packet itself: the
                     // vehicle counts it, its null answer is not queued.
                     Ok(c) if c.is_null() => {
-                        let _ = vehicle.handle(&c, &mut Discard);
+                        let _ = vehicle.lock(|v| v.borrow_mut().handle(&c, &mut Discard));
                     }
                     Ok(c) => {
-                        let _ = vehicle.handle(&c, &mut self.down);
+                        let down = &mut self.down;
+                        let _ = vehicle.lock(|v| v.borrow_mut().handle(&c, down));
+                        // What the packet's controller work answered, if it
+                        // is done already (in-process it is).
+                        let _ = vehicle.lock(|v| v.borrow_mut().send_queued(down));
                     }
-                    Err(e) => vehicle.count_malformed(e),
+                    Err(e) => vehicle.lock(|v| v.borrow_mut().count_malformed(e)),
                 }
                 if p.ty() == types::RADIO_RAW {
                     // One downlink packet per uplink packet.
@@ -453,7 +475,7 @@ impl<const Q: usize> Syslink<Q> {
             types::PM_BATTERY_STATE => match BatteryState::parse(p.data()) {
                 Ok(b) => {
                     self.counters.battery = self.counters.battery.wrapping_add(1);
-                    vehicle.set_battery(b.vbat_v, b.pm_state());
+                    vehicle.lock(|v| v.borrow_mut().set_battery(b.vbat_v, b.pm_state()));
                 }
                 Err(_) => self.counters.bad_battery = self.counters.bad_battery.wrapping_add(1),
             },

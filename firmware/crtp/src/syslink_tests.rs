@@ -3,6 +3,7 @@
 //! downlink per uplink, battery reports, and 10⁶ random and mutated frames.
 
 use super::*;
+use crate::vehicle::CrtpVehicle;
 use crate::vehicle::LOG_VARS;
 use fc_loop::params::Settings;
 

@@ -374,3 +374,155 @@ fn decks_are_read_only_and_absent() {
         assert_eq!(r.payload(), &[id[0], id[1], 0][..], "deck.{} stays 0", n.name);
     }
 }
+
+/// Split as an image splits it (the shared part and the controller in two
+/// tasks): a parameter write that re-designs is not answered until the
+/// controller's side has run the design; a write that comes meanwhile is
+/// refused unanswered (cflib repeats it), and so is a take-off; the answer
+/// then carries the value in force, and the same write in one piece
+/// (`CrtpVehicle::handle`) is answered at once with the same value.
+#[test]
+fn a_redesigning_write_is_answered_once_the_controllers_side_has_designed() {
+    use crate::vehicle::{fly_step, run_work, ControllerWork};
+    use fc_loop::Exclusive;
+    let w_pos = (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
+        .unwrap();
+    let mut whole = at_rest(3000);
+    let mut split = at_rest(3000);
+    let id = (w_pos as u16).to_le_bytes();
+    let before = crate::f32_at(ask(&mut whole, pk(Port::Param, 1, &id)).payload(), 3).unwrap();
+    let mut write = vec![id[0], id[1]];
+    write.extend_from_slice(&(2.0 * before).to_le_bytes());
+    let write = pk(Port::Param, 2, &write);
+    // In one piece: answered at once, with the new value.
+    let r = ask(&mut whole, write);
+    assert_eq!(crate::f32_at(r.payload(), 2), Some(2.0 * before));
+
+    let (core, ctrl) = split.split();
+    let mut out = Sent::default();
+    core.handle(&write, &mut out).unwrap();
+    assert!(
+        out.0.iter().all(|p| p.port() != Port::Param as u8),
+        "answered before its design"
+    );
+    let Some(work @ ControllerWork::Param { .. }) = core.take_work() else {
+        panic!("no design queued")
+    };
+    // Meanwhile: a second write and a take-off are refused, unanswered.
+    core.handle(&write, &mut out).unwrap();
+    assert!(out.0.iter().all(|p| p.port() != Port::Param as u8));
+    assert_eq!(core.counters().refused, 1);
+    assert!(core.take_work().is_none(), "one design at a time");
+    // The estimator's steps go on while the design waits.
+    let clock = MonotonicClock::default();
+    let imu = ImuSample {
+        gyro_frd_radps: Vector3::zeros(),
+        accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+    };
+    let step = core.imu_begin(3_001_000, &imu, &[], &clock);
+    fly_step(&mut Exclusive(&mut *core), ctrl, step, &clock);
+    // The controller's side designs; the answer is queued for the link.
+    let (r, answer) = run_work(&mut Exclusive(&mut *core), ctrl, work);
+    assert!(r.is_ok() && answer.is_none(), "a CRTP write is answered over CRTP");
+    let mut later = Sent::default();
+    core.poll(&mut later).unwrap();
+    let r = later
+        .0
+        .iter()
+        .find(|p| p.port() == Port::Param as u8)
+        .expect("answered after the design");
+    assert_eq!(
+        r.payload(),
+        ask(&mut whole, write).payload(),
+        "the same answer as in one piece"
+    );
+    assert_eq!(core.counters().handled, 1, "the write, counted once its design is done");
+    assert!(!core.busy());
+}
+
+/// The simulator's `ParamSet` on the split vehicle: a write that needs no
+/// design is answered at once; one that re-designs is answered by the
+/// controller's side, with what our protocol's `Param` carries in one
+/// piece; while it waits, another is refused as busy (code 8).
+#[test]
+fn the_simulators_redesigning_write_is_answered_by_the_controllers_side() {
+    use crate::vehicle::run_work;
+    use fc_loop::params::{index_of, Refusal};
+    use fc_loop::Exclusive;
+    use fc_proto::FromFc;
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    let mass = index_of(b"VEH_MASS").unwrap() as u16;
+    let timeout = index_of(b"FS_TIMEOUT_MS").unwrap() as u16;
+    let (core, ctrl) = v.split();
+    assert!(matches!(
+        core.sim_param(timeout, 300.0),
+        Some(FromFc::Param { refusal: 0, .. })
+    ));
+    assert!(
+        core.sim_param(mass, 0.75).is_none(),
+        "a re-design waits for the controller's side"
+    );
+    let work = core.take_work().unwrap();
+    assert!(matches!(
+        core.sim_param(timeout, 400.0),
+        Some(FromFc::Param { refusal: 8, .. })
+    ));
+    assert_eq!(Refusal::Busy.code(), 8);
+    let (r, answer) = run_work(&mut Exclusive(&mut *core), ctrl, work);
+    assert!(r.is_ok());
+    let Some(FromFc::Param { value, refusal: 0, .. }) = answer else {
+        panic!("{answer:?}")
+    };
+    assert_eq!(value, 0.75);
+    assert_eq!(core.core().settings().vehicle.mass_kg, 0.75);
+}
+
+/// A take-off forgets the controller's state (`ControllerWork::Reset`)
+/// instead of designing it again, which the MPC's design would take tens
+/// of milliseconds for. The reset must give what the design gives: every
+/// controller the vehicle flies, wound up for 300 steps on the ground
+/// (hover asked 1 m above, no motion), then reset, flies the next 100
+/// steps bit for bit as a freshly designed one.
+#[test]
+fn a_reset_controller_flies_as_a_freshly_designed_one() {
+    use crate::vehicle::{run_work, ControllerWork};
+    use fc_core::control::{Controller, ControllerSpec, Family, Setpoint, StateEstimate};
+    use fc_core::model::AttitudeForm;
+    use fc_loop::Exclusive;
+    use nalgebra::Vector4;
+    let on_ground = StateEstimate {
+        pos_ned_m: Vector3::zeros(),
+        vel_ned_mps: Vector3::zeros(),
+        att: Vector4::new(1.0, 0.0, 0.0, 0.0),
+        rates_frd_radps: Vector3::zeros(),
+    };
+    let climbing = |k: usize| StateEstimate {
+        pos_ned_m: Vector3::new(0.001 * k as f32, 0.0, -0.002 * k as f32),
+        vel_ned_mps: Vector3::new(0.1, 0.0, -0.2),
+        ..on_ground
+    };
+    let up = Setpoint::hold(Vector3::new(0.2, 0.0, -1.0), 0.1);
+    for family in [Family::Pd, Family::Lqr, Family::Mpc] {
+        for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+            let settings = Settings {
+                controller: ControllerSpec::new(family, form),
+                ..Settings::os4()
+            };
+            let mut fresh = CrtpVehicle::new(settings).unwrap();
+            let mut wound = CrtpVehicle::new(settings).unwrap();
+            let (core, ctrl) = wound.split();
+            for _ in 0..300 {
+                ctrl.update(&on_ground, &up).unwrap();
+            }
+            let (r, _) = run_work(&mut Exclusive(&mut *core), ctrl, ControllerWork::Reset);
+            assert!(r.is_ok());
+            let (_, fresh_ctrl) = fresh.split();
+            for k in 0..100 {
+                let a = ctrl.update(&climbing(k), &up).unwrap().u;
+                let b = fresh_ctrl.update(&climbing(k), &up).unwrap().u;
+                assert_eq!(a, b, "{family:?} {form:?}, step {k} after the reset");
+            }
+        }
+    }
+}

@@ -1,6 +1,18 @@
 //! The flight controller behind CRTP: [`CrtpVehicle`] answers cflib and
 //! cfclient as a Crazyflie (firmware protocol version 12) does and flies
-//! the flight loop ([`fc_loop::FlightCore`]) on its own sensors.
+//! the flight loop ([`fc_loop::Loop`] and its controller) on its own
+//! sensors.
+//!
+//! It is two parts, as the flight loop is: [`CrtpCore`], everything but the
+//! controller (the packets, the modes, the supervisor, the loop), and the
+//! controller. In-process ([`CrtpVehicle`]) they step together. An image
+//! that runs the IMU, the controller and the link at three interrupt
+//! priorities keeps them apart: the IMU task takes each sample's estimator
+//! half ([`CrtpCore::imu_begin`]), the controller's task flies it
+//! ([`fly_step`]) and runs the controller work a packet asked for
+//! ([`CrtpCore::take_work`], [`run_work`]) — a take-off's reset, a
+//! parameter write that re-designs (answered once it is done) — and the
+//! link's task handles packets under short locks of the [`CrtpCore`].
 //!
 //! Services (port: what):
 //! - link (15): echo (channel 0), "Bitcraze Crazyflie" (source, 1), sink
@@ -36,14 +48,16 @@ use crate::log::{self, LogBlocks};
 use crate::planner::{Reference, Segment};
 use crate::toc::{self, Name};
 use crate::{f32_at, frames, u16_at, CrtpCounters, CrtpError, Packet, Port};
+use core::borrow::BorrowMut;
 use core::convert::Infallible;
 use core::fmt::Write as _;
 use fc_core::control::Setpoint;
+use fc_core::control::{AnyController, Controller};
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
 use fc_loop::nav::NavMode;
 use fc_loop::params::{Refusal, Settings, PARAMS};
-use fc_loop::{FcConfig, FlightCore, Outbox};
+use fc_loop::{run_job, FcConfig, Job, Loop, Mutex, Outbox, ParamPlan};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use nalgebra::{Vector3, Vector4};
@@ -69,6 +83,9 @@ pub const DEVICE_TYPE_NAME: &str = "Crazyflie 2.1 (fc-core)";
 pub const FIRMWARE_VERSION: &str = concat!("fc-core ", env!("CARGO_PKG_VERSION"));
 /// Console packets waiting to be sent, at most.
 pub const CONSOLE_QUEUE: usize = 8;
+/// Sampled log blocks waiting for the link, at most (one per block: a
+/// full queue drops the oldest, as a radio that cannot keep up would).
+pub const LOG_QUEUE: usize = crate::log::MAX_BLOCKS;
 
 /// Where [`CrtpVehicle`]'s packets go (a UDP socket on the host, syslink
 /// on a board).
@@ -299,28 +316,140 @@ impl core::fmt::Write for Line {
     }
 }
 
-/// The flight controller behind CRTP (see the module's documentation).
+/// Controller work a packet (or the simulator) asked for, run on the
+/// controller's side ([`run_work`]).
+#[derive(Debug, Clone, Copy)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "no allocation: the work is held in place, one at a time"
+)]
+pub enum ControllerWork {
+    /// Forget the controller's state before flying (a take-off from idle:
+    /// nothing wound up on the ground): `Controller::reset`, which returns
+    /// it to what its design gave, without designing again.
+    Reset,
+    /// A parameter write that re-designs: these settings, then the answer.
+    Param {
+        /// The settings with the value written.
+        next: Settings,
+        /// Who is answered.
+        reply: Reply,
+    },
+}
+
+/// Who a re-designing parameter write answers once its design is done.
+#[derive(Debug, Clone, Copy)]
+pub enum Reply {
+    /// A CRTP client: the request (a write by id, or by name).
+    Crtp(Packet),
+    /// The board's simulator: our protocol's `ParamSet` of this index.
+    Sim(u16),
+    /// The caller ([`CrtpVehicle::write_param`]).
+    Caller,
+}
+
+/// What a parameter write did.
+enum Written {
+    /// Done: answer now.
+    Now,
+    /// A re-design was queued: answered when it is done.
+    Later,
+}
+
+/// An IMU step's estimator half ([`CrtpCore::imu_begin`]), for the
+/// controller's side ([`fly_step`]).
+#[derive(Debug, Clone, Copy)]
+pub struct ImuStep {
+    /// The loop's job for the controller (`None`: no session, not flown).
+    pub job: Option<Job>,
+    /// A set-point is flown (a mode other than idle gave one).
+    pub setpoint: bool,
+}
+
+/// The [`Loop`] inside a locked [`CrtpCore`], as [`run_job`] locks it.
+struct LoopOf<'a, M>(&'a mut M);
+
+impl<M: Mutex> Mutex for LoopOf<'_, M>
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    type T = Loop;
+    fn lock<R>(&mut self, f: impl FnOnce(&mut Loop) -> R) -> R {
+        self.0.lock(|v| f(&mut v.borrow_mut().core))
+    }
+}
+
+/// Flies `step` on the controller `ctrl` (the controller's task), the
+/// vehicle `v` locked only to take the step's inputs and record its
+/// result; returns the inputs to apply `[U1 N, U2 N, U3 N, U4 N·m]`.
+pub fn fly_step<M: Mutex, C: CycleClock>(
+    v: &mut M,
+    ctrl: &mut AnyController<f32>,
+    step: ImuStep,
+    clock: &C,
+) -> Vector4<f32>
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    let mut answer = Answer::default();
+    if let Some(job) = step.job {
+        let _ = run_job(&mut LoopOf(v), ctrl, job, &mut answer, clock);
+    }
+    v.lock(|v| v.borrow_mut().imu_end(&step, answer.u))
+}
+
+/// Runs `work` ([`CrtpCore::take_work`]) on the controller `ctrl`, the
+/// design with the vehicle `v` unlocked; returns its result and, for the
+/// simulator's write, its answer ([`CrtpCore::work_done`]).
+pub fn run_work<M: Mutex>(
+    v: &mut M,
+    ctrl: &mut AnyController<f32>,
+    work: ControllerWork,
+) -> (Result<(), Refusal>, Option<FromFc>)
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    let r = match work {
+        ControllerWork::Reset => {
+            ctrl.reset();
+            Ok(())
+        }
+        ControllerWork::Param { next, .. } => fc_loop::apply_plan(&mut LoopOf(v), ctrl, ParamPlan::Redesign(next)),
+    };
+    let answer = v.lock(|v| v.borrow_mut().work_done(&work, r));
+    (r, answer)
+}
+
+/// The flight controller behind CRTP in one piece (see the module's
+/// documentation): a [`CrtpCore`] (reached through `Deref`) and its
+/// controller, whose work runs at once.
 pub struct CrtpVehicle {
-    core: FlightCore,
-    defaults: Settings,
-    mixer: Option<Mixer<f32>>,
-    armed: bool,
-    tumbled: bool,
-    locked: bool,
-    mode: Mode,
-    log: LogBlocks,
-    console: heapless::Deque<Packet, CONSOLE_QUEUE>,
-    /// Time of the last IMU step, µs.
-    now_us: u64,
-    seq: u32,
-    /// Inputs of the last step `[U1 N, U2 N, U3 N, U4 N·m]` (zero: motors off).
-    u: Vector4<f32>,
-    motors: [f32; 4],
-    /// A position source with heading has been seen (pose, or the host's).
-    heading_seen: bool,
-    vbat_v: f32,
-    pm_state: i8,
-    counters: CrtpCounters,
+    core: CrtpCore,
+    ctrl: AnyController<f32>,
+}
+
+impl core::ops::Deref for CrtpVehicle {
+    type Target = CrtpCore;
+    fn deref(&self) -> &CrtpCore {
+        &self.core
+    }
+}
+
+impl core::ops::DerefMut for CrtpVehicle {
+    fn deref_mut(&mut self) -> &mut CrtpCore {
+        &mut self.core
+    }
+}
+
+/// The vehicle reached directly: the controller work a locked moment
+/// asked for runs before the lock ends (syslink's packets, in-process).
+impl Mutex for CrtpVehicle {
+    type T = CrtpCore;
+    fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpCore) -> R) -> R {
+        let r = f(&mut self.core);
+        self.run_pending();
+        r
+    }
 }
 
 impl CrtpVehicle {
@@ -336,7 +465,114 @@ impl CrtpVehicle {
     /// [`CrtpVehicle::start`] succeeds), for a static home on the image.
     pub fn unstarted(settings: Settings) -> Self {
         Self {
-            core: FlightCore::unstarted_with(FcConfig::default(), settings),
+            core: CrtpCore::unstarted(settings),
+            ctrl: fc_loop::fallback_controller(settings.vehicle),
+        }
+    }
+
+    /// Checks the settings and designs the controller in place.
+    pub fn start(&mut self) -> Result<(), Refusal> {
+        self.core.mixer = Some(fc_loop::start_front_end(&mut self.core.core, &mut self.ctrl)?);
+        Ok(())
+    }
+
+    /// The shared part and the controller apart, for an image that runs
+    /// them in two tasks ([`fly_step`], [`run_work`]).
+    pub fn split(&mut self) -> (&mut CrtpCore, &mut AnyController<f32>) {
+        (&mut self.core, &mut self.ctrl)
+    }
+
+    /// Writes entry `index` of the flight loop's parameter table
+    /// ([`PARAMS`], the same ids as the CRTP table's first entries) as a
+    /// client's write is: checked, applied, re-designing only while the
+    /// motors are off. Returns the value in force.
+    pub fn write_param(&mut self, index: usize, value: f32) -> Result<f32, Refusal> {
+        let param = PARAMS.get(index).ok_or(Refusal::Unknown)?;
+        if let Written::Later = self.core.param_write(index, value, Reply::Caller)? {
+            if let Some((r, _)) = self.run_pending() {
+                r?;
+            }
+        }
+        Ok((param.get)(self.core.core.settings()))
+    }
+
+    /// One IMU sample taken at `t_us` with the fixes of the host's own
+    /// position source: [`CrtpCore::imu_begin`], [`fly_step`], then the
+    /// log blocks due sampled ([`CrtpCore::sample_logs`]).
+    /// Returns the inputs to apply (zero: motors off).
+    pub fn imu_step<C: CycleClock>(&mut self, t_us: u64, imu: &ImuSample, fixes: &[Fix], clock: &C) -> Vector4<f32> {
+        let step = self.core.imu_begin(t_us, imu, fixes, clock);
+        let u = fly_step(&mut fc_loop::Exclusive(&mut self.core), &mut self.ctrl, step, clock);
+        self.core.sample_logs();
+        u
+    }
+
+    /// Handles one packet; answers go to `out`, a re-designing write's
+    /// once its design (run here) is done.
+    pub fn handle<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Result<(), S::Error> {
+        self.core.handle(p, out)?;
+        self.run_pending();
+        self.core.send_queued(out)
+    }
+
+    /// Runs the controller work a packet queued, if any.
+    fn run_pending(&mut self) -> Option<(Result<(), Refusal>, Option<FromFc>)> {
+        let work = self.core.take_work()?;
+        Some(run_work(&mut fc_loop::Exclusive(&mut self.core), &mut self.ctrl, work))
+    }
+}
+
+/// Where controller work stands (one at a time).
+#[derive(Debug, Clone, Copy)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "no allocation: the work is held in place, one at a time"
+)]
+enum WorkState {
+    Idle,
+    Queued(ControllerWork),
+    Running,
+}
+
+/// The CRTP vehicle without its controller (see the module's
+/// documentation): what the link's and the IMU's tasks share.
+pub struct CrtpCore {
+    core: Loop,
+    /// Controller work asked for and not yet done.
+    work: WorkState,
+    /// The answer of a re-designing parameter write, sent before the console.
+    reply: Option<Packet>,
+    defaults: Settings,
+    mixer: Option<Mixer<f32>>,
+    armed: bool,
+    tumbled: bool,
+    locked: bool,
+    mode: Mode,
+    log: LogBlocks,
+    console: heapless::Deque<Packet, CONSOLE_QUEUE>,
+    /// Log blocks sampled at their step, waiting for the link.
+    sampled: heapless::Deque<Packet, LOG_QUEUE>,
+    /// Time of the last IMU step, µs.
+    now_us: u64,
+    seq: u32,
+    /// Inputs of the last step `[U1 N, U2 N, U3 N, U4 N·m]` (zero: motors off).
+    u: Vector4<f32>,
+    motors: [f32; 4],
+    /// A position source with heading has been seen (pose, or the host's).
+    heading_seen: bool,
+    vbat_v: f32,
+    pm_state: i8,
+    counters: CrtpCounters,
+}
+
+impl CrtpCore {
+    /// The vehicle's shared part with nothing designed yet (motors off
+    /// until [`CrtpVehicle::start`] succeeds).
+    pub fn unstarted(settings: Settings) -> Self {
+        Self {
+            core: Loop::unstarted_with(FcConfig::default(), settings),
+            work: WorkState::Idle,
+            reply: None,
             defaults: settings,
             mixer: None,
             armed: false,
@@ -345,6 +581,7 @@ impl CrtpVehicle {
             mode: Mode::Idle,
             log: LogBlocks::new(),
             console: heapless::Deque::new(),
+            sampled: heapless::Deque::new(),
             now_us: 0,
             seq: 0,
             u: Vector4::zeros(),
@@ -356,21 +593,79 @@ impl CrtpVehicle {
         }
     }
 
-    /// Checks the settings and designs the controller in place.
-    pub fn start(&mut self) -> Result<(), Refusal> {
-        self.mixer = Some(self.core.start_front_end()?);
-        Ok(())
+    /// A parameter write from the board's simulator (our protocol's
+    /// `ParamSet` of entry `index` of [`PARAMS`], the same ids as the CRTP
+    /// table's first entries), as a client's write is: checked, applied,
+    /// re-designing only while the motors are off. Returns the answer, or
+    /// `None` when a re-design was queued ([`CrtpCore::take_work`]), whose
+    /// answer [`CrtpCore::work_done`] gives.
+    pub fn sim_param(&mut self, index: u16, value: f32) -> Option<FromFc> {
+        let r = match PARAMS.get(usize::from(index)) {
+            None => Err(Refusal::Unknown),
+            Some(_) => self.param_write(usize::from(index), value, Reply::Sim(index)),
+        };
+        match r {
+            Ok(Written::Later) => None,
+            Ok(Written::Now) => Some(fc_loop::param_answer(self.core.settings(), index, None)),
+            Err(e) => Some(fc_loop::param_answer(self.core.settings(), index, Some(e))),
+        }
     }
 
-    /// Writes entry `index` of the flight loop's parameter table
-    /// (`fc_loop::params::PARAMS`, the same ids as the CRTP table's first
-    /// entries) as a client's write is: checked, applied, re-designing only
-    /// while the motors are off. Returns the value in force. For a board's
-    /// or a simulator's configuration (our protocol's `ParamSet`).
-    pub fn write_param(&mut self, index: usize, value: f32) -> Result<f32, Refusal> {
-        let param = PARAMS.get(index).ok_or(Refusal::Unknown)?;
-        self.param_write(index, value)?;
-        Ok((param.get)(self.core.settings()))
+    /// The controller work a packet asked for, handed to the controller's
+    /// side (which answers with [`CrtpCore::work_done`]); until then no
+    /// other work is taken and parameter writes are refused as busy.
+    pub fn take_work(&mut self) -> Option<ControllerWork> {
+        match self.work {
+            WorkState::Queued(w) => {
+                self.work = WorkState::Running;
+                Some(w)
+            }
+            _ => None,
+        }
+    }
+
+    /// Records the end of `work` with its result `r`: a failed take-off
+    /// reset (none fails) leaves the motors idle; a re-designing write takes the new
+    /// mixer and is answered (a CRTP client through the downlink, before
+    /// the console; the simulator by the returned message).
+    pub fn work_done(&mut self, work: &ControllerWork, r: Result<(), Refusal>) -> Option<FromFc> {
+        self.work = WorkState::Idle;
+        match (work, r) {
+            (ControllerWork::Reset, Ok(())) => {
+                self.counters.handled = self.counters.handled.wrapping_add(1);
+                None
+            }
+            (ControllerWork::Reset, Err(_)) => {
+                self.counters.refused = self.counters.refused.wrapping_add(1);
+                self.mode = Mode::Idle;
+                self.say(format_args!("controller reset failed"));
+                None
+            }
+            (ControllerWork::Param { reply, .. }, r) => {
+                let r = r.and_then(|()| {
+                    self.mixer = Some(self.core.settings().mixer()?);
+                    Ok(())
+                });
+                match reply {
+                    Reply::Crtp(request) => {
+                        if r.is_ok() {
+                            self.counters.handled = self.counters.handled.wrapping_add(1);
+                        } else {
+                            self.counters.refused = self.counters.refused.wrapping_add(1);
+                        }
+                        self.reply = Some(self.written_reply(request, r.err()));
+                        None
+                    }
+                    Reply::Sim(index) => Some(fc_loop::param_answer(self.core.settings(), *index, r.err())),
+                    Reply::Caller => None,
+                }
+            }
+        }
+    }
+
+    /// Controller work is queued or running.
+    pub fn busy(&self) -> bool {
+        !matches!(self.work, WorkState::Idle)
     }
 
     /// Armed.
@@ -384,7 +679,7 @@ impl CrtpVehicle {
     }
 
     /// The flight loop (estimator, set-point, counters).
-    pub fn core(&self) -> &FlightCore {
+    pub fn core(&self) -> &Loop {
         &self.core
     }
 
@@ -424,10 +719,10 @@ impl CrtpVehicle {
     }
 
     /// One IMU sample taken at `t_us` with the fixes of the host's own
-    /// position source (`heading`: they carry one): the set-point of this
-    /// instant, one estimator step, the controller on its schedule, the
-    /// supervisor's checks. Returns the inputs to apply (zero: motors off).
-    pub fn imu_step<C: CycleClock>(&mut self, t_us: u64, imu: &ImuSample, fixes: &[Fix], clock: &C) -> Vector4<f32> {
+    /// position source (`heading`: they carry one), the IMU task's half:
+    /// the set-point of this instant, one estimator step, the supervisor's
+    /// checks; returns the controller's step ([`fly_step`] flies it).
+    pub fn imu_begin<C: CycleClock>(&mut self, t_us: u64, imu: &ImuSample, fixes: &[Fix], clock: &C) -> ImuStep {
         if t_us < self.now_us {
             // A host that started again: a new time line.
             self.core.open_session();
@@ -443,12 +738,30 @@ impl CrtpVehicle {
         if let Some(sp) = sp {
             self.core.set_setpoint(&sp);
         }
-        let mut answer = Answer::default();
         self.seq = self.seq.wrapping_add(1);
-        let _ = self.core.imu_step(self.seq, t_us, imu, &mut answer, clock, t_us);
+        let job = self
+            .core
+            .imu_job(self.seq, t_us, imu, clock, t_us)
+            .map(|job| match job {
+                // The estimator's state goes out in log blocks, not with every
+                // step's answer (our protocol's `Nav`): not built.
+                Job::Step(step) => Job::Step(fc_loop::Step { nav: false, ..step }),
+                other => other,
+            });
+        // The controller changes nothing the supervisor reads.
         self.supervise(t_us);
-        let on = self.armed && self.mode != Mode::Idle && sp.is_some();
-        self.u = match answer.u {
+        ImuStep {
+            job,
+            setpoint: sp.is_some(),
+        }
+    }
+
+    /// The end of an IMU step whose controller answered `u` (`None`: no
+    /// answer): the inputs to apply, zero unless armed and flying a
+    /// set-point.
+    pub fn imu_end(&mut self, step: &ImuStep, u: Option<[f32; 4]>) -> Vector4<f32> {
+        let on = self.armed && self.mode != Mode::Idle && step.setpoint;
+        self.u = match u {
             Some(u) if on => Vector4::from(u),
             _ => Vector4::zeros(),
         };
@@ -556,20 +869,31 @@ impl CrtpVehicle {
         let _ = self.console.push_back(line.0);
     }
 
-    /// Sends what is due at the last step's time: console lines, then log
-    /// blocks.
-    pub fn poll<S: CrtpSink>(&mut self, out: &mut S) -> Result<(), S::Error> {
-        while let Some(p) = self.console.pop_front() {
-            out.send(&p)?;
-        }
+    /// Samples the log blocks due at the last step's time (their values and
+    /// that time, in ms): called once per step, after it is flown
+    /// ([`CrtpVehicle::imu_step`]; an image's controller task), so a block's
+    /// stamps follow its grid whenever the link sends it.
+    pub fn sample_logs(&mut self) {
         if !self.log.any_due(self.now_us) {
-            return Ok(());
+            return;
         }
         let values = self.log_values();
         while let Some(p) = self
             .log
             .next_due(self.now_us, |v| values.get(usize::from(v)).copied().unwrap_or(0.0))
         {
+            if self.sampled.is_full() {
+                self.sampled.pop_front();
+            }
+            let _ = self.sampled.push_back(p);
+        }
+    }
+
+    /// Sends what is waiting: a re-designing write's answer, console lines,
+    /// then the log blocks sampled ([`CrtpCore::sample_logs`]).
+    pub fn poll<S: CrtpSink>(&mut self, out: &mut S) -> Result<(), S::Error> {
+        self.send_queued(out)?;
+        while let Some(p) = self.sampled.pop_front() {
             out.send(&p)?;
         }
         Ok(())
@@ -670,16 +994,19 @@ impl CrtpVehicle {
         true
     }
 
-    /// Starts flying `mode` from idle: the controller designed afresh (no
-    /// state wound up on the ground).
+    /// Starts flying `mode` from idle: the controller's state forgotten (no
+    /// state wound up on the ground; [`ControllerWork::Reset`]).
     fn take_control(&mut self) -> bool {
         if !self.armed {
             self.say(format_args!("not armed"));
             return false;
         }
-        if self.mode == Mode::Idle && self.core.try_select(self.core.settings().controller).is_err() {
-            self.say(format_args!("controller design failed"));
+        if self.busy() {
+            self.say(format_args!("controller design under way"));
             return false;
+        }
+        if self.mode == Mode::Idle {
+            self.work = WorkState::Queued(ControllerWork::Reset);
         }
         true
     }
@@ -690,6 +1017,7 @@ impl CrtpVehicle {
             self.counters.null = self.counters.null.wrapping_add(1);
             return out.send(&Packet::NULL);
         }
+        let was_busy = self.busy();
         let result = match Port::from_number(p.port()) {
             Some(Port::Link) => self.on_link(p, out),
             Some(Port::Platform) => self.on_platform(p, out),
@@ -704,11 +1032,22 @@ impl CrtpVehicle {
             Some(Port::Console) => Ok(Err(unsupported(p))),
             None => Ok(Err(CrtpError::NoSuchPort(p.port()))),
         }?;
+        let deferred = matches!(self.work, WorkState::Queued(_)) && !was_busy;
         match result {
+            // Counted when its work is done (`work_done`).
+            Ok(()) if deferred => {}
             Ok(()) => self.counters.handled = self.counters.handled.wrapping_add(1),
             Err(e) => self.counters.count(e),
         }
         // Console lines the packet caused go out at once.
+        self.send_queued(out)
+    }
+
+    /// Sends a re-designing write's answer, then the console lines.
+    pub fn send_queued<S: CrtpSink>(&mut self, out: &mut S) -> Result<(), S::Error> {
+        if let Some(r) = self.reply.take() {
+            out.send(&r)?;
+        }
         while let Some(c) = self.console.pop_front() {
             out.send(&c)?;
         }
@@ -903,30 +1242,76 @@ impl CrtpVehicle {
     }
 
     /// Writes parameter `id`: checked, applied (re-designs only while the
-    /// motors are off).
-    fn param_write(&mut self, id: usize, value: f32) -> Result<(), Refusal> {
+    /// motors are off; a re-design is queued for the controller's side,
+    /// and `reply` answered when it is done). Refused while other
+    /// controller work is under way.
+    fn param_write(&mut self, id: usize, value: f32, reply: Reply) -> Result<Written, Refusal> {
         let (_, _, extra) = param_entry(id).ok_or(Refusal::Unknown)?;
+        if self.busy() {
+            return Err(Refusal::Busy);
+        }
         let index = match extra {
             None => id,
             Some(Extra::Controller) => CTL_ID,
             Some(Extra::Alias(i)) => i,
-            Some(Extra::ResetEstimation) if value == 0.0 => return Ok(()),
+            Some(Extra::ResetEstimation) if value == 0.0 => return Ok(Written::Now),
             Some(Extra::ResetEstimation) if self.flying() => return Err(Refusal::Armed),
             Some(Extra::ResetEstimation) => {
                 self.core.open_session();
                 self.heading_seen = false;
                 self.say(format_args!("estimator reset"));
-                return Ok(());
+                return Ok(Written::Now);
             }
-            Some(Extra::Estimator) if value == 2.0 => return Ok(()),
-            Some(Extra::EnHighLevel) if value == 1.0 => return Ok(()),
+            Some(Extra::Estimator) if value == 2.0 => return Ok(Written::Now),
+            Some(Extra::EnHighLevel) if value == 1.0 => return Ok(Written::Now),
             // Read-only: the value in force, 0, is the only one taken.
-            Some(Extra::Deck) if value == 0.0 => return Ok(()),
+            Some(Extra::Deck) if value == 0.0 => return Ok(Written::Now),
             Some(_) => return Err(Refusal::Range { lo: value, hi: value }),
         };
-        self.core.apply_param(index, value, !self.flying())?;
-        self.mixer = Some(self.core.settings().mixer()?);
-        Ok(())
+        let plan = self.core.plan_param(index, value, !self.flying())?;
+        if let ParamPlan::Set(next) | ParamPlan::Redesign(next) = &plan {
+            // The mixer's settings checked before anything is taken.
+            next.mixer()?;
+        }
+        match self.core.apply_unless_design(plan) {
+            Some(next) => {
+                self.work = WorkState::Queued(ControllerWork::Param { next, reply });
+                Ok(Written::Later)
+            }
+            None => {
+                self.mixer = Some(self.core.settings().mixer()?);
+                Ok(Written::Now)
+            }
+        }
+    }
+
+    /// The answer to the parameter write `request` (by id on channel 2:
+    /// the value in force; by name: its status), refused for `refused`
+    /// (said on the console) or not.
+    fn written_reply(&mut self, request: &Packet, refused: Option<Refusal>) -> Packet {
+        let d = request.payload();
+        if request.channel() == 3 {
+            // `MISC_SETBYNAME` `[0, group\0, name\0, type, value]`:
+            // answered `[0, group\0, name\0, status]`.
+            let names = d[1..]
+                .iter()
+                .enumerate()
+                .filter(|&(_, &b)| b == 0)
+                .nth(1)
+                .map_or(d.len() - 1, |(i, _)| i + 1);
+            let mut r = reply(Port::Param, 3, &d[..1 + names]);
+            let _ = r.extend(&[if refused.is_some() { log::ENOEXEC } else { 0 }]);
+            return r;
+        }
+        let id = u16_at(d, 0).map_or(usize::MAX, usize::from);
+        if let (Some(why), Some((name, _, _))) = (refused, param_entry(id)) {
+            self.say(format_args!("{}.{}: {}", name.group, name.name, why));
+        }
+        let mut r = reply(Port::Param, 2, &d[..2.min(d.len())]);
+        // The value in force, changed or not.
+        let now = self.param_value(id).unwrap_or(f32::NAN);
+        self.put_value(&mut r, id, now);
+        r
     }
 
     fn on_param<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Result<Result<(), CrtpError>, S::Error> {
@@ -972,23 +1357,26 @@ impl CrtpVehicle {
                     return Ok(Err(short(p)));
                 };
                 let id = usize::from(id);
-                let mut r = reply(Port::Param, 2, &d[..2]);
-                let Some((name, t, _)) = param_entry(id) else {
+                let Some((_, t, _)) = param_entry(id) else {
+                    let mut r = reply(Port::Param, 2, &d[..2]);
                     let _ = r.extend(&[log::ENOENT]);
                     out.send(&r)?;
                     return Ok(Err(unsupported(p)));
                 };
-                let value = read_value(t, &d[2..]);
-                let refused = match value {
-                    Some(v) => self.param_write(id, v).err(),
+                if self.busy() {
+                    // Not answered: the client repeats its write, and it is
+                    // taken once the design under way is done.
+                    return Ok(Err(CrtpError::Refused { port: p.port() }));
+                }
+                let refused = match read_value(t, &d[2..]) {
+                    Some(v) => match self.param_write(id, v, Reply::Crtp(*p)) {
+                        Ok(Written::Later) => return Ok(Ok(())),
+                        Ok(Written::Now) => None,
+                        Err(e) => Some(e),
+                    },
                     None => Some(Refusal::NotInteger),
                 };
-                if let Some(why) = refused {
-                    self.say(format_args!("{}.{}: {}", name.group, name.name, why));
-                }
-                // The value in force, changed or not.
-                let now = self.param_value(id).unwrap_or(f32::NAN);
-                self.put_value(&mut r, id, now);
+                let r = self.written_reply(p, refused);
                 out.send(&r)?;
                 if refused.is_some() {
                     return Ok(Err(CrtpError::Refused { port: p.port() }));
@@ -1055,12 +1443,19 @@ impl CrtpVehicle {
             return Ok(Err(short(p)));
         };
         let id = (0..PARAM_COUNT).find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(group, name)));
+        if id.is_some() && self.busy() {
+            // As a write by id: not answered until the design under way is done.
+            return Ok(Err(CrtpError::Refused { port: p.port() }));
+        }
         let code = match (id, read_value(t, value)) {
             (None, _) => log::ENOENT,
-            (Some(i), Some(v)) if param_entry(i).is_some_and(|(_, pt, _)| pt == t) => match self.param_write(i, v) {
-                Ok(()) => 0,
-                Err(_) => log::ENOEXEC,
-            },
+            (Some(i), Some(v)) if param_entry(i).is_some_and(|(_, pt, _)| pt == t) => {
+                match self.param_write(i, v, Reply::Crtp(*p)) {
+                    Ok(Written::Later) => return Ok(Ok(())),
+                    Ok(Written::Now) => 0,
+                    Err(_) => log::ENOEXEC,
+                }
+            }
             _ => log::ENOEXEC,
         };
         let mut r = reply(Port::Param, 3, &[0]);

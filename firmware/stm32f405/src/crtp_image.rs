@@ -1,8 +1,9 @@
-//! The CRTP image's loop, shared by every board that is a Crazyflie's STM32
-//! (`firmware-crtp` on the plain STM32F405, `firmware-crazyflie` on the
-//! Crazyflie 2.1): syslink to the nRF51 radio on USART6, the vehicle
-//! ([`fc_crtp::vehicle::CrtpVehicle`], the same code `sil-host crtp` runs
-//! in-process) behind it, and the simulator's sensors on USART1.
+//! What the CRTP images share (`firmware-crtp` on the plain STM32F405,
+//! `firmware-crazyflie` on the Crazyflie 2.1), around the RTIC application
+//! both include (`src/crtp_app.rs`): syslink to the nRF51 radio on USART6,
+//! the vehicle ([`fc_crtp::vehicle::CrtpCore`] and its controller, the
+//! same code `sil-host crtp` runs in-process) behind it, and the
+//! simulator's sensors on USART1.
 //!
 //! - **USART6, syslink** ([`fc_crtp::syslink`]): `RADIO_READY` at boot, each
 //!   radio packet from the nRF51 handled and answered with at most one
@@ -16,37 +17,42 @@
 //! Logs through defmt: boot, the radio's `RADIO_READY` echo, arming, and
 //! link errors on either port as they happen.
 
-use crate::PCLK2_HZ;
-use fc_core::estimate::{Fix, ImuSample};
-use fc_crtp::syslink::{Syslink, SyslinkCounters};
-use fc_crtp::vehicle::CrtpVehicle;
-use fc_loop::{fix_from_wire, param_answer};
-use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME};
-use hal_shim::stm32f405::{rx_overruns, Port, SysTickClock, TxTimeout, Usart};
+use fc_crtp::syslink::SyslinkCounters;
+use fc_crtp::vehicle::CrtpCore;
+use fc_proto::{encode, FromFc, MAX_FRAME};
+use hal_shim::stm32f405::{rx_overruns, Port, TxTimeout, Usart};
 use hal_shim::ByteLink;
-use nalgebra::{Vector3, Vector4};
+use nalgebra::Vector4;
 
 /// syslink's rate on the Crazyflie 2.1.
-const SYSLINK_BAUD: u32 = 1_000_000;
+pub const SYSLINK_BAUD: u32 = 1_000_000;
 /// Downlink packets waiting for an uplink packet (the firmware's
 /// `radiolink` queue holds 16).
-const DOWNLINK: usize = 16;
+pub const DOWNLINK: usize = 16;
 /// Fixes queued for the next IMU sample.
-const FIXES: usize = 4;
+pub const FIXES: usize = 4;
+
+/// A board's outputs of every step: its motors (none on the plain
+/// STM32F405, whose simulator flies the inputs), its LEDs.
+pub trait Outputs {
+    /// Applies the inputs `u` `[U1 N, U2 N, U3 N, U4 N·m]` of a step of
+    /// the vehicle `v` (zero: motors off).
+    fn drive(&mut self, v: &CrtpCore, u: &Vector4<f32>);
+}
 
 /// What the simulator's link did.
 #[derive(Clone, Copy, PartialEq, Eq, Default)]
-struct SimCounters {
+pub struct SimCounters {
     /// Frames that did not decode.
-    bad: u32,
+    pub bad: u32,
     /// Fixes dropped: more than [`FIXES`] before one IMU sample.
-    fixes_dropped: u32,
+    pub fixes_dropped: u32,
     /// Frames of kinds this image does not take from the simulator.
-    ignored: u32,
+    pub ignored: u32,
 }
 
 /// Sends `m` to the simulator.
-fn send(usart: &mut Usart, m: &FromFc) -> Result<(), TxTimeout> {
+pub fn send(usart: &mut Usart, m: &FromFc) -> Result<(), TxTimeout> {
     let mut out = [0u8; MAX_FRAME];
     match encode(m, &mut out) {
         Ok(n) => usart.write_all(&out[..n]),
@@ -55,58 +61,13 @@ fn send(usart: &mut Usart, m: &FromFc) -> Result<(), TxTimeout> {
     }
 }
 
-/// One frame from the simulator.
-fn on_sim_frame(
-    m: ToFc,
-    v: &mut CrtpVehicle,
-    fixes: &mut heapless::Vec<Fix, FIXES>,
-    sim: &mut Usart,
-    clock: &SysTickClock,
-    c: &mut SimCounters,
-    on_output: &mut dyn FnMut(&CrtpVehicle, &Vector4<f32>),
-) -> Result<(), TxTimeout> {
-    match m {
-        ToFc::ParamSet { index, value } => {
-            let refusal = v.write_param(usize::from(index), value).err();
-            send(sim, &param_answer(v.core().settings(), index, refusal))
-        }
-        ToFc::Fix(w) => {
-            if fixes.push(fix_from_wire(&w)).is_err() {
-                c.fixes_dropped = c.fixes_dropped.wrapping_add(1);
-            }
-            Ok(())
-        }
-        ToFc::Imu { seq, t_us, gyro, accel } => {
-            let imu = ImuSample {
-                gyro_frd_radps: Vector3::from(gyro),
-                accel_frd_mps2: Vector3::from(accel),
-            };
-            let u = v.imu_step(t_us, &imu, fixes, clock);
-            fixes.clear();
-            on_output(v, &u);
-            send(
-                sim,
-                &FromFc::Actuator {
-                    seq,
-                    u: [u[0], u[1], u[2], u[3]],
-                    failsafe: false,
-                },
-            )
-        }
-        _ => {
-            c.ignored = c.ignored.wrapping_add(1);
-            Ok(())
-        }
-    }
-}
-
 /// Logs what changed since the last call.
-fn log_changes(v: &CrtpVehicle, radio: &SyslinkCounters, sim: &SimCounters, last: &mut Last) {
+pub fn log_changes(armed: bool, radio: &SyslinkCounters, sim: &SimCounters, last: &mut Last) {
     if radio.ready != last.radio.ready {
         defmt::info!("nRF51 radio ready (RADIO_READY echoed)");
     }
-    if v.armed() != last.armed {
-        if v.armed() {
+    if armed != last.armed {
+        if armed {
             defmt::info!("armed");
         } else {
             defmt::info!("disarmed");
@@ -130,7 +91,7 @@ fn log_changes(v: &CrtpVehicle, radio: &SyslinkCounters, sim: &SimCounters, last
         );
     }
     *last = Last {
-        armed: v.armed(),
+        armed,
         radio: *radio,
         sim: *sim,
     };
@@ -138,57 +99,8 @@ fn log_changes(v: &CrtpVehicle, radio: &SyslinkCounters, sim: &SimCounters, last
 
 /// What [`log_changes`] saw last.
 #[derive(Default)]
-struct Last {
+pub struct Last {
     armed: bool,
     radio: SyslinkCounters,
     sim: SimCounters,
-}
-
-/// Runs the CRTP image on `v` (started), the simulator on `sim` (USART1)
-/// and the radio on USART6, never returning. `idle` waits for the next
-/// interrupt (the board's); `on_output` is given the vehicle and every IMU
-/// step's inputs `[U1 N, U2 N, U3 N, U4 N·m]`, for the board's motors.
-pub fn run(
-    v: &'static mut CrtpVehicle,
-    mut sim: Usart,
-    clock: SysTickClock,
-    idle: fn(),
-    on_output: &mut dyn FnMut(&CrtpVehicle, &Vector4<f32>),
-) -> ! {
-    let mut radio = Usart::init(Port::Usart6, PCLK2_HZ, SYSLINK_BAUD);
-    let mut syslink: Syslink<DOWNLINK> = Syslink::new();
-    if syslink.boot(&mut radio).is_err() {
-        defmt::warn!("USART6 transmit timed out (RADIO_READY)");
-    }
-    defmt::info!("up: CRTP over syslink on USART6, the simulator on USART1");
-    let mut decoder: FrameDecoder = FrameDecoder::new();
-    let mut fixes: heapless::Vec<Fix, FIXES> = heapless::Vec::new();
-    let mut sc = SimCounters::default();
-    let mut last = Last::default();
-    let mut tx_errors: u32 = 0;
-    let mut buf = [0u8; 64];
-    loop {
-        let mut ok = true;
-        // The simulator's frames first: a sample waits for its answer.
-        while let Ok(n @ 1..) = sim.read(&mut buf) {
-            for &b in &buf[..n] {
-                match decoder.push::<ToFc>(b) {
-                    None => {}
-                    Some(Err(_)) => sc.bad = sc.bad.wrapping_add(1),
-                    Some(Ok(m)) => ok &= on_sim_frame(m, v, &mut fixes, &mut sim, &clock, &mut sc, on_output).is_ok(),
-                }
-            }
-            // Log blocks that fell due, queued for the next uplink packet.
-            syslink.poll(v);
-        }
-        while let Ok(n @ 1..) = radio.read(&mut buf) {
-            ok &= syslink.receive(&buf[..n], v, &mut radio).is_ok();
-        }
-        if !ok {
-            tx_errors = tx_errors.wrapping_add(1);
-            defmt::warn!("a USART transmit timed out ({=u32} so far)", tx_errors);
-        }
-        log_changes(v, &syslink.counters(), &sc, &mut last);
-        idle();
-    }
 }

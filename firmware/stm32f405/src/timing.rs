@@ -1,7 +1,8 @@
 //! What the image's tasks measure of every step: the time from data-ready
 //! (the sample's interrupt) to the estimate, and to the controller's
-//! answer, against the deadline of one 1 kHz period; the jobs and answers
-//! a full queue dropped. In SysTick ticks (168 MHz); under QEMU's
+//! answer (or the outputs driven), against the deadline of one 1 kHz
+//! period: the IMU task's deadline and the 1 kHz controller's; the jobs and
+//! answers a full queue dropped. In SysTick ticks (168 MHz); under QEMU's
 //! `-icount shift=0` a tick is 1/0.168 instructions.
 
 /// The deadline of a step, SysTick ticks: one 1 kHz period, 168 000
@@ -31,6 +32,9 @@ pub struct StepTiming {
     pub worst_answer_ticks: u64,
     /// Steps answered after their deadline, or dropped.
     pub missed: u32,
+    /// Samples whose estimate was done after their deadline (the IMU
+    /// task's own deadline: the next sample).
+    pub imu_missed: u32,
     /// Jobs the controller's queue had no room for.
     pub jobs_dropped: u32,
     /// Answers the link's queue had no room for.
@@ -56,6 +60,7 @@ impl Timing {
                 worst_estimate_ticks: 0,
                 worst_answer_ticks: 0,
                 missed: 0,
+                imu_missed: 0,
                 jobs_dropped: 0,
                 answers_dropped: 0,
                 tx_timeouts: 0,
@@ -66,7 +71,11 @@ impl Timing {
     /// A sample that arrived at `entry` was estimated at `done`.
     pub fn estimated(&mut self, entry: u64, done: u64) {
         let t = &mut self.now;
-        t.worst_estimate_ticks = t.worst_estimate_ticks.max(done.saturating_sub(entry));
+        let took = done.saturating_sub(entry);
+        t.worst_estimate_ticks = t.worst_estimate_ticks.max(took);
+        if took > self.deadline_ticks {
+            t.imu_missed = t.imu_missed.wrapping_add(1);
+        }
     }
 
     /// A step whose sample arrived at `entry` was answered at `done`.
@@ -108,6 +117,7 @@ impl StepTiming {
     pub fn due(&self, logged: &StepTiming) -> bool {
         self.steps / LOG_EVERY != logged.steps / LOG_EVERY
             || self.missed != logged.missed
+            || self.imu_missed != logged.imu_missed
             || self.answers_dropped != logged.answers_dropped
             || self.tx_timeouts != logged.tx_timeouts
     }
@@ -120,7 +130,7 @@ impl StepTiming {
             return;
         }
         defmt::info!(
-            "timing: {=u32} steps, worst data-ready->estimate {=u64} instructions, worst data-ready->answer {=u64} instructions, deadline {=u64}: {=u32} missed ({=u32} jobs, {=u32} answers dropped, {=u32} tx timeouts)",
+            "timing: {=u32} steps, worst data-ready->estimate {=u64} instructions, worst data-ready->answer {=u64} instructions, deadline {=u64}: {=u32} missed ({=u32} jobs, {=u32} answers dropped, {=u32} tx timeouts); {=u32} IMU deadlines missed",
             self.steps,
             instructions(self.worst_estimate_ticks),
             instructions(self.worst_answer_ticks),
@@ -128,7 +138,8 @@ impl StepTiming {
             self.missed,
             self.jobs_dropped,
             self.answers_dropped,
-            self.tx_timeouts
+            self.tx_timeouts,
+            self.imu_missed
         );
         *logged = *self;
     }
@@ -161,7 +172,11 @@ mod tests {
         let s = t.snapshot();
         assert_eq!((s.steps, s.missed, s.jobs_dropped), (2, 2, 1));
         assert_eq!((s.worst_estimate_ticks, s.worst_answer_ticks), (30, 101));
+        assert_eq!(s.imu_missed, 0, "every estimate in time");
         assert!(s.due(&StepTiming::default()));
         assert!(!s.due(&s));
+        t.estimated(2000, 2101);
+        assert_eq!(t.snapshot().imu_missed, 1, "an estimate past the deadline");
+        assert!(t.snapshot().due(&s));
     }
 }

@@ -3,8 +3,10 @@
 //! vector table (cortex-m-rt's `set-vtor`).
 //!
 //! It is a Crazyflie's STM32 as cflib and cfclient know it: CRTP over
-//! syslink to the nRF51 radio on USART6 (`fc_stm32f405::crtp_image`, the
-//! loop `firmware-crtp` runs too), the vehicle's parameters and samples from
+//! syslink to the nRF51 radio on USART6 (the RTIC application of
+//! `fc-stm32f405`'s `src/crtp_app.rs`, which `firmware-crtp` runs too:
+//! radio bytes at priority 4, the sample and estimator at 3, the
+//! controller at 2, the link at 1), the vehicle's parameters and samples from
 //! the simulator on USART1, and the Crazyflie's motors on TIM2/TIM4: every
 //! step's inputs go through the vehicle's mixer (`MOT_FRAME` 4, the
 //! Crazyflie's M1–M4, hubs 46 mm out; the vehicle's parameters as written)
@@ -12,9 +14,10 @@
 //! reports, to the four compare registers; disarmed, they are 0. A fault
 //! zeroes them first. The LEDs show booting, aligning, ready, armed and
 //! failsafe (`fc_crazyflie::leds`; QEMU models no GPIO). Not yet wired: the
-//! BMI088 and BMP388 on I2C3 (the drivers are in this crate's library), the
-//! IWDG and the interrupt priorities of the board's own clock. In QEMU the `boot-shim`
-//! binary stands in for the bootloader.
+//! BMI088 and BMP388 on I2C3 (the drivers are in this crate's library;
+//! the simulator's `Imu` frame on USART1 stands in for the gyro's
+//! data-ready line) and the IWDG. In QEMU the `boot-shim` binary stands in
+//! for the bootloader.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -28,14 +31,21 @@ use stm32f4 as _;
 mod board;
 
 #[cfg(target_os = "none")]
+#[path = "../../../stm32f405/src/crtp_app.rs"]
+mod crtp_app;
+
+#[cfg(target_os = "none")]
+pub use target::{vehicle, BoardOutputs};
+
+#[cfg(target_os = "none")]
 mod target {
-    use crate::board;
-    use cortex_m_rt::entry;
-    use fc_crazyflie::leds::{self, pattern, Indication};
+    use fc_core::model::airframe::Mixer;
+    use fc_crazyflie::leds::{self, pattern, Indication, LedPin, Leds, Lit};
     use fc_crazyflie::motors::{self, MotorOutput, CF21_LEGACY_PROPELLERS};
-    use fc_crtp::vehicle::CrtpVehicle;
+    use fc_crtp::vehicle::{CrtpCore, CrtpVehicle};
     use fc_loop::nav::NavMode;
     use fc_loop::params::{Airframe, Settings};
+    use nalgebra::Vector4;
 
     /// Hub distance from the centre, m (Bitcraze's `ARM_LENGTH`).
     const HUB_M: f32 = 0.046;
@@ -48,47 +58,70 @@ mod target {
         stopped
     }
 
-    #[entry]
-    fn main() -> ! {
-        let (clock, sim) = board::bring_up();
-        // SAFETY: the only code that touches the motor peripherals.
-        let (tim2, tim4) = unsafe { motors::start_on_chip() };
-        board::on_fault_stop_motors(on_fault);
-        // SAFETY: the only code that touches the LED pins.
-        let mut leds = unsafe { leds::start_on_chip() };
-        let mut last_lit = pattern(Indication::Booting, 0);
-        let _ = leds.show(last_lit);
-        // SAFETY: a read of SCB.VTOR, which nothing writes after reset.
-        let vtor = unsafe { (*cortex_m::peripheral::SCB::PTR).vtor.read() };
-        defmt::info!("Crazyflie 2.1 image: vector table at {=u32:#010x}", vtor);
-        let Some(v) = vehicle() else {
-            board::fail("vehicle already taken");
-        };
-        if v.start().is_err() {
-            board::fail("boot controller design failed");
-        }
-        let Ok(mut mixer) = v.core().settings().mixer() else {
-            board::fail("the settings give no mixer");
-        };
-        let mut designs = v.core().selections();
-        let (mut saturated, mut saturations) = (false, 0u32);
-        let (mut armed_steps, mut steps) = (0u32, 0u32);
-        let mut drive = |v: &CrtpVehicle, u: &nalgebra::Vector4<f32>| {
-            // The vehicle's parameters (and so its mixer) change only with a new design.
-            if v.core().selections() != designs {
-                designs = v.core().selections();
-                if let Ok(m) = v.core().settings().mixer() {
-                    mixer = m;
-                }
+    /// The Crazyflie's outputs of every step: the four brushed motors on
+    /// TIM2/TIM4 through the vehicle's mixer and the thrust curve at the
+    /// battery's voltage (off while disarmed), and the LEDs.
+    pub struct BoardOutputs {
+        tim2: &'static stm32f4::stm32f405::tim2::RegisterBlock,
+        tim4: &'static stm32f4::stm32f405::tim3::RegisterBlock,
+        leds: Leds<LedPin>,
+        last_lit: Lit,
+        /// The mixer of the vehicle's parameters, and the design it is of.
+        mixer: Option<(Mixer<f32>, u32)>,
+        saturated: bool,
+        saturations: u32,
+        armed_steps: u32,
+        steps: u32,
+    }
+
+    // SAFETY: the timers' registers are reached only through this value,
+    // which the controller's task alone owns (RTIC moves it there from
+    // `init`); the fault handler's own writes happen when no task runs.
+    unsafe impl Send for BoardOutputs {}
+
+    impl BoardOutputs {
+        /// The motor timers (compare 0), the fault hook, the LEDs showing "booting".
+        pub(crate) fn start() -> Self {
+            // SAFETY: the only code that touches the motor peripherals.
+            let (tim2, tim4) = unsafe { motors::start_on_chip() };
+            crate::board::on_fault_stop_motors(on_fault);
+            // SAFETY: the only code that touches the LED pins.
+            let mut leds = unsafe { leds::start_on_chip() };
+            let last_lit = pattern(Indication::Booting, 0);
+            let _ = leds.show(last_lit);
+            // SAFETY: a read of SCB.VTOR, which nothing writes after reset.
+            let vtor = unsafe { (*cortex_m::peripheral::SCB::PTR).vtor.read() };
+            defmt::info!("Crazyflie 2.1 image: vector table at {=u32:#010x}", vtor);
+            Self {
+                tim2,
+                tim4,
+                leds,
+                last_lit,
+                mixer: None,
+                saturated: false,
+                saturations: 0,
+                armed_steps: 0,
+                steps: 0,
             }
-            let out = if v.armed() {
-                motors::output(&CF21_LEGACY_PROPELLERS, mixer.thrusts(u).into(), v.battery_v())
-            } else {
-                MotorOutput::OFF
+        }
+    }
+
+    impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
+        fn drive(&mut self, v: &CrtpCore, u: &Vector4<f32>) {
+            // The vehicle's parameters (and so its mixer) change only with a new design.
+            let designs = v.core().selections();
+            if self.mixer.is_none_or(|(_, d)| d != designs) {
+                self.mixer = v.core().settings().mixer().ok().map(|m| (m, designs));
+            }
+            let out = match (v.armed(), &self.mixer) {
+                (true, Some((mixer, _))) => {
+                    motors::output(&CF21_LEGACY_PROPELLERS, mixer.thrusts(u).into(), v.battery_v())
+                }
+                _ => MotorOutput::OFF,
             };
-            motors::set(tim2, tim4, &out);
+            motors::set(self.tim2, self.tim4, &out);
             // The LEDs, on the steps' clock (1 kHz: `steps` is ms).
-            steps = steps.wrapping_add(1);
+            self.steps = self.steps.wrapping_add(1);
             let shown = match (v.armed(), v.core().navigator().mode()) {
                 (true, NavMode::Failsafe) => Indication::Failsafe,
                 (true, _) => Indication::Armed,
@@ -96,37 +129,36 @@ mod target {
                 (false, _) => Indication::Ready,
             };
             // Five pin writes only when what they show changes.
-            let lit = pattern(shown, steps);
-            if lit != last_lit {
-                last_lit = lit;
-                let _ = leds.show(lit);
+            let lit = pattern(shown, self.steps);
+            if lit != self.last_lit {
+                self.last_lit = lit;
+                let _ = self.leds.show(lit);
             }
             // Once a second of armed flight (at 1 kHz), what the motors get.
-            armed_steps = if v.armed() { armed_steps.wrapping_add(1) } else { 0 };
-            if armed_steps % 1000 == 500 {
+            self.armed_steps = if v.armed() { self.armed_steps.wrapping_add(1) } else { 0 };
+            if self.armed_steps % 1000 == 500 {
                 defmt::info!("motors: compare {} at {=f32} V", out.compare, v.battery_v());
             }
-            if out.saturated != saturated {
-                saturated = out.saturated;
-                if saturated {
-                    saturations = saturations.wrapping_add(1);
+            if out.saturated != self.saturated {
+                self.saturated = out.saturated;
+                if self.saturated {
+                    self.saturations = self.saturations.wrapping_add(1);
                     defmt::warn!(
                         "motors saturated: a rotor needs more than the Crazyflie's thrust curve gives ({=u32} so far)",
-                        saturations
+                        self.saturations
                     );
                 } else {
                     defmt::info!("motors within the thrust curve again");
                 }
             }
-        };
-        fc_stm32f405::crtp_image::run(v, sim, clock, board::idle, &mut drive)
+        }
     }
 
     /// The vehicle, in static RAM (see `firmware-crtp`), with the
     /// Crazyflie's motor order (`MOT_FRAME` 4) and hub distance; the
     /// simulator (or a client) writes the vehicle's parameters.
     #[inline(never)]
-    fn vehicle() -> Option<&'static mut CrtpVehicle> {
+    pub fn vehicle() -> Option<&'static mut CrtpVehicle> {
         let settings = Settings {
             airframe: Airframe::XCrazyflie,
             hub_m: HUB_M,

@@ -1,0 +1,362 @@
+//! The CRTP images' RTIC 2 application, included by `firmware-crtp` (the
+//! plain STM32F405) and `firmware-crazyflie` (the Crazyflie 2.1), each of
+//! which gives it its board's outputs (`crate::BoardOutputs`, an
+//! [`Outputs`]) and its vehicle (`crate::vehicle()`, unstarted, in static
+//! RAM). Four interrupt priorities, as a flight controller's tasks are
+//! ordered (the sample first, then the controller, then the link):
+//!
+//! | priority | task | interrupt | work |
+//! |---|---|---|---|
+//! | 4 | `radio_bytes` | USART6 receive | the nRF51's bytes into their queue (1 Mbaud: a byte every 10 µs), the link pended |
+//! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame stands in for the gyro's data-ready line) | decodes the simulator's frames; a sample steps the estimator ([`CrtpCore::imu_begin`]) and goes to the controller |
+//! | 2 | `controller` | CAN2_RX0 (pended) | owns the controller: flies each step ([`fly_step`]), drives the outputs, answers the simulator; runs the designs a packet or the simulator asked for ([`run_work`]) |
+//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle, answers and log blocks queued for the radio; the simulator's queued answers; the log |
+//!
+//! The vehicle's shared part ([`CrtpCore`]) is locked for an estimator
+//! step, a packet, a step's result; never for a controller step, a design
+//! or a USART write. So a take-off's design or a re-designing parameter
+//! write (tens of milliseconds) delays only the controller's task, not a
+//! sample. The image measures it as `firmware` does
+//! (`fc_stm32f405::timing`): for every step, data-ready → estimate and
+//! data-ready → outputs driven, against one 1 kHz period.
+
+use fc_stm32f405::crtp_image::Outputs;
+
+#[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
+mod app {
+    use super::Outputs;
+    use crate::board;
+    use fc_core::control::AnyController;
+    use fc_core::estimate::{Fix, ImuSample};
+    use fc_crtp::syslink::Syslink;
+    use fc_crtp::vehicle::{fly_step, run_work, ControllerWork, CrtpCore, ImuStep};
+    use fc_loop::params::Refusal;
+    use fc_loop::{fix_from_wire, Mutex};
+    use fc_proto::{FrameDecoder, FromFc, ToFc};
+    use fc_stm32f405::crtp_image::{log_changes, send, Last, SimCounters, DOWNLINK, FIXES, SYSLINK_BAUD};
+    use fc_stm32f405::timing::{StepTiming, Timing};
+    use fc_stm32f405::PCLK2_HZ;
+    use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, SysTickClock, Usart};
+    use heapless::spsc::{Consumer, Producer, Queue};
+    use nalgebra::Vector3;
+    use stm32f4::stm32f405::Interrupt;
+
+    /// Work waiting for the controller's task from the sample's: steps,
+    /// and the simulator's re-designing parameter writes between them.
+    const TASKS: usize = 8;
+    /// Work from the link's task (one design at a time: 2 is room enough).
+    const WORKS: usize = 2;
+    /// The sample task's answers to the simulator, waiting for the link.
+    const ANSWERS: usize = 8;
+
+    /// Work for the controller's task, in the order the simulator sent it.
+    pub enum Task {
+        /// A sample's step: its controller half, the simulator's sequence
+        /// number, and its data-ready time (SysTick ticks).
+        Step { step: ImuStep, seq: u32, entry: u64 },
+        /// A design ([`CrtpCore::take_work`]).
+        Work(ControllerWork),
+    }
+
+    #[shared]
+    struct Shared {
+        /// The vehicle without its controller.
+        v: &'static mut CrtpCore,
+        /// USART1's transmitter: the simulator's answers.
+        sim_tx: Usart,
+        /// What the tasks measured.
+        timing: Timing,
+        /// What the simulator's link did.
+        sim: SimCounters,
+    }
+
+    #[local]
+    struct Local {
+        ctrl: &'static mut AnyController<f32>,
+        outputs: crate::BoardOutputs,
+        decoder: FrameDecoder,
+        fixes: heapless::Vec<Fix, FIXES>,
+        tasks_in: Producer<'static, Task>,
+        tasks_out: Consumer<'static, Task>,
+        works_in: Producer<'static, ControllerWork>,
+        works_out: Consumer<'static, ControllerWork>,
+        answers_in: Producer<'static, FromFc>,
+        answers_out: Consumer<'static, FromFc>,
+        radio: Usart,
+        syslink: Syslink<DOWNLINK>,
+        last: Last,
+        logged: StepTiming,
+        tx_errors: u32,
+        sample_clock: SysTickClock,
+        control_clock: SysTickClock,
+    }
+
+    #[init(local = [
+        tasks: Queue<Task, TASKS> = Queue::new(),
+        works: Queue<ControllerWork, WORKS> = Queue::new(),
+        answers: Queue<FromFc, ANSWERS> = Queue::new(),
+    ])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let (clock, sim_tx) = board::bring_up();
+        let outputs = crate::BoardOutputs::start();
+        let Some(vehicle) = crate::vehicle() else {
+            board::fail("vehicle already taken");
+        };
+        if vehicle.start().is_err() {
+            board::fail("boot controller design failed");
+        }
+        let (v, ctrl) = vehicle.split();
+        let mut radio = Usart::init(Port::Usart6, PCLK2_HZ, SYSLINK_BAUD);
+        let mut syslink: Syslink<DOWNLINK> = Syslink::new();
+        if syslink.boot(&mut radio).is_err() {
+            defmt::warn!("USART6 transmit timed out (RADIO_READY)");
+        }
+        defmt::info!(
+            "up: CRTP over syslink on USART6, the simulator on USART1; tasks: radio bytes (4), data-ready (3), controller (2), link (1)"
+        );
+        let (tasks_in, tasks_out) = cx.local.tasks.split();
+        let (works_in, works_out) = cx.local.works.split();
+        let (answers_in, answers_out) = cx.local.answers.split();
+        (
+            Shared {
+                v,
+                sim_tx,
+                timing: Timing::new(fc_stm32f405::timing::DEADLINE_TICKS),
+                sim: SimCounters::default(),
+            },
+            Local {
+                ctrl,
+                outputs,
+                decoder: FrameDecoder::new(),
+                fixes: heapless::Vec::new(),
+                tasks_in,
+                tasks_out,
+                works_in,
+                works_out,
+                answers_in,
+                answers_out,
+                radio,
+                syslink,
+                last: Last::default(),
+                logged: StepTiming::default(),
+                tx_errors: 0,
+                sample_clock: clock,
+                control_clock: clock,
+            },
+        )
+    }
+
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
+    /// The radio's bytes into their queue; the link's task takes them.
+    #[task(binds = USART6, priority = 4)]
+    fn radio_bytes(_: radio_bytes::Context) {
+        usart_isr(Port::Usart6);
+        rtic::pend(Interrupt::CAN2_RX1);
+    }
+
+    /// The simulator's frames: a parameter write (answered, or its design
+    /// handed to the controller), a fix (kept for the next sample), a
+    /// sample (data-ready: the estimator's step, then the controller's).
+    #[task(binds = USART1, priority = 3, shared = [v, timing, sim], local = [decoder, fixes, tasks_in, answers_in, sample_clock])]
+    fn data_ready(cx: data_ready::Context) {
+        usart_isr(Port::Usart1);
+        let data_ready::LocalResources {
+            decoder,
+            fixes,
+            tasks_in,
+            answers_in,
+            sample_clock: clock,
+            ..
+        } = cx.local;
+        let (mut v, mut timing, mut sim) = (cx.shared.v, cx.shared.timing, cx.shared.sim);
+        let mut buf = [0u8; 64];
+        loop {
+            let n = read_queued(Port::Usart1, &mut buf);
+            if n == 0 {
+                break;
+            }
+            for &b in &buf[..n] {
+                let m = match decoder.push::<ToFc>(b) {
+                    None => continue,
+                    Some(Err(_)) => {
+                        sim.lock(|c| c.bad = c.bad.wrapping_add(1));
+                        continue;
+                    }
+                    Some(Ok(m)) => m,
+                };
+                match m {
+                    ToFc::ParamSet { index, value } => {
+                        let (answer, work) = v.lock(|v| match v.sim_param(index, value) {
+                            Some(a) => (Some(a), None),
+                            None => (None, v.take_work()),
+                        });
+                        if let Some(work) = work {
+                            if tasks_in.enqueue(Task::Work(work)).is_err() {
+                                let answer = v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+                                if let Some(a) = answer {
+                                    let _ = answers_in.enqueue(a);
+                                }
+                            }
+                            rtic::pend(Interrupt::CAN2_RX0);
+                        }
+                        if let Some(a) = answer {
+                            if answers_in.enqueue(a).is_err() {
+                                timing.lock(|t| t.answers_dropped(1));
+                            }
+                        }
+                    }
+                    ToFc::Fix(w) => {
+                        if fixes.push(fix_from_wire(&w)).is_err() {
+                            sim.lock(|c| c.fixes_dropped = c.fixes_dropped.wrapping_add(1));
+                        }
+                    }
+                    ToFc::Imu { seq, t_us, gyro, accel } => {
+                        // Data-ready: the sample is whole (on a board, the
+                        // gyro's line; here, the `Imu` frame's last byte).
+                        let entry = ticks_now();
+                        let imu = ImuSample {
+                            gyro_frd_radps: Vector3::from(gyro),
+                            accel_frd_mps2: Vector3::from(accel),
+                        };
+                        let step = v.lock(|v| v.imu_begin(t_us, &imu, fixes, clock));
+                        fixes.clear();
+                        let done = ticks_now();
+                        timing.lock(|t| t.estimated(entry, done));
+                        if tasks_in.enqueue(Task::Step { step, seq, entry }).is_err() {
+                            timing.lock(|t| t.job_dropped());
+                        }
+                        rtic::pend(Interrupt::CAN2_RX0);
+                    }
+                    _ => sim.lock(|c| c.ignored = c.ignored.wrapping_add(1)),
+                }
+            }
+        }
+        rtic::pend(Interrupt::CAN2_RX1);
+    }
+
+    /// The controller: the link's designs first, then the sample task's
+    /// work in order; each step flown, its outputs driven and the
+    /// simulator answered.
+    #[task(binds = CAN2_RX0, priority = 2, shared = [v, sim_tx, timing], local = [ctrl, outputs, tasks_out, works_out, control_clock])]
+    fn controller(cx: controller::Context) {
+        let controller::LocalResources {
+            ctrl,
+            outputs,
+            tasks_out,
+            works_out,
+            control_clock: clock,
+            ..
+        } = cx.local;
+        let (mut v, mut sim_tx, mut timing) = (cx.shared.v, cx.shared.sim_tx, cx.shared.timing);
+        loop {
+            let task = match works_out.dequeue() {
+                Some(w) => Task::Work(w),
+                None => match tasks_out.dequeue() {
+                    Some(t) => t,
+                    None => break,
+                },
+            };
+            match task {
+                Task::Work(work) => {
+                    let (_, answer) = run_work(&mut v, ctrl, work);
+                    if let Some(a) = answer {
+                        if sim_tx.lock(|u| send(u, &a)).is_err() {
+                            timing.lock(|t| t.tx_timeout());
+                        }
+                    }
+                }
+                Task::Step { step, seq, entry } => {
+                    let u = fly_step(&mut v, ctrl, step, clock);
+                    v.lock(|v| outputs.drive(v, &u));
+                    // The step is flown when its outputs are driven.
+                    let done = ticks_now();
+                    let answer = FromFc::Actuator {
+                        seq,
+                        u: [u[0], u[1], u[2], u[3]],
+                        failsafe: false,
+                    };
+                    let sent = sim_tx.lock(|tx| send(tx, &answer));
+                    // The log blocks due, sampled at this step.
+                    v.lock(|v| v.sample_logs());
+                    timing.lock(|t| {
+                        t.flown(entry, done);
+                        if sent.is_err() {
+                            t.tx_timeout();
+                        }
+                    });
+                }
+            }
+        }
+        rtic::pend(Interrupt::CAN2_RX1);
+    }
+
+    /// The link: the radio's packets, the log blocks and answers that fell
+    /// due, the simulator's queued answers, then what changed in the log.
+    #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim], local = [radio, syslink, works_in, answers_out, last, logged, tx_errors])]
+    fn link(cx: link::Context) {
+        let link::LocalResources {
+            radio,
+            syslink,
+            works_in,
+            answers_out,
+            last,
+            logged,
+            tx_errors,
+            ..
+        } = cx.local;
+        let (v, mut sim_tx, mut timing, mut sim) = (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.sim);
+        let mut vehicle = Handing { v, works: works_in };
+        let mut ok = true;
+        let mut buf = [0u8; 64];
+        loop {
+            let n = read_queued(Port::Usart6, &mut buf);
+            if n == 0 {
+                break;
+            }
+            ok &= syslink.receive(&buf[..n], &mut vehicle, radio).is_ok();
+        }
+        syslink.poll(&mut vehicle);
+        while let Some(m) = answers_out.dequeue() {
+            ok &= sim_tx.lock(|u| send(u, &m)).is_ok();
+        }
+        if !ok {
+            *tx_errors = tx_errors.wrapping_add(1);
+            defmt::warn!("a USART transmit timed out ({=u32} so far)", *tx_errors);
+        }
+        let armed = vehicle.v.lock(|v| v.armed());
+        let sc = sim.lock(|c| *c);
+        log_changes(armed, &syslink.counters(), &sc, last);
+        timing.lock(|t| t.snapshot()).log_if_due(logged);
+    }
+
+    /// The vehicle as the link's task locks it: the controller work a
+    /// packet asked for goes to the controller's task as the lock ends.
+    struct Handing<'a, M> {
+        v: M,
+        works: &'a mut Producer<'static, ControllerWork>,
+    }
+
+    impl<M: Mutex<T = &'static mut CrtpCore>> Mutex for Handing<'_, M> {
+        type T = CrtpCore;
+        fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpCore) -> R) -> R {
+            let (r, work) = self.v.lock(|v| {
+                let r = f(v);
+                (r, v.take_work())
+            });
+            if let Some(work) = work {
+                if self.works.enqueue(work).is_err() {
+                    // Not reached (one design at a time); refused if it were.
+                    self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+                }
+                rtic::pend(Interrupt::CAN2_RX0);
+            }
+            r
+        }
+    }
+}
