@@ -180,6 +180,18 @@ def report(sil, failed_before):
     out, bridge = sil.stop()
     if QEMU:
         print(f'  the bridge relayed: {bridge.strip()}')
+    if QEMU:
+        # The image's tasks measure every step (fc_stm32f405::timing) and log
+        # the figures every 1000 steps and at once when a deadline is missed.
+        t = re.findall(r'timing: (\d+) steps, worst data-ready->estimate (\d+) instructions, '
+                       r'worst data-ready->answer (\d+) instructions, deadline (\d+): (\d+) missed '
+                       r'\((\d+) jobs, (\d+) answers dropped, (\d+) tx timeouts\); (\d+) IMU deadlines missed', out)
+        steps, est, ans, deadline, late, jobs, answers, tx, imu = (int(x) for x in t[-1]) if t else (0,) * 8 + (-1,)
+        check(steps >= 1000 and imu == 0 and jobs + answers + tx == 0,
+              f'the image met every IMU deadline at 1 kHz: {imu} of {steps} samples estimated late (worst data-ready '
+              f'-> estimate {est} instructions, deadline {deadline}: 168 000 cycles at CPI 1.5 x 1.5), no step dropped; '
+              f'the controller drove the outputs at worst {ans} instructions after data-ready, {late} steps after '
+              f'the deadline (a design is one)')
     if CRAZYFLIE:
         # The image logs, once a second armed, the four TIM2/TIM4 compares the
         # thrust curve gave. Hovering rotorpy's 30 g Crazyflie takes 74 mN a
@@ -263,11 +275,14 @@ def session_high_level(sil_host, truth):
                 if len(stamps) == 100:
                     break
         # cflib starts a new block twice (after its creation, then start()); the
-        # second start re-phases the block's timer, as the firmware's does.
+        # second start re-phases the block's timer, as the firmware's does. A
+        # block is sampled and stamped when the link's task (lowest priority)
+        # sends it: on the image a step late at times (11 ms, then 9: the block
+        # stays on its 10 ms grid), as the Crazyflie's log task stamps when it runs.
         gaps = sorted(b - a for a, b in zip(stamps, stamps[1:]))
-        check(gaps[1] >= 9 and gaps[-1] == 10 and gaps[len(gaps) // 2] == 10,
+        check(gaps[1] >= 9 and gaps[-1] <= 11 and gaps[len(gaps) // 2] == 10,
               f'SyncLogger at 100 Hz: 100 samples, timestamps 10 ms apart (gaps {gaps[0]}–{gaps[-1]} ms, '
-              f'one re-phase allowed)')
+              f'one re-phase allowed, a step of jitter)')
         check(max(errs) < 0.03, f'stateEstimate within 3 cm of the truth (worst {100 * max(errs):.2f} cm)')
 
         cf.supervisor.send_arming_request(True)
@@ -278,9 +293,31 @@ def session_high_level(sil_host, truth):
         hl.takeoff(0.5, 2.0)
         truth.sleep(3.0)
         near(truth, (start[0], start[1], 0.5), 'takeoff(0.5, 2) after 3 s')
+        # A ground station flooding it with parameter reads all through the
+        # go_to: cflib sends one read at a time and the next when it is
+        # answered; four are kept queued, so the link is never idle.
+        reads = {'asked': 0, 'answered': 0}
+        cf.param.add_update_callback(group='mpc', name='W_POS',
+                                     cb=lambda name, value: reads.__setitem__('answered', reads['answered'] + 1))
+        flooding = threading.Event()
+        flooding.set()
+
+        def flood():
+            while flooding.is_set():
+                while reads['asked'] - reads['answered'] < 4:
+                    cf.param.request_param_update('mpc.W_POS')
+                    reads['asked'] += 1
+                time.sleep(0.0005)
+
+        flooder = threading.Thread(target=flood, daemon=True)
         hl.go_to(1.0, 0.5, 0.8, 0.0, 3.0)
+        flooder.start()
         truth.sleep(4.5)
+        flooding.clear()
+        flooder.join()
         near(truth, (1.0, 0.5, 0.8), 'go_to(1, 0.5, 0.8, 0, 3) after 4.5 s')
+        check(reads['answered'] >= 100, f'under a parameter-read flood: {reads["answered"]} reads answered '
+                                        f'during the go_to ({reads["asked"]} asked)')
         hl.land(0.0, 2.0)
         truth.sleep(3.5)
         near(truth, (1.0, 0.5, 0.0), 'land(0, 2) after 3.5 s')
