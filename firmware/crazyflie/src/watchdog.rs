@@ -11,6 +11,10 @@
 //!
 //! Timeout: LSI / 32 / 100 → 100 ms at the nominal 32 kHz; the LSI varies
 //! from 17 to 47 kHz (datasheet DS8626 table 38), so 68–188 ms.
+//! While the controller's task designs (tens of milliseconds on the chip,
+//! no controller step), the timeout is widened to [`design_timeout_us`] and
+//! set back after.
+//!
 //! QEMU's netduinoplus2 models no IWDG; [`FeedRule`] is the same code on
 //! the board and in the host tests below, which run it against a model of
 //! the IWDG's countdown.
@@ -48,21 +52,48 @@ impl core::fmt::Display for WatchdogError {
     }
 }
 
+/// `IWDG_PR` while the controller's task designs: divide by 256 (PR = 6).
+pub const DESIGN_PRESCALER_BITS: u8 = 6;
+/// `IWDG_RLR` while the controller's task designs: 4096 counts, the most.
+pub const DESIGN_RELOAD: u16 = 4095;
+
+/// The timeout while a design runs, at an LSI of `lsi_hz`, µs: 32.8 s at
+/// 32 kHz, 22.3 s at the LSI's fastest (47 kHz). A design of the fast MPC
+/// takes ≈ 25 M instructions (≈ 0.2–0.35 s at CPI 1.2–2.25), longer than
+/// [`timeout_us`]; a design that never ends still resets the chip.
+pub const fn design_timeout_us(lsi_hz: u32) -> u32 {
+    ((4u64 << DESIGN_PRESCALER_BITS) * (DESIGN_RELOAD as u64 + 1) * 1_000_000 / lsi_hz as u64) as u32
+}
+
 /// Starts the IWDG with the stated timeout (it cannot be stopped again
 /// until reset) and feeds it once.
 pub fn start(iwdg: &iwdg::RegisterBlock) -> Result<(), WatchdogError> {
     iwdg.kr().write(|w| w.key().start());
-    iwdg.kr().write(|w| w.key().unlock());
-    iwdg.pr().write(|w| w.pr().divide_by32());
-    // SAFETY: RL is 12 bits; 99 fits.
-    iwdg.rlr().write(|w| unsafe { w.rl().bits(RELOAD) });
-    let mut polls = 0;
-    while iwdg.sr().read().bits() & 0b11 != 0 {
-        polls += 1;
-        if polls >= UPDATE_POLLS {
-            return Err(WatchdogError::UpdateTimeout);
+    set_timeout(iwdg, PRESCALER_BITS, RELOAD)
+}
+
+/// Sets the running IWDG's prescaler (`pr_bits`, 0–6) and reload (12
+/// bits), each update confirmed within [`UPDATE_POLLS`] polls of SR, then
+/// feeds it: the stated timeout ([`PRESCALER_BITS`], [`RELOAD`]) or the
+/// design's ([`DESIGN_PRESCALER_BITS`], [`DESIGN_RELOAD`]).
+pub fn set_timeout(iwdg: &iwdg::RegisterBlock, pr_bits: u8, reload: u16) -> Result<(), WatchdogError> {
+    let updated = || {
+        let mut polls = 0;
+        while iwdg.sr().read().bits() & 0b11 != 0 {
+            polls += 1;
+            if polls >= UPDATE_POLLS {
+                return Err(WatchdogError::UpdateTimeout);
+            }
         }
-    }
+        Ok(())
+    };
+    // A previous update must be done before the registers take another.
+    updated()?;
+    iwdg.kr().write(|w| w.key().unlock());
+    // SAFETY: PR is 3 bits and RL 12; both masked to fit.
+    iwdg.pr().write(|w| unsafe { w.pr().bits(pr_bits & 0b111) });
+    iwdg.rlr().write(|w| unsafe { w.rl().bits(reload & 0x0FFF) });
+    updated()?;
     feed(iwdg);
     Ok(())
 }
@@ -85,6 +116,13 @@ pub struct FeedRule {
 pub struct Seen {
     imu: u32,
     controller: u32,
+}
+
+impl Seen {
+    /// Nothing seen yet (for a static).
+    pub const fn new() -> Self {
+        Self { imu: 0, controller: 0 }
+    }
 }
 
 impl FeedRule {
@@ -141,6 +179,29 @@ mod tests {
         let mut regs = [0, 0, 0, 1u32];
         let iwdg: &iwdg::RegisterBlock = unsafe { &*regs.as_mut_ptr().cast() };
         assert_eq!(start(iwdg), Err(WatchdogError::UpdateTimeout));
+    }
+
+    #[test]
+    fn a_design_widens_the_timeout_and_the_stated_one_comes_back() {
+        // RM0090 §19.3.3: 4 · 2^PR · (RL + 1) / f_LSI; /256 is PR = 6.
+        assert_eq!(design_timeout_us(LSI_HZ), 32_768_000);
+        assert_eq!(design_timeout_us(47_000), 22_310_127);
+        let mut regs = [0u32; 4];
+        // SAFETY: 4 words ≥ the register block; volatile cells over host memory.
+        let iwdg: &iwdg::RegisterBlock = unsafe { &*regs.as_mut_ptr().cast() };
+        assert_eq!(set_timeout(iwdg, DESIGN_PRESCALER_BITS, DESIGN_RELOAD), Ok(()));
+        assert_eq!(regs[..3], [0xAAAA, 6, 4095]);
+        let iwdg: &iwdg::RegisterBlock = unsafe { &*regs.as_mut_ptr().cast() };
+        assert_eq!(set_timeout(iwdg, PRESCALER_BITS, RELOAD), Ok(()));
+        assert_eq!(regs[..3], [0xAAAA, 3, 99]);
+        // An update still under way (RVU set) is waited for, boundedly.
+        let mut regs = [0, 0, 0, 2u32];
+        let iwdg: &iwdg::RegisterBlock = unsafe { &*regs.as_mut_ptr().cast() };
+        assert_eq!(
+            set_timeout(iwdg, DESIGN_PRESCALER_BITS, DESIGN_RELOAD),
+            Err(WatchdogError::UpdateTimeout)
+        );
+        assert_eq!(regs[..3], [0, 0, 0], "nothing written before the last update is done");
     }
 
     /// The IWDG's countdown at its nominal timeout: feeds reload it; at

@@ -1,8 +1,8 @@
 //! The CRTP images' RTIC 2 application, included by `firmware-crtp` (the
 //! plain STM32F405) and `firmware-crazyflie` (the Crazyflie 2.1), each of
 //! which gives it its board's outputs (`crate::BoardOutputs`, an
-//! [`Outputs`]) and its vehicle (`crate::vehicle()`, unstarted, in static
-//! RAM). Four interrupt priorities, as a flight controller's tasks are
+//! [`Outputs`]), its watchdog (`crate::WATCHDOG`, a [`Watchdog`]) and its
+//! vehicle (`crate::vehicle()`, unstarted, in static RAM). Four interrupt priorities, as a flight controller's tasks are
 //! ordered (the sample first, then the controller, then the link):
 //!
 //! | priority | task | interrupt | work |
@@ -20,11 +20,11 @@
 //! (`fc_stm32f405::timing`): for every step, data-ready → estimate and
 //! data-ready → outputs driven, against one 1 kHz period.
 
-use fc_stm32f405::crtp_image::Outputs;
+use fc_stm32f405::crtp_image::{Outputs, Watchdog};
 
 #[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
 mod app {
-    use super::Outputs;
+    use super::{Outputs, Watchdog};
     use crate::board;
     use fc_core::control::AnyController;
     use fc_core::estimate::{Fix, ImuSample};
@@ -227,6 +227,7 @@ mod app {
                         let step = v.lock(|v| v.imu_begin(t_us, &imu, fixes, clock));
                         fixes.clear();
                         let done = ticks_now();
+                        crate::WATCHDOG.imu_step();
                         timing.lock(|t| t.estimated(entry, done));
                         if tasks_in.enqueue(Task::Step { step, seq, entry }).is_err() {
                             timing.lock(|t| t.job_dropped());
@@ -264,7 +265,9 @@ mod app {
             };
             match task {
                 Task::Work(work) => {
+                    crate::WATCHDOG.work(true);
                     let (_, answer) = run_work(&mut v, ctrl, work);
+                    crate::WATCHDOG.work(false);
                     if let Some(a) = answer {
                         if sim_tx.lock(|u| send(u, &a)).is_err() {
                             timing.lock(|t| t.tx_timeout());
@@ -276,6 +279,7 @@ mod app {
                     v.lock(|v| outputs.drive(v, &u));
                     // The step is flown when its outputs are driven.
                     let done = ticks_now();
+                    crate::WATCHDOG.controller_step();
                     let answer = FromFc::Actuator {
                         seq,
                         u: [u[0], u[1], u[2], u[3]],
@@ -329,6 +333,7 @@ mod app {
             *tx_errors = tx_errors.wrapping_add(1);
             defmt::warn!("a USART transmit timed out ({=u32} so far)", *tx_errors);
         }
+        crate::WATCHDOG.service();
         let armed = vehicle.v.lock(|v| v.armed());
         let sc = sim.lock(|c| *c);
         log_changes(armed, &syslink.counters(), &sc, last);

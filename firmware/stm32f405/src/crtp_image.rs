@@ -40,6 +40,22 @@ pub trait Outputs {
     fn drive(&mut self, v: &CrtpCore, u: &Vector4<f32>);
 }
 
+/// A board's watchdog, as the image's tasks report to it (each method is
+/// called from the task it names, so the implementation is shared across
+/// priorities: `Sync`).
+pub trait Watchdog: Sync {
+    /// The IMU task finished a sample (data-ready, priority 3).
+    fn imu_step(&self);
+    /// The controller's task finished a step (priority 2).
+    fn controller_step(&self);
+    /// The controller's task begins (`true`) or ends controller work (a
+    /// design: tens of milliseconds without a step).
+    fn work(&self, running: bool);
+    /// The link's task (the lowest priority), after each batch of steps:
+    /// starts the watchdog once both tasks ran, feeds it when both ran again.
+    fn service(&self);
+}
+
 /// What the simulator's link did.
 #[derive(Clone, Copy, PartialEq, Eq, Default)]
 pub struct SimCounters {

@@ -35,6 +35,23 @@ impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
     fn drive(&mut self, _: &fc_crtp::vehicle::CrtpCore, _: &nalgebra::Vector4<f32>) {}
 }
 
+/// This lockstep test image arms no watchdog (the Crazyflie image does:
+/// `fc_crazyflie::watchdog`); the tasks' reports go nowhere.
+#[cfg(target_os = "none")]
+pub struct NoWatchdog;
+
+#[cfg(target_os = "none")]
+impl fc_stm32f405::crtp_image::Watchdog for NoWatchdog {
+    fn imu_step(&self) {}
+    fn controller_step(&self) {}
+    fn work(&self, _: bool) {}
+    fn service(&self) {}
+}
+
+/// The tasks' watchdog: none on this image.
+#[cfg(target_os = "none")]
+static WATCHDOG: NoWatchdog = NoWatchdog;
+
 /// The vehicle, in static RAM (its flight loop and controller are
 /// ≈ 8 KiB), built once and unstarted: the controller is designed in
 /// place by `start`, after this frame is gone. It boots with the OS4's
