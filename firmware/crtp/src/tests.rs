@@ -526,3 +526,64 @@ fn a_reset_controller_flies_as_a_freshly_designed_one() {
         }
     }
 }
+
+/// `MISC_SETBYNAME` (cflib's `set_value_raw`): `[0, group\0, name\0, type,
+/// value]`, answered `[0, group\0, name\0, status]` as the Crazyflie
+/// firmware's `paramSetByName` answers: 0 written, ENOENT for no such
+/// name, ENOEXEC for a refused value. A write that re-designs is answered
+/// the same way once the controller's side has designed (split vehicle).
+#[test]
+fn a_write_by_name_is_answered_with_its_name_and_status() {
+    use crate::vehicle::run_work;
+    use fc_loop::Exclusive;
+    let by_name = |group: &[u8], name: &[u8], t: u8, value: &[u8]| {
+        let mut d = vec![0u8];
+        d.extend_from_slice(group);
+        d.push(0);
+        d.extend_from_slice(name);
+        d.push(0);
+        d.push(t);
+        d.extend_from_slice(value);
+        pk(Port::Param, 3, &d)
+    };
+    let answer = |group: &[u8], name: &[u8], code: u8| {
+        let mut a = vec![0u8];
+        a.extend_from_slice(group);
+        a.push(0);
+        a.extend_from_slice(name);
+        a.push(0);
+        a.push(code);
+        a
+    };
+    let w_pos = (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
+        .unwrap();
+    let (_, t, _) = param_entry(w_pos).unwrap();
+    let mut v = at_rest(3000);
+    let r = ask(&mut v, by_name(b"mpc", b"W_POS", t, &3.0f32.to_le_bytes()));
+    assert_eq!(r.payload(), &answer(b"mpc", b"W_POS", 0)[..]);
+    let r = ask(&mut v, by_name(b"mpc", b"NO_SUCH", t, &3.0f32.to_le_bytes()));
+    assert_eq!(r.payload(), &answer(b"mpc", b"NO_SUCH", log::ENOENT)[..]);
+    let r = ask(&mut v, by_name(b"mpc", b"W_POS", t, &(-1.0f32).to_le_bytes()));
+    assert_eq!(r.payload(), &answer(b"mpc", b"W_POS", log::ENOEXEC)[..]);
+
+    let (core, ctrl) = v.split();
+    let mut out = Sent::default();
+    core.handle(&by_name(b"mpc", b"W_POS", t, &4.0f32.to_le_bytes()), &mut out)
+        .unwrap();
+    assert!(
+        out.0.iter().all(|p| p.port() != Port::Param as u8),
+        "answered before its design"
+    );
+    let work = core.take_work().expect("a design queued");
+    let (r, _) = run_work(&mut Exclusive(&mut *core), ctrl, work);
+    assert!(r.is_ok());
+    let mut later = Sent::default();
+    core.poll(&mut later).unwrap();
+    let r = later
+        .0
+        .iter()
+        .find(|p| p.port() == Port::Param as u8)
+        .expect("answered after the design");
+    assert_eq!(r.payload(), &answer(b"mpc", b"W_POS", 0)[..]);
+}

@@ -1291,17 +1291,7 @@ impl CrtpCore {
     fn written_reply(&mut self, request: &Packet, refused: Option<Refusal>) -> Packet {
         let d = request.payload();
         if request.channel() == 3 {
-            // `MISC_SETBYNAME` `[0, group\0, name\0, type, value]`:
-            // answered `[0, group\0, name\0, status]`.
-            let names = d[1..]
-                .iter()
-                .enumerate()
-                .filter(|&(_, &b)| b == 0)
-                .nth(1)
-                .map_or(d.len() - 1, |(i, _)| i + 1);
-            let mut r = reply(Port::Param, 3, &d[..1 + names]);
-            let _ = r.extend(&[if refused.is_some() { log::ENOEXEC } else { 0 }]);
-            return r;
+            return set_by_name_reply(request, if refused.is_some() { log::ENOEXEC } else { 0 });
         }
         let id = u16_at(d, 0).map_or(usize::MAX, usize::from);
         if let (Some(why), Some((name, _, _))) = (refused, param_entry(id)) {
@@ -1458,10 +1448,7 @@ impl CrtpCore {
             }
             _ => log::ENOEXEC,
         };
-        let mut r = reply(Port::Param, 3, &[0]);
-        let _ = r.extend(&d[..group.len() + name.len() + 2]);
-        let _ = r.extend(&[code]);
-        out.send(&r)?;
+        out.send(&set_by_name_reply(p, code))?;
         Ok(if code == 0 {
             Ok(())
         } else {
@@ -1739,6 +1726,21 @@ fn read_value(t: u8, b: &[u8]) -> Option<f32> {
         param_types::FLOAT => f32_at(b, 0),
         _ => None,
     }
+}
+
+/// The answer to the `MISC_SETBYNAME` request `request` (`[0, group\0,
+/// name\0, type, value]`) with status `code`: `[0, group\0, name\0, code]`.
+fn set_by_name_reply(request: &Packet, code: u8) -> Packet {
+    let d = request.payload().get(1..).unwrap_or(&[]);
+    let mut parts = d.splitn(3, |&b| b == 0);
+    let names = match (parts.next(), parts.next()) {
+        (Some(group), Some(name)) => (group.len() + name.len() + 2).min(d.len()),
+        _ => d.len(),
+    };
+    let mut r = reply(Port::Param, 3, &[0]);
+    let _ = r.extend(&d[..names]);
+    let _ = r.extend(&[code]);
+    r
 }
 
 fn reply(port: Port, channel: u8, payload: &[u8]) -> Packet {
