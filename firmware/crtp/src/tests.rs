@@ -409,6 +409,7 @@ fn a_redesigning_write_is_answered_once_the_controllers_side_has_designed() {
     let Some(work @ ControllerWork::Param { .. }) = core.take_work() else {
         panic!("no design queued")
     };
+    assert!(work.designs(), "the watchdog's window is widened for it");
     // Meanwhile: a second write and a take-off are refused, unanswered.
     core.handle(&write, &mut out).unwrap();
     assert!(out.0.iter().all(|p| p.port() != Port::Param as u8));
@@ -515,6 +516,10 @@ fn a_reset_controller_flies_as_a_freshly_designed_one() {
             for _ in 0..300 {
                 ctrl.update(&on_ground, &up).unwrap();
             }
+            assert!(
+                !ControllerWork::Reset.designs(),
+                "no design: the watchdog's window stays"
+            );
             let (r, _) = run_work(&mut Exclusive(&mut *core), ctrl, ControllerWork::Reset);
             assert!(r.is_ok());
             let (_, fresh_ctrl) = fresh.split();

@@ -337,6 +337,14 @@ pub enum ControllerWork {
     },
 }
 
+impl ControllerWork {
+    /// It designs a controller (tens of milliseconds on the chip without a
+    /// controller step); a reset is a few stores.
+    pub fn designs(&self) -> bool {
+        matches!(self, ControllerWork::Param { .. })
+    }
+}
+
 /// Who a re-designing parameter write answers once its design is done.
 #[derive(Debug, Clone, Copy)]
 pub enum Reply {

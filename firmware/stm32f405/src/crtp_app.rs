@@ -192,16 +192,14 @@ mod app {
                 };
                 match m {
                     ToFc::ParamSet { index, value } => {
-                        let (answer, work) = v.lock(|v| match v.sim_param(index, value) {
+                        let (mut answer, work) = v.lock(|v| match v.sim_param(index, value) {
                             Some(a) => (Some(a), None),
                             None => (None, v.take_work()),
                         });
                         if let Some(work) = work {
                             if tasks_in.enqueue(Task::Work(work)).is_err() {
-                                let answer = v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
-                                if let Some(a) = answer {
-                                    let _ = answers_in.enqueue(a);
-                                }
+                                // No room for the design: refused as busy.
+                                answer = v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
                             }
                             rtic::pend(Interrupt::CAN2_RX0);
                         }
@@ -265,9 +263,14 @@ mod app {
             };
             match task {
                 Task::Work(work) => {
-                    crate::WATCHDOG.work(true);
+                    let designs = work.designs();
+                    if designs {
+                        crate::WATCHDOG.designing(true);
+                    }
                     let (_, answer) = run_work(&mut v, ctrl, work);
-                    crate::WATCHDOG.work(false);
+                    if designs {
+                        crate::WATCHDOG.designing(false);
+                    }
                     if let Some(a) = answer {
                         if sim_tx.lock(|u| send(u, &a)).is_err() {
                             timing.lock(|t| t.tx_timeout());

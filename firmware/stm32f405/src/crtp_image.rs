@@ -48,9 +48,9 @@ pub trait Watchdog: Sync {
     fn imu_step(&self);
     /// The controller's task finished a step (priority 2).
     fn controller_step(&self);
-    /// The controller's task begins (`true`) or ends controller work (a
-    /// design: tens of milliseconds without a step).
-    fn work(&self, running: bool);
+    /// The controller's task begins (`true`) or ends a design (tens of
+    /// milliseconds without a step: [`fc_crtp::vehicle::ControllerWork::designs`]).
+    fn designing(&self, running: bool);
     /// The link's task (the lowest priority), after each batch of steps:
     /// starts the watchdog once both tasks ran, feeds it when both ran again.
     fn service(&self);

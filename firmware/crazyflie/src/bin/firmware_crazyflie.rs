@@ -200,7 +200,7 @@ mod target {
             self.rule.controller_step();
         }
 
-        fn work(&self, running: bool) {
+        fn designing(&self, running: bool) {
             if !self.started.load(Ordering::Relaxed) {
                 return;
             }

@@ -44,7 +44,7 @@ pub struct NoWatchdog;
 impl fc_stm32f405::crtp_image::Watchdog for NoWatchdog {
     fn imu_step(&self) {}
     fn controller_step(&self) {}
-    fn work(&self, _: bool) {}
+    fn designing(&self, _: bool) {}
     fn service(&self) {}
 }
 
