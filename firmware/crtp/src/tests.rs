@@ -592,3 +592,30 @@ fn a_write_by_name_is_answered_with_its_name_and_status() {
         .expect("answered after the design");
     assert_eq!(r.payload(), &answer(b"mpc", b"W_POS", 0)[..]);
 }
+
+/// A board's motors take the vehicle's mixer (`CrtpVehicle::mixer`); it
+/// follows every parameter write, `MOT_FRAME` included, which changes the
+/// rotor layout without a design (no new selection).
+#[test]
+fn the_mixer_follows_a_motor_layout_write() {
+    use fc_loop::params::{index_of, Airframe};
+    use nalgebra::Vector4;
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    let selections = v.core().selections();
+    // Hover thrust with a roll torque: each layout spreads it differently.
+    let u = Vector4::new(6.0, 0.05, 0.0, 0.0);
+    let before = v.mixer().unwrap().thrusts(&u);
+    let frame = index_of(b"MOT_FRAME").unwrap();
+    assert_eq!(v.write_param(frame, 4.0), Ok(4.0));
+    assert_eq!(v.core().selections(), selections, "no design");
+    let expected = Settings {
+        airframe: Airframe::XCrazyflie,
+        ..Settings::os4()
+    }
+    .mixer()
+    .unwrap()
+    .thrusts(&u);
+    let after = v.mixer().unwrap().thrusts(&u);
+    assert_eq!(after, expected);
+    assert_ne!(after, before);
+}

@@ -712,6 +712,12 @@ impl CrtpCore {
         self.motors
     }
 
+    /// The mixer of the parameters in force (`None` until started): the
+    /// rotors' thrusts of a step's inputs, for a board's motors.
+    pub fn mixer(&self) -> Option<&Mixer<f32>> {
+        self.mixer.as_ref()
+    }
+
     /// The battery voltage the nRF51 last reported, V (4.2 until it does).
     pub fn battery_v(&self) -> f32 {
         self.vbat_v

@@ -43,7 +43,6 @@ pub use target::{vehicle, BoardOutputs, WATCHDOG};
 mod target {
     use core::cell::Cell;
     use core::sync::atomic::{AtomicBool, Ordering};
-    use fc_core::model::airframe::Mixer;
     use fc_crazyflie::leds::{self, pattern, Indication, LedPin, Leds, Lit};
     use fc_crazyflie::motors::{self, MotorOutput, CF21_LEGACY_PROPELLERS};
     use fc_crazyflie::watchdog::{self, FeedRule, Seen};
@@ -71,8 +70,6 @@ mod target {
         tim4: &'static stm32f4::stm32f405::tim3::RegisterBlock,
         leds: Leds<LedPin>,
         last_lit: Lit,
-        /// The mixer of the vehicle's parameters, and the design it is of.
-        mixer: Option<(Mixer<f32>, u32)>,
         saturated: bool,
         saturations: u32,
         armed_steps: u32,
@@ -102,7 +99,6 @@ mod target {
                 tim4,
                 leds,
                 last_lit,
-                mixer: None,
                 saturated: false,
                 saturations: 0,
                 armed_steps: 0,
@@ -113,15 +109,10 @@ mod target {
 
     impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
         fn drive(&mut self, v: &CrtpCore, u: &Vector4<f32>) {
-            // The vehicle's parameters (and so its mixer) change only with a new design.
-            let designs = v.core().selections();
-            if self.mixer.is_none_or(|(_, d)| d != designs) {
-                self.mixer = v.core().settings().mixer().ok().map(|m| (m, designs));
-            }
-            let out = match (v.armed(), &self.mixer) {
-                (true, Some((mixer, _))) => {
-                    motors::output(&CF21_LEGACY_PROPELLERS, mixer.thrusts(u).into(), v.battery_v())
-                }
+            // The vehicle's mixer follows every parameter write (`MOT_FRAME`
+            // changes it without a design).
+            let out = match (v.armed(), v.mixer()) {
+                (true, Some(mixer)) => motors::output(&CF21_LEGACY_PROPELLERS, mixer.thrusts(u).into(), v.battery_v()),
                 _ => MotorOutput::OFF,
             };
             motors::set(self.tim2, self.tim4, &out);
