@@ -6,6 +6,7 @@
 pub mod frames;
 pub mod log;
 pub mod planner;
+pub mod supervisor;
 pub mod syslink;
 pub mod toc;
 pub mod vehicle;

@@ -421,7 +421,7 @@ fn a_redesigning_write_is_answered_once_the_controllers_side_has_designed() {
         gyro_frd_radps: Vector3::zeros(),
         accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
     };
-    let step = core.imu_begin(3_001_000, &imu, &[], &clock);
+    let step = core.imu_begin(3_001_000, Some(&imu), &[], &clock);
     fly_step(&mut Exclusive(&mut *core), ctrl, step, &clock);
     // The controller's side designs; the answer is queued for the link.
     let (r, answer) = run_work(&mut Exclusive(&mut *core), ctrl, work);
@@ -618,4 +618,110 @@ fn the_mixer_follows_a_motor_layout_write() {
     let after = v.mixer().unwrap().thrusts(&u);
     assert_eq!(after, expected);
     assert_ne!(after, before);
+}
+
+/// The console lines in `sent`.
+fn console_of(sent: &[Packet]) -> String {
+    sent.iter()
+        .filter(|p| p.port() == Port::Console as u8)
+        .map(|p| String::from_utf8_lossy(p.payload()).into_owned())
+        .collect()
+}
+
+/// The console lines `v` has queued.
+fn console(v: &mut CrtpVehicle) -> String {
+    let mut out = Sent::default();
+    v.poll(&mut out).unwrap();
+    console_of(&out.0)
+}
+
+/// `p` handled: its answer on its port, and the console lines sent with it.
+fn ask_said(v: &mut CrtpVehicle, p: Packet) -> (Packet, String) {
+    let mut out = Sent::default();
+    v.handle(&p, &mut out).unwrap();
+    let a = *out.0.iter().rev().find(|a| a.port() == p.port()).expect("an answer");
+    (a, console_of(&out.0) + &console(v))
+}
+
+/// The supervisor's sensor and battery checks refuse arming by name; a
+/// bad or missing IMU sample in flight is replaced by the last good one
+/// (the motors never stop for it); more than 10 ms of them starts a
+/// failsafe descent that commands do not overrule while the IMU is silent
+/// and that lands with the motors off.
+#[test]
+fn a_silent_imu_in_flight_is_held_for_10_ms_then_a_failsafe_descent() {
+    use crate::supervisor::SensorDown;
+    let mut v = at_rest(3000);
+    v.set_sensors(Err(SensorDown {
+        device: "BMI088 gyroscope",
+        why: "wrong chip id",
+    }));
+    let arm = pk(Port::Supervisor, 1, &[0x01, 1]);
+    let (a, said) = ask_said(&mut v, arm);
+    assert_eq!(a.payload(), &[0x81, 0, 0]);
+    assert!(
+        said.contains("arming refused: BMI088 gyroscope: wrong chip id"),
+        "{said}"
+    );
+    v.set_sensors(Ok(()));
+    v.set_battery(3.1, 3);
+    let (a, said) = ask_said(&mut v, arm);
+    assert_eq!(a.payload(), &[0x81, 0, 0]);
+    assert!(said.contains("arming refused: battery 3.10 V below 3.20 V"), "{said}");
+    v.set_battery(3.9, 0);
+    assert_eq!(ask(&mut v, arm).payload(), &[0x81, 1, 1]);
+    // Take off to 1 m over 2 s; fly 1 s of it.
+    let mut takeoff = vec![7u8, 0];
+    for x in [1.0f32, 0.0] {
+        takeoff.extend_from_slice(&x.to_le_bytes());
+    }
+    takeoff.push(0);
+    takeoff.extend_from_slice(&2.0f32.to_le_bytes());
+    let mut out = Sent::default();
+    v.handle(&pk(Port::HighLevel, 0, &takeoff), &mut out).unwrap();
+    rest(&mut v, 3000, 1000);
+    assert!(v.flying());
+    let clock = MonotonicClock::default();
+    let nan = ImuSample {
+        gyro_frd_radps: Vector3::new(f32::NAN, 0.0, 0.0),
+        accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+    };
+    let mut t_ms = 4001;
+    let bad = |v: &mut CrtpVehicle, n: u64, t_ms: &mut u64| {
+        let mut outs = Vec::new();
+        for _ in 0..n {
+            outs.push(v.imu_step(*t_ms * 1000, &nan, &[], &clock));
+            *t_ms += 1;
+        }
+        outs
+    };
+    // 10 bad samples: each step flies the last good sample; no failsafe.
+    let outs = bad(&mut v, 10, &mut t_ms);
+    assert!(outs.iter().all(|u| u[0] > 0.1), "the motors kept turning: {outs:?}");
+    assert!(v.flying() && !v.failsafe());
+    assert_eq!(v.imu_counters().held, 10);
+    // The 11th is more than 10 ms after the last good one: failsafe.
+    let outs = bad(&mut v, 1, &mut t_ms);
+    assert!(outs[0][0] > 0.1 && v.failsafe());
+    let said = console(&mut v);
+    assert!(
+        said.contains("IMU silent for more than 10 ms: failsafe descent"),
+        "{said}"
+    );
+    assert_eq!(v.imu_counters().timeouts, 1);
+    // A go_to while silent is overruled: still descending.
+    let mut go = vec![12u8, 0, 0, 0];
+    for x in [1.0f32, 0.0, 1.0, 0.0, 1.0] {
+        go.extend_from_slice(&x.to_le_bytes());
+    }
+    v.handle(&pk(Port::HighLevel, 0, &go), &mut out).unwrap();
+    bad(&mut v, 5, &mut t_ms);
+    let sp = v.core().setpoint().pos_ned_m;
+    assert!(sp[0].abs() < 1e-3 && sp[2] > -1.0, "descending where it was: {sp:?}");
+    // Good samples again: the descent goes on, to the ground, motors off.
+    rest(&mut v, t_ms, 6000);
+    assert!(!v.flying() && v.armed(), "landed");
+    let said = console(&mut v);
+    assert!(said.contains("landed: motors off"), "{said}");
+    assert_eq!(v.imu_counters().timeouts, 1);
 }

@@ -46,6 +46,7 @@
 
 use crate::log::{self, LogBlocks};
 use crate::planner::{Reference, Segment};
+use crate::supervisor::{ImuCounters, ImuGuard, SensorDown, BATTERY_FLOOR_V, FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US};
 use crate::toc::{self, Name};
 use crate::{f32_at, frames, u16_at, CrtpCounters, CrtpError, Packet, Port};
 use core::borrow::BorrowMut;
@@ -302,14 +303,35 @@ impl Outbox for Answer {
     }
 }
 
-/// Text for one console packet (cut at 30 bytes).
-struct Line(Packet);
+/// Console text, cut into packets of up to 30 bytes as the Crazyflie's
+/// console sends it (cflib joins them): each full packet is queued, the
+/// oldest dropped when the queue is full.
+struct Line<'a> {
+    p: Packet,
+    queue: &'a mut heapless::Deque<Packet, CONSOLE_QUEUE>,
+}
 
-impl core::fmt::Write for Line {
+impl Line<'_> {
+    fn push(&mut self) {
+        if self.p.payload().is_empty() {
+            return;
+        }
+        if self.queue.is_full() {
+            self.queue.pop_front();
+        }
+        let _ = self.queue.push_back(self.p);
+        if let Ok(p) = Packet::new(Port::Console, 0, &[]) {
+            self.p = p;
+        }
+    }
+}
+
+impl core::fmt::Write for Line<'_> {
     fn write_str(&mut self, s: &str) -> core::fmt::Result {
         for b in s.bytes() {
-            if self.0.extend(&[b]).is_err() {
-                break;
+            if self.p.extend(&[b]).is_err() {
+                self.push();
+                let _ = self.p.extend(&[b]);
             }
         }
         Ok(())
@@ -509,7 +531,7 @@ impl CrtpVehicle {
     /// log blocks due sampled ([`CrtpCore::sample_logs`]).
     /// Returns the inputs to apply (zero: motors off).
     pub fn imu_step<C: CycleClock>(&mut self, t_us: u64, imu: &ImuSample, fixes: &[Fix], clock: &C) -> Vector4<f32> {
-        let step = self.core.imu_begin(t_us, imu, fixes, clock);
+        let step = self.core.imu_begin(t_us, Some(imu), fixes, clock);
         let u = fly_step(&mut fc_loop::Exclusive(&mut self.core), &mut self.ctrl, step, clock);
         self.core.sample_logs();
         u
@@ -571,6 +593,12 @@ pub struct CrtpCore {
     vbat_v: f32,
     pm_state: i8,
     counters: CrtpCounters,
+    /// Every IMU sample checked, the last good one held.
+    imu: ImuGuard,
+    /// The board's sensors as it started them (`Ok`: the simulator's).
+    sensors: Result<(), SensorDown>,
+    /// A failsafe descent began in this silence of the IMU.
+    failsafe: bool,
 }
 
 impl CrtpCore {
@@ -598,7 +626,28 @@ impl CrtpCore {
             vbat_v: 4.2,
             pm_state: 0,
             counters: CrtpCounters::default(),
+            imu: ImuGuard::new(),
+            sensors: Ok(()),
+            failsafe: false,
         }
+    }
+
+    /// What the board's sensors did at start-up (a board without sensors
+    /// of its own, flying a simulator's, leaves it `Ok`): arming is refused
+    /// while one is down, naming it.
+    pub fn set_sensors(&mut self, r: Result<(), SensorDown>) {
+        self.sensors = r;
+    }
+
+    /// The IMU samples that were not good, by kind
+    /// ([`crate::supervisor::ImuGuard`]).
+    pub fn imu_counters(&self) -> ImuCounters {
+        self.imu.counters()
+    }
+
+    /// A failsafe descent is under way (the IMU went silent in flight).
+    pub fn failsafe(&self) -> bool {
+        self.failsafe
     }
 
     /// A parameter write from the board's simulator (our protocol's
@@ -732,15 +781,26 @@ impl CrtpCore {
         self.pm_state = state;
     }
 
-    /// One IMU sample taken at `t_us` with the fixes of the host's own
-    /// position source (`heading`: they carry one), the IMU task's half:
-    /// the set-point of this instant, one estimator step, the supervisor's
-    /// checks; returns the controller's step ([`fly_step`] flies it).
-    pub fn imu_begin<C: CycleClock>(&mut self, t_us: u64, imu: &ImuSample, fixes: &[Fix], clock: &C) -> ImuStep {
+    /// One IMU sample taken at `t_us` (`None`: the board's driver had
+    /// none) with the fixes of the host's own position source (`heading`:
+    /// they carry one), the IMU task's half: the sample checked (a bad or
+    /// missing one replaced by the last good one,
+    /// [`crate::supervisor::ImuGuard`]), the set-point of this instant, one
+    /// estimator step, the supervisor's checks; returns the controller's
+    /// step ([`fly_step`] flies it).
+    pub fn imu_begin<C: CycleClock>(
+        &mut self,
+        t_us: u64,
+        imu: Option<&ImuSample>,
+        fixes: &[Fix],
+        clock: &C,
+    ) -> ImuStep {
         if t_us < self.now_us {
             // A host that started again: a new time line.
             self.core.open_session();
+            self.imu.restart();
         }
+        let (sample, _) = self.imu.take(t_us, imu);
         // The interval a velocity set-point moves over (at most 0.1 s).
         let dt_s = (t_us.saturating_sub(self.now_us) as f32 * 1e-6).min(0.1);
         self.now_us = t_us;
@@ -753,9 +813,9 @@ impl CrtpCore {
             self.core.set_setpoint(&sp);
         }
         self.seq = self.seq.wrapping_add(1);
-        let job = self
-            .core
-            .imu_job(self.seq, t_us, imu, clock, t_us)
+        // Nothing to step on before the first good sample.
+        let job = sample
+            .and_then(|imu| self.core.imu_job(self.seq, t_us, &imu, clock, t_us))
             .map(|job| match job {
                 // The estimator's state goes out in log blocks, not with every
                 // step's answer (our protocol's `Nav`): not built.
@@ -836,8 +896,14 @@ impl CrtpCore {
         };
     }
 
-    /// Tumble detection and the end of a landing.
+    /// The IMU's silence, tumble detection and the end of a landing.
     fn supervise(&mut self, t_us: u64) {
+        if !self.imu.silent() {
+            self.failsafe = false;
+        } else if self.flying() && !matches!(self.mode, Mode::High { landing: true, .. }) {
+            // Every command while silent is overruled by the descent.
+            self.failsafe_descent(t_us);
+        }
         let Some(est) = self.core.navigator().estimate() else {
             return;
         };
@@ -857,6 +923,25 @@ impl CrtpCore {
         }
     }
 
+    /// Straight down from where the vehicle is flying to the frame's z = 0
+    /// (the floor of a motion-capture or Lighthouse frame) at
+    /// [`FAILSAFE_DESCENT_MPS`], landed as a landing is.
+    fn failsafe_descent(&mut self, t_us: u64) {
+        if !self.failsafe {
+            self.failsafe = true;
+            let ms = IMU_TIMEOUT_US / 1000;
+            self.say(format_args!("IMU silent for more than {ms} ms: failsafe descent"));
+        }
+        let here = self.reference();
+        let height_m = (-here.pos_ned_m[2]).max(0.0);
+        let goal = Vector3::new(here.pos_ned_m[0], here.pos_ned_m[1], 0.0);
+        let dur_s = (height_m / FAILSAFE_DESCENT_MPS).max(0.5);
+        self.mode = match Segment::plan(t_us, &here, goal, here.yaw_rad, dur_s) {
+            Ok(seg) => Mode::High { seg, landing: true },
+            Err(_) => Mode::Idle,
+        };
+    }
+
     /// What is flown now, as a reference (the estimate at rest when idle).
     fn reference(&self) -> Reference {
         match &self.mode {
@@ -869,18 +954,18 @@ impl CrtpCore {
         }
     }
 
-    /// Queues a console line.
+    /// Queues a console line (in as many packets as it takes).
     fn say(&mut self, text: core::fmt::Arguments) {
         let Ok(p) = Packet::new(Port::Console, 0, &[]) else {
             return;
         };
-        let mut line = Line(p);
+        let mut line = Line {
+            p,
+            queue: &mut self.console,
+        };
         let _ = line.write_fmt(text);
-        let _ = line.0.extend(b"\n");
-        if self.console.is_full() {
-            self.console.pop_front();
-        }
-        let _ = self.console.push_back(line.0);
+        let _ = line.write_str("\n");
+        line.push();
     }
 
     /// Samples the log blocks due at the last step's time (their values and
@@ -950,7 +1035,11 @@ impl CrtpCore {
     }
 
     fn can_fly(&self) -> bool {
-        self.core.navigator().mode() == NavMode::Navigating && !self.tumbled && !self.locked
+        self.core.navigator().mode() == NavMode::Navigating
+            && !self.tumbled
+            && !self.locked
+            && self.sensors.is_ok()
+            && self.vbat_v >= BATTERY_FLOOR_V
     }
 
     /// The supervisor's state bits (cflib's `Supervisor.STATES` order).
@@ -989,6 +1078,17 @@ impl CrtpCore {
         }
         if self.armed {
             return true;
+        }
+        if let Err(down) = self.sensors {
+            self.say(format_args!("arming refused: {down}"));
+            return false;
+        }
+        if self.vbat_v < BATTERY_FLOOR_V {
+            let v = self.vbat_v;
+            self.say(format_args!(
+                "arming refused: battery {v:.2} V below {BATTERY_FLOOR_V:.2} V"
+            ));
+            return false;
         }
         let why = match self.core.navigator().mode() {
             _ if self.locked => Some("locked: restart"),
