@@ -12,8 +12,9 @@
 //! - [`motors`]: the brushed motors on TIM2 and TIM4 (8-bit PWM at 328 kHz),
 //!   the Crazyflie 2.1's thrust curve and battery compensation;
 //! - [`leds`]: what the five LEDs show for each state;
-//! - [`supervisor`]: the "can fly" checks, tumble detection and the sensor
-//!   watchdog (a silent sensor → failsafe descent);
+//! - [`supervisor`]: the board's part of the vehicle's supervisor (whether
+//!   its sensors started, named in the arming refusal; a failed read is a
+//!   missing sample, which the vehicle holds for 10 ms, then descends);
 //! - [`watchdog`]: the independent watchdog's plan and its feeding rule (fed
 //!   only when the IMU task and the controller both made progress).
 //!
