@@ -222,7 +222,7 @@ mod app {
                             gyro_frd_radps: Vector3::from(gyro),
                             accel_frd_mps2: Vector3::from(accel),
                         };
-                        let step = v.lock(|v| v.imu_begin(t_us, &imu, fixes, clock));
+                        let step = v.lock(|v| v.imu_begin(t_us, Some(&imu), fixes, clock));
                         fixes.clear();
                         let done = ticks_now();
                         crate::WATCHDOG.imu_step();
@@ -337,9 +337,9 @@ mod app {
             defmt::warn!("a USART transmit timed out ({=u32} so far)", *tx_errors);
         }
         crate::WATCHDOG.service();
-        let armed = vehicle.v.lock(|v| v.armed());
+        let (armed, imu) = vehicle.v.lock(|v| (v.armed(), v.imu_counters()));
         let sc = sim.lock(|c| *c);
-        log_changes(armed, &syslink.counters(), &sc, last);
+        log_changes(armed, imu, &syslink.counters(), &sc, last);
         timing.lock(|t| t.snapshot()).log_if_due(logged);
     }
 

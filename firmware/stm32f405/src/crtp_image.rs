@@ -17,6 +17,7 @@
 //! Logs through defmt: boot, the radio's `RADIO_READY` echo, arming, and
 //! link errors on either port as they happen.
 
+use fc_crtp::supervisor::ImuCounters;
 use fc_crtp::syslink::SyslinkCounters;
 use fc_crtp::vehicle::CrtpCore;
 use fc_proto::{encode, FromFc, MAX_FRAME};
@@ -77,8 +78,27 @@ pub fn send(usart: &mut Usart, m: &FromFc) -> Result<(), TxTimeout> {
     }
 }
 
-/// Logs what changed since the last call.
-pub fn log_changes(armed: bool, radio: &SyslinkCounters, sim: &SimCounters, last: &mut Last) {
+/// Logs what changed since the last call: arming, the radio's and the
+/// simulator's link errors, and the IMU's bad samples (a silence past
+/// 10 ms at once; the rest once they stop changing, so a dead part logs a
+/// line per episode, not per sample).
+pub fn log_changes(armed: bool, imu: ImuCounters, radio: &SyslinkCounters, sim: &SimCounters, last: &mut Last) {
+    if imu.timeouts != last.imu.timeouts {
+        defmt::error!(
+            "IMU silent for more than 10 ms: failsafe descent ({=u32} so far)",
+            imu.timeouts
+        );
+    }
+    if imu == last.imu && imu != last.imu_logged {
+        defmt::warn!(
+            "IMU: {=u32} samples missing, {=u32} bad (not finite, out of range), {=u32} steps flown on the last good one, {=u32} silences past 10 ms",
+            imu.missing,
+            imu.bad,
+            imu.held,
+            imu.timeouts
+        );
+        last.imu_logged = imu;
+    }
     if radio.ready != last.radio.ready {
         defmt::info!("nRF51 radio ready (RADIO_READY echoed)");
     }
@@ -106,17 +126,18 @@ pub fn log_changes(armed: bool, radio: &SyslinkCounters, sim: &SimCounters, last
             rx_overruns(Port::Usart1)
         );
     }
-    *last = Last {
-        armed,
-        radio: *radio,
-        sim: *sim,
-    };
+    last.armed = armed;
+    last.imu = imu;
+    last.radio = *radio;
+    last.sim = *sim;
 }
 
 /// What [`log_changes`] saw last.
 #[derive(Default)]
 pub struct Last {
     armed: bool,
+    imu: ImuCounters,
+    imu_logged: ImuCounters,
     radio: SyslinkCounters,
     sim: SimCounters,
 }
