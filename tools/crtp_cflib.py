@@ -18,7 +18,11 @@ the firmware says of itself:
 6. a second session with `--position-source external`: `send_extpos` of the
    mocap stream is the only position source; `send_position_setpoint` climbs
    and moves, the truth within 5 cm of each set-point; then
-   `send_notify_setpoint_stop` and the high-level `land`.
+   `send_notify_setpoint_stop` and the high-level `land`;
+7. a session whose IMU answers NaN for 30 ms in a 1 m hover
+   (`sil-host crtp --imu-dead`): the vehicle flies the last good sample for
+   10 ms, then says "failsafe descent" on the console and lands straight
+   down; the samples are counted (sil-host's summary, the image's log).
 
 With `--qemu` the same sessions fly the `firmware-crtp` image in QEMU
 (`sil-host crtp --target qemu`): cflib reaches it through
@@ -56,6 +60,9 @@ PORT = 19850
 TRUTH_PORT = 19870
 URI = f'udp://127.0.0.1:{PORT}'
 TOL_M = 0.05
+# Session 4's dead IMU: when (plant time, s) and for how long.
+DEAD_AT_S = 8.0
+DEAD_S = 0.03
 CRAZYFLIE = '--qemu-crazyflie' in sys.argv[2:]
 QEMU = '--qemu' in sys.argv[2:] or CRAZYFLIE
 CONTROLLER = [a for a in sys.argv[2:] if a not in ('--qemu', '--qemu-crazyflie')]
@@ -209,6 +216,7 @@ def report(sil, failed_before):
               f'{len(hover)} at hover (e.g. {hover[:1]})')
     if failed > failed_before:
         print(f'sil-host said:\n{out[-4000:]}\nthe bridge said: {bridge.strip()}')
+    return out
 
 
 def near(truth, goal, what):
@@ -377,9 +385,55 @@ def session_extpos(sil_host, truth):
         report(sil, failed_before)
 
 
+def session_dead_imu(sil_host, truth):
+    print(f'session 3: the IMU answers NaN for {1000 * DEAD_S:.0f} ms in a hover (sil-host --imu-dead)')
+    failed_before = failed
+    sil = Sil(sil_host, '--imu-dead', f'{DEAD_AT_S},{DEAD_S}', truth=truth)
+    said = []
+    try:
+        scf = connect()
+        cf = scf.cf
+        cf.console.receivedChar.add_callback(said.append)
+        check(estimator_settled(scf), 'estimator converged')
+        cf.supervisor.send_arming_request(True)
+        time.sleep(0.3)
+        cf.high_level_commander.takeoff(1.0, 2.0)
+        truth.sleep(3.0)
+        hover = truth.pos()
+        check(truth.t() < DEAD_AT_S - 0.5 and abs(hover[2] - 1.0) < 0.1,
+              f'hovering at {hover[2]:.2f} m before the IMU dies at {DEAD_AT_S} s (plant time {truth.t():.1f} s)')
+        truth.sleep(DEAD_AT_S + 0.5 - truth.t())
+        text = ''.join(said)
+        check('IMU silent for more than 10 ms: failsafe descent' in text,
+              'the console said: IMU silent for more than 10 ms: failsafe descent')
+        # Straight down at 0.3 m/s from 1 m, then motors off.
+        truth.sleep(5.0)
+        p = truth.pos()
+        drift = math.dist(p[:2], hover[:2])
+        check(p[2] < TOL_M and not truth.last['flying'] and drift < 0.1,
+              f'descended and landed where it hovered: z {p[2]:.3f} m, {100 * drift:.1f} cm from the hover '
+              f'point, motors off')
+        check('landed: motors off' in ''.join(said), 'the console said: landed: motors off')
+        scf.close_link()
+    finally:
+        out = report(sil, failed_before)
+    # Every NaN sample counted bad, each step flown on the last good one,
+    # one silence past 10 ms (in-process: sil-host's summary; the images log it).
+    n = round(DEAD_S * 1000)
+    if QEMU:
+        m = re.findall(r'IMU: (\d+) samples missing, (\d+) bad .*?, (\d+) steps flown on the last good one, '
+                       r'(\d+) silences', out)
+        got = tuple(int(x) for x in m[-1]) if m else None
+    else:
+        m = re.search(r'"imu": \[\s*(\d+),\s*(\d+),\s*(\d+),\s*(\d+)\s*\]', out)
+        got = tuple(int(x) for x in m.groups()) if m else None
+    check(got is not None and got[0] == 0 and abs(got[1] - n) <= 1 and got[2] == got[1] and got[3] == 1,
+          f'IMU samples (missing, bad, flown on the last good one, silences): {got}, {n} NaN samples sent')
+
+
 def session_examples(sil_host):
     version = importlib.metadata.version('cflib')
-    print(f'session 3: cflib {version}\'s own examples, unchanged')
+    print(f'session 4: cflib {version}\'s own examples, unchanged')
     work = pathlib.Path('target/cflib-examples').resolve()
     work.mkdir(parents=True, exist_ok=True)
     sdist = work / f'cflib-{version}.tar.gz'
@@ -413,6 +467,7 @@ def main():
     truth.start()
     session_high_level(sil_host, truth)
     session_extpos(sil_host, truth)
+    session_dead_imu(sil_host, truth)
     session_examples(sil_host)
     truth.stop = True
     plant = sum(p for p, _ in truth.walls)

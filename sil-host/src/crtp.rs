@@ -60,6 +60,8 @@ pub struct CrtpConfig {
     pub duration_s: Option<f64>,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// Every IMU sample in `(start, length)`, s of the plant's time, is NaN.
+    pub imu_dead: Option<(f64, f64)>,
     /// Where the vehicle runs.
     pub target: CrtpTarget,
     /// Set from elsewhere (a signal handler) to end the flight at the next
@@ -103,6 +105,9 @@ pub struct CrtpSummary {
     pub packets: Option<Counters>,
     /// Packets sent (in-process).
     pub sent: Option<u64>,
+    /// IMU samples not good (in-process): missing, bad, steps flown on a
+    /// held sample, silences past 10 ms (the image logs its own).
+    pub imu: Option<[u32; 4]>,
     /// The image's log (QEMU).
     pub firmware_log: Vec<String>,
     /// The plant's final position, Crazyflie frame, m.
@@ -365,7 +370,9 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
     let mut plant = Plant::new(pc, &fc_core::hover_quat_state(&Vector3::zeros(), 0.0));
     plant.set_rotor_speeds(nalgebra::Vector4::zeros());
     plant.contact_ground(0.0);
-    let mut sensors = Sensors::new(SensorConfig::new(FixProfile::Mocap, cfg.seed), IMU_PERIOD_S)?;
+    let mut sensor_cfg = SensorConfig::new(FixProfile::Mocap, cfg.seed);
+    sensor_cfg.faults.imu_dead = cfg.imu_dead;
+    let mut sensors = Sensors::new(sensor_cfg, IMU_PERIOD_S)?;
     let u1_max = 4.0 * cfg.vehicle.kf_ns2 * cfg.vehicle.omega_max_radps.powi(2);
     let start = Instant::now();
     let mut step: u64 = 0;
@@ -426,6 +433,10 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
             target: "in-process",
             packets: Some(vehicle.counters().into()),
             sent: Some(out.sent),
+            imu: Some({
+                let c = vehicle.imu_counters();
+                [c.missing, c.bad, c.held, c.timeouts]
+            }),
             firmware_log: Vec::new(),
             final_position_m,
         },
@@ -438,6 +449,7 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
                 target: "qemu",
                 packets: None,
                 sent: None,
+                imu: None,
                 firmware_log: qemu.finish()?,
                 final_position_m,
             }

@@ -138,6 +138,10 @@ struct CrtpArgs {
     /// With `--target qemu` or `qemu-crazyflie`: how long the image waits for the bridge to connect, s.
     #[arg(long, default_value_t = 30.0, value_name = "S")]
     bridge_wait: f64,
+    /// Fault: every IMU sample in START,LENGTH (s of the plant's time) is NaN; the vehicle flies
+    /// the last good one for 10 ms, then descends (its failsafe).
+    #[arg(long, value_name = "START,LENGTH", value_parser = parse_window)]
+    imu_dead: Option<(f64, f64)>,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -757,6 +761,7 @@ fn sensors_for(a: &FlyArgs, cfg: &FlightConfig) -> Result<Option<SensorConfig>> 
         outlier_at_s: a.fix_outlier_at,
         imu_nan_at_s: a.imu_nan_at,
         imu_stuck: a.imu_stuck,
+        imu_dead: None,
         accel_clip_at_s: a.accel_clip_at,
     };
     for (flag, v) in [
@@ -1115,6 +1120,7 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
         truth_to: a.truth_to,
         duration_s: a.duration,
         seed: a.seed,
+        imu_dead: a.imu_dead,
         target: match a.target.as_str() {
             "qemu" | "qemu-crazyflie" => sil_host::crtp::CrtpTarget::Qemu {
                 syslink: a.syslink.clone(),

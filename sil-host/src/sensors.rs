@@ -181,6 +181,10 @@ pub struct Faults {
     pub imu_nan_at_s: Option<f64>,
     /// The IMU repeats one sample over `[start, start + length)`.
     pub imu_stuck: Option<(f64, f64)>,
+    /// Every IMU sample in `[start, start + length)` is NaN: a part that
+    /// answers garbage, as long as it lasts.
+    #[serde(default)]
+    pub imu_dead: Option<(f64, f64)>,
     /// The first IMU sample at or after this time sees a 30 g shock on
     /// body z (it clips at the range).
     pub accel_clip_at_s: Option<f64>,
@@ -355,6 +359,10 @@ impl Sensors {
         if f.imu_nan_at_s.is_some_and(|at| t >= at) && !self.nan_done {
             self.nan_done = true;
             s.gyro_frd_radps[0] = f32::NAN;
+        }
+        if f.imu_dead.is_some_and(|(start, len)| t >= start && t < start + len) {
+            s.gyro_frd_radps = Vector3::repeat(f32::NAN);
+            s.accel_frd_mps2 = Vector3::repeat(f32::NAN);
         }
         if let (Some((start, len)), Some((prev, _))) = (f.imu_stuck, self.prev) {
             if t >= start && t < start + len {
