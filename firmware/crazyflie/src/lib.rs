@@ -26,6 +26,7 @@
 pub mod bmi088;
 pub mod bmp388;
 mod error;
+pub mod i2c;
 pub mod leds;
 pub mod motors;
 pub mod pins;
