@@ -20,6 +20,7 @@
 //! z change sign.
 
 use crate::error::{FreezeWatch, SensorError};
+use crate::i2c::{Burst, I2cError, Progress, Regs};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
 
@@ -257,6 +258,111 @@ pub fn sample_from_raw(raw: &[u8; 12]) -> ImuSample {
     }
 }
 
+/// The 1 kHz sample on the I2C interrupts: at the gyroscope's data-ready
+/// ([`SampleReader::data_ready`]) a [`Burst`] reads its six bytes, then the
+/// accelerometer's six; the event and error interrupts advance it
+/// ([`SampleReader::on_event`], [`SampleReader::on_error`]) and the last
+/// one gives the sample, in body FRD, or why there is none (the bus's
+/// error; a frozen part, as [`Bmi088::read`] finds it). A sample still on
+/// the bus at the next data-ready is abandoned and reported as timed out:
+/// the bound of every read is one sample period.
+pub struct SampleReader {
+    burst: Burst,
+    raw: [u8; 12],
+    /// Reading the accelerometer's half.
+    second: bool,
+    freeze: FreezeWatch<12>,
+}
+
+impl Default for SampleReader {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// A failed burst as the driver's error, naming the half it was reading.
+fn burst_error(second: bool, e: I2cError) -> SensorError {
+    let device = if second { ACC } else { GYRO };
+    match e {
+        I2cError::Timeout(_) => SensorError::Timeout { device, polls: 0 },
+        e => SensorError::bus(device, e),
+    }
+}
+
+impl SampleReader {
+    /// Idle.
+    pub const fn new() -> Self {
+        Self {
+            burst: Burst::new(),
+            raw: [0; 12],
+            second: false,
+            freeze: FreezeWatch::new(FROZEN_REPEATS),
+        }
+    }
+
+    /// The gyroscope's data-ready: starts the sample's reads. `Err` if the
+    /// last sample was still on the bus (abandoned: that sample is missing)
+    /// or the bus refused to start.
+    pub fn data_ready<R: Regs>(&mut self, r: &R) -> Result<(), SensorError> {
+        let late = self.burst.busy();
+        if late {
+            self.burst.abort(r);
+        }
+        self.second = false;
+        let started = self
+            .burst
+            .start(r, GYRO_ADDR, reg::GYRO_X_LSB, 6)
+            .map_err(|e| burst_error(false, e));
+        if late {
+            return Err(SensorError::Timeout {
+                device: "BMI088 (sample still on the bus at the next data-ready)",
+                polls: 0,
+            });
+        }
+        started
+    }
+
+    /// A sample under way.
+    pub fn busy(&self) -> bool {
+        self.burst.busy()
+    }
+
+    fn advance<R: Regs>(&mut self, r: &R, p: Progress) -> Option<Result<ImuSample, SensorError>> {
+        match p {
+            Progress::Pending => None,
+            Progress::Failed(e) => Some(Err(burst_error(self.second, e))),
+            Progress::Done if !self.second => {
+                self.raw[..6].copy_from_slice(self.burst.data());
+                self.second = true;
+                match self.burst.start(r, ACCEL_ADDR, reg::ACC_X_LSB, 6) {
+                    Ok(()) => None,
+                    Err(e) => Some(Err(burst_error(true, e))),
+                }
+            }
+            Progress::Done => {
+                self.raw[6..].copy_from_slice(self.burst.data());
+                Some(
+                    self.freeze
+                        .check("BMI088", &self.raw)
+                        .map(|()| sample_from_raw(&self.raw)),
+                )
+            }
+        }
+    }
+
+    /// The I2C event interrupt: `Some` once the sample is read (or failed).
+    pub fn on_event<R: Regs>(&mut self, r: &R) -> Option<Result<ImuSample, SensorError>> {
+        let p = self.burst.on_event(r);
+        self.advance(r, p)
+    }
+
+    /// The I2C error interrupt: `Some(Err)` if it ended the sample.
+    pub fn on_error<R: Regs>(&mut self, r: &R) -> Option<Result<ImuSample, SensorError>> {
+        let p = self.burst.on_error(r);
+        self.advance(r, p)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -449,5 +555,52 @@ mod tests {
         // One changed bit and it is live again.
         assert!(imu.read().is_ok());
         i2c.done();
+    }
+
+    /// The interrupt-driven sample over the modelled peripheral: the same
+    /// sample as the blocking read; a part that stops answering is an
+    /// error naming it; a sample still on the bus at the next data-ready
+    /// is abandoned and the next one read.
+    #[test]
+    fn the_interrupt_driven_sample_reads_both_halves_and_bounds_itself() {
+        use crate::i2c_model::{part, Bus};
+        let mut gyro = part(0x69, 0x0F);
+        let mut acc = part(0x18, 0x1E);
+        gyro.regs[0x02..0x08].copy_from_slice(&[100, 0, 0, 0, 0, 0]);
+        acc.regs[0x12..0x18].copy_from_slice(&[0, 0, 0, 0, 0x55, 0x05]);
+        let bus = Bus::new(vec![gyro, acc]);
+        let _m = crate::i2c::I2cMaster::new(&bus);
+        let mut rd = SampleReader::new();
+        let sample = |rd: &mut SampleReader| {
+            rd.data_ready(&&bus).unwrap();
+            for _ in 0..100 {
+                let out = if bus.error_pending() {
+                    rd.on_error(&&bus)
+                } else {
+                    rd.on_event(&&bus)
+                };
+                if let Some(r) = out {
+                    return r;
+                }
+            }
+            panic!("no sample")
+        };
+        let want = sample_from_raw(&[100, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x55, 0x05]);
+        assert_eq!(sample(&mut rd), Ok(want));
+        // The accelerometer gone: the gyroscope's half read, then a NACK.
+        bus.0.borrow_mut().parts.truncate(1);
+        assert_eq!(
+            sample(&mut rd),
+            Err(SensorError::Bus {
+                device: "BMI088 accelerometer",
+                kind: ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address)
+            })
+        );
+        // A data-ready while a sample is on the bus: that one is missing.
+        rd.data_ready(&&bus).unwrap();
+        rd.on_event(&&bus);
+        assert!(rd.busy());
+        assert!(matches!(rd.data_ready(&&bus), Err(SensorError::Timeout { .. })));
+        assert!(rd.busy(), "the next sample started");
     }
 }

@@ -127,6 +127,39 @@ pub trait Regs {
     fn set_timing(&self, ccr: u32, trise: u32);
 }
 
+impl<T: Regs + ?Sized> Regs for &T {
+    fn sr1(&self) -> u32 {
+        (**self).sr1()
+    }
+    fn sr2(&self) -> u32 {
+        (**self).sr2()
+    }
+    fn cr1(&self) -> u32 {
+        (**self).cr1()
+    }
+    fn set_cr1(&self, v: u32) {
+        (**self).set_cr1(v)
+    }
+    fn cr2(&self) -> u32 {
+        (**self).cr2()
+    }
+    fn set_cr2(&self, v: u32) {
+        (**self).set_cr2(v)
+    }
+    fn clear_errors(&self, mask: u32) {
+        (**self).clear_errors(mask)
+    }
+    fn dr(&self) -> u8 {
+        (**self).dr()
+    }
+    fn set_dr(&self, b: u8) {
+        (**self).set_dr(b)
+    }
+    fn set_timing(&self, ccr: u32, trise: u32) {
+        (**self).set_timing(ccr, trise)
+    }
+}
+
 // The registers are 16 bits wide (the PAC's `u16`); the bits above are 0.
 impl Regs for stm32f4::stm32f405::i2c1::RegisterBlock {
     fn sr1(&self) -> u32 {

@@ -27,9 +27,12 @@ pub mod bmi088;
 pub mod bmp388;
 mod error;
 pub mod i2c;
+#[cfg(test)]
+mod i2c_model;
 pub mod leds;
 pub mod motors;
 pub mod pins;
+pub mod sensor_bus;
 pub mod supervisor;
 pub mod watchdog;
 

@@ -20,11 +20,11 @@
 //! (`fc_stm32f405::timing`): for every step, data-ready → estimate and
 //! data-ready → outputs driven, against one 1 kHz period.
 
-use fc_stm32f405::crtp_image::{Outputs, Watchdog};
+use fc_stm32f405::crtp_image::{ImuBus, Outputs, Watchdog};
 
 #[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
 mod app {
-    use super::{Outputs, Watchdog};
+    use super::{ImuBus, Outputs, Watchdog};
     use crate::board;
     use fc_core::control::AnyController;
     use fc_core::estimate::{Fix, ImuSample};
@@ -52,8 +52,13 @@ mod app {
     /// Work for the controller's task, in the order the simulator sent it.
     pub enum Task {
         /// A sample's step: its controller half, the simulator's sequence
-        /// number, and its data-ready time (SysTick ticks).
-        Step { step: ImuStep, seq: u32, entry: u64 },
+        /// number (`None`: the board's own sample, not answered), and its
+        /// data-ready time (SysTick ticks).
+        Step {
+            step: ImuStep,
+            seq: Option<u32>,
+            entry: u64,
+        },
         /// A design ([`CrtpCore::take_work`]).
         Work(ControllerWork),
     }
@@ -68,6 +73,8 @@ mod app {
         timing: Timing,
         /// What the simulator's link did.
         sim: SimCounters,
+        /// The board's own IMU (none in QEMU).
+        imu: crate::ImuBus,
     }
 
     #[local]
@@ -106,6 +113,9 @@ mod app {
             board::fail("boot controller design failed");
         }
         let (v, ctrl) = vehicle.split();
+        // The board's sensors, started (QEMU's: the simulator's).
+        let (imu, sensors) = crate::imu_bus();
+        v.set_sensors(sensors);
         let mut radio = Usart::init(Port::Usart6, PCLK2_HZ, SYSLINK_BAUD);
         let mut syslink: Syslink<DOWNLINK> = Syslink::new();
         if syslink.boot(&mut radio).is_err() {
@@ -123,6 +133,7 @@ mod app {
                 sim_tx,
                 timing: Timing::new(fc_stm32f405::timing::DEADLINE_TICKS),
                 sim: SimCounters::default(),
+                imu,
             },
             Local {
                 ctrl,
@@ -163,7 +174,7 @@ mod app {
     /// The simulator's frames: a parameter write (answered, or its design
     /// handed to the controller), a fix (kept for the next sample), a
     /// sample (data-ready: the estimator's step, then the controller's).
-    #[task(binds = USART1, priority = 3, shared = [v, timing, sim], local = [decoder, fixes, tasks_in, answers_in, sample_clock])]
+    #[task(binds = USART1, priority = 3, shared = [v, timing, sim, imu], local = [decoder, fixes, tasks_in, answers_in, sample_clock])]
     fn data_ready(cx: data_ready::Context) {
         usart_isr(Port::Usart1);
         let data_ready::LocalResources {
@@ -174,7 +185,7 @@ mod app {
             sample_clock: clock,
             ..
         } = cx.local;
-        let (mut v, mut timing, mut sim) = (cx.shared.v, cx.shared.timing, cx.shared.sim);
+        let (mut v, mut timing, mut sim, mut imu) = (cx.shared.v, cx.shared.timing, cx.shared.sim, cx.shared.imu);
         let mut buf = [0u8; 64];
         loop {
             let n = read_queued(Port::Usart1, &mut buf);
@@ -215,28 +226,97 @@ mod app {
                         }
                     }
                     ToFc::Imu { seq, t_us, gyro, accel } => {
-                        // Data-ready: the sample is whole (on a board, the
-                        // gyro's line; here, the `Imu` frame's last byte).
+                        // Data-ready: the sample is whole (here, the `Imu`
+                        // frame's last byte).
                         let entry = ticks_now();
-                        let imu = ImuSample {
+                        let s = ImuSample {
                             gyro_frd_radps: Vector3::from(gyro),
                             accel_frd_mps2: Vector3::from(accel),
                         };
-                        let step = v.lock(|v| v.imu_begin(t_us, Some(&imu), fixes, clock));
-                        fixes.clear();
-                        let done = ticks_now();
-                        crate::WATCHDOG.imu_step();
-                        timing.lock(|t| t.estimated(entry, done));
-                        if tasks_in.enqueue(Task::Step { step, seq, entry }).is_err() {
-                            timing.lock(|t| t.job_dropped());
-                        }
-                        rtic::pend(Interrupt::CAN2_RX0);
+                        let mut step = Stepping {
+                            v: &mut v,
+                            timing: &mut timing,
+                            tasks_in,
+                            fixes,
+                            clock,
+                        };
+                        step.sample(t_us, Some(&s), Some(seq), entry);
                     }
                     _ => sim.lock(|c| c.ignored = c.ignored.wrapping_add(1)),
                 }
             }
         }
+        // The board's own sample, read on its bus's interrupts (a board's
+        // data-ready line, its time taken there).
+        while let Some((entry, s)) = imu.lock(|b| b.take()) {
+            let mut step = Stepping {
+                v: &mut v,
+                timing: &mut timing,
+                tasks_in,
+                fixes,
+                clock,
+            };
+            step.sample(board::us_of(entry), s.as_ref(), None, entry);
+        }
         rtic::pend(Interrupt::CAN2_RX1);
+    }
+
+    /// The sample task's step, whichever source the sample came from.
+    struct Stepping<'a, V, T> {
+        v: &'a mut V,
+        timing: &'a mut T,
+        tasks_in: &'a mut Producer<'static, Task>,
+        fixes: &'a mut heapless::Vec<Fix, FIXES>,
+        clock: &'a SysTickClock,
+    }
+
+    impl<V, T> Stepping<'_, V, T>
+    where
+        V: rtic::Mutex<T = &'static mut CrtpCore>,
+        T: rtic::Mutex<T = Timing>,
+    {
+        /// The estimator's step of a sample taken at `t_us` (`None`:
+        /// missing) whose data-ready came at `entry`, then the controller's
+        /// queued (`seq`: the simulator's, answered).
+        fn sample(&mut self, t_us: u64, s: Option<&ImuSample>, seq: Option<u32>, entry: u64) {
+            let (fixes, clock) = (&mut *self.fixes, self.clock);
+            let step = self.v.lock(|v| v.imu_begin(t_us, s, fixes, clock));
+            self.fixes.clear();
+            let done = ticks_now();
+            crate::WATCHDOG.imu_step();
+            self.timing.lock(|t| t.estimated(entry, done));
+            if self.tasks_in.enqueue(Task::Step { step, seq, entry }).is_err() {
+                self.timing.lock(|t| t.job_dropped());
+            }
+            rtic::pend(Interrupt::CAN2_RX0);
+        }
+    }
+
+    /// The board's data-ready line (the Crazyflie's gyroscope INT3 on PC14,
+    /// EXTI14): the sample's reads start. Never fires in QEMU.
+    #[task(binds = EXTI15_10, priority = 3, shared = [imu])]
+    fn gyro_ready(mut cx: gyro_ready::Context) {
+        let entry = ticks_now();
+        if cx.shared.imu.lock(|b| b.data_ready(entry)) {
+            rtic::pend(Interrupt::USART1);
+        }
+    }
+
+    /// The board's IMU bus (I2C3): each event advances the sample's reads;
+    /// the last pends `data_ready`.
+    #[task(binds = I2C3_EV, priority = 3, shared = [imu])]
+    fn imu_bus_event(mut cx: imu_bus_event::Context) {
+        if cx.shared.imu.lock(|b| b.bus_interrupt(false)) {
+            rtic::pend(Interrupt::USART1);
+        }
+    }
+
+    /// The board's IMU bus's errors (NACK, bus error, arbitration lost).
+    #[task(binds = I2C3_ER, priority = 3, shared = [imu])]
+    fn imu_bus_error(mut cx: imu_bus_error::Context) {
+        if cx.shared.imu.lock(|b| b.bus_interrupt(true)) {
+            rtic::pend(Interrupt::USART1);
+        }
     }
 
     /// The controller: the link's designs first, then the sample task's
@@ -283,12 +363,18 @@ mod app {
                     // The step is flown when its outputs are driven.
                     let done = ticks_now();
                     crate::WATCHDOG.controller_step();
-                    let answer = FromFc::Actuator {
-                        seq,
-                        u: [u[0], u[1], u[2], u[3]],
-                        failsafe: false,
+                    // The simulator's sample is answered; the board's own is not.
+                    let sent = match seq {
+                        Some(seq) => {
+                            let answer = FromFc::Actuator {
+                                seq,
+                                u: [u[0], u[1], u[2], u[3]],
+                                failsafe: false,
+                            };
+                            sim_tx.lock(|tx| send(tx, &answer))
+                        }
+                        None => Ok(()),
                     };
-                    let sent = sim_tx.lock(|tx| send(tx, &answer));
                     // The log blocks due, sampled at this step.
                     v.lock(|v| v.sample_logs());
                     timing.lock(|t| {

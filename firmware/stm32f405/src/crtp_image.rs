@@ -17,6 +17,7 @@
 //! Logs through defmt: boot, the radio's `RADIO_READY` echo, arming, and
 //! link errors on either port as they happen.
 
+use fc_core::estimate::ImuSample;
 use fc_crtp::supervisor::ImuCounters;
 use fc_crtp::syslink::SyslinkCounters;
 use fc_crtp::vehicle::CrtpCore;
@@ -55,6 +56,39 @@ pub trait Watchdog: Sync {
     /// The link's task (the lowest priority), after each batch of steps:
     /// starts the watchdog once both tasks ran, feeds it when both ran again.
     fn service(&self);
+}
+
+/// A board's own IMU, read on its bus's interrupts (the Crazyflie 2.1's
+/// BMI088 on I2C3, its data-ready on EXTI14). Its samples go through the
+/// same task as the simulator's: `data_ready`, which each finished sample
+/// pends. A board without one (QEMU models no I2C and no GPIO; the plain
+/// STM32F405 flies the simulator's) is [`SimulatorOnly`].
+pub trait ImuBus: Send {
+    /// The data-ready line fired at `entry` (SysTick ticks): starts the
+    /// sample's reads. `true` when a sample is ready for `data_ready` (the
+    /// last one, abandoned: missing).
+    fn data_ready(&mut self, entry: u64) -> bool;
+    /// The bus's event (`error` false) or error interrupt: `true` when a
+    /// sample is ready.
+    fn bus_interrupt(&mut self, error: bool) -> bool;
+    /// The sample ready, if any: its data-ready time (SysTick ticks) and the
+    /// sample in body FRD, or `None` (the read failed; counted missing).
+    fn take(&mut self) -> Option<(u64, Option<ImuSample>)>;
+}
+
+/// No IMU of the board's own: every sample is the simulator's, on USART1.
+pub struct SimulatorOnly;
+
+impl ImuBus for SimulatorOnly {
+    fn data_ready(&mut self, _: u64) -> bool {
+        false
+    }
+    fn bus_interrupt(&mut self, _: bool) -> bool {
+        false
+    }
+    fn take(&mut self) -> Option<(u64, Option<ImuSample>)> {
+        None
+    }
 }
 
 /// What the simulator's link did.

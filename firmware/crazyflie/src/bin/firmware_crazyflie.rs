@@ -37,7 +37,7 @@ mod board;
 mod crtp_app;
 
 #[cfg(target_os = "none")]
-pub use target::{vehicle, BoardOutputs, WATCHDOG};
+pub use target::{imu_bus, vehicle, BoardOutputs, ImuBus, WATCHDOG};
 
 #[cfg(target_os = "none")]
 mod target {
@@ -237,6 +237,20 @@ mod target {
         }
     }
 
+    /// In QEMU (which models no I2C and no GPIO) the IMU is the
+    /// simulator's, on USART1, and taken as up.
+    #[cfg(feature = "qemu")]
+    pub type ImuBus = fc_stm32f405::crtp_image::SimulatorOnly;
+
+    /// The simulator's sensors (QEMU).
+    #[cfg(feature = "qemu")]
+    pub fn imu_bus() -> (ImuBus, Result<(), fc_crtp::supervisor::SensorDown>) {
+        (fc_stm32f405::crtp_image::SimulatorOnly, Ok(()))
+    }
+
+    #[cfg(not(feature = "qemu"))]
+    pub use crate::sensors::{imu_bus, ImuBus};
+
     /// The vehicle, in static RAM (see `firmware-crtp`), with the
     /// Crazyflie's motor order (`MOT_FRAME` 4) and hub distance; the
     /// simulator (or a client) writes the vehicle's parameters.
@@ -248,6 +262,130 @@ mod target {
             ..Settings::os4()
         };
         cortex_m::singleton!(: CrtpVehicle = CrtpVehicle::unstarted(settings))
+    }
+}
+
+/// The Crazyflie's own sensors on the board build (QEMU models no I2C and
+/// no GPIO: there the simulator's samples stand in, on USART1): the BMI088
+/// and BMP388 started on I2C3 with the blocking master (every wait
+/// bounded), then the gyroscope's data-ready on EXTI14 starting each
+/// sample's reads on I2C3's interrupts.
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
+mod sensors {
+    use fc_core::estimate::ImuSample;
+    use fc_crazyflie::bmi088::{Bmi088, SampleReader};
+    use fc_crazyflie::bmp388::Bmp388;
+    use fc_crazyflie::i2c::I2cMaster;
+    use fc_crazyflie::sensor_bus;
+    use fc_crazyflie::supervisor::sensors_up;
+    use fc_crazyflie::SensorError;
+    use fc_crtp::supervisor::SensorDown;
+    use nalgebra::Vector3;
+    use stm32f4::stm32f405::{exti, i2c1};
+
+    /// A busy-wait delay for the sensors' start-up (interrupts are off in
+    /// `init`; SysTick is the clock's).
+    struct Spin;
+
+    impl embedded_hal::delay::DelayNs for Spin {
+        fn delay_ns(&mut self, ns: u32) {
+            // 168 cycles per µs; at least one µs.
+            cortex_m::asm::delay((ns / 1000 + 1).saturating_mul(168));
+        }
+    }
+
+    /// The BMI088 on I2C3, its samples read on the bus's interrupts.
+    pub struct ImuBus {
+        i2c: &'static i2c1::RegisterBlock,
+        exti: &'static exti::RegisterBlock,
+        reader: SampleReader,
+        entry: u64,
+        ready: Option<(u64, Option<ImuSample>)>,
+        errors: u32,
+    }
+
+    // SAFETY: I2C3 and EXTI14 are reached only through this value, which
+    // the priority-3 tasks alone share (an RTIC resource).
+    unsafe impl Send for ImuBus {}
+
+    impl ImuBus {
+        fn done(&mut self, r: Result<fc_crazyflie::bmi088::ImuSample, SensorError>) -> bool {
+            let s = match r {
+                Ok(s) => Some(ImuSample {
+                    gyro_frd_radps: Vector3::from(s.gyro_frd_radps),
+                    accel_frd_mps2: Vector3::from(s.accel_frd_mps2),
+                }),
+                Err(e) => {
+                    // The first and every 1000th: the vehicle counts them all.
+                    if self.errors.is_multiple_of(1000) {
+                        defmt::warn!(
+                            "IMU read: {} ({=u32} so far)",
+                            defmt::Display2Format(&e),
+                            self.errors + 1
+                        );
+                    }
+                    self.errors = self.errors.wrapping_add(1);
+                    None
+                }
+            };
+            self.ready = Some((self.entry, s));
+            true
+        }
+    }
+
+    impl fc_stm32f405::crtp_image::ImuBus for ImuBus {
+        fn data_ready(&mut self, entry: u64) -> bool {
+            sensor_bus::clear_data_ready(self.exti);
+            self.entry = entry;
+            match self.reader.data_ready(&self.i2c) {
+                Ok(()) => false,
+                Err(e) => self.done(Err(e)),
+            }
+        }
+
+        fn bus_interrupt(&mut self, error: bool) -> bool {
+            let r = if error {
+                self.reader.on_error(&self.i2c)
+            } else {
+                self.reader.on_event(&self.i2c)
+            };
+            match r {
+                Some(r) => self.done(r),
+                None => false,
+            }
+        }
+
+        fn take(&mut self) -> Option<(u64, Option<ImuSample>)> {
+            self.ready.take()
+        }
+    }
+
+    /// Starts both parts (their failures logged in full and reported to the
+    /// vehicle's supervisor, which refuses arming naming the part), then
+    /// the data-ready line.
+    pub fn imu_bus() -> (ImuBus, Result<(), SensorDown>) {
+        // SAFETY: start-up, once; nothing else touches I2C3, EXTI14 or
+        // these pins, and nothing runs concurrently in `init`.
+        let (i2c, exti) = unsafe { sensor_bus::start_on_chip() };
+        let mut imu = Bmi088::new(I2cMaster::new(i2c));
+        let imu_up = imu.init(&mut Spin);
+        let mut baro = Bmp388::new(imu.release());
+        let baro_up = baro.init(&mut Spin);
+        for (part, r) in [("BMI088", imu_up), ("BMP388", baro_up)] {
+            match r {
+                Ok(()) => defmt::info!("{=str} started on I2C3", part),
+                Err(e) => defmt::error!("{=str} did not start: {}", part, defmt::Display2Format(&e)),
+            }
+        }
+        let bus = ImuBus {
+            i2c,
+            exti,
+            reader: SampleReader::new(),
+            entry: 0,
+            ready: None,
+            errors: 0,
+        };
+        (bus, sensors_up(imu_up, baro_up))
     }
 }
 

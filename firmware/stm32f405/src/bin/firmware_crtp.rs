@@ -52,6 +52,16 @@ impl fc_stm32f405::crtp_image::Watchdog for NoWatchdog {
 #[cfg(target_os = "none")]
 static WATCHDOG: NoWatchdog = NoWatchdog;
 
+/// The board's own IMU: none; the simulator's samples come on USART1.
+#[cfg(target_os = "none")]
+type ImuBus = fc_stm32f405::crtp_image::SimulatorOnly;
+
+/// No sensors to start: the simulator's are taken as up.
+#[cfg(target_os = "none")]
+fn imu_bus() -> (ImuBus, Result<(), fc_crtp::supervisor::SensorDown>) {
+    (fc_stm32f405::crtp_image::SimulatorOnly, Ok(()))
+}
+
 /// The vehicle, in static RAM (its flight loop and controller are
 /// ≈ 8 KiB), built once and unstarted: the controller is designed in
 /// place by `start`, after this frame is gone. It boots with the OS4's
