@@ -9,6 +9,10 @@
 //! - [`bmi088`]: the IMU on I2C3 (accelerometer 0x18, gyroscope 0x69),
 //!   configured as the official firmware configures it, in body FRD;
 //! - [`bmp388`]: the barometer at 0x77 with Bosch's compensation;
+//! - [`i2c`]: the STM32F4's I2C master (RM0090 §27), blocking with bounded
+//!   waits for start-up, interrupt-driven for the 1 kHz sample;
+//! - [`sensor_bus`]: I2C3's pins and the gyroscope's data-ready line
+//!   (PC14, EXTI14) on the chip;
 //! - [`motors`]: the brushed motors on TIM2 and TIM4 (8-bit PWM at 328 kHz),
 //!   the Crazyflie 2.1's thrust curve and battery compensation;
 //! - [`leds`]: what the five LEDs show for each state;

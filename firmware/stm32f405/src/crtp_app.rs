@@ -8,7 +8,8 @@
 //! | priority | task | interrupt | work |
 //! |---|---|---|---|
 //! | 4 | `radio_bytes` | USART6 receive | the nRF51's bytes into their queue (1 Mbaud: a byte every 10 µs), the link pended |
-//! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame stands in for the gyro's data-ready line) | decodes the simulator's frames; a sample steps the estimator ([`CrtpCore::imu_begin`]) and goes to the controller |
+//! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame), or pended by the board's IMU | decodes the simulator's frames, takes the board's sample; a sample steps the estimator ([`CrtpCore::imu_begin`]) and goes to the controller |
+//! | 3 | `gyro_ready`, `imu_bus_event`, `imu_bus_error` | EXTI15_10, I2C3_EV, I2C3_ER | the board's own IMU ([`ImuBus`]: the Crazyflie's BMI088; none in QEMU): data-ready starts the reads, the bus's interrupts advance them |
 //! | 2 | `controller` | CAN2_RX0 (pended) | owns the controller: flies each step ([`fly_step`]), drives the outputs, answers the simulator; runs the designs a packet or the simulator asked for ([`run_work`]) |
 //! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle, answers and log blocks queued for the radio; the simulator's queued answers; the log |
 //!

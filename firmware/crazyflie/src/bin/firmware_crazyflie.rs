@@ -16,10 +16,12 @@
 //! failsafe (`fc_crazyflie::leds`; QEMU models no GPIO). The IWDG starts
 //! once the IMU task and the controller have both run and is fed only
 //! while both keep running (`fc_crazyflie::watchdog`; QEMU models no IWDG).
-//! Not yet wired: the BMI088 and BMP388 on I2C3 (the drivers are in this
-//! crate's library; the simulator's `Imu` frame on USART1 stands in for the
-//! gyro's data-ready line) and the supervisor's checks. In QEMU the
-//! `boot-shim` binary stands in for the bootloader.
+//! Its IMU: in QEMU (the default `qemu` feature; QEMU models no I2C or
+//! GPIO) the simulator's `Imu` frame on USART1; on the board build (`cargo
+//! cf-build`) the BMI088 on I2C3, started at boot, each sample read on
+//! I2C3's interrupts from the gyroscope's data-ready on EXTI14 (`sensors`
+//! below; never run here). The BMP388 is started at boot, not yet read in
+//! flight. In QEMU the `boot-shim` binary stands in for the bootloader.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
