@@ -54,6 +54,28 @@ assert 0x20000000 < sp < 0x20020000 and sp % 8 == 0, hex(sp)
 assert 0x08004000 < reset < 0x08004000 + len(b) and reset & 1, hex(reset)
 print(f"firmware-crazyflie.bin: {len(b)} B for 0x08004000, SP {sp:#x}, reset {reset:#x}")
 PY
+# The image as flashed (its own sensors on I2C3, defmt over RTT) within its
+# budgets: flash <= 384 KiB of the 1008 KiB above the bootloader, static RAM
+# <= 28 KiB (the QEMU build's are tests/tests/image.rs's).
+python3 - target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie <<'PY'
+import subprocess, sys
+out = subprocess.run(["size", "-A", sys.argv[1]], capture_output=True, text=True, check=True).stdout
+flash = ram = 0
+for line in out.splitlines():
+    f = line.split()
+    if len(f) != 3 or not f[1].isdigit() or not f[2].isdigit():
+        continue
+    name, size, addr = f[0], int(f[1]), int(f[2])
+    if 0x08000000 <= addr < 0x08100000 and name not in (".uninit",):
+        flash += size
+    if name == ".data":
+        flash += size
+    if 0x20000000 <= addr < 0x20020000:
+        ram += size
+budget = (384 * 1024, 28 * 1024)
+print(f"firmware-crazyflie as flashed: flash {flash} B of {budget[0]}, static RAM {ram} B of {budget[1]}")
+assert flash <= budget[0] and ram <= budget[1], "over budget"
+PY
 echo "== image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
 size target/thumbv7em-none-eabihf/release/firmware target/thumbv7em-none-eabihf/release/firmware-crtp target/thumbv7em-none-eabihf/release/firmware-crazyflie target/hardware/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie  # binutils (with gcc) reads the ARM ELF
 echo "== API docs (warnings denied; the doctests run with the tests below)"
