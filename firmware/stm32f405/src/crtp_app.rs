@@ -187,6 +187,13 @@ mod app {
             ..
         } = cx.local;
         let (mut v, mut timing, mut sim, mut imu) = (cx.shared.v, cx.shared.timing, cx.shared.sim, cx.shared.imu);
+        let mut st = Stepping {
+            v: &mut v,
+            timing: &mut timing,
+            tasks_in,
+            fixes,
+            clock,
+        };
         let mut buf = [0u8; 64];
         loop {
             let n = read_queued(Port::Usart1, &mut buf);
@@ -204,25 +211,25 @@ mod app {
                 };
                 match m {
                     ToFc::ParamSet { index, value } => {
-                        let (mut answer, work) = v.lock(|v| match v.sim_param(index, value) {
+                        let (mut answer, work) = st.v.lock(|v| match v.sim_param(index, value) {
                             Some(a) => (Some(a), None),
                             None => (None, v.take_work()),
                         });
                         if let Some(work) = work {
-                            if tasks_in.enqueue(Task::Work(work)).is_err() {
+                            if st.tasks_in.enqueue(Task::Work(work)).is_err() {
                                 // No room for the design: refused as busy.
-                                answer = v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+                                answer = st.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
                             }
                             rtic::pend(Interrupt::CAN2_RX0);
                         }
                         if let Some(a) = answer {
                             if answers_in.enqueue(a).is_err() {
-                                timing.lock(|t| t.answers_dropped(1));
+                                st.timing.lock(|t| t.answers_dropped(1));
                             }
                         }
                     }
                     ToFc::Fix(w) => {
-                        if fixes.push(fix_from_wire(&w)).is_err() {
+                        if st.fixes.push(fix_from_wire(&w)).is_err() {
                             sim.lock(|c| c.fixes_dropped = c.fixes_dropped.wrapping_add(1));
                         }
                     }
@@ -234,14 +241,7 @@ mod app {
                             gyro_frd_radps: Vector3::from(gyro),
                             accel_frd_mps2: Vector3::from(accel),
                         };
-                        let mut step = Stepping {
-                            v: &mut v,
-                            timing: &mut timing,
-                            tasks_in,
-                            fixes,
-                            clock,
-                        };
-                        step.sample(t_us, Some(&s), Some(seq), entry);
+                        st.sample(t_us, Some(&s), Some(seq), entry);
                     }
                     _ => sim.lock(|c| c.ignored = c.ignored.wrapping_add(1)),
                 }
@@ -250,14 +250,7 @@ mod app {
         // The board's own sample, read on its bus's interrupts (a board's
         // data-ready line, its time taken there).
         while let Some((entry, s)) = imu.lock(|b| b.take()) {
-            let mut step = Stepping {
-                v: &mut v,
-                timing: &mut timing,
-                tasks_in,
-                fixes,
-                clock,
-            };
-            step.sample(board::us_of(entry), s.as_ref(), None, entry);
+            st.sample(board::us_of(entry), s.as_ref(), None, entry);
         }
         rtic::pend(Interrupt::CAN2_RX1);
     }

@@ -301,8 +301,10 @@ mod sensors {
         i2c: &'static i2c1::RegisterBlock,
         exti: &'static exti::RegisterBlock,
         reader: SampleReader,
+        /// The data-ready time of the sample on the bus.
         entry: u64,
-        ready: Option<(u64, Option<ImuSample>)>,
+        /// Samples done, for `data_ready` (an abandoned one and the next).
+        ready: heapless::Deque<(u64, Option<ImuSample>), 2>,
         errors: u32,
     }
 
@@ -311,7 +313,8 @@ mod sensors {
     unsafe impl Send for ImuBus {}
 
     impl ImuBus {
-        fn done(&mut self, r: Result<fc_crazyflie::bmi088::ImuSample, SensorError>) -> bool {
+        /// The sample whose data-ready came at `at` is done (or failed).
+        fn done(&mut self, at: u64, r: Result<fc_crazyflie::bmi088::ImuSample, SensorError>) -> bool {
             let s = match r {
                 Ok(s) => Some(ImuSample {
                     gyro_frd_radps: Vector3::from(s.gyro_frd_radps),
@@ -330,7 +333,10 @@ mod sensors {
                     None
                 }
             };
-            self.ready = Some((self.entry, s));
+            if self.ready.is_full() {
+                self.ready.pop_front();
+            }
+            let _ = self.ready.push_back((at, s));
             true
         }
     }
@@ -338,10 +344,15 @@ mod sensors {
     impl fc_stm32f405::crtp_image::ImuBus for ImuBus {
         fn data_ready(&mut self, entry: u64) -> bool {
             sensor_bus::clear_data_ready(self.exti);
-            self.entry = entry;
+            let last = core::mem::replace(&mut self.entry, entry);
             match self.reader.data_ready(&self.i2c) {
                 Ok(()) => false,
-                Err(e) => self.done(Err(e)),
+                // The last sample, abandoned on the bus (this one started),
+                // or this one, refused by the bus.
+                Err(e) => {
+                    let at = if self.reader.busy() { last } else { entry };
+                    self.done(at, Err(e))
+                }
             }
         }
 
@@ -352,13 +363,13 @@ mod sensors {
                 self.reader.on_event(&self.i2c)
             };
             match r {
-                Some(r) => self.done(r),
+                Some(r) => self.done(self.entry, r),
                 None => false,
             }
         }
 
         fn take(&mut self) -> Option<(u64, Option<ImuSample>)> {
-            self.ready.take()
+            self.ready.pop_front()
         }
     }
 
@@ -384,7 +395,7 @@ mod sensors {
             exti,
             reader: SampleReader::new(),
             entry: 0,
-            ready: None,
+            ready: heapless::Deque::new(),
             errors: 0,
         };
         (bus, sensors_up(imu_up, baro_up))
