@@ -190,19 +190,26 @@ fn a_session_answers_as_a_crazyflie() {
     assert_eq!(r.payload(), &[0xFF, 0x7F, log::ENOENT]);
 }
 
+/// The high-level commander's `TAKEOFF_2` to `height_m` over `dur_s`
+/// (group 0, yaw 0, not the current yaw).
+fn takeoff(height_m: f32, dur_s: f32) -> Packet {
+    let mut d = vec![7u8, 0];
+    for x in [height_m, 0.0] {
+        d.extend_from_slice(&x.to_le_bytes());
+    }
+    d.push(0);
+    d.extend_from_slice(&dur_s.to_le_bytes());
+    pk(Port::HighLevel, 0, &d)
+}
+
 #[test]
 fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
     let mut v = at_rest(5);
     let no = ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1]));
     assert_eq!(no.payload(), &[0x81, 0, 0], "refused while aligning");
-    let mut takeoff = vec![7u8, 0];
-    for x in [0.5f32, 0.0] {
-        takeoff.extend_from_slice(&x.to_le_bytes());
-    }
-    takeoff.push(0);
-    takeoff.extend_from_slice(&2.0f32.to_le_bytes());
+    let takeoff = takeoff(0.5, 2.0);
     let mut out = Sent::default();
-    v.handle(&pk(Port::HighLevel, 0, &takeoff), &mut out).unwrap();
+    v.handle(&takeoff, &mut out).unwrap();
     assert!(!v.flying() && v.counters().refused == 1, "not armed: refused");
     rest(&mut v, 5, 3000);
     let yes = ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1]));
@@ -210,7 +217,7 @@ fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
     let bits = ask(&mut v, pk(Port::Supervisor, 0, &[0x0C]));
     let bits = u16::from_le_bytes([bits.payload()[1], bits.payload()[2]]);
     assert_eq!(bits & 0b1010, 0b1010, "armed, can fly: {bits:#x}");
-    v.handle(&pk(Port::HighLevel, 0, &takeoff), &mut out).unwrap();
+    v.handle(&takeoff, &mut out).unwrap();
     assert!(v.flying());
     // A NaN set-point is refused; the flight goes on.
     let mut nan = vec![7u8];
@@ -671,14 +678,9 @@ fn a_silent_imu_in_flight_is_held_for_10_ms_then_a_failsafe_descent() {
     v.set_battery(3.9, 0);
     assert_eq!(ask(&mut v, arm).payload(), &[0x81, 1, 1]);
     // Take off to 1 m over 2 s; fly 1 s of it.
-    let mut takeoff = vec![7u8, 0];
-    for x in [1.0f32, 0.0] {
-        takeoff.extend_from_slice(&x.to_le_bytes());
-    }
-    takeoff.push(0);
-    takeoff.extend_from_slice(&2.0f32.to_le_bytes());
+    let takeoff = takeoff(1.0, 2.0);
     let mut out = Sent::default();
-    v.handle(&pk(Port::HighLevel, 0, &takeoff), &mut out).unwrap();
+    v.handle(&takeoff, &mut out).unwrap();
     rest(&mut v, 3000, 1000);
     assert!(v.flying());
     let clock = MonotonicClock::default();
