@@ -79,6 +79,14 @@ pub trait ImuBus: Send {
 /// No IMU of the board's own: every sample is the simulator's, on USART1.
 pub struct SimulatorOnly;
 
+impl SimulatorOnly {
+    /// The bus and the sensors' start-up result: none to start, the
+    /// simulator's taken as up.
+    pub fn started() -> (Self, Result<(), fc_crtp::supervisor::SensorDown>) {
+        (SimulatorOnly, Ok(()))
+    }
+}
+
 impl ImuBus for SimulatorOnly {
     fn data_ready(&mut self, _: u64) -> bool {
         false

@@ -247,7 +247,7 @@ mod target {
     /// The simulator's sensors (QEMU).
     #[cfg(feature = "qemu")]
     pub fn imu_bus() -> (ImuBus, Result<(), fc_crtp::supervisor::SensorDown>) {
-        (fc_stm32f405::crtp_image::SimulatorOnly, Ok(()))
+        fc_stm32f405::crtp_image::SimulatorOnly::started()
     }
 
     #[cfg(not(feature = "qemu"))]
