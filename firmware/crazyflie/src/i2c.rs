@@ -86,6 +86,12 @@ pub mod sr2 {
 /// APB1 register is ≥ 12 cycles, so 30 000 polls are ≥ 2.1 ms, about 95
 /// byte times at 400 kHz.
 pub const POLLS: u32 = 30_000;
+/// Polls a [`Burst`] makes for the last transfer's STOP to be sent (CR1.STOP
+/// and SR2.BUSY clear; RM0090 §27.6.1: CR1 must not be written while STOP
+/// is set) before it starts: about one SCL period and t_BUF after the last
+/// byte's interrupt. At ≥ 12 cycles a poll, 500 polls are ≥ 36 µs; a bus
+/// still busy after them refuses the burst.
+pub const BUS_FREE_POLLS: u32 = 500;
 /// Longest [`Burst`] read, bytes.
 pub const BURST_MAX: usize = 8;
 /// PCLK1 of the clock tree (`fc-stm32f405`'s 168 MHz), Hz.
@@ -494,8 +500,17 @@ impl Burst {
         if !(3..=BURST_MAX).contains(&len) {
             return Err(I2cError::Unsupported);
         }
-        if self.busy() || r.sr2() & sr2::BUSY != 0 {
+        if self.busy() {
             return Err(I2cError::Bus);
+        }
+        // The transfer before (this burst's last one, or another's) may end
+        // with its STOP still going out.
+        let mut polls = 0;
+        while r.cr1() & cr1::STOP != 0 || r.sr2() & sr2::BUSY != 0 {
+            polls += 1;
+            if polls >= BUS_FREE_POLLS {
+                return Err(I2cError::Bus);
+            }
         }
         *self = Self {
             phase: Phase::Start,

@@ -55,6 +55,10 @@ pub(crate) struct State {
     pub(crate) busy_stuck: bool,
     /// Bytes read out of DR in this transfer.
     pub(crate) read_out: usize,
+    /// Register reads for which a STOP, once sent, still shows (CR1.STOP
+    /// and SR2.BUSY set), as on the chip for about an SCL period.
+    pub(crate) stop_lag: u32,
+    lag_left: u32,
 }
 
 pub(crate) struct Bus(pub(crate) RefCell<State>);
@@ -131,6 +135,7 @@ impl State {
             );
         }
         self.cr1 &= !cr1::STOP;
+        self.lag_left = self.stop_lag;
         self.log.push(Ev::Stop);
         self.master = false;
         self.reading = false;
@@ -168,13 +173,22 @@ impl Regs for Bus {
             }
         }
         s.sr1_read = false;
-        u32::from(s.master || s.busy_stuck) * sr2::BUSY
+        let lag = s.lag_left > 0;
+        s.lag_left = s.lag_left.saturating_sub(1);
+        u32::from(s.master || s.busy_stuck || lag) * sr2::BUSY
     }
     fn cr1(&self) -> u32 {
-        self.0.borrow().cr1
+        let mut s = self.0.borrow_mut();
+        let lag = s.lag_left > 0;
+        s.lag_left = s.lag_left.saturating_sub(1);
+        s.cr1 | u32::from(lag) * cr1::STOP
     }
     fn set_cr1(&self, v: u32) {
         let mut s = self.0.borrow_mut();
+        assert!(
+            s.lag_left == 0 || v & cr1::SWRST != 0,
+            "CR1 written while the last STOP is still set (RM0090 §27.6.1)"
+        );
         if v & cr1::SWRST != 0 {
             let parts = core::mem::take(&mut s.parts);
             let (stuck, busy_stuck, log) = (s.stuck, s.busy_stuck, core::mem::take(&mut s.log));

@@ -130,3 +130,26 @@ fn the_bmi088_driver_starts_and_reads_through_the_master() {
     assert!((s.gyro_frd_radps[0] - 100.0 * crate::bmi088::GYRO_RADPS_PER_LSB).abs() < 1e-6);
     assert!((s.accel_frd_mps2[2] + 9.8).abs() < 0.05, "{s:?}");
 }
+
+/// On the chip a STOP takes about an SCL period to go out after the last
+/// byte's interrupt, and CR1 must not be written meanwhile: a burst started
+/// right after another (the accelerometer's after the gyroscope's) waits
+/// for it, bounded, and a bus that stays busy refuses the burst.
+#[test]
+fn a_burst_right_after_another_waits_for_its_stop_and_the_wait_is_bounded() {
+    let bus = Bus::new(vec![part(0x69, 0x0F), part(0x18, 0x1E)]);
+    let _m = I2cMaster::new(&bus);
+    bus.0.borrow_mut().stop_lag = 40;
+    let mut b = Burst::new();
+    b.start(&&bus, 0x69, 0x02, 6).unwrap();
+    assert_eq!(run(&bus, &mut b).0, Progress::Done);
+    b.start(&&bus, 0x18, 0x12, 6).unwrap();
+    assert_eq!(run(&bus, &mut b).0, Progress::Done);
+    assert_eq!(b.data(), &[0x13, 0x14, 0x15, 0x16, 0x17, 0x18]);
+    // A STOP that never clears: refused after BUS_FREE_POLLS, not a hang.
+    bus.0.borrow_mut().stop_lag = u32::MAX;
+    b.start(&&bus, 0x69, 0x02, 6).unwrap();
+    run(&bus, &mut b);
+    assert_eq!(b.start(&&bus, 0x18, 0x12, 6), Err(I2cError::Bus));
+    assert!(!b.busy());
+}
