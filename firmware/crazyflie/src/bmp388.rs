@@ -5,6 +5,7 @@
 //! §9.2, "Trimming coefficients" and the compensation formulas).
 
 use crate::error::{FreezeWatch, SensorError};
+use crate::i2c::{Burst, I2cError, Progress, Regs};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
 
@@ -127,6 +128,32 @@ pub struct BaroSample {
     pub temperature_c: f32,
 }
 
+/// The compensated sample of the six `DATA` bytes (pressure then
+/// temperature, 24 bits each, LSB first); values outside the part's range
+/// are refused.
+fn convert(cal: &Calibration, b: &[u8; 6]) -> Result<BaroSample, SensorError> {
+    let raw_p = u32::from_le_bytes([b[0], b[1], b[2], 0]);
+    let raw_t = u32::from_le_bytes([b[3], b[4], b[5], 0]);
+    let (p, t) = cal.compensate(raw_p, raw_t);
+    let within = |v: f64, (lo, hi): (f32, f32)| v >= f64::from(lo) && v <= f64::from(hi);
+    if !within(t, TEMPERATURE_RANGE_C) {
+        return Err(SensorError::Implausible {
+            device: DEV,
+            quantity: "temperature (°C)",
+        });
+    }
+    if !within(p, PRESSURE_RANGE_PA) {
+        return Err(SensorError::Implausible {
+            device: DEV,
+            quantity: "pressure (Pa)",
+        });
+    }
+    Ok(BaroSample {
+        pressure_pa: p as f32,
+        temperature_c: t as f32,
+    })
+}
+
 /// The BMP388 on an I2C bus.
 pub struct Bmp388<I> {
     i2c: I,
@@ -149,6 +176,12 @@ impl<I: I2c> Bmp388<I> {
     /// Gives the bus back.
     pub fn release(self) -> I {
         self.i2c
+    }
+
+    /// The part's calibration, once [`Bmp388::init`] read it (for
+    /// [`SampleReader`]).
+    pub fn calibration(&self) -> Option<Calibration> {
+        self.cal
     }
 
     fn read(&mut self, r: u8, buf: &mut [u8]) -> Result<(), SensorError> {
@@ -213,26 +246,74 @@ impl<I: I2c> Bmp388<I> {
         let mut b = [0u8; 6];
         self.read(reg::DATA, &mut b)?;
         self.freeze.check(DEV, &b)?;
-        let raw_p = u32::from_le_bytes([b[0], b[1], b[2], 0]);
-        let raw_t = u32::from_le_bytes([b[3], b[4], b[5], 0]);
-        let (p, t) = cal.compensate(raw_p, raw_t);
-        let within = |v: f64, (lo, hi): (f32, f32)| v >= f64::from(lo) && v <= f64::from(hi);
-        if !within(t, TEMPERATURE_RANGE_C) {
-            return Err(SensorError::Implausible {
-                device: DEV,
-                quantity: "temperature (°C)",
-            });
+        convert(&cal, &b)
+    }
+}
+
+/// The barometer's sample read on the bus's interrupts (a [`Burst`] of the
+/// six `DATA` bytes), compensated with the part's calibration, with the
+/// same range and freeze checks as [`Bmp388::sample`]. The Crazyflie's
+/// sensor bus runs it after an IMU sample ([`crate::reads::Reads`]).
+pub struct SampleReader {
+    burst: Burst,
+    cal: Calibration,
+    freeze: FreezeWatch<6>,
+}
+
+fn burst_error(e: I2cError) -> SensorError {
+    match e {
+        I2cError::Timeout(_) => SensorError::Timeout { device: DEV, polls: 0 },
+        e => SensorError::bus(DEV, e),
+    }
+}
+
+impl SampleReader {
+    /// Idle, with the part's calibration ([`Bmp388::calibration`]).
+    pub const fn new(cal: Calibration) -> Self {
+        Self {
+            burst: Burst::new(),
+            cal,
+            freeze: FreezeWatch::new(FROZEN_REPEATS),
         }
-        if !within(p, PRESSURE_RANGE_PA) {
-            return Err(SensorError::Implausible {
-                device: DEV,
-                quantity: "pressure (Pa)",
-            });
+    }
+
+    /// Starts a sample's read.
+    pub fn start<R: Regs>(&mut self, r: &R) -> Result<(), SensorError> {
+        self.burst.start(r, ADDR, reg::DATA, 6).map_err(burst_error)
+    }
+
+    /// A sample under way.
+    pub fn busy(&self) -> bool {
+        self.burst.busy()
+    }
+
+    /// Abandons the sample under way (its owner's bound).
+    pub fn abort<R: Regs>(&mut self, r: &R) {
+        self.burst.abort(r);
+    }
+
+    fn advance(&mut self, p: Progress) -> Option<Result<BaroSample, SensorError>> {
+        match p {
+            Progress::Pending => None,
+            Progress::Failed(e) => Some(Err(burst_error(e))),
+            Progress::Done => {
+                let mut b = [0u8; 6];
+                b.copy_from_slice(self.burst.data());
+                Some(self.freeze.check(DEV, &b).and_then(|()| convert(&self.cal, &b)))
+            }
         }
-        Ok(BaroSample {
-            pressure_pa: p as f32,
-            temperature_c: t as f32,
-        })
+    }
+
+    /// The I2C event interrupt: `Some` once the sample is read (or failed).
+    pub fn on_event<R: Regs>(&mut self, r: &R) -> Option<Result<BaroSample, SensorError>> {
+        let p = self.burst.on_event(r);
+        self.advance(p)
+    }
+
+    /// The I2C error interrupt: `Some(Err)` if it ended the sample.
+    pub fn on_error<R: Regs>(&mut self, r: &R) -> Option<Result<BaroSample, SensorError>> {
+        let p = self.burst.on_error(r);
+        self.advance(p)
     }
 }
 

@@ -89,9 +89,10 @@ pub const POLLS: u32 = 30_000;
 /// Polls a [`Burst`] makes for the last transfer's STOP to be sent (CR1.STOP
 /// and SR2.BUSY clear; RM0090 §27.6.1: CR1 must not be written while STOP
 /// is set) before it starts: about one SCL period and t_BUF after the last
-/// byte's interrupt. At ≥ 12 cycles a poll, 500 polls are ≥ 36 µs; a bus
-/// still busy after them refuses the burst.
-pub const BUS_FREE_POLLS: u32 = 500;
+/// byte's interrupt, or a byte time (22.5 µs at 400 kHz) after an abort
+/// mid-read. At ≥ 12 cycles a poll, 1 000 polls are ≥ 71 µs; a bus still
+/// busy after them refuses the burst.
+pub const BUS_FREE_POLLS: u32 = 1_000;
 /// Longest [`Burst`] read, bytes.
 pub const BURST_MAX: usize = 8;
 /// PCLK1 of the clock tree (`fc-stm32f405`'s 168 MHz), Hz.

@@ -181,7 +181,7 @@ impl Regs for Bus {
         let mut s = self.0.borrow_mut();
         let lag = s.lag_left > 0;
         s.lag_left = s.lag_left.saturating_sub(1);
-        s.cr1 | u32::from(lag) * cr1::STOP
+        s.cr1 | (u32::from(lag) * cr1::STOP)
     }
     fn set_cr1(&self, v: u32) {
         let mut s = self.0.borrow_mut();

@@ -11,6 +11,9 @@
 //! - [`bmp388`]: the barometer at 0x77 with Bosch's compensation;
 //! - [`i2c`]: the STM32F4's I2C master (RM0090 §27), blocking with bounded
 //!   waits for start-up, interrupt-driven for the 1 kHz sample;
+//! - [`reads`]: what the sensor bus reads and when (the IMU at 1 kHz, the
+//!   barometer after every 20th sample), on its interrupts, bounded by the
+//!   IMU's period;
 //! - [`sensor_bus`]: I2C3's pins and the gyroscope's data-ready line
 //!   (PC14, EXTI14) on the chip;
 //! - [`motors`]: the brushed motors on TIM2 and TIM4 (8-bit PWM at 328 kHz),
@@ -36,6 +39,7 @@ mod i2c_model;
 pub mod leds;
 pub mod motors;
 pub mod pins;
+pub mod reads;
 pub mod sensor_bus;
 pub mod supervisor;
 pub mod watchdog;

@@ -727,3 +727,52 @@ fn a_silent_imu_in_flight_is_held_for_10_ms_then_a_failsafe_descent() {
     assert!(said.contains("landed: motors off"), "{said}");
     assert_eq!(v.imu_counters().timeouts, 1);
 }
+
+/// The board's barometer (the Crazyflie's BMP388) as a height fix: its
+/// first reading, 120 m above sea level, is where the estimator has the
+/// vehicle (no jump); a pressure 20 cm higher then pulls the estimate up by
+/// as much with no other position source, while a 1 m jump is outside the
+/// estimator's gate; readings come at 50 Hz whatever the board offers, and
+/// a reading that is not a measurement is not fused.
+#[test]
+fn the_barometer_is_fused_as_its_change_from_the_first_reading() {
+    let mut v = at_rest(2000);
+    let clock = MonotonicClock::default();
+    let imu = ImuSample {
+        gyro_frd_radps: Vector3::zeros(),
+        accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+    };
+    let p0 = 101_325.0 - 120.0 * 12.0;
+    let alt = |p: f32| fc_loop::baro::pressure_altitude_m(p).unwrap();
+    let down = |v: &CrtpVehicle| v.core().navigator().estimate().unwrap().pos_ned_m[2];
+    assert!(down(&v).abs() < 0.01);
+    // The board offers a reading every ms; 50 Hz are fused.
+    let mut fused = 0;
+    for k in 2000..3000u64 {
+        fused += usize::from(v.baro((k + 1) * 1000, alt(p0)));
+        v.imu_step((k + 1) * 1000, &imu, &[], &clock);
+    }
+    assert_eq!(fused, 50);
+    assert_eq!(v.baro_fixes(), 50);
+    assert!(down(&v).abs() < 0.02, "no jump at the reference: {}", down(&v));
+    // 2.4 Pa less: 0.2 m higher (12.0 Pa/m here). Three seconds of it pull
+    // the estimate there (with no other position source the filter's
+    // velocity and accelerometer bias take part of it: it overshoots by
+    // about 0.1 m over the next 5 s, then settles).
+    let rejected = |v: &CrtpVehicle| v.core().navigator().counters().alt_rejected;
+    for k in 3000..6000u64 {
+        v.baro((k + 1) * 1000, alt(p0 - 2.4));
+        v.imu_step((k + 1) * 1000, &imu, &[], &clock);
+    }
+    assert!((down(&v) + 0.2).abs() < 0.1, "0.2 m up: {}", down(&v));
+    assert_eq!(rejected(&v), 0);
+    // A 1 m jump while the IMU says at rest: gated, the estimate stays.
+    for k in 6000..6100u64 {
+        v.baro((k + 1) * 1000, alt(p0 - 14.4));
+        v.imu_step((k + 1) * 1000, &imu, &[], &clock);
+    }
+    assert!(rejected(&v) >= 4, "{}", rejected(&v));
+    assert!((down(&v) + 0.2).abs() < 0.1, "{}", down(&v));
+    assert!(!v.baro(6_200_000, f32::NAN));
+    assert!(!v.baro(6_300_000, 50_000.0), "50 km is not a measurement");
+}

@@ -56,6 +56,7 @@ use fc_core::control::Setpoint;
 use fc_core::control::{AnyController, Controller};
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
+use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
 use fc_loop::params::{Refusal, Settings, PARAMS};
 use fc_loop::{run_job, FcConfig, Job, Loop, Mutex, Outbox, ParamPlan};
@@ -599,6 +600,9 @@ pub struct CrtpCore {
     sensors: Result<(), SensorDown>,
     /// A failsafe descent began in this silence of the IMU.
     failsafe: bool,
+    /// The board's barometer as a height fix, and the fixes it gave.
+    baro: Barometer,
+    baro_fixes: u32,
 }
 
 impl CrtpCore {
@@ -629,6 +633,8 @@ impl CrtpCore {
             imu: ImuGuard::new(),
             sensors: Ok(()),
             failsafe: false,
+            baro: Barometer::new(),
+            baro_fixes: 0,
         }
     }
 
@@ -648,6 +654,29 @@ impl CrtpCore {
     /// A failsafe descent is under way (the IMU went silent in flight).
     pub fn failsafe(&self) -> bool {
         self.failsafe
+    }
+
+    /// The board's barometer read `alt_m` (m above sea level: the
+    /// BMP388's pressure through [`fc_loop::baro::pressure_altitude_m`]) at
+    /// `t_us`: fused as a height fix before the next IMU step, at most at
+    /// 50 Hz, its first reading referenced to the estimated height then
+    /// ([`Barometer`]). `true` if it was fused; a reading that is not a
+    /// measurement, or one before the estimator has a position, is not.
+    pub fn baro(&mut self, t_us: u64, alt_m: f32) -> bool {
+        let est_down_m = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        match self.baro.fix(t_us, alt_m, est_down_m) {
+            Some(fix) => {
+                self.core.push_fix(&fix);
+                self.baro_fixes = self.baro_fixes.wrapping_add(1);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Barometer fixes fused since start-up ([`CrtpCore::baro`]).
+    pub fn baro_fixes(&self) -> u32 {
+        self.baro_fixes
     }
 
     /// A parameter write from the board's simulator (our protocol's
@@ -799,6 +828,7 @@ impl CrtpCore {
             // A host that started again: a new time line.
             self.core.open_session();
             self.imu.restart();
+            self.baro.reset();
         }
         let (sample, _) = self.imu.take(t_us, imu);
         // The interval a velocity set-point moves over (at most 0.1 s).

@@ -29,6 +29,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod baro;
 pub mod nav;
 pub mod params;
 pub mod schedule;

@@ -40,6 +40,7 @@ use fc_core::estimate::Fix;
 use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
+use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
 use fc_loop::schedule::Schedule;
 use fc_loop::{FcConfig, FlightCore, Outbox};
@@ -104,9 +105,9 @@ const SYS_STATUS_HZ: u64 = 2;
 const ATTITUDE_HZ: u64 = 50;
 /// A flagged `HIL_SENSOR` barometer (and magnetometer) is fused at most
 /// this often, µs (50 Hz; `HIL_SENSOR` comes at the IMU's rate).
-pub const BARO_PERIOD_US: u64 = 20_000;
+pub const BARO_PERIOD_US: u64 = fc_loop::baro::PERIOD_US;
 /// 1σ assumed of a barometric height, m.
-pub const BARO_SIGMA_M: f32 = 0.1;
+pub const BARO_SIGMA_M: f32 = fc_loop::baro::SIGMA_M;
 /// 1σ assumed of a magnetometer heading, rad (2°).
 pub const MAG_SIGMA_RAD: f32 = 0.035;
 
@@ -164,11 +165,9 @@ pub struct MavVehicle {
     home: Option<Home>,
     /// Time of the last fix taken, µs.
     last_fix_us: Option<u64>,
-    /// Pressure altitude at home (NED z = 0), m: the first `HIL_SENSOR`
-    /// barometer reading referenced to the estimated height then.
-    baro_ref_m: Option<f32>,
-    /// When a barometer reading is next fused (every [`BARO_PERIOD_US`]).
-    baro_due: Schedule,
+    /// The `HIL_SENSOR` barometer: its reference (the first reading
+    /// referenced to the estimated height then) and rate.
+    baro: Barometer,
     /// Magnetic heading minus true heading (the declination, and whatever
     /// the simulator's field adds), rad: the first reading referenced to
     /// the estimated heading then.
@@ -222,8 +221,7 @@ impl MavVehicle {
             setpoint_given: false,
             home: None,
             last_fix_us: None,
-            baro_ref_m: None,
-            baro_due: Schedule::new(),
+            baro: Barometer::new(),
             mag_ref_rad: None,
             mag_due: Schedule::new(),
             last_sensor_us: None,
@@ -357,8 +355,7 @@ impl MavVehicle {
             self.core.open_session();
             self.home = None;
             self.last_fix_us = None;
-            self.baro_ref_m = None;
-            self.baro_due.reset();
+            self.baro.reset();
             self.mag_ref_rad = None;
             self.mag_due.reset();
             self.next_us = [s.time_us; 3];
@@ -400,17 +397,9 @@ impl MavVehicle {
     /// then (a barometer's altitude is above sea level, and drifts with the
     /// weather: what is fused is its change).
     fn on_baro(&mut self, t_us: u64, alt_m: f32) {
-        let Some(est) = self.core.navigator().estimate() else {
+        let est_down_m = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        let Some(fix) = self.baro.fix(t_us, alt_m, est_down_m) else {
             return;
-        };
-        if !self.baro_due.due(t_us, BARO_PERIOD_US) {
-            return;
-        }
-        let reference = *self.baro_ref_m.get_or_insert(alt_m + est.pos_ned_m[2]);
-        let fix = Fix {
-            alt_m: Some(alt_m - reference),
-            alt_sigma_m: BARO_SIGMA_M,
-            ..Fix::EMPTY
         };
         self.core.push_fix(&fix);
         self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);

@@ -247,6 +247,11 @@ mod app {
                 }
             }
         }
+        // The board's own barometer (50 Hz): a height fix before the next
+        // sample's step.
+        if let Some((at, alt_m)) = imu.lock(|b| b.take_baro()) {
+            st.v.lock(|v| v.baro(board::us_of(at), alt_m));
+        }
         // The board's own sample, read on its bus's interrupts (a board's
         // data-ready line, its time taken there).
         while let Some((entry, s)) = imu.lock(|b| b.take()) {

@@ -74,6 +74,13 @@ pub trait ImuBus: Send {
     /// The sample ready, if any: its data-ready time (SysTick ticks) and the
     /// sample in body FRD, or `None` (the read failed; counted missing).
     fn take(&mut self) -> Option<(u64, Option<ImuSample>)>;
+    /// The board's barometer reading since the last call, if any: the
+    /// data-ready time of the IMU sample it was read after (SysTick ticks)
+    /// and its pressure altitude, m above sea level
+    /// ([`fc_loop::baro::pressure_altitude_m`]). None on a board without one.
+    fn take_baro(&mut self) -> Option<(u64, f32)> {
+        None
+    }
 }
 
 /// No IMU of the board's own: every sample is the simulator's, on USART1.

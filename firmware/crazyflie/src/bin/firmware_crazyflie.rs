@@ -20,8 +20,9 @@
 //! GPIO) the simulator's `Imu` frame on USART1; on the board build (`cargo
 //! cf-build`) the BMI088 on I2C3, started at boot, each sample read on
 //! I2C3's interrupts from the gyroscope's data-ready on EXTI14 (`sensors`
-//! below; never run here). The BMP388 is started at boot, not yet read in
-//! flight. In QEMU the `boot-shim` binary stands in for the bootloader.
+//! below; never run here), and after every 20th sample the BMP388 (50 Hz),
+//! fused as a height fix. In QEMU the `boot-shim` binary stands in for the
+//! bootloader.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -271,17 +272,19 @@ mod target {
 /// no GPIO: there the simulator's samples stand in, on USART1): the BMI088
 /// and BMP388 started on I2C3 with the blocking master (every wait
 /// bounded), then the gyroscope's data-ready on EXTI14 starting each
-/// sample's reads on I2C3's interrupts.
+/// sample's reads on I2C3's interrupts, the barometer's after every 20th.
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
 mod sensors {
     use fc_core::estimate::ImuSample;
-    use fc_crazyflie::bmi088::{Bmi088, SampleReader};
+    use fc_crazyflie::bmi088::Bmi088;
     use fc_crazyflie::bmp388::Bmp388;
     use fc_crazyflie::i2c::I2cMaster;
+    use fc_crazyflie::reads::{Finished, Reads};
     use fc_crazyflie::sensor_bus;
     use fc_crazyflie::supervisor::sensors_up;
     use fc_crazyflie::SensorError;
     use fc_crtp::supervisor::SensorDown;
+    use fc_loop::baro::pressure_altitude_m;
     use nalgebra::Vector3;
     use stm32f4::stm32f405::{exti, i2c1};
 
@@ -296,16 +299,21 @@ mod sensors {
         }
     }
 
-    /// The BMI088 on I2C3, its samples read on the bus's interrupts.
+    /// The BMI088 and BMP388 on I2C3, read on the bus's interrupts
+    /// ([`Reads`]: the IMU at every data-ready, the barometer after every
+    /// 20th sample).
     pub struct ImuBus {
         i2c: &'static i2c1::RegisterBlock,
         exti: &'static exti::RegisterBlock,
-        reader: SampleReader,
+        reads: Reads,
         /// The data-ready time of the sample on the bus.
         entry: u64,
         /// Samples done, for `data_ready` (an abandoned one and the next).
         ready: heapless::Deque<(u64, Option<ImuSample>), 2>,
-        errors: u32,
+        /// The newest barometer reading: its sample's data-ready time and
+        /// pressure altitude, m above sea level.
+        baro: Option<(u64, f32)>,
+        errors: [u32; 2],
     }
 
     // SAFETY: I2C3 and EXTI14 are reached only through this value, which
@@ -313,31 +321,59 @@ mod sensors {
     unsafe impl Send for ImuBus {}
 
     impl ImuBus {
-        /// The sample whose data-ready came at `at` is done (or failed).
-        fn done(&mut self, at: u64, r: Result<fc_crazyflie::bmi088::ImuSample, SensorError>) -> bool {
-            let s = match r {
-                Ok(s) => Some(ImuSample {
-                    gyro_frd_radps: Vector3::from(s.gyro_frd_radps),
-                    accel_frd_mps2: Vector3::from(s.accel_frd_mps2),
-                }),
-                Err(e) => {
-                    // The first and every 1000th: the vehicle counts them all.
-                    if self.errors.is_multiple_of(1000) {
-                        defmt::warn!(
-                            "IMU read: {} ({=u32} so far)",
-                            defmt::Display2Format(&e),
-                            self.errors + 1
-                        );
-                    }
-                    self.errors = self.errors.wrapping_add(1);
-                    None
-                }
-            };
-            if self.ready.is_full() {
-                self.ready.pop_front();
+        /// The first and every 1000th failure of a part (the vehicle counts
+        /// the IMU's; a barometer reading missed is one fix fewer).
+        fn failed(&mut self, part: usize, e: &SensorError) {
+            if self.errors[part].is_multiple_of(1000) {
+                defmt::warn!(
+                    "{=str} read: {} ({=u32} so far)",
+                    ["IMU", "barometer"][part],
+                    defmt::Display2Format(e),
+                    self.errors[part] + 1
+                );
             }
-            let _ = self.ready.push_back((at, s));
-            true
+            self.errors[part] = self.errors[part].wrapping_add(1);
+        }
+
+        /// What an interrupt finished, the IMU sample's as of data-ready
+        /// `at`; `true` if `data_ready` has something to take.
+        fn finished(&mut self, at: u64, f: Finished) -> bool {
+            let mut ready = false;
+            if let Some(r) = f.imu {
+                let s = match r {
+                    Ok(s) => Some(ImuSample {
+                        gyro_frd_radps: Vector3::from(s.gyro_frd_radps),
+                        accel_frd_mps2: Vector3::from(s.accel_frd_mps2),
+                    }),
+                    Err(e) => {
+                        self.failed(0, &e);
+                        None
+                    }
+                };
+                if self.ready.is_full() {
+                    self.ready.pop_front();
+                }
+                let _ = self.ready.push_back((at, s));
+                ready = true;
+            }
+            match f.baro {
+                Some(Ok(b)) => match pressure_altitude_m(b.pressure_pa) {
+                    Some(alt) => {
+                        self.baro = Some((self.entry, alt));
+                        ready = true;
+                    }
+                    None => self.failed(
+                        1,
+                        &SensorError::Implausible {
+                            device: "BMP388",
+                            quantity: "pressure (Pa)",
+                        },
+                    ),
+                },
+                Some(Err(e)) => self.failed(1, &e),
+                None => {}
+            }
+            ready
         }
     }
 
@@ -345,31 +381,24 @@ mod sensors {
         fn data_ready(&mut self, entry: u64) -> bool {
             sensor_bus::clear_data_ready(self.exti);
             let last = core::mem::replace(&mut self.entry, entry);
-            match self.reader.data_ready(&self.i2c) {
-                Ok(()) => false,
-                // The last sample, abandoned on the bus (this one started),
-                // or this one, refused by the bus.
-                Err(e) => {
-                    let at = if self.reader.busy() { last } else { entry };
-                    self.done(at, Err(e))
-                }
-            }
+            let f = self.reads.data_ready(&self.i2c);
+            // An IMU sample reported here is the last one, abandoned on the
+            // bus (this one started), or this one, refused by the bus.
+            let at = if self.reads.busy() { last } else { entry };
+            self.finished(at, f)
         }
 
         fn bus_interrupt(&mut self, error: bool) -> bool {
-            let r = if error {
-                self.reader.on_error(&self.i2c)
-            } else {
-                self.reader.on_event(&self.i2c)
-            };
-            match r {
-                Some(r) => self.done(self.entry, r),
-                None => false,
-            }
+            let f = self.reads.on_interrupt(&self.i2c, error);
+            self.finished(self.entry, f)
         }
 
         fn take(&mut self) -> Option<(u64, Option<ImuSample>)> {
             self.ready.pop_front()
+        }
+
+        fn take_baro(&mut self) -> Option<(u64, f32)> {
+            self.baro.take()
         }
     }
 
@@ -384,6 +413,7 @@ mod sensors {
         let imu_up = imu.init(&mut Spin);
         let mut baro = Bmp388::new(imu.release());
         let baro_up = baro.init(&mut Spin);
+        let calibration = baro.calibration().filter(|_| baro_up.is_ok());
         for (part, r) in [("BMI088", imu_up), ("BMP388", baro_up)] {
             match r {
                 Ok(()) => defmt::info!("{=str} started on I2C3", part),
@@ -393,10 +423,11 @@ mod sensors {
         let bus = ImuBus {
             i2c,
             exti,
-            reader: SampleReader::new(),
+            reads: Reads::new(calibration),
             entry: 0,
             ready: heapless::Deque::new(),
-            errors: 0,
+            baro: None,
+            errors: [0; 2],
         };
         (bus, sensors_up(imu_up, baro_up))
     }
