@@ -168,6 +168,10 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --
 echo "== a pymavlink ground station (tools/mav_gcs.py) lists, reads and sets parameters, arms and flies it against rotorpy"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration 60 \
     --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
+echo "== MAVSDK (PyPI, its C++ library), unmodified, flies it as a PX4: health, home, takeoff, offboard, return to launch"
+python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "mavsdk==4.1.0"
+python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --mavsdk --duration 120 \
+    --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
 echo "== cflib (PyPI, pinned), unmodified, flies sil-host crtp over its udp:// driver; then cflib's own examples"
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "cflib==0.1.34"
 python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
@@ -190,4 +194,4 @@ python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/
     --out target/cfclient-flight-tab.png | tee -a "$log"
 echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|mavsdk|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

@@ -18,7 +18,9 @@ heartbeat, then:
    vehicle answers "temporarily rejected" (its estimator aligns first);
 4. checks that a re-designing parameter (the mass, a gain) is refused
    while armed;
-5. streams SET_POSITION_TARGET_LOCAL_NED: 1 m up, then a step of
+5. asks for PX4's Offboard mode (MAV_CMD_DO_SET_MODE): refused before
+   any set-point, accepted once they stream; then
+   streams SET_POSITION_TARGET_LOCAL_NED: 1 m up, then a step of
    --step m north; reads LOCAL_POSITION_NED, ATTITUDE and SYS_STATUS;
    the position must end within --tolerance of the set-point;
 6. asks to disarm in the air (must be refused), then falls silent: no
@@ -40,6 +42,8 @@ os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
 
 MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_DO_SET_MODE = 176
+PX4_MAIN_OFFBOARD = 6.0
 MAV_RESULT_ACCEPTED = 0
 MAV_RESULT_TEMPORARILY_REJECTED = 1
 MAV_RESULT_DENIED = 2
@@ -205,6 +209,13 @@ class Gcs:
                    f"a gain (PD_ROLL_P) refused while armed: {why[:1]}")
 
         up, step = (0.0, 0.0, -1.0), (step_m, 0.0, -1.0)
+        # PX4's rule: set-points are flown in Offboard, which is entered
+        # only while they stream.
+        self.check(self.command(MAV_CMD_DO_SET_MODE, 1.0, PX4_MAIN_OFFBOARD, 0.0) == MAV_RESULT_DENIED,
+                   "Offboard refused before any set-point")
+        self.fly_to(up, 0.2)
+        self.check(self.command(MAV_CMD_DO_SET_MODE, 1.0, PX4_MAIN_OFFBOARD, 0.0) == MAV_RESULT_ACCEPTED,
+                   "Offboard accepted while set-points stream")
         self.check(self.fly_to(up, 4.0), "1 m up, held 4 s of vehicle time")
         self.check(self.fly_to(step, 6.0), f"{step_m} m north, held 6 s")
         err = None

@@ -20,6 +20,7 @@ measurements of the flight (from rotorpy's true state) added under
 import argparse
 import json
 import os
+import socket
 import subprocess
 import sys
 
@@ -101,6 +102,10 @@ def main():
                     help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
                          "sets parameters, arms and flies the vehicle; the flight ends when it is done")
     ap.add_argument("--gcs-port", type=int, default=14550)
+    ap.add_argument("--mavsdk", action="store_true",
+                    help="like --gcs, with tools/mavsdk_flight.py (MAVSDK, PyPI) as the ground station; "
+                         "rotorpy's position is sent to it on UDP --truth-port")
+    ap.add_argument("--truth-port", type=int, default=14560)
     ap.add_argument("--vehicle", choices=sorted(VEHICLES), default="crazyflie",
                     help="rotorpy's vehicle, flown with our vehicle file for it")
     ap.add_argument("--layout", choices=sorted(LAYOUTS), default="rotorpy",
@@ -114,13 +119,20 @@ def main():
            "--vehicle", VEHICLES[a.vehicle][1], "--airframe", LAYOUTS[a.layout][0],
            "--hub-m", str(VEHICLES[a.vehicle][0]["rotor_pos"]["r1"][0] * 2 ** 0.5),
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
-    if (bool(a.waypoint) + bool(a.scenario) + a.gcs) != 1:
-        ap.error("give --waypoint(s), --scenario or --gcs")
+    if (bool(a.waypoint) + bool(a.scenario) + a.gcs + a.mavsdk) != 1:
+        ap.error("give --waypoint(s), --scenario, --gcs or --mavsdk")
     gcs = None
-    if a.gcs:
+    truth_sock = None
+    here = os.path.dirname(__file__)
+    if a.gcs or a.mavsdk:
         # The ground station listens first, as QGroundControl does.
-        gcs = subprocess.Popen([sys.executable, os.path.join(os.path.dirname(__file__), "mav_gcs.py"),
-                                "--url", f"udpin:127.0.0.1:{a.gcs_port}"], stdout=subprocess.PIPE, text=True)
+        if a.mavsdk:
+            script = [os.path.join(here, "mavsdk_flight.py"), "--url", f"udpin://127.0.0.1:{a.gcs_port}",
+                      "--truth-port", str(a.truth_port)]
+            truth_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        else:
+            script = [os.path.join(here, "mav_gcs.py"), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
+        gcs = subprocess.Popen([sys.executable] + script, stdout=subprocess.PIPE, text=True)
         cmd += ["--gcs", f"127.0.0.1:{a.gcs_port}", "--gcs-only"]
     for w in a.waypoint or []:
         cmd += ["--waypoint", w]
@@ -143,6 +155,9 @@ def main():
         state = vehicle.step(state, zero, a.dt)
         x = np.asarray(state["x"], dtype=float)  # ENU
         track.append([k * a.dt, x[1], x[0], -x[2]])  # t, north, east, down
+        if truth_sock is not None and k % 10 == 0:
+            msg = json.dumps({"t": k * a.dt, "ned": track[-1][1:]}).encode()
+            truth_sock.sendto(msg, ("127.0.0.1", a.truth_port))
         if not np.all(np.isfinite(x)) or np.abs(x).max() > 100:
             break
         if gcs is not None and k % 50 == 0 and gcs.poll() is not None:
@@ -160,8 +175,9 @@ def main():
             gcs.kill()
         gcs_out, _ = gcs.communicate(timeout=60)
         sys.stderr.write(gcs_out)
-        line = [ln for ln in gcs_out.splitlines() if ln.startswith("gcs check:")]
-        res["gcs"] = line[-1] if line else "gcs check: 0 passed, 1 failed (the ground station did not finish)"
+        prefix = "mavsdk check:" if a.mavsdk else "gcs check:"
+        line = [ln for ln in gcs_out.splitlines() if ln.startswith(prefix)]
+        res["gcs"] = line[-1] if line else f"{prefix} 0 passed, 1 failed (the ground station did not finish)"
         text = json.dumps(res, indent=2)
         print(text)
         if a.json:

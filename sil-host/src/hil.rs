@@ -8,9 +8,9 @@
 //! [`fc_mavlink::vehicle::MavVehicle`], the same code the image runs.
 //!
 //! Who flies it: either the mission given here, which this process sends
-//! into the vehicle as a ground station would (`COMMAND_LONG` arm until
-//! accepted — refused while the estimator aligns —, then a
-//! `SET_POSITION_TARGET_LOCAL_NED` every step), or an external ground
+//! into the vehicle as a ground station would (a
+//! `SET_POSITION_TARGET_LOCAL_NED` as the set-point changes, PX4's Offboard
+//! mode and arming until accepted — refused while the estimator aligns), or an external ground
 //! station over UDP ([`HilConfig::gcs`]: telemetry is sent to it, its
 //! commands and parameter writes are read from it), as PX4 SITL talks to
 //! QGroundControl on port 14550.
@@ -32,6 +32,9 @@ pub const SYSTEM_ID: u8 = 1;
 pub const COMPONENT_ID: u8 = 1;
 /// Shortest interval between two set-points sent for a mission, s (100 Hz).
 pub const SETPOINT_PERIOD_S: f64 = 0.01;
+/// Longest interval between two set-points of a mission (one that does not
+/// change is sent again), s: PX4's Offboard ends after 1 s without one.
+pub const SETPOINT_REPEAT_S: f64 = 0.2;
 /// The system id of the ground station this process plays for a mission.
 pub const MISSION_GCS_ID: u8 = 255;
 
@@ -392,6 +395,20 @@ pub fn arm_command(arm: bool) -> MavMessage {
     })
 }
 
+/// `MAV_CMD_DO_SET_MODE` to PX4's Offboard, as MAVSDK sends it.
+pub fn offboard_command() -> MavMessage {
+    let (main, sub) = fc_mavlink::modes::FlightMode::Offboard.px4();
+    MavMessage::COMMAND_LONG(common::COMMAND_LONG_DATA {
+        param1: f32::from(common::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits()),
+        param2: f32::from(main),
+        param3: f32::from(sub),
+        command: common::MavCmd::MAV_CMD_DO_SET_MODE,
+        target_system: SYSTEM_ID,
+        target_component: COMPONENT_ID,
+        ..Default::default()
+    })
+}
+
 /// Flies against the simulator at `cfg.addr` until `cfg.duration_s` of
 /// simulated time or until it hangs up.
 pub fn run(cfg: &HilConfig) -> Result<HilResult> {
@@ -461,7 +478,10 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     };
     send(
         true,
-        &MavMessage::HEARTBEAT(fc_mavlink::hil::heartbeat(false)),
+        &MavMessage::HEARTBEAT(fc_mavlink::hil::heartbeat(
+            false,
+            fc_mavlink::modes::FlightMode::Position.custom_mode(),
+        )),
         &mut sim,
     )?;
     let mut input = stream;
@@ -530,7 +550,8 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             t_now = t;
             // The mission, sent as a ground station sends it: the set-point
             // when it changes, at most at 100 Hz (a trajectory's moves, with
-            // its velocity and acceleration), and at least every second;
+            // its velocity and acceleration), and at least every 0.2 s (an
+            // Offboard stream: PX4 leaves Offboard when it stops for 1 s);
             // arming every 0.5 s until armed.
             let mut tracking = false;
             if let Some(mission) = &cfg.mission {
@@ -538,7 +559,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 tracking = track;
                 reference = Some(s);
                 let changed = sp.is_none_or(|old| old != s);
-                if (changed && t >= next_sp_s - 1e-9) || t >= next_sp_s + 1.0 {
+                if (changed && t >= next_sp_s - 1e-9) || t >= next_sp_s + SETPOINT_REPEAT_S {
                     v.deliver(&position_target(&s, (t * 1e3) as u32), &mut out)?;
                     if let Some(log) = ulog.as_mut() {
                         log.setpoint(t, &s)?;
@@ -547,6 +568,8 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                     sp = Some(s);
                 }
                 if !armed && t >= next_arm_s {
+                    // PX4's order: Offboard (the set-points stream), then arm.
+                    v.deliver(&offboard_command(), &mut out)?;
                     v.deliver(&arm_command(true), &mut out)?;
                     next_arm_s = t + 0.5;
                 }

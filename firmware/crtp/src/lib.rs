@@ -5,7 +5,8 @@
 
 pub mod frames;
 pub mod log;
-pub mod planner;
+/// The high-level commander's planner (it lives with the flight loop, which both protocols drive).
+pub use fc_loop::planner;
 pub mod supervisor;
 pub mod syslink;
 pub mod toc;

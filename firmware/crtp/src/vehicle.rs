@@ -887,7 +887,7 @@ impl CrtpCore {
         {
             let age_ms = t_us.saturating_sub(last_us) / 1000;
             if handover_us.is_some_and(|h| t_us >= h) {
-                self.hold_from(&reference_of(&sp), t_us);
+                self.hold_from(&Reference::from(&sp), t_us);
             } else if age_ms > SETPOINT_STOP_MS {
                 self.mode = Mode::Idle;
                 self.say(format_args!("set-points stopped: motors off"));
@@ -907,14 +907,10 @@ impl CrtpCore {
                     sp.pos_ned_m += sp.vel_ned_mps * dt_s;
                     sp.yaw_rad += sp.yaw_rate_radps * dt_s;
                 }
-                reference_of(sp)
+                Reference::from(&*sp)
             }
         };
-        let mut sp = Setpoint::hold(r.pos_ned_m, r.yaw_rad);
-        sp.vel_ned_mps = r.vel_ned_mps;
-        sp.acc_ned_mps2 = r.acc_ned_mps2;
-        sp.yaw_rate_radps = r.yaw_rate_radps;
-        Some(sp)
+        Some(r.setpoint())
     }
 
     /// Holds `from` (brought to rest over half a second) under the
@@ -976,7 +972,7 @@ impl CrtpCore {
     fn reference(&self) -> Reference {
         match &self.mode {
             Mode::High { seg, .. } => seg.eval(self.now_us),
-            Mode::Generic { sp, .. } => reference_of(sp),
+            Mode::Generic { sp, .. } => Reference::from(sp),
             Mode::Idle => match self.core.navigator().estimate() {
                 Some(e) => Reference::at_rest(e.pos_ned_m, e.euler()[2]),
                 None => Reference::at_rest(Vector3::zeros(), 0.0),
@@ -1841,17 +1837,6 @@ fn position_fix(p: [f32; 3]) -> Option<Fix> {
     f.pos_ned_m = Some(frames::ned_from_cf(p));
     f.pos_sigma_m = Vector3::repeat(EXTPOS_SIGMA_M);
     Some(f)
-}
-
-/// A set-point as a planner reference.
-fn reference_of(sp: &Setpoint<f32>) -> Reference {
-    Reference {
-        pos_ned_m: sp.pos_ned_m,
-        vel_ned_mps: sp.vel_ned_mps,
-        acc_ned_mps2: sp.acc_ned_mps2,
-        yaw_rad: sp.yaw_rad,
-        yaw_rate_radps: sp.yaw_rate_radps,
-    }
 }
 
 /// A log variable's TOC name.

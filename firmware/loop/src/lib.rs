@@ -32,6 +32,7 @@
 pub mod baro;
 pub mod nav;
 pub mod params;
+pub mod planner;
 pub mod schedule;
 
 use fc_core::control::{

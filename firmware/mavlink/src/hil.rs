@@ -152,6 +152,24 @@ impl Home {
         let down = -(f64::from(alt_mm) - f64::from(self.alt_mm)) * 1e-3;
         Vector3::new(north, east, down)
     }
+
+    /// The WGS-84 position (latitude and longitude 1e-7 °, altitude MSL mm)
+    /// of `ned_m` about this home: the inverse of [`Home::ned_m`] (the same
+    /// flat-earth approximation, within 1 cm over a few km). Saturates at
+    /// the integers' range.
+    pub fn geodetic(&self, ned_m: &Vector3<f64>) -> (i32, i32, i32) {
+        let deg = core::f64::consts::PI / 180.0 * 1e-7;
+        let lat0 = f64::from(self.lat_e7) * deg;
+        let lat = f64::from(self.lat_e7) + ned_m[0] / (deg * EARTH_RADIUS_M);
+        let lon = f64::from(self.lon_e7) + ned_m[1] / (deg * EARTH_RADIUS_M * libm::cos(lat0));
+        let alt = f64::from(self.alt_mm) - ned_m[2] * 1e3;
+        // `as` saturates (and maps NaN to 0).
+        (
+            libm::round(lat) as i32,
+            libm::round(lon) as i32,
+            libm::round(alt) as i32,
+        )
+    }
 }
 
 /// The 1σ given to a fix made from `HIL_STATE_QUATERNION`.
@@ -223,13 +241,15 @@ pub fn actuator_controls(time_us: u64, motors: &[f32; 4], armed: bool) -> HIL_AC
     }
 }
 
-/// This flight controller's `HEARTBEAT`: a quadrotor, HIL enabled, armed or not.
-pub fn heartbeat(armed: bool) -> HEARTBEAT_DATA {
+/// This flight controller's `HEARTBEAT`: a quadrotor with PX4's autopilot id and
+/// mode encoding (`custom_mode`, [`crate::modes::FlightMode::custom_mode`]),
+/// HIL enabled, armed or not.
+pub fn heartbeat(armed: bool, custom_mode: u32) -> HEARTBEAT_DATA {
     HEARTBEAT_DATA {
-        custom_mode: 0,
+        custom_mode,
         mavtype: MavType::MAV_TYPE_QUADROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
-        base_mode: mode_flags(armed),
+        autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+        base_mode: mode_flags(armed) | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
         system_status: if armed {
             MavState::MAV_STATE_ACTIVE
         } else {

@@ -4,6 +4,7 @@
 #![forbid(unsafe_code)]
 
 pub mod hil;
+pub mod modes;
 /// The parameter table (it lives with the flight loop, which both protocols drive).
 pub use fc_loop::params;
 pub mod vehicle;
@@ -260,6 +261,13 @@ subset! {
     HIL_SENSOR: HIL_SENSOR_DATA,
     HIL_STATE_QUATERNION: HIL_STATE_QUATERNION_DATA,
     HIL_ACTUATOR_CONTROLS: HIL_ACTUATOR_CONTROLS_DATA,
+    COMMAND_INT: COMMAND_INT_DATA,
+    AUTOPILOT_VERSION: AUTOPILOT_VERSION_DATA,
+    GLOBAL_POSITION_INT: GLOBAL_POSITION_INT_DATA,
+    ATTITUDE_QUATERNION: ATTITUDE_QUATERNION_DATA,
+    HOME_POSITION: HOME_POSITION_DATA,
+    EXTENDED_SYS_STATE: EXTENDED_SYS_STATE_DATA,
+    BATTERY_STATUS: BATTERY_STATUS_DATA,
 }
 
 /// Writes `msg` as one MAVLink 2 frame (unsigned) into `out`; returns its

@@ -72,7 +72,7 @@ fn our_hil_actuator_controls_are_pymavlinks_bytes() {
 
 #[test]
 fn frames_survive_noise_split_reads_and_back_to_back_delivery() {
-    let hb = frame(&MavMessage::HEARTBEAT(heartbeat(false)));
+    let hb = frame(&MavMessage::HEARTBEAT(heartbeat(false, 0)));
     let mut bytes = vec![0x00, 0x55, 0xFE, 0x12];
     bytes.extend_from_slice(&hb);
     bytes.extend_from_slice(&PYMAVLINK_HIL_SENSOR);
@@ -87,7 +87,7 @@ fn frames_survive_noise_split_reads_and_back_to_back_delivery() {
 
 #[test]
 fn bad_frames_are_refused_counted_and_the_next_one_reads() {
-    let hb = frame(&MavMessage::HEARTBEAT(heartbeat(true)));
+    let hb = frame(&MavMessage::HEARTBEAT(heartbeat(true, 0)));
     let mut r = MavReader::new(1);
     // A flipped payload bit: the CRC catches it.
     let mut bad = PYMAVLINK_HIL_SENSOR;
@@ -177,6 +177,13 @@ fn hil_state_becomes_a_ned_fix_about_home() {
     assert!((p[2] + 2.0).abs() < 1e-6, "{p}");
     assert_eq!(f.vel_ned_mps.unwrap(), nalgebra::Vector3::new(1.5, -0.2, 0.05));
     assert!((f.yaw_rad.unwrap() - yaw).abs() < 1e-6);
+    // Back to WGS-84: the same integers (GLOBAL_POSITION_INT, HOME_POSITION).
+    let back = home.geodetic(&nalgebra::Vector3::new(north, east, -2.0));
+    assert_eq!(back, (474_001_000, 85_001_000, 502_000));
+    assert_eq!(
+        home.geodetic(&nalgebra::Vector3::zeros()),
+        (474_000_000, 85_000_000, 500_000)
+    );
     let bad = HIL_STATE_QUATERNION_DATA {
         attitude_quaternion: [0.0; 4],
         ..m

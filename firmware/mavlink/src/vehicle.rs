@@ -32,6 +32,7 @@
 //! and answered where MAVLink expects an answer (`MAV_RESULT_UNSUPPORTED`).
 
 use crate::hil::{self, Home, StateFixSigmas};
+use crate::modes::{nav_index_of, FlightMode, Legs, NavSettings, Route, NAV_PARAMS};
 use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
 use core::convert::Infallible;
@@ -42,6 +43,7 @@ use fc_core::model::airframe::Mixer;
 use fc_core::model::airframe::MixerError;
 use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
+use fc_loop::planner::Reference;
 use fc_loop::schedule::Schedule;
 use fc_loop::{FcConfig, FlightCore, Outbox};
 use fc_proto::FromFc;
@@ -96,13 +98,38 @@ pub struct VehicleCounters {
 pub const IN_AIR_M: f32 = 0.15;
 /// Within this of the height it armed at, a landing vehicle has landed, m.
 pub const LANDED_M: f32 = 0.03;
+/// Slower than this vertically (estimated), a landing vehicle on the ground has landed, m/s.
+pub const LANDED_MPS: f32 = 0.2;
 /// `param2` of a disarm that is obeyed in the air too (MAVLink's magic number).
 const FORCE: f32 = 21196.0;
 
-/// Telemetry rates, Hz of simulated time.
-const HEARTBEAT_HZ: u64 = 1;
-const SYS_STATUS_HZ: u64 = 2;
-const ATTITUDE_HZ: u64 = 50;
+/// The telemetry streams and their default intervals, µs of simulated
+/// time (`MAV_CMD_SET_MESSAGE_INTERVAL` changes them): message id, interval.
+pub const STREAMS: [(u32, u64); 9] = [
+    (0, 1_000_000),   // HEARTBEAT, 1 Hz (to the simulator too)
+    (1, 500_000),     // SYS_STATUS, 2 Hz
+    (30, 20_000),     // ATTITUDE, 50 Hz
+    (32, 20_000),     // LOCAL_POSITION_NED, 50 Hz
+    (33, 100_000),    // GLOBAL_POSITION_INT, 10 Hz
+    (31, 100_000),    // ATTITUDE_QUATERNION, 10 Hz
+    (245, 200_000),   // EXTENDED_SYS_STATE, 5 Hz
+    (242, 2_000_000), // HOME_POSITION, 0.5 Hz
+    (147, 1_000_000), // BATTERY_STATUS, 1 Hz
+];
+/// The shortest interval a stream may be set to, µs (the IMU's step).
+pub const MIN_INTERVAL_US: u64 = 1_000;
+/// `AUTOPILOT_VERSION` (148), sent when asked for.
+const AUTOPILOT_VERSION_ID: u32 = 148;
+/// This firmware's version in PX4's encoding (major, minor, patch, 255 for
+/// a release): the crates' version, 0.1.0.
+pub const FLIGHT_SW_VERSION: u32 = 0x0001_00FF;
+/// The modelled pack's capacity, mAh (a simulator gives no battery; the
+/// Crazyflie 2.1's 250 mAh 1S LiPo).
+pub const PACK_MAH: f32 = 250.0;
+/// The modelled pack's current with every motor at full command, A.
+pub const PACK_FULL_A: f32 = 8.0;
+/// The modelled pack's internal resistance, Ω.
+pub const PACK_OHM: f32 = 0.05;
 /// A flagged `HIL_SENSOR` barometer (and magnetometer) is fused at most
 /// this often, µs (50 Hz; `HIL_SENSOR` comes at the IMU's rate).
 pub const BARO_PERIOD_US: u64 = fc_loop::baro::PERIOD_US;
@@ -154,14 +181,20 @@ pub struct MavVehicle {
     /// `None` until started.
     mixer: Option<Mixer<f32>>,
     armed: bool,
-    /// Where it armed (estimated), down, m.
-    armed_down_m: f32,
     /// Simulated time of the last ground-station `HEARTBEAT`, µs.
     gcs_seen_us: Option<u64>,
-    /// Landing because the ground station was lost.
-    landing: bool,
-    /// A set-point arrived since boot (arming then keeps it).
-    setpoint_given: bool,
+    /// The flight mode ([`crate::modes`]).
+    mode: FlightMode,
+    /// The automatic modes' settings (PX4's parameters).
+    nav: NavSettings,
+    /// The automatic mode's route.
+    route: Route,
+    /// The last offboard set-point, and when it came (simulated µs).
+    offboard: Option<(Setpoint<f32>, u64)>,
+    /// Where it armed (estimated), NED about the origin, m: the home a
+    /// return flies to (the origin until it arms).
+    home_ned_m: Vector3<f32>,
+    /// The simulator's first position: the origin of the local frame.
     home: Option<Home>,
     /// Time of the last fix taken, µs.
     last_fix_us: Option<u64>,
@@ -182,8 +215,12 @@ pub struct MavVehicle {
     motors: [f32; 4],
     /// Cycles of the last step, and the clock's rate.
     cycles: (u32, u32),
-    /// Next telemetry times, µs: heartbeat, status, attitude/position.
-    next_us: [u64; 3],
+    /// The telemetry streams: interval (µs, 0: off) and next time due, in
+    /// [`STREAMS`]' order.
+    streams: [(u64, u64); STREAMS.len()],
+    /// Charge drawn from the modelled pack, mAh, and its current, A.
+    used_mah: f32,
+    current_a: f32,
     /// Frames the links' readers refused (for `SYS_STATUS.errors_comm`).
     link_errors: u32,
     /// Position last reported by the simulator, NED about home, m.
@@ -195,6 +232,29 @@ pub struct MavVehicle {
 /// Milliseconds since boot of simulated time `t_us` (MAVLink's `time_boot_ms`).
 fn boot_ms(t_us: u64) -> u32 {
     (t_us / 1000) as u32
+}
+
+/// Every parameter served: the flight loop's ([`PARAMS`]), then the
+/// automatic modes' ([`NAV_PARAMS`]).
+pub const PARAM_COUNT: usize = PARAMS.len() + NAV_PARAMS.len();
+
+/// The `param_index` of the parameter named `id` (NUL-padded), in either table.
+pub fn param_index_of(id: &[u8]) -> Option<usize> {
+    params::index_of(id).or_else(|| nav_index_of(id).map(|k| PARAMS.len() + k))
+}
+
+/// The name of parameter `index` (of [`PARAM_COUNT`]).
+fn param_id(index: usize) -> &'static str {
+    match PARAMS.get(index) {
+        Some(p) => p.id,
+        None => NAV_PARAMS.get(index - PARAMS.len()).map_or("?", |p| p.id),
+    }
+}
+
+/// A command, from `COMMAND_LONG` or `COMMAND_INT` (its x and y as f32).
+struct Command {
+    command: MavCmd,
+    params: [f32; 7],
 }
 
 impl MavVehicle {
@@ -215,10 +275,12 @@ impl MavVehicle {
             core: FlightCore::unstarted_with(FcConfig::default(), settings),
             mixer: None,
             armed: false,
-            armed_down_m: 0.0,
             gcs_seen_us: None,
-            landing: false,
-            setpoint_given: false,
+            mode: FlightMode::Position,
+            nav: NavSettings::default(),
+            route: Route::new(),
+            offboard: None,
+            home_ned_m: Vector3::zeros(),
             home: None,
             last_fix_us: None,
             baro: Barometer::new(),
@@ -228,7 +290,9 @@ impl MavVehicle {
             seq: 0,
             motors: [0.0; 4],
             cycles: (0, 1),
-            next_us: [0; 3],
+            streams: STREAMS.map(|(_, us)| (us, 0)),
+            used_mah: 0.0,
+            current_a: 0.0,
             link_errors: 0,
             reported_ned_m: None,
             counters: VehicleCounters::default(),
@@ -295,19 +359,34 @@ impl MavVehicle {
                 self.on_state(m);
                 Ok(())
             }
-            MavMessage::COMMAND_LONG(m) => self.on_command(m, out),
+            MavMessage::COMMAND_LONG(m) if self.for_me(m.target_system) => {
+                let c = Command {
+                    command: m.command,
+                    params: [m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7],
+                };
+                self.on_command(&c, out)
+            }
+            MavMessage::COMMAND_INT(m) if self.for_me(m.target_system) => {
+                // x and y are integers (degrees × 1e7 in global frames);
+                // none of the commands answered here reads them.
+                let c = Command {
+                    command: m.command,
+                    params: [m.param1, m.param2, m.param3, m.param4, m.x as f32, m.y as f32, m.z],
+                };
+                self.on_command(&c, out)
+            }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
             MavMessage::PARAM_REQUEST_LIST(m) if self.for_me(m.target_system) => {
-                for i in 0..PARAMS.len() {
+                for i in 0..PARAM_COUNT {
                     self.send_param(i, out)?;
                 }
                 Ok(())
             }
             MavMessage::PARAM_REQUEST_READ(m) if self.for_me(m.target_system) => {
                 let index = if m.param_index >= 0 {
-                    Some(m.param_index as usize).filter(|&i| i < PARAMS.len())
+                    Some(m.param_index as usize).filter(|&i| i < PARAM_COUNT)
                 } else {
-                    params::index_of(&m.param_id[..])
+                    param_index_of(&m.param_id[..])
                 };
                 match index {
                     Some(i) => self.send_param(i, out),
@@ -358,8 +437,14 @@ impl MavVehicle {
             self.baro.reset();
             self.mag_ref_rad = None;
             self.mag_due.reset();
-            self.next_us = [s.time_us; 3];
+            for (k, st) in self.streams.iter_mut().enumerate() {
+                *st = (STREAMS[k].1, s.time_us);
+            }
+            self.used_mah = 0.0;
         }
+        let dt_s = self
+            .last_sensor_us
+            .map_or(0.0, |t| s.time_us.saturating_sub(t) as f32 * 1e-6);
         self.last_sensor_us = Some(s.time_us);
         if let Some(alt) = s.baro_alt_m {
             self.on_baro(s.time_us, alt);
@@ -387,7 +472,12 @@ impl MavVehicle {
             Peer::Simulator,
             &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.armed)),
         )?;
+        // The modelled pack: current with the motors' mean command.
+        let mean = self.motors.iter().sum::<f32>() / 4.0;
+        self.current_a = PACK_FULL_A * mean.clamp(0.0, 1.0);
+        self.used_mah += self.current_a * dt_s.min(0.1) / 3.6;
         self.watch_ground_station(s.time_us, out)?;
+        self.fly_mode(s.time_us, out)?;
         self.telemetry(s.time_us, out)
     }
 
@@ -453,13 +543,12 @@ impl MavVehicle {
         }
     }
 
-    fn on_command<S: MavSink>(&mut self, m: &COMMAND_LONG_DATA, out: &mut S) -> Result<(), S::Error> {
-        if !self.for_me(m.target_system) {
-            self.counters.ignored = self.counters.ignored.wrapping_add(1);
-            return Ok(());
-        }
-        let result = match m.command {
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if m.param1 == 1.0 => match self.arm() {
+    fn on_command<S: MavSink>(&mut self, c: &Command, out: &mut S) -> Result<(), S::Error> {
+        let p = &c.params;
+        // The message a request asks for, sent after its acknowledgement.
+        let mut then_send = None;
+        let result = match c.command {
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 1.0 => match self.arm() {
                 Ok(()) => {
                     self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
                     MavResult::MAV_RESULT_ACCEPTED
@@ -473,7 +562,7 @@ impl MavVehicle {
                     MavResult::MAV_RESULT_TEMPORARILY_REJECTED
                 }
             },
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if m.param1 == 0.0 && self.in_air() && m.param2 != FORCE => {
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 0.0 && self.in_air() && p[1] != FORCE => {
                 self.say(
                     out,
                     MavSeverity::MAV_SEVERITY_WARNING,
@@ -481,14 +570,71 @@ impl MavVehicle {
                 )?;
                 MavResult::MAV_RESULT_DENIED
             }
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if m.param1 == 0.0 => {
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 0.0 => {
                 if self.armed {
                     self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("disarmed"))?;
                 }
-                self.armed = false;
+                self.disarm();
                 MavResult::MAV_RESULT_ACCEPTED
             }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => MavResult::MAV_RESULT_DENIED,
+            MavCmd::MAV_CMD_NAV_TAKEOFF => self.mode_command(FlightMode::Takeoff, p[6], out)?,
+            MavCmd::MAV_CMD_NAV_LAND => self.mode_command(FlightMode::Land, f32::NAN, out)?,
+            MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH => self.mode_command(FlightMode::Return, f32::NAN, out)?,
+            MavCmd::MAV_CMD_DO_SET_MODE => {
+                let custom = (p[0] as u32) & MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() as u32 != 0;
+                match FlightMode::from_px4(p[1] as u8, p[2] as u8) {
+                    Some(m) if custom => self.mode_command(m, f32::NAN, out)?,
+                    _ => {
+                        self.say(
+                            out,
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            // As integers: f32's Display would link core's float formatting.
+                            format_args!("mode {}/{} not flown here", p[1] as i32, p[2] as i32),
+                        )?;
+                        MavResult::MAV_RESULT_DENIED
+                    }
+                }
+            }
+            // The older requests, superseded by REQUEST_MESSAGE, are still
+            // what some ground stations send.
+            #[allow(deprecated)]
+            MavCmd::MAV_CMD_REQUEST_MESSAGE
+            | MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
+            | MavCmd::MAV_CMD_GET_HOME_POSITION => {
+                #[allow(deprecated)]
+                let id = match c.command {
+                    MavCmd::MAV_CMD_REQUEST_MESSAGE => p[0] as u32,
+                    MavCmd::MAV_CMD_GET_HOME_POSITION => 242,
+                    _ => AUTOPILOT_VERSION_ID,
+                };
+                match self.message(id, self.last_sensor_us.unwrap_or(0)) {
+                    Some(m) => {
+                        then_send = Some(m);
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    None => MavResult::MAV_RESULT_UNSUPPORTED,
+                }
+            }
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
+                let (id, us) = (p[0] as u32, p[1]);
+                match STREAMS.iter().position(|&(sid, _)| sid == id) {
+                    Some(k) if us.is_finite() && us >= -1.0 => {
+                        self.streams[k].0 = if us == -1.0 {
+                            0
+                        } else if us == 0.0 {
+                            STREAMS[k].1
+                        } else {
+                            (us as u64).max(MIN_INTERVAL_US)
+                        };
+                        self.streams[k].1 = 0;
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    Some(_) => MavResult::MAV_RESULT_DENIED,
+                    None => MavResult::MAV_RESULT_UNSUPPORTED,
+                }
+            }
+            MavCmd::MAV_CMD_MISSION_START => self.mode_command(FlightMode::Mission, f32::NAN, out)?,
             _ => MavResult::MAV_RESULT_UNSUPPORTED,
         };
         if result != MavResult::MAV_RESULT_ACCEPTED {
@@ -497,38 +643,180 @@ impl MavVehicle {
         out.send(
             Peer::GroundStation,
             &MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
-                command: m.command,
+                command: c.command,
                 result,
             }),
-        )
+        )?;
+        match then_send {
+            Some(m) => out.send(Peer::GroundStation, &m),
+            None => Ok(()),
+        }
+    }
+
+    /// A mode asked for (by `DO_SET_MODE` or its own command): entered, or
+    /// refused with a `STATUSTEXT` saying why. `alt_amsl_m` is a takeoff's
+    /// height above sea level (NaN: `MIS_TAKEOFF_ALT` above home).
+    fn mode_command<S: MavSink>(
+        &mut self,
+        mode: FlightMode,
+        alt_amsl_m: f32,
+        out: &mut S,
+    ) -> Result<MavResult, S::Error> {
+        let t_us = self.last_sensor_us.unwrap_or(0);
+        match self.set_mode(mode, t_us, alt_amsl_m) {
+            Ok(()) => Ok(MavResult::MAV_RESULT_ACCEPTED),
+            Err(why) => {
+                self.say(
+                    out,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    format_args!("{mode} refused: {why}"),
+                )?;
+                Ok(MavResult::MAV_RESULT_DENIED)
+            }
+        }
+    }
+
+    /// The flight mode.
+    pub fn mode(&self) -> FlightMode {
+        self.mode
+    }
+
+    /// The automatic modes' settings (PX4's parameters).
+    pub fn nav_settings(&self) -> &NavSettings {
+        &self.nav
+    }
+
+    /// Enters `mode` at `t_us` (see [`crate::modes`]).
+    fn set_mode(&mut self, mode: FlightMode, t_us: u64, alt_amsl_m: f32) -> Result<(), &'static str> {
+        let est = self.core.navigator().estimate();
+        let here = est.map(|e| e.pos_ned_m);
+        let yaw = est.map_or(0.0, |e| fc_core::quat_to_euler(&e.att)[2]);
+        match mode {
+            FlightMode::Position | FlightMode::Hold => {
+                if let (true, Some(p)) = (self.armed, here) {
+                    self.core.set_setpoint(&Setpoint::hold(p, yaw));
+                }
+            }
+            FlightMode::Offboard => {
+                let fresh = self
+                    .offboard
+                    .filter(|&(_, at)| t_us.saturating_sub(at) <= self.offboard_loss_us());
+                let Some((sp, _)) = fresh else {
+                    return Err("no set-points streaming");
+                };
+                if self.armed {
+                    self.core.set_setpoint(&sp);
+                }
+            }
+            FlightMode::Mission => return Err("no mission"),
+            FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
+                if !self.armed {
+                    return Err("disarmed");
+                }
+                let Some(p) = here else {
+                    return Err("no position");
+                };
+                let ground = self.home_ned_m[2];
+                let mut legs = Legs::new();
+                let _ = match mode {
+                    FlightMode::Takeoff => {
+                        let above_origin = self.home.map_or(f32::NAN, |h| alt_amsl_m - h.alt_mm as f32 * 1e-3);
+                        let up = if above_origin.is_finite() {
+                            above_origin
+                        } else {
+                            self.nav.takeoff_alt_m - ground
+                        };
+                        legs.push_back((Vector3::new(p[0], p[1], -up), self.nav.climb_mps))
+                    }
+                    FlightMode::Land => legs.push_back((Vector3::new(p[0], p[1], ground), self.nav.land_mps)),
+                    _ => {
+                        // Return: up to RTL_RETURN_ALT (if lower), over home, down.
+                        let cruise = p[2].min(ground - self.nav.rtl_alt_m);
+                        let h = self.home_ned_m;
+                        let _ = legs.push_back((Vector3::new(p[0], p[1], cruise), self.nav.climb_mps));
+                        let _ = legs.push_back((Vector3::new(h[0], h[1], cruise), self.nav.cruise_mps));
+                        legs.push_back((Vector3::new(h[0], h[1], ground), self.nav.land_mps))
+                    }
+                };
+                let from = Reference::from(self.core.setpoint());
+                if !self.route.start(t_us, &from, legs, self.core.setpoint().yaw_rad) {
+                    return Err("goal out of range");
+                }
+            }
+        }
+        self.mode = mode;
+        Ok(())
+    }
+
+    fn offboard_loss_us(&self) -> u64 {
+        (self.nav.offboard_loss_s * 1e6) as u64
+    }
+
+    /// Each step, what the mode flies: the automatic mode's route (a
+    /// takeoff then holds; a return or a landing disarms on the ground),
+    /// Offboard's loss of set-points (then Hold).
+    fn fly_mode<S: MavSink>(&mut self, t_us: u64, out: &mut S) -> Result<(), S::Error> {
+        if !self.armed {
+            return Ok(());
+        }
+        match self.mode {
+            FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
+                let Some((r, done)) = self.route.at(t_us) else {
+                    return Ok(());
+                };
+                self.core.set_setpoint(&r.setpoint());
+                if self.mode == FlightMode::Takeoff && done {
+                    self.mode = FlightMode::Hold;
+                    return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("takeoff done: hold"));
+                }
+                // Landed (PX4's land detector, simplified): landing, on the
+                // ground it armed on and not moving up or down.
+                let landing = self.mode == FlightMode::Land || self.route_descending();
+                let on_ground = self.core.navigator().estimate().is_some_and(|e| {
+                    (e.pos_ned_m[2] - self.home_ned_m[2]).abs() < LANDED_M && e.vel_ned_mps[2].abs() < LANDED_MPS
+                });
+                if landing && on_ground {
+                    self.disarm();
+                    return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("landed: disarmed"));
+                }
+            }
+            FlightMode::Offboard => {
+                let lost = self
+                    .offboard
+                    .is_none_or(|(_, at)| t_us.saturating_sub(at) > self.offboard_loss_us());
+                if lost {
+                    let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
+                    return self.say(
+                        out,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        format_args!("offboard set-points lost: hold"),
+                    );
+                }
+            }
+            _ => {}
+        }
+        Ok(())
     }
 
     /// The ground-station failsafe (`FS_GCS_MS`): armed, a ground station
-    /// was heard, and it has been silent that long → land where it is: the
-    /// set-point drops to the height it armed at, and once there (within
-    /// [`LANDED_M`]) it disarms. Set-points no longer count while landing;
-    /// a heartbeat again does not cancel it (as PX4's data-link loss).
+    /// was heard, and it has been silent that long → Land (where it is,
+    /// then disarmed on the ground). Set-points no longer count; a
+    /// heartbeat again does not cancel it (as PX4's data-link loss).
     fn watch_ground_station<S: MavSink>(&mut self, now_us: u64, out: &mut S) -> Result<(), S::Error> {
         let limit_us = u64::from(self.core.settings().gcs_loss_ms) * 1000;
-        let Some(est) = self.core.navigator().estimate() else {
-            return Ok(());
-        };
         let lost = self.gcs_seen_us.is_some_and(|t| now_us.saturating_sub(t) > limit_us);
-        if self.armed && !self.landing && limit_us > 0 && lost {
-            self.landing = true;
-            let yaw = fc_core::quat_to_euler(&est.att)[2];
-            let ground = Vector3::new(est.pos_ned_m[0], est.pos_ned_m[1], self.armed_down_m);
-            self.core.set_setpoint(&Setpoint::hold(ground, yaw));
+        if self.armed
+            && self.mode != FlightMode::Land
+            && limit_us > 0
+            && lost
+            && self.set_mode(FlightMode::Land, now_us, f32::NAN).is_ok()
+        {
+            self.gcs_seen_us = None;
             self.say(
                 out,
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 format_args!("ground station lost: landing"),
             )?;
-        }
-        if self.armed && self.landing && (est.pos_ned_m[2] - self.armed_down_m).abs() < LANDED_M {
-            self.armed = false;
-            self.landing = false;
-            self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("landed: disarmed"))?;
         }
         Ok(())
     }
@@ -537,10 +825,36 @@ impl MavVehicle {
     /// disarming would drop it.
     fn in_air(&self) -> bool {
         let down = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
-        self.armed && down.is_some_and(|d| d < self.armed_down_m - IN_AIR_M)
+        self.armed && down.is_some_and(|d| d < self.home_ned_m[2] - IN_AIR_M)
+    }
+
+    /// PX4's landed state: on the ground, taking off, in the air, landing.
+    pub fn landed_state(&self) -> MavLandedState {
+        let landing = self.mode == FlightMode::Land || self.route_descending();
+        match (self.armed, self.in_air()) {
+            (false, _) => MavLandedState::MAV_LANDED_STATE_ON_GROUND,
+            (true, _) if self.mode == FlightMode::Takeoff => MavLandedState::MAV_LANDED_STATE_TAKEOFF,
+            (true, true) if landing => MavLandedState::MAV_LANDED_STATE_LANDING,
+            (true, true) => MavLandedState::MAV_LANDED_STATE_IN_AIR,
+            (true, false) => MavLandedState::MAV_LANDED_STATE_ON_GROUND,
+        }
+    }
+
+    /// A return's last leg (straight down over home) is under way.
+    fn route_descending(&self) -> bool {
+        self.mode == FlightMode::Return && self.route.on_last_leg()
+    }
+
+    fn disarm(&mut self) {
+        self.armed = false;
+        if !matches!(self.mode, FlightMode::Position | FlightMode::Offboard) {
+            self.mode = FlightMode::Hold;
+        }
     }
 
     /// Arms if the estimator navigates; the controller is designed afresh.
+    /// Where it arms is home; it holds there (or, in Offboard, flies the
+    /// streamed set-point; an automatic mode becomes Hold).
     fn arm(&mut self) -> Result<(), &'static str> {
         if self.armed {
             return Ok(());
@@ -556,12 +870,19 @@ impl MavVehicle {
         self.core
             .try_select(self.core.settings().controller)
             .map_err(|_| "controller design failed")?;
-        if !self.setpoint_given {
-            let yaw = fc_core::quat_to_euler(&est.att)[2];
-            self.core.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
+        let yaw = fc_core::quat_to_euler(&est.att)[2];
+        match (self.mode, self.offboard) {
+            (FlightMode::Offboard, Some((sp, _))) => {
+                self.core.set_setpoint(&sp);
+            }
+            (mode, _) => {
+                self.core.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
+                if mode != FlightMode::Position {
+                    self.mode = FlightMode::Hold;
+                }
+            }
         }
-        self.armed_down_m = est.pos_ned_m[2];
-        self.landing = false;
+        self.home_ned_m = est.pos_ned_m;
         self.armed = true;
         Ok(())
     }
@@ -572,26 +893,30 @@ impl MavVehicle {
             return Ok(());
         }
         // The frame and mask here; the values (finite, within range) by the
-        // flight loop, as for every protocol.
-        let accepted = match setpoint_from_target(m, self.core.setpoint().yaw_rad) {
-            Some(_) if self.landing => return Ok(()),
-            Some(sp) => self.core.set_setpoint(&sp),
-            None => false,
-        };
-        if accepted {
-            self.setpoint_given = true;
-            return Ok(());
+        // flight loop, as for every protocol. Kept for Offboard; flown only
+        // in Offboard, as PX4 does.
+        let sp = setpoint_from_target(m, self.core.setpoint().yaw_rad).filter(|sp| sp.is_valid());
+        match sp {
+            Some(sp) => {
+                self.offboard = Some((sp, self.last_sensor_us.unwrap_or(0)));
+                if self.mode == FlightMode::Offboard && self.armed {
+                    self.core.set_setpoint(&sp);
+                }
+                Ok(())
+            }
+            None => {
+                self.counters.setpoints_refused = self.counters.setpoints_refused.wrapping_add(1);
+                self.say(
+                    out,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    format_args!("set-point refused: LOCAL_NED, position, finite"),
+                )
+            }
         }
-        self.counters.setpoints_refused = self.counters.setpoints_refused.wrapping_add(1);
-        self.say(
-            out,
-            MavSeverity::MAV_SEVERITY_WARNING,
-            format_args!("set-point refused: LOCAL_NED, position, finite"),
-        )
     }
 
     fn on_param_set<S: MavSink>(&mut self, m: &PARAM_SET_DATA, out: &mut S) -> Result<(), S::Error> {
-        let Some(i) = params::index_of(&m.param_id[..]) else {
+        let Some(i) = param_index_of(&m.param_id[..]) else {
             self.counters.params_refused = self.counters.params_refused.wrapping_add(1);
             return self.status(
                 out,
@@ -600,9 +925,13 @@ impl MavVehicle {
                 Refusal::Unknown,
             );
         };
-        if let Err(why) = self.apply(i, m.param_value) {
+        let r = match i.checked_sub(PARAMS.len()) {
+            Some(k) => self.nav.set(k, m.param_value),
+            None => self.apply(i, m.param_value),
+        };
+        if let Err(why) = r {
             self.counters.params_refused = self.counters.params_refused.wrapping_add(1);
-            let id = PARAMS[i].id;
+            let id = param_id(i);
             self.say(
                 out,
                 MavSeverity::MAV_SEVERITY_WARNING,
@@ -622,14 +951,21 @@ impl MavVehicle {
     }
 
     fn send_param<S: MavSink>(&self, index: usize, out: &mut S) -> Result<(), S::Error> {
-        let p = &PARAMS[index];
+        let value = match (
+            PARAMS.get(index),
+            index.checked_sub(PARAMS.len()).and_then(|k| NAV_PARAMS.get(k)),
+        ) {
+            (Some(p), _) => (p.get)(self.core.settings()),
+            (None, Some(p)) => (p.get)(&self.nav),
+            (None, None) => return Ok(()),
+        };
         out.send(
             Peer::GroundStation,
             &MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
-                param_value: (p.get)(self.core.settings()),
-                param_count: PARAMS.len() as u16,
+                param_value: value,
+                param_count: PARAM_COUNT as u16,
                 param_index: index as u16,
-                param_id: p.id.into(),
+                param_id: param_id(index).into(),
                 param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
             }),
         )
@@ -655,62 +991,170 @@ impl MavVehicle {
         )
     }
 
-    /// Sends the telemetry due at simulated time `t_us`.
+    /// Sends the telemetry due at simulated time `t_us` ([`STREAMS`], at
+    /// their intervals).
     fn telemetry<S: MavSink>(&mut self, t_us: u64, out: &mut S) -> Result<(), S::Error> {
-        if t_us >= self.next_us[0] {
-            self.next_us[0] = t_us + 1_000_000 / HEARTBEAT_HZ;
-            let hb = MavMessage::HEARTBEAT(hil::heartbeat(self.armed));
-            out.send(Peer::Simulator, &hb)?;
-            out.send(Peer::GroundStation, &hb)?;
-        }
-        if t_us >= self.next_us[1] {
-            self.next_us[1] = t_us + 1_000_000 / SYS_STATUS_HZ;
-            out.send(Peer::GroundStation, &MavMessage::SYS_STATUS(self.sys_status()))?;
-        }
-        if t_us >= self.next_us[2] {
-            self.next_us[2] = t_us + 1_000_000 / ATTITUDE_HZ;
-            if let Some(e) = self.core.navigator().estimate() {
-                let rpy = fc_core::quat_to_euler(&e.att);
-                out.send(
-                    Peer::GroundStation,
-                    &MavMessage::ATTITUDE(ATTITUDE_DATA {
-                        time_boot_ms: boot_ms(t_us),
-                        roll: rpy[0],
-                        pitch: rpy[1],
-                        yaw: rpy[2],
-                        rollspeed: e.rates_frd_radps[0],
-                        pitchspeed: e.rates_frd_radps[1],
-                        yawspeed: e.rates_frd_radps[2],
-                    }),
-                )?;
-                out.send(
-                    Peer::GroundStation,
-                    &MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
-                        time_boot_ms: boot_ms(t_us),
-                        x: e.pos_ned_m[0],
-                        y: e.pos_ned_m[1],
-                        z: e.pos_ned_m[2],
-                        vx: e.vel_ned_mps[0],
-                        vy: e.vel_ned_mps[1],
-                        vz: e.vel_ned_mps[2],
-                    }),
-                )?;
+        for (k, &(id, _)) in STREAMS.iter().enumerate() {
+            let (interval, next) = self.streams[k];
+            if interval == 0 || t_us < next {
+                continue;
+            }
+            self.streams[k].1 = t_us.saturating_add(interval);
+            if let Some(m) = self.message(id, t_us) {
+                if id == 0 {
+                    out.send(Peer::Simulator, &m)?;
+                }
+                out.send(Peer::GroundStation, &m)?;
             }
         }
         Ok(())
     }
 
+    /// Message `id` as of `t_us`, if this vehicle sends it (and has what it
+    /// carries: an estimate, a home).
+    fn message(&self, id: u32, t_us: u64) -> Option<MavMessage> {
+        let est = self.core.navigator().estimate();
+        let time_boot_ms = boot_ms(t_us);
+        Some(match id {
+            0 => MavMessage::HEARTBEAT(hil::heartbeat(self.armed, self.mode.custom_mode())),
+            1 => MavMessage::SYS_STATUS(self.sys_status()),
+            30 => {
+                let e = est?;
+                let rpy = fc_core::quat_to_euler(&e.att);
+                MavMessage::ATTITUDE(ATTITUDE_DATA {
+                    time_boot_ms,
+                    roll: rpy[0],
+                    pitch: rpy[1],
+                    yaw: rpy[2],
+                    rollspeed: e.rates_frd_radps[0],
+                    pitchspeed: e.rates_frd_radps[1],
+                    yawspeed: e.rates_frd_radps[2],
+                })
+            }
+            31 => {
+                let e = est?;
+                MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+                    time_boot_ms,
+                    q1: e.att[0],
+                    q2: e.att[1],
+                    q3: e.att[2],
+                    q4: e.att[3],
+                    rollspeed: e.rates_frd_radps[0],
+                    pitchspeed: e.rates_frd_radps[1],
+                    yawspeed: e.rates_frd_radps[2],
+                })
+            }
+            32 => {
+                let e = est?;
+                MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+                    time_boot_ms,
+                    x: e.pos_ned_m[0],
+                    y: e.pos_ned_m[1],
+                    z: e.pos_ned_m[2],
+                    vx: e.vel_ned_mps[0],
+                    vy: e.vel_ned_mps[1],
+                    vz: e.vel_ned_mps[2],
+                })
+            }
+            33 => {
+                let (e, h) = (est?, self.home?);
+                let (lat, lon, alt) = h.geodetic(&e.pos_ned_m.cast());
+                let cm = |v: f32| (v * 100.0).clamp(-32_767.0, 32_767.0) as i16;
+                let yaw_deg = fc_core::quat_to_euler(&e.att)[2].to_degrees();
+                MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                    time_boot_ms,
+                    lat,
+                    lon,
+                    alt,
+                    relative_alt: ((self.home_ned_m[2] - e.pos_ned_m[2]) * 1e3) as i32,
+                    vx: cm(e.vel_ned_mps[0]),
+                    vy: cm(e.vel_ned_mps[1]),
+                    vz: cm(e.vel_ned_mps[2]),
+                    hdg: (libm::fmodf(yaw_deg + 360.0, 360.0) * 100.0) as u16 % 36_000,
+                })
+            }
+            147 => MavMessage::BATTERY_STATUS(self.battery_status()),
+            242 => {
+                let h = self.home?;
+                let (latitude, longitude, altitude) = h.geodetic(&self.home_ned_m.cast());
+                MavMessage::HOME_POSITION(HOME_POSITION_DATA {
+                    latitude,
+                    longitude,
+                    altitude,
+                    x: self.home_ned_m[0],
+                    y: self.home_ned_m[1],
+                    z: self.home_ned_m[2],
+                    q: [1.0, 0.0, 0.0, 0.0],
+                    approach_x: 0.0,
+                    approach_y: 0.0,
+                    approach_z: 0.0,
+                })
+            }
+            245 => MavMessage::EXTENDED_SYS_STATE(EXTENDED_SYS_STATE_DATA {
+                vtol_state: MavVtolState::MAV_VTOL_STATE_UNDEFINED,
+                landed_state: self.landed_state(),
+            }),
+            AUTOPILOT_VERSION_ID => MavMessage::AUTOPILOT_VERSION(autopilot_version(self.system_id)),
+            _ => return None,
+        })
+    }
+
+    /// The modelled pack's voltage, V: 4.2 full to 3.3 empty, less the sag
+    /// of its current.
+    fn pack_v(&self) -> f32 {
+        let used = (self.used_mah / PACK_MAH).clamp(0.0, 1.0);
+        4.2 - 0.9 * used - PACK_OHM * self.current_a
+    }
+
+    fn pack_remaining_pct(&self) -> i8 {
+        (100.0 * (1.0 - self.used_mah / PACK_MAH)).clamp(0.0, 100.0) as i8
+    }
+
+    fn battery_status(&self) -> BATTERY_STATUS_DATA {
+        let mut voltages = [u16::MAX; 10];
+        voltages[0] = (self.pack_v() * 1e3) as u16;
+        BATTERY_STATUS_DATA {
+            current_consumed: self.used_mah as i32,
+            energy_consumed: -1,
+            temperature: i16::MAX,
+            voltages,
+            current_battery: (self.current_a * 100.0) as i16,
+            id: 0,
+            battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
+            mavtype: MavBatteryType::MAV_BATTERY_TYPE_LIPO,
+            battery_remaining: self.pack_remaining_pct(),
+        }
+    }
+
     fn sys_status(&self) -> SYS_STATUS_DATA {
         use MavSysStatusSensor as S;
-        let present = S::MAV_SYS_STATUS_SENSOR_3D_GYRO
+        // The position source: the simulator's state as an external
+        // (vision-like) position, and a global one about its origin (home).
+        let mut present = S::MAV_SYS_STATUS_SENSOR_3D_GYRO
             | S::MAV_SYS_STATUS_SENSOR_3D_ACCEL
             | S::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
             | S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
             | S::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-            | S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
+            | S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+            | S::MAV_SYS_STATUS_SENSOR_VISION_POSITION
+            | S::MAV_SYS_STATUS_SENSOR_BATTERY
+            | S::MAV_SYS_STATUS_PREARM_CHECK;
+        if self.home.is_some() {
+            present |= S::MAV_SYS_STATUS_SENSOR_GPS;
+        }
         let mut healthy = present;
-        if self.core.navigator().mode() != NavMode::Navigating || self.core.failsafe() {
-            healthy.remove(S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | S::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL);
+        let navigating = self.core.navigator().mode() == NavMode::Navigating && !self.core.failsafe();
+        if !navigating {
+            healthy.remove(
+                S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+                    | S::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+                    | S::MAV_SYS_STATUS_SENSOR_VISION_POSITION
+                    | S::MAV_SYS_STATUS_SENSOR_GPS
+                    | S::MAV_SYS_STATUS_PREARM_CHECK,
+            );
+        }
+        if self.mixer.is_none() {
+            healthy.remove(S::MAV_SYS_STATUS_PREARM_CHECK);
         }
         // Load: the last step's time against a 1 kHz step, per mille.
         let per_step = u64::from(self.cycles.1) / 1000;
@@ -720,16 +1164,41 @@ impl MavVehicle {
             onboard_control_sensors_enabled: present,
             onboard_control_sensors_health: healthy,
             load: load.min(1000) as u16,
-            voltage_battery: u16::MAX,
-            current_battery: -1,
+            voltage_battery: (self.pack_v() * 1e3) as u16,
+            current_battery: (self.current_a * 100.0) as i16,
             drop_rate_comm: 0,
             errors_comm: self.link_errors.min(u32::from(u16::MAX)) as u16,
             errors_count1: self.counters.sensors_refused.min(u32::from(u16::MAX)) as u16,
             errors_count2: self.counters.params_refused.min(u32::from(u16::MAX)) as u16,
             errors_count3: self.counters.commands_refused.min(u32::from(u16::MAX)) as u16,
             errors_count4: self.core.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
-            battery_remaining: -1,
+            battery_remaining: self.pack_remaining_pct(),
         }
+    }
+}
+
+/// `AUTOPILOT_VERSION`: the capabilities that are true of this vehicle.
+// PARAM_FLOAT is deprecated for PARAM_ENCODE_C_CAST; every parameter here
+// is a REAL32, so both are true, and older clients read PARAM_FLOAT.
+#[allow(deprecated)]
+pub fn autopilot_version(system_id: u8) -> AUTOPILOT_VERSION_DATA {
+    use MavProtocolCapability as C;
+    AUTOPILOT_VERSION_DATA {
+        capabilities: C::MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            | C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+            | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+            | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | C::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
+        uid: u64::from(system_id),
+        flight_sw_version: FLIGHT_SW_VERSION,
+        middleware_sw_version: 0,
+        os_sw_version: 0,
+        board_version: 0,
+        vendor_id: 0,
+        product_id: 0,
+        flight_custom_version: [0; 8],
+        middleware_custom_version: [0; 8],
+        os_custom_version: [0; 8],
     }
 }
 

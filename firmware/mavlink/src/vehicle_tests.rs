@@ -3,6 +3,7 @@
 //! on a refused write), its telemetry rates, and a fuzzer of ≥ 10⁶ frames.
 
 use super::*;
+use crate::modes::NAV_PARAMS;
 use crate::{encode, MavHeader, MavReader, MAX_FRAME};
 use fc_core::model::VehicleParams;
 use hal_shim::CycleClock;
@@ -113,6 +114,33 @@ fn command(arm: f32, force: f32) -> MavMessage {
         target_component: 1,
         ..Default::default()
     })
+}
+
+/// A `COMMAND_LONG` for this vehicle.
+fn command_of(command: MavCmd, p: [f32; 7]) -> MavMessage {
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: p[0],
+        param2: p[1],
+        param3: p[2],
+        param4: p[3],
+        param5: p[4],
+        param6: p[5],
+        param7: p[6],
+        command,
+        target_system: 1,
+        target_component: 1,
+        ..Default::default()
+    })
+}
+
+/// `MAV_CMD_DO_SET_MODE` as MAVSDK sends it (custom mode enabled, PX4's
+/// main and sub mode).
+fn set_mode(m: FlightMode) -> MavMessage {
+    let (main, sub) = m.px4();
+    command_of(
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [1.0, f32::from(main), f32::from(sub), 0.0, 0.0, 0.0, 0.0],
+    )
 }
 
 fn param_set(id: &str, value: f32) -> MavMessage {
@@ -243,7 +271,15 @@ fn parameters_answer_as_the_protocol_says_and_redesigns_wait_for_disarm() {
         target_component: 1,
     });
     v.handle(&list, &mut out, &Still, 0).unwrap();
-    assert_eq!(out.count("PARAM_VALUE"), PARAMS.len());
+    assert_eq!(out.count("PARAM_VALUE"), PARAMS.len() + NAV_PARAMS.len());
+    // PX4's own names for the automatic modes, after the loop's.
+    v.handle(&param_set("MIS_TAKEOFF_ALT", 1.5), &mut out, &Still, 0)
+        .unwrap();
+    assert_eq!(out.param("MIS_TAKEOFF_ALT"), Some(1.5));
+    v.handle(&param_set("MIS_TAKEOFF_ALT", -1.0), &mut out, &Still, 0)
+        .unwrap();
+    assert_eq!(out.param("MIS_TAKEOFF_ALT"), Some(1.5));
+    out.assert_text("MIS_TAKEOFF_ALT=-1 refused: out of [0.2, 100]");
 
     // Refused: the old value is echoed and a STATUSTEXT names it.
     v.handle(&param_set("VEH_MASS", -1.0), &mut out, &Still, 0).unwrap();
@@ -302,7 +338,7 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
 
     let mut out = Sent::default();
     let unsupported = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        command: MavCmd::MAV_CMD_NAV_TAKEOFF,
+        command: MavCmd::MAV_CMD_DO_SET_SERVO,
         target_system: 1,
         ..Default::default()
     });
@@ -314,7 +350,8 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     v.handle(&elsewhere, &mut out, &Still, 0).unwrap();
     assert_eq!(out.acks(), [MavResult::MAV_RESULT_UNSUPPORTED]);
 
-    // A set-point in the body frame is refused; one in LOCAL_NED is flown.
+    // A set-point in the body frame is refused; one in LOCAL_NED is kept,
+    // and flown once armed in Offboard (PX4's rule).
     let mut sp = SET_POSITION_TARGET_LOCAL_NED_DATA {
         x: 1.0,
         y: 2.0,
@@ -342,6 +379,11 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
         0,
     )
     .unwrap();
+    assert_ne!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    v.handle(&set_mode(FlightMode::Offboard), &mut out, &Still, 0).unwrap();
+    assert_eq!(v.mode(), FlightMode::Offboard);
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(v.armed());
     assert_eq!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     assert_eq!(v.core().setpoint().yaw_rad, 0.5);
     // A NaN velocity (not masked) is refused by the flight loop: counted,
@@ -377,28 +419,26 @@ fn losing_the_ground_station_lands_and_disarms() {
     v.handle(&gcs_beat, &mut out, &Still, 0).unwrap();
     v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
     assert!(v.armed());
-    // Fly to 2 m up (the set-point; the samples still say "at rest": the
-    // estimate stays on the ground, so it is "landed" as soon as it lands).
-    let up = SET_POSITION_TARGET_LOCAL_NED_DATA {
-        z: -2.0,
-        target_system: 1,
-        type_mask: PositionTargetTypemask::empty(),
-        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
-        ..Default::default()
-    };
-    v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(up), &mut out, &Still, 0)
-        .unwrap();
+    // Take off (2.5 m at 0.5 m/s: 10.9 s; the samples still say "at rest":
+    // the estimate stays on the ground, so it is "landed" once it lands).
+    v.handle(
+        &command_of(MavCmd::MAV_CMD_NAV_TAKEOFF, [f32::NAN; 7]),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
     // Heard 4.9 s ago: still fine (FS_GCS_MS 5000).
     let mut out = Sent::default();
     let t = rest(&mut v, &mut out, t, 4_900);
     assert!(v.armed() && out.texts().is_empty(), "{:?}", out.texts());
-    assert_eq!(v.core().setpoint().pos_ned_m[2], -2.0);
+    assert!(v.core().setpoint().pos_ned_m[2] < -0.5, "climbing");
+    assert_eq!(v.mode(), FlightMode::Takeoff);
     // Silent past 5 s: land where it is, then disarm on the ground.
     rest(&mut v, &mut out, t, 200);
     let texts = out.texts();
     assert_eq!(texts, ["ground station lost: landing", "landed: disarmed"], "{texts:?}");
     assert!(!v.armed());
-    assert!(v.core().setpoint().pos_ned_m[2].abs() < 0.05);
     // Off (FS_GCS_MS 0): never.
     let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
     let i = params::index_of(b"FS_GCS_MS").unwrap();
@@ -455,7 +495,7 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
     while sent_frames < frames {
         // A message of the kinds the vehicle acts on, its fields random.
         t_us += 1000;
-        let msg = match rng.next() % 6 {
+        let msg = match rng.next() % 8 {
             0 => at_rest(t_us)[1].clone(),
             1 => MavMessage::HIL_SENSOR(HIL_SENSOR_DATA {
                 time_usec: if rng.next().is_multiple_of(8) { rng.next() } else { t_us },
@@ -474,7 +514,53 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
                 ..Default::default()
             }),
             3 => command(rng.f32(), rng.f32()),
-            4 => param_set(PARAMS[(rng.next() % PARAMS.len() as u64) as usize].id, rng.f32()),
+            // Every command answered here and one it does not have, random
+            // parameters, as COMMAND_LONG or COMMAND_INT.
+            4 | 5 => {
+                #[allow(deprecated)]
+                const CMDS: [MavCmd; 12] = [
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                    MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    MavCmd::MAV_CMD_NAV_LAND,
+                    MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH,
+                    MavCmd::MAV_CMD_DO_SET_MODE,
+                    MavCmd::MAV_CMD_REQUEST_MESSAGE,
+                    MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+                    MavCmd::MAV_CMD_GET_HOME_POSITION,
+                    MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                    MavCmd::MAV_CMD_MISSION_START,
+                    MavCmd::MAV_CMD_DO_SET_SERVO,
+                    MavCmd::MAV_CMD_DO_SET_MODE,
+                ];
+                let c = CMDS[(rng.next() % CMDS.len() as u64) as usize];
+                // Small integers half the time (mode numbers, message ids).
+                let mut p = [0.0f32; 7];
+                for x in &mut p {
+                    *x = if rng.next().is_multiple_of(2) {
+                        (rng.next() % 256) as f32
+                    } else {
+                        rng.f32()
+                    };
+                }
+                if rng.next().is_multiple_of(2) {
+                    command_of(c, p)
+                } else {
+                    MavMessage::COMMAND_INT(COMMAND_INT_DATA {
+                        param1: p[0],
+                        param2: p[1],
+                        param3: p[2],
+                        param4: p[3],
+                        x: rng.next() as i32,
+                        y: rng.next() as i32,
+                        z: p[6],
+                        command: c,
+                        target_system: 1,
+                        target_component: 1,
+                        ..Default::default()
+                    })
+                }
+            }
+            6 => param_set(param_id((rng.next() % PARAM_COUNT as u64) as usize), rng.f32()),
             _ => MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
                 x: rng.f32(),
                 y: rng.f32(),
@@ -631,4 +717,208 @@ fn a_flagged_magnetometer_holds_the_heading_without_fixes() {
         "dead reckoning turns 0.02·10 rad: ψ {dead_reckoned}"
     );
     assert!(with_mag.abs() < 0.035, "with the magnetometer: ψ {with_mag}");
+}
+
+/// What MAVSDK, MAVProxy and QGroundControl read at connection and send to
+/// fly, answered as PX4 answers: a PX4 heartbeat and its mode encoding,
+/// AUTOPILOT_VERSION on request, streams at the rates asked for, the modes
+/// with PX4's rules (takeoff only armed, offboard only while set-points
+/// stream, lost set-points end in Hold), every other command UNSUPPORTED.
+#[test]
+fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut out = Sent::default();
+    let t = rest(&mut v, &mut out, 1_000_000, 2000);
+    let last = |out: &Sent, name: &str| {
+        out.0
+            .iter()
+            .rev()
+            .find(|(_, m)| message_name(m) == name)
+            .map(|(_, m)| m.clone())
+            .unwrap_or_else(|| panic!("no {name}"))
+    };
+    let MavMessage::HEARTBEAT(hb) = last(&out, "HEARTBEAT") else {
+        unreachable!()
+    };
+    assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_PX4);
+    assert_eq!(hb.custom_mode, 0x0003_0000, "Position (POSCTL) on the ground");
+    assert!(hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED));
+
+    // AUTOPILOT_VERSION on REQUEST_MESSAGE (as COMMAND_INT too) and on the older request.
+    let mut out = Sent::default();
+    let req = MavMessage::COMMAND_INT(COMMAND_INT_DATA {
+        param1: 148.0,
+        command: MavCmd::MAV_CMD_REQUEST_MESSAGE,
+        target_system: 1,
+        target_component: 1,
+        ..Default::default()
+    });
+    v.handle(&req, &mut out, &Still, 0).unwrap();
+    #[allow(deprecated)]
+    let caps = command_of(
+        MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+        [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    v.handle(&caps, &mut out, &Still, 0).unwrap();
+    assert_eq!(out.acks(), [MavResult::MAV_RESULT_ACCEPTED; 2]);
+    assert_eq!(out.count("AUTOPILOT_VERSION"), 2);
+    let MavMessage::AUTOPILOT_VERSION(av) = last(&out, "AUTOPILOT_VERSION") else {
+        unreachable!()
+    };
+    use MavProtocolCapability as C;
+    assert!(av.capabilities.contains(
+        C::MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | C::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    ));
+    assert!(
+        !av.capabilities.contains(C::MAV_PROTOCOL_CAPABILITY_MISSION_INT),
+        "no mission yet"
+    );
+    // Home, the landed state, the battery on request; an unknown message is UNSUPPORTED.
+    let mut out = Sent::default();
+    for id in [242.0, 245.0, 147.0, 33.0, 9999.0] {
+        v.handle(
+            &command_of(MavCmd::MAV_CMD_REQUEST_MESSAGE, [id, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            &mut out,
+            &Still,
+            0,
+        )
+        .unwrap();
+    }
+    let ok = MavResult::MAV_RESULT_ACCEPTED;
+    assert_eq!(out.acks(), [ok, ok, ok, ok, MavResult::MAV_RESULT_UNSUPPORTED]);
+    let MavMessage::HOME_POSITION(h) = last(&out, "HOME_POSITION") else {
+        unreachable!()
+    };
+    assert_eq!(
+        (h.latitude, h.longitude, h.altitude),
+        (474_000_000, 85_000_000, 500_000)
+    );
+    let MavMessage::EXTENDED_SYS_STATE(x) = last(&out, "EXTENDED_SYS_STATE") else {
+        unreachable!()
+    };
+    assert_eq!(x.landed_state, MavLandedState::MAV_LANDED_STATE_ON_GROUND);
+    let MavMessage::BATTERY_STATUS(b) = last(&out, "BATTERY_STATUS") else {
+        unreachable!()
+    };
+    assert_eq!(
+        (b.voltages[0], b.battery_remaining),
+        (4200, 100),
+        "the modelled pack, full"
+    );
+    let MavMessage::GLOBAL_POSITION_INT(g) = last(&out, "GLOBAL_POSITION_INT") else {
+        unreachable!()
+    };
+    assert!((g.lat - 474_000_000).abs() <= 1 && g.relative_alt.abs() < 10, "{g:?}");
+
+    // Streams at the rate asked for: GLOBAL_POSITION_INT at 50 Hz, then off.
+    let interval =
+        |id: f32, us: f32| command_of(MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL, [id, us, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    v.handle(&interval(33.0, 20_000.0), &mut out, &Still, 0).unwrap();
+    let mut out = Sent::default();
+    let t = rest(&mut v, &mut out, t, 1000);
+    assert_eq!(out.count("GLOBAL_POSITION_INT"), 50);
+    assert_eq!(out.count("EXTENDED_SYS_STATE"), 5);
+    v.handle(&interval(33.0, -1.0), &mut out, &Still, 0).unwrap();
+    v.handle(&interval(12345.0, 1000.0), &mut out, &Still, 0).unwrap();
+    assert_eq!(out.acks(), [ok, MavResult::MAV_RESULT_UNSUPPORTED]);
+    let mut out = Sent::default();
+    let t = rest(&mut v, &mut out, t, 1000);
+    assert_eq!(out.count("GLOBAL_POSITION_INT"), 0);
+
+    // Refusals by PX4's rules, each said; commands it does not have: UNSUPPORTED.
+    let mut out = Sent::default();
+    for m in [FlightMode::Offboard, FlightMode::Takeoff, FlightMode::Mission] {
+        v.handle(&set_mode(m), &mut out, &Still, 0).unwrap();
+    }
+    v.handle(&command_of(MavCmd::MAV_CMD_DO_SET_SERVO, [0.0; 7]), &mut out, &Still, 0)
+        .unwrap();
+    let denied = MavResult::MAV_RESULT_DENIED;
+    assert_eq!(out.acks(), [denied, denied, denied, MavResult::MAV_RESULT_UNSUPPORTED]);
+    assert_eq!(
+        out.texts(),
+        [
+            "Offboard refused: no set-points streaming",
+            "Takeoff refused: disarmed",
+            "Mission refused: no mission"
+        ]
+    );
+    assert_eq!(v.mode(), FlightMode::Position);
+
+    // Hold, arm, take off to MIS_TAKEOFF_ALT: Takeoff, then Hold at 1.5 m.
+    let mut out = Sent::default();
+    v.handle(&set_mode(FlightMode::Hold), &mut out, &Still, 0).unwrap();
+    v.handle(&param_set("MIS_TAKEOFF_ALT", 1.5), &mut out, &Still, 0)
+        .unwrap();
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    v.handle(
+        &command_of(MavCmd::MAV_CMD_NAV_TAKEOFF, [f32::NAN; 7]),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
+    assert_eq!(out.acks(), [ok; 3]);
+    assert_eq!(v.mode(), FlightMode::Takeoff);
+    assert_eq!(v.landed_state(), MavLandedState::MAV_LANDED_STATE_TAKEOFF);
+    // 1.5 m at 0.5 m/s: 6.6 s; the heartbeat after says Hold.
+    let t = rest(&mut v, &mut out, t, 8_000);
+    assert_eq!(v.mode(), FlightMode::Hold);
+    assert!((v.core().setpoint().pos_ned_m[2] + 1.5).abs() < 1e-4);
+    out.assert_text("takeoff done: hold");
+    let MavMessage::HEARTBEAT(hb) = last(&out, "HEARTBEAT") else {
+        unreachable!()
+    };
+    assert_eq!(hb.custom_mode, FlightMode::Hold.custom_mode());
+    // A takeoff to 10²⁰ m above sea level cannot be planned: refused, still Hold.
+    let mut out = Sent::default();
+    let absurd = command_of(MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e20]);
+    v.handle(&absurd, &mut out, &Still, 0).unwrap();
+    assert_eq!(out.acks(), [denied]);
+    out.assert_text("Takeoff refused: goal out of range");
+    assert_eq!(v.mode(), FlightMode::Hold);
+
+    // Offboard while set-points stream; they stop: Hold after COM_OF_LOSS_T (1 s).
+    let target = MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        x: 2.0,
+        z: -1.5,
+        target_system: 1,
+        type_mask: PositionTargetTypemask::empty(),
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..Default::default()
+    });
+    let mut out = Sent::default();
+    v.handle(&target, &mut out, &Still, 0).unwrap();
+    v.handle(&set_mode(FlightMode::Offboard), &mut out, &Still, 0).unwrap();
+    assert_eq!(
+        (v.mode(), v.core().setpoint().pos_ned_m[0]),
+        (FlightMode::Offboard, 2.0)
+    );
+    let t = rest(&mut v, &mut out, t, 1_100);
+    assert_eq!(v.mode(), FlightMode::Hold);
+    out.assert_text("offboard set-points lost: hold");
+
+    // Return: up to RTL_RETURN_ALT (2 m) over where it is, home, down; on
+    // the ground it disarms (the samples say it never left).
+    let mut out = Sent::default();
+    v.handle(
+        &command_of(MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH, [0.0; 7]),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
+    assert_eq!(v.mode(), FlightMode::Return);
+    let mut highest: f32 = 0.0;
+    let mut t = t;
+    while v.armed() && t < 60_000_000 {
+        t = rest(&mut v, &mut out, t, 100);
+        highest = highest.min(v.core().setpoint().pos_ned_m[2]);
+    }
+    assert!(!v.armed(), "landed and disarmed");
+    assert!((highest + 2.0).abs() < 1e-3, "{highest}");
+    let sp = v.core().setpoint().pos_ned_m;
+    assert!(sp[0].abs() < 1e-3 && sp[1].abs() < 1e-3, "over home: {sp:?}");
+    out.assert_text("landed: disarmed");
 }

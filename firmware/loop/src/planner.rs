@@ -5,6 +5,7 @@
 //! `takeoff` and `land` plan them. Eight conditions fix the eight
 //! coefficients: the segment is unique.
 
+use fc_core::control::Setpoint;
 use nalgebra::Vector3;
 
 /// Longest segment, s (the firmware's commands carry f32 seconds; a
@@ -46,7 +47,29 @@ pub struct Reference {
     pub yaw_rate_radps: f32,
 }
 
+impl From<&Setpoint<f32>> for Reference {
+    /// A set-point as a reference (its jerk dropped: segments start at jerk 0).
+    fn from(sp: &Setpoint<f32>) -> Self {
+        Self {
+            pos_ned_m: sp.pos_ned_m,
+            vel_ned_mps: sp.vel_ned_mps,
+            acc_ned_mps2: sp.acc_ned_mps2,
+            yaw_rad: sp.yaw_rad,
+            yaw_rate_radps: sp.yaw_rate_radps,
+        }
+    }
+}
+
 impl Reference {
+    /// The set-point the controllers fly for it (jerk 0).
+    pub fn setpoint(&self) -> Setpoint<f32> {
+        let mut sp = Setpoint::hold(self.pos_ned_m, self.yaw_rad);
+        sp.vel_ned_mps = self.vel_ned_mps;
+        sp.acc_ned_mps2 = self.acc_ned_mps2;
+        sp.yaw_rate_radps = self.yaw_rate_radps;
+        sp
+    }
+
     /// At rest at `pos` with heading `yaw`.
     pub fn at_rest(pos_ned_m: Vector3<f32>, yaw_rad: f32) -> Self {
         Self {

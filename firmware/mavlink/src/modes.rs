@@ -1,0 +1,413 @@
+//! PX4's flight modes as this vehicle flies them, so that a ground station's
+//! PX4 mode table (MAVSDK's, QGroundControl's, MAVProxy's) applies unchanged:
+//! the mode is `HEARTBEAT.custom_mode` in PX4's encoding (`px4_custom_mode.h`:
+//! the main mode in bits 16–23, the sub mode in bits 24–31) and is asked for
+//! with `MAV_CMD_DO_SET_MODE` (`param1` `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`,
+//! `param2` the main mode, `param3` the sub mode).
+//!
+//! | mode | PX4 (main, sub) | what it flies |
+//! |---|---|---|
+//! | Position | POSCTL (3, 0) | holds where it was when entered |
+//! | Hold | AUTO (4) LOITER (3) | the same (PX4's loiter) |
+//! | Takeoff | AUTO TAKEOFF (2) | straight up to [`NavSettings::takeoff_alt_m`] above home, then Hold |
+//! | Land | AUTO LAND (6) | straight down to the ground it armed on at [`NavSettings::land_mps`], then disarms |
+//! | Return | AUTO RTL (5) | up to [`NavSettings::rtl_alt_m`] above home (if lower), over home at [`NavSettings::cruise_mps`], then Land |
+//! | Offboard | OFFBOARD (6, 0) | the ground station's `SET_POSITION_TARGET_LOCAL_NED`; entered only while they stream, Hold when they stop for [`NavSettings::offboard_loss_s`] |
+//! | Mission | AUTO MISSION (4) | the uploaded mission (`crate::mission`) |
+//!
+//! Each leg of an automatic mode is one planner segment
+//! ([`fc_loop::planner::Segment`], rest to rest), its duration chosen so that
+//! its peak speed is the mode's speed.
+
+use crate::params::Refusal;
+use fc_loop::planner::{Reference, Segment};
+use nalgebra::Vector3;
+
+/// PX4's main and sub mode numbers (`px4_custom_mode.h`).
+pub mod px4 {
+    /// Position control.
+    pub const MAIN_POSCTL: u8 = 3;
+    /// The automatic modes (their sub mode says which).
+    pub const MAIN_AUTO: u8 = 4;
+    /// Offboard.
+    pub const MAIN_OFFBOARD: u8 = 6;
+    /// AUTO: takeoff.
+    pub const SUB_TAKEOFF: u8 = 2;
+    /// AUTO: loiter (MAVSDK's and QGroundControl's "Hold").
+    pub const SUB_LOITER: u8 = 3;
+    /// AUTO: mission.
+    pub const SUB_MISSION: u8 = 4;
+    /// AUTO: return to launch.
+    pub const SUB_RTL: u8 = 5;
+    /// AUTO: land.
+    pub const SUB_LAND: u8 = 6;
+}
+
+/// A flight mode (see the module's table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FlightMode {
+    /// Position control: hold where it is.
+    Position,
+    /// Hold (PX4's AUTO LOITER).
+    Hold,
+    /// Climb to the takeoff height, then Hold.
+    Takeoff,
+    /// Descend to the ground, then disarm.
+    Land,
+    /// Return to home and land.
+    Return,
+    /// Fly the ground station's set-points.
+    Offboard,
+    /// Fly the uploaded mission.
+    Mission,
+}
+
+impl FlightMode {
+    /// Every mode.
+    pub const ALL: [FlightMode; 7] = [
+        FlightMode::Position,
+        FlightMode::Hold,
+        FlightMode::Takeoff,
+        FlightMode::Land,
+        FlightMode::Return,
+        FlightMode::Offboard,
+        FlightMode::Mission,
+    ];
+
+    /// PX4's (main, sub) mode.
+    pub const fn px4(self) -> (u8, u8) {
+        use px4::*;
+        match self {
+            FlightMode::Position => (MAIN_POSCTL, 0),
+            FlightMode::Hold => (MAIN_AUTO, SUB_LOITER),
+            FlightMode::Takeoff => (MAIN_AUTO, SUB_TAKEOFF),
+            FlightMode::Land => (MAIN_AUTO, SUB_LAND),
+            FlightMode::Return => (MAIN_AUTO, SUB_RTL),
+            FlightMode::Offboard => (MAIN_OFFBOARD, 0),
+            FlightMode::Mission => (MAIN_AUTO, SUB_MISSION),
+        }
+    }
+
+    /// `HEARTBEAT.custom_mode` in PX4's encoding.
+    pub const fn custom_mode(self) -> u32 {
+        let (main, sub) = self.px4();
+        ((main as u32) << 16) | ((sub as u32) << 24)
+    }
+
+    /// The mode PX4's (main, sub) names, if this vehicle flies it (the
+    /// sub mode counts only under AUTO, as in PX4).
+    pub fn from_px4(main: u8, sub: u8) -> Option<Self> {
+        use px4::*;
+        match (main, sub) {
+            (MAIN_POSCTL, _) => Some(FlightMode::Position),
+            (MAIN_OFFBOARD, _) => Some(FlightMode::Offboard),
+            (MAIN_AUTO, SUB_LOITER) => Some(FlightMode::Hold),
+            (MAIN_AUTO, SUB_TAKEOFF) => Some(FlightMode::Takeoff),
+            (MAIN_AUTO, SUB_LAND) => Some(FlightMode::Land),
+            (MAIN_AUTO, SUB_RTL) => Some(FlightMode::Return),
+            (MAIN_AUTO, SUB_MISSION) => Some(FlightMode::Mission),
+            _ => None,
+        }
+    }
+
+    /// The name QGroundControl shows for it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            FlightMode::Position => "Position",
+            FlightMode::Hold => "Hold",
+            FlightMode::Takeoff => "Takeoff",
+            FlightMode::Land => "Land",
+            FlightMode::Return => "Return",
+            FlightMode::Offboard => "Offboard",
+            FlightMode::Mission => "Mission",
+        }
+    }
+}
+
+impl core::fmt::Display for FlightMode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The automatic modes' settings, under PX4's parameter names. The defaults
+/// are PX4's where a room-sized vehicle can fly them, and smaller where it
+/// cannot (PX4's are for an outdoor multicopter: a 60 m return height, 5
+/// m/s cruise).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavSettings {
+    /// `MIS_TAKEOFF_ALT`: takeoff height above home, m (PX4: 2.5).
+    pub takeoff_alt_m: f32,
+    /// `RTL_RETURN_ALT`: the least height a return flies home at, m (PX4: 60).
+    pub rtl_alt_m: f32,
+    /// `MPC_XY_CRUISE`: horizontal speed of the automatic modes, m/s (PX4: 5).
+    pub cruise_mps: f32,
+    /// `MPC_Z_V_AUTO_UP`: climb speed, m/s (PX4: 3).
+    pub climb_mps: f32,
+    /// `MPC_LAND_SPEED`: descent speed of a landing, m/s (PX4: 0.7).
+    pub land_mps: f32,
+    /// `COM_OF_LOSS_T`: set-points silent this long end Offboard, s (PX4: 1).
+    pub offboard_loss_s: f32,
+}
+
+impl Default for NavSettings {
+    fn default() -> Self {
+        Self {
+            takeoff_alt_m: 2.5,
+            rtl_alt_m: 2.0,
+            cruise_mps: 1.0,
+            climb_mps: 0.5,
+            land_mps: 0.5,
+            offboard_loss_s: 1.0,
+        }
+    }
+}
+
+/// One of [`NavSettings`]' parameters.
+#[derive(Clone, Copy)]
+pub struct NavParam {
+    /// Its PX4 name.
+    pub id: &'static str,
+    /// What it is, with its unit.
+    pub doc: &'static str,
+    /// Accepted range.
+    pub range: (f32, f32),
+    /// Its value.
+    pub get: fn(&NavSettings) -> f32,
+    /// Where it is written.
+    pub field: fn(&mut NavSettings) -> &mut f32,
+}
+
+impl core::fmt::Debug for NavParam {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("NavParam").field("id", &self.id).finish()
+    }
+}
+
+macro_rules! nav {
+    ($id:literal, $doc:literal, $lo:expr, $hi:expr, $f:ident) => {
+        NavParam {
+            id: $id,
+            doc: $doc,
+            range: ($lo, $hi),
+            get: |s| s.$f,
+            field: |s| &mut s.$f,
+        }
+    };
+}
+
+/// The automatic modes' parameters, served after the flight loop's
+/// ([`crate::params::PARAMS`]) in `param_index` order.
+pub const NAV_PARAMS: [NavParam; 6] = [
+    nav!(
+        "MIS_TAKEOFF_ALT",
+        "takeoff height above home, m",
+        0.2,
+        100.0,
+        takeoff_alt_m
+    ),
+    nav!(
+        "RTL_RETURN_ALT",
+        "least height of a return home, m",
+        0.2,
+        500.0,
+        rtl_alt_m
+    ),
+    nav!(
+        "MPC_XY_CRUISE",
+        "horizontal speed of the automatic modes, m/s",
+        0.1,
+        20.0,
+        cruise_mps
+    ),
+    nav!(
+        "MPC_Z_V_AUTO_UP",
+        "climb speed of the automatic modes, m/s",
+        0.1,
+        8.0,
+        climb_mps
+    ),
+    nav!("MPC_LAND_SPEED", "descent speed of a landing, m/s", 0.1, 4.0, land_mps),
+    nav!(
+        "COM_OF_LOSS_T",
+        "offboard set-points silent this long end offboard, s",
+        0.1,
+        60.0,
+        offboard_loss_s
+    ),
+];
+
+impl NavSettings {
+    /// Writes parameter `index` of [`NAV_PARAMS`]: refused outside its range.
+    pub fn set(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
+        let p = NAV_PARAMS.get(index).ok_or(Refusal::Unknown)?;
+        let (lo, hi) = p.range;
+        if !(value.is_finite() && (lo..=hi).contains(&value)) {
+            return Err(Refusal::Range { lo, hi });
+        }
+        *(p.field)(self) = value;
+        Ok(())
+    }
+}
+
+/// The index in [`NAV_PARAMS`] of the parameter named `id` (NUL-padded).
+pub fn nav_index_of(id: &[u8]) -> Option<usize> {
+    let len = id.iter().position(|&b| b == 0).unwrap_or(id.len());
+    NAV_PARAMS.iter().position(|p| p.id.as_bytes() == &id[..len])
+}
+
+/// Duration of a rest-to-rest segment of length `d` whose peak speed is `v`
+/// (the septic's peak is 35/16 · d / T), at least 0.5 s.
+pub fn leg_duration_s(d_m: f32, v_mps: f32) -> f32 {
+    (35.0 / 16.0 * d_m / v_mps.max(0.01)).max(0.5)
+}
+
+/// The legs of an automatic mode still to fly, each a goal (NED, m) and
+/// its speed, m/s.
+pub type Legs = heapless::Deque<(Vector3<f32>, f32), 3>;
+
+/// An automatic mode under way: the segment flown, the legs after it.
+#[derive(Debug, Clone, Default)]
+pub struct Route {
+    segment: Option<Segment>,
+    legs: Legs,
+    yaw_rad: f32,
+}
+
+impl Route {
+    /// Nothing to fly.
+    pub const fn new() -> Self {
+        Self {
+            segment: None,
+            legs: heapless::Deque::new(),
+            yaw_rad: 0.0,
+        }
+    }
+
+    /// From `from` at `t_us` through `legs` in turn, holding heading `yaw`;
+    /// `false` (nothing to fly) if no leg could be planned (a goal not
+    /// finite or farther than the planner's 1 km).
+    pub fn start(&mut self, t_us: u64, from: &Reference, legs: Legs, yaw_rad: f32) -> bool {
+        self.legs = legs;
+        self.yaw_rad = yaw_rad;
+        self.segment = None;
+        self.next(t_us, from)
+    }
+
+    /// Plans the next leg from `from`; `false` when there is none.
+    fn next(&mut self, t_us: u64, from: &Reference) -> bool {
+        while let Some((goal, speed)) = self.legs.pop_front() {
+            let d = (goal - from.pos_ned_m).norm();
+            if let Ok(s) = Segment::plan(t_us, from, goal, self.yaw_rad, leg_duration_s(d, speed)) {
+                self.segment = Some(s);
+                return true;
+            }
+        }
+        false
+    }
+
+    /// The reference at `t_us` and whether every leg is done.
+    pub fn at(&mut self, t_us: u64) -> Option<(Reference, bool)> {
+        let seg = self.segment?;
+        if seg.finished(t_us) {
+            let end = seg.goal();
+            if self.next(t_us, &end) {
+                return self.segment.map(|s| (s.eval(t_us), false));
+            }
+            return Some((end, true));
+        }
+        Some((seg.eval(t_us), false))
+    }
+
+    /// The leg flown is the last one (or the route has ended).
+    pub fn on_last_leg(&self) -> bool {
+        self.segment.is_some() && self.legs.is_empty()
+    }
+
+    /// Where the route ends (the last leg's goal), if under way.
+    pub fn goal(&self) -> Option<Vector3<f32>> {
+        self.legs
+            .back()
+            .map(|l| l.0)
+            .or(self.segment.map(|s| s.goal().pos_ned_m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn modes_encode_as_px4_and_decode_back() {
+        // px4_custom_mode.h: main mode in byte 2, sub mode in byte 3.
+        assert_eq!(FlightMode::Position.custom_mode(), 0x0003_0000);
+        assert_eq!(FlightMode::Offboard.custom_mode(), 0x0006_0000);
+        assert_eq!(FlightMode::Hold.custom_mode(), 0x0304_0000);
+        assert_eq!(FlightMode::Takeoff.custom_mode(), 0x0204_0000);
+        assert_eq!(FlightMode::Mission.custom_mode(), 0x0404_0000);
+        assert_eq!(FlightMode::Return.custom_mode(), 0x0504_0000);
+        assert_eq!(FlightMode::Land.custom_mode(), 0x0604_0000);
+        for m in FlightMode::ALL {
+            let (main, sub) = m.px4();
+            assert_eq!(FlightMode::from_px4(main, sub), Some(m));
+            let c = m.custom_mode().to_le_bytes();
+            assert_eq!((c[2], c[3]), (main, sub));
+        }
+        // Manual, AUTO READY and follow-me are not flown here.
+        assert_eq!(FlightMode::from_px4(1, 0), None);
+        assert_eq!(FlightMode::from_px4(4, 1), None);
+        assert_eq!(FlightMode::from_px4(4, 8), None);
+    }
+
+    #[test]
+    fn nav_parameters_are_named_as_px4_and_checked() {
+        let mut s = NavSettings::default();
+        let i = nav_index_of(b"MIS_TAKEOFF_ALT\0").unwrap();
+        s.set(i, 1.5).unwrap();
+        assert_eq!(s.takeoff_alt_m, 1.5);
+        assert_eq!(s.set(i, -1.0), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
+        assert_eq!(s.set(i, f32::NAN), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
+        assert_eq!(s.takeoff_alt_m, 1.5);
+        for (k, p) in NAV_PARAMS.iter().enumerate() {
+            assert!(p.id.len() <= 16);
+            assert_eq!(nav_index_of(p.id.as_bytes()), Some(k));
+            let (lo, hi) = p.range;
+            assert!((lo..=hi).contains(&(p.get)(&NavSettings::default())), "{}", p.id);
+        }
+        assert_eq!(nav_index_of(b"NOPE"), None);
+    }
+
+    #[test]
+    fn a_route_flies_its_legs_in_turn_at_their_peak_speeds() {
+        let mut r = Route::new();
+        let from = Reference::at_rest(Vector3::new(3.0, 4.0, -1.0), 0.0);
+        let mut legs = Legs::new();
+        legs.push_back((Vector3::new(3.0, 4.0, -2.0), 0.5)).unwrap();
+        legs.push_back((Vector3::new(0.0, 0.0, -2.0), 1.0)).unwrap();
+        assert!(r.start(0, &from, legs, 0.0));
+        assert_eq!(r.goal(), Some(Vector3::new(0.0, 0.0, -2.0)));
+        let mut t = 0;
+        let mut peak = [0.0f32; 2];
+        let mut leg = 0;
+        loop {
+            let (re, done) = r.at(t).unwrap();
+            if done {
+                assert!((re.pos_ned_m - Vector3::new(0.0, 0.0, -2.0)).norm() < 1e-4);
+                break;
+            }
+            if re.pos_ned_m[2] <= -2.0 + 1e-4 && re.vel_ned_mps[2].abs() < 1e-4 && leg == 0 && t > 0 {
+                leg = 1;
+            }
+            peak[leg] = peak[leg].max(re.vel_ned_mps.norm());
+            t += 10_000;
+            assert!(t < 20_000_000, "never done");
+        }
+        // 1 m up at 0.5 m/s: 4.375 s; 5 m across at 1 m/s: 10.9 s.
+        // A goal 2 km away is not planned.
+        let mut far = Legs::new();
+        far.push_back((Vector3::new(2000.0, 0.0, -1.0), 1.0)).unwrap();
+        assert!(!Route::new().start(0, &from, far, 0.0));
+        assert!((peak[0] - 0.5).abs() < 0.01 && (peak[1] - 1.0).abs() < 0.01, "{peak:?}");
+        assert!((15_000_000..15_500_000).contains(&t), "{t}");
+    }
+}

@@ -1,0 +1,196 @@
+#!/usr/bin/env python3
+"""MAVSDK (PyPI `mavsdk` 4.x, the native binding of MAVSDK's C++ library),
+unmodified, flies the flight controller as it flies PX4, using only
+MAVSDK's public API. Run by tools/rotorpy_hil.py --mavsdk against
+`sil-host px4-hil --gcs` flying rotorpy; every step is checked against
+rotorpy's truth, which rotorpy_hil.py sends to --truth-port (north, east,
+down about the start, m, with the simulated time).
+
+1. connect (`udpin://`, as to a PX4 SITL); the autopilot is PX4;
+2. telemetry: health (local and global position, home, armable), home,
+   position, attitude, battery, flight mode, landed state, armed;
+3. param get and set; `action.set_takeoff_altitude(1.5)` (PX4's
+   MIS_TAKEOFF_ALT);
+4. `action.arm()`, `action.takeoff()`: Hold at 1.5 m (5 cm, rotorpy);
+5. offboard: a set-point where it is, `start()`, a 2 m move north, `stop()`
+   (Hold): within 5 cm of the set-point;
+6. `action.return_to_launch()`: landed and disarmed within 20 cm of home.
+
+Prints `mavsdk check: P passed, F failed` (and what failed); exits non-zero
+if anything failed. The mission and the joystick are not flown yet.
+"""
+import argparse
+import asyncio
+import json
+import math
+import socket
+import sys
+import time
+
+from mavsdk.asyncio import Configuration, ComponentType, Mavsdk
+from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
+from mavsdk.asyncio.plugins.param import ParamAsync
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync, FlightMode, LandedState
+from mavsdk import Autopilot
+
+
+class Truth:
+    """rotorpy's position (NED about the start, m) and time (s), latest."""
+
+    def __init__(self, port):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        self.sock.bind(("127.0.0.1", port))
+        self.sock.setblocking(False)
+        self.t, self.ned = None, None
+
+    def poll(self):
+        while True:
+            try:
+                data, _ = self.sock.recvfrom(256)
+            except BlockingIOError:
+                return
+            m = json.loads(data)
+            self.t, self.ned = m["t"], m["ned"]
+
+    def dist(self, ned):
+        self.poll()
+        if self.ned is None:
+            return math.inf
+        return math.dist(self.ned, ned)
+
+
+class Flight:
+    def __init__(self, truth, timeout):
+        self.truth = truth
+        self.timeout = timeout
+        self.results = []
+
+    def check(self, ok, what):
+        self.results.append((bool(ok), what))
+        print(("ok   " if ok else "FAIL ") + what, flush=True)
+        return ok
+
+    async def until(self, cond, what, timeout=None):
+        """Waits (wall time) until `cond()` holds; checks it."""
+        end = time.time() + (timeout or self.timeout)
+        while time.time() < end:
+            # Keeps the truth current (its datagrams are not left to queue).
+            self.truth.poll()
+            if await cond():
+                return self.check(True, what)
+            await asyncio.sleep(0.05)
+        return self.check(False, what + " (timed out)")
+
+    async def settle_at(self, ned, tol, hold_s, what):
+        """rotorpy within `tol` m of `ned` for `hold_s` simulated seconds."""
+        since = None
+
+        async def near():
+            nonlocal since
+            d = self.truth.dist(ned)
+            if d > tol:
+                since = None
+                return False
+            since = self.truth.t if since is None else since
+            return self.truth.t - since >= hold_s
+
+        ok = await self.until(near, what)
+        if not ok:
+            print(f"     rotorpy at {self.truth.ned}, {self.truth.dist(ned):.3f} m from {ned}", flush=True)
+        return ok
+
+    async def run(self, url):
+        cfg = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+        async with Mavsdk(cfg) as mavsdk:
+            await mavsdk.add_any_connection(url)
+            system = await mavsdk.first_autopilot(timeout_s=self.timeout)
+            if not self.check(system is not None, "an autopilot connects"):
+                return
+            self.check(await system.autopilot_type() == Autopilot.PX4, "it is a PX4 autopilot")
+            tel, action = TelemetryAsync(system), ActionAsync(system)
+            offboard, param = OffboardAsync(system), ParamAsync(system)
+
+            async def healthy():
+                h = await tel.health()
+                return (h.is_local_position_ok and h.is_global_position_ok and h.is_home_position_ok
+                        and h.is_armable)
+
+            await self.until(healthy, "health: local and global position, home, armable")
+            home = await tel.home()
+            pos = await tel.position()
+            self.check(abs(pos.relative_altitude_m) < 0.05 and abs(pos.latitude_deg - home.latitude_deg) < 1e-6
+                       and abs(pos.longitude_deg - home.longitude_deg) < 1e-6,
+                       f"position at home ({pos.latitude_deg:.7f}, {pos.longitude_deg:.7f}, "
+                       f"{pos.relative_altitude_m:.3f} m up), home {home.latitude_deg:.7f}, "
+                       f"{home.longitude_deg:.7f}")
+            att = await tel.attitude_euler()
+            self.check(abs(att.roll_deg) < 2 and abs(att.pitch_deg) < 2,
+                       f"attitude level (roll {att.roll_deg:.2f}, pitch {att.pitch_deg:.2f} deg)")
+            bat = await tel.battery()
+            self.check(3.3 <= bat.voltage_v <= 4.25 and 0 <= bat.remaining_percent <= 100,
+                       f"battery {bat.voltage_v:.2f} V, {bat.remaining_percent:.0f} %")
+            mode = await tel.flight_mode()
+            self.check(mode == FlightMode.POSCTL, f"flight mode {mode} (Position)")
+            landed = await tel.landed_state()
+            self.check(landed == LandedState.ON_GROUND and not await tel.armed(),
+                       f"landed state {landed}, disarmed")
+
+            mass = await param.get_param_float("VEH_MASS")
+            self.check(mass > 0, f"param VEH_MASS = {mass}")
+            await param.set_param_float("MPC_XY_CRUISE", 1.0)
+            self.check(await param.get_param_float("MPC_XY_CRUISE") == 1.0, "param MPC_XY_CRUISE set and read back")
+            await action.set_takeoff_altitude(1.5)
+            self.check(await action.get_takeoff_altitude() == 1.5, "takeoff altitude 1.5 m (MIS_TAKEOFF_ALT)")
+
+            await action.arm()
+            await self.until(tel.armed, "armed")
+
+            async def mode_is(m):
+                return await tel.flight_mode() == m
+
+            await action.takeoff()
+            await self.until(lambda: mode_is(FlightMode.HOLD), "takeoff, then Hold")
+            await self.settle_at([0.0, 0.0, -1.5], 0.05, 1.0, "rotorpy within 5 cm of 1.5 m up (1 s)")
+            self.check(await tel.landed_state() == LandedState.IN_AIR, "landed state IN_AIR")
+
+            await offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.5, 0.0))
+            await offboard.start()
+            await self.until(lambda: mode_is(FlightMode.OFFBOARD), "offboard started")
+            await offboard.set_position_ned(PositionNedYaw(2.0, 0.0, -1.5, 0.0))
+            await self.settle_at([2.0, 0.0, -1.5], 0.05, 1.0, "offboard: rotorpy within 5 cm of 2 m north (1 s)")
+            await offboard.stop()
+            await self.until(lambda: mode_is(FlightMode.HOLD), "offboard stopped: Hold")
+
+            await action.return_to_launch()
+            await self.until(lambda: mode_is(FlightMode.RETURN_TO_LAUNCH), "return to launch")
+
+            async def down():
+                return await tel.landed_state() == LandedState.ON_GROUND and not await tel.armed()
+
+            await self.until(down, "landed and disarmed", timeout=3 * self.timeout)
+            d = self.truth.dist([0.0, 0.0, 0.0])
+            self.check(d <= 0.2, f"rotorpy landed {d:.3f} m from home (20 cm)")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--url", default="udpin://127.0.0.1:14550")
+    ap.add_argument("--truth-port", type=int, default=14560)
+    ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per step")
+    a = ap.parse_args()
+    f = Flight(Truth(a.truth_port), a.timeout)
+    try:
+        asyncio.run(f.run(a.url))
+    except Exception as e:  # a MAVSDK error is a failed check, with its reason
+        f.check(False, f"MAVSDK raised {type(e).__name__}: {e}")
+    failed = [w for ok, w in f.results if not ok]
+    passed = len(f.results) - len(failed)
+    tail = f" ({'; '.join(failed)})" if failed else ""
+    print(f"mavsdk check: {passed} passed, {len(failed)} failed{tail}", flush=True)
+    return 0 if not failed and f.results else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
