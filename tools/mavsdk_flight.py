@@ -14,10 +14,12 @@ down about the start, m, with the simulated time).
 4. `action.arm()`, `action.takeoff()`: Hold at 1.5 m (5 cm, rotorpy);
 5. offboard: a set-point where it is, `start()`, a 2 m move north, `stop()`
    (Hold): within 5 cm of the set-point;
-6. `action.return_to_launch()`: landed and disarmed within 20 cm of home.
+6. mission: four waypoints uploaded (and downloaded back), started, its
+   progress to the end; rotorpy passes within 5 cm of each;
+7. `action.return_to_launch()`: landed and disarmed within 20 cm of home.
 
 Prints `mavsdk check: P passed, F failed` (and what failed); exits non-zero
-if anything failed. The mission and the joystick are not flown yet.
+if anything failed. The joystick is not flown yet.
 """
 import argparse
 import asyncio
@@ -29,6 +31,7 @@ import time
 
 from mavsdk.asyncio import Configuration, ComponentType, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync, FlightMode, LandedState
@@ -44,6 +47,7 @@ class Truth:
         self.sock.bind(("127.0.0.1", port))
         self.sock.setblocking(False)
         self.t, self.ned = None, None
+        self.track = []
 
     def poll(self):
         while True:
@@ -53,6 +57,12 @@ class Truth:
                 return
             m = json.loads(data)
             self.t, self.ned = m["t"], m["ned"]
+            self.track.append(self.ned)
+
+    def closest(self, ned, since):
+        """The closest rotorpy came to `ned` after track entry `since`, m."""
+        self.poll()
+        return min((math.dist(p, ned) for p in self.track[since:]), default=math.inf)
 
     def dist(self, ned):
         self.poll()
@@ -162,6 +172,40 @@ class Flight:
             await self.settle_at([2.0, 0.0, -1.5], 0.05, 1.0, "offboard: rotorpy within 5 cm of 2 m north (1 s)")
             await offboard.stop()
             await self.until(lambda: mode_is(FlightMode.HOLD), "offboard stopped: Hold")
+
+            # The mission: a 2 m square's corners and its centre, 1.5 m up,
+            # as WGS-84 about home (the flight controller's flat earth,
+            # WGS-84's equatorial radius).
+            mission = MissionAsync(system)
+            r = 6378137.0
+            lat0, lon0 = home.latitude_deg, home.longitude_deg
+            corners = [(2.0, 2.0), (0.0, 2.0), (0.0, 0.0), (1.0, 1.0)]
+            items = [MissionItem(latitude_deg=lat0 + math.degrees(n / r),
+                                 longitude_deg=lon0 + math.degrees(e / (r * math.cos(math.radians(lat0)))),
+                                 relative_altitude_m=1.5, loiter_time_s=1.0, acceptance_radius_m=0.05)
+                     for n, e in corners]
+            await mission.upload_mission(MissionPlan(items))
+            back = await mission.download_mission()
+            self.check(len(back.mission_items) == 4 and all(
+                abs(a.latitude_deg - b.latitude_deg) < 1e-7 and abs(a.relative_altitude_m - 1.5) < 1e-3
+                for a, b in zip(back.mission_items, items)), "mission uploaded, downloaded back the same")
+            since = len(self.truth.track)
+            await mission.start_mission()
+            await self.until(lambda: mode_is(FlightMode.MISSION), "mission started")
+            seen = set()
+
+            async def finished():
+                p = await mission.mission_progress()
+                seen.add(p.current)
+                return await mission.is_mission_finished()
+
+            await self.until(finished, "mission finished", timeout=3 * self.timeout)
+            p = await mission.mission_progress()
+            self.check(p.total == 4 and p.current == 4 and {1, 2, 3} <= seen,
+                       f"mission progress went through {sorted(seen)} to {p.current} of {p.total}")
+            for k, (n, e) in enumerate(corners):
+                d = self.truth.closest([n, e, -1.5], since)
+                self.check(d <= 0.05, f"waypoint {k + 1} ({n}, {e}, 1.5 m up): rotorpy within {100 * d:.1f} cm (5 cm)")
 
             await action.return_to_launch()
             await self.until(lambda: mode_is(FlightMode.RETURN_TO_LAUNCH), "return to launch")

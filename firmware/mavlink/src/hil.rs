@@ -122,7 +122,7 @@ pub fn mag_heading_rad(mag_frd: &Vector3<f32>, roll_rad: f32, pitch_rad: f32) ->
 }
 
 /// The origin of the local NED frame, as `HIL_STATE_QUATERNION` spells positions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Home {
     /// Latitude, 1e-7 °.
     pub lat_e7: i32,

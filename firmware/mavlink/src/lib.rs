@@ -4,6 +4,7 @@
 #![forbid(unsafe_code)]
 
 pub mod hil;
+pub mod mission;
 pub mod modes;
 /// The parameter table (it lives with the flight loop, which both protocols drive).
 pub use fc_loop::params;
@@ -221,8 +222,11 @@ impl MavReader {
 macro_rules! subset {
     ($($name:ident: $data:ident),+ $(,)?) => {
         /// The ids of the messages this crate reads and writes (see `encode` and `MavReader`).
+        // Deprecated messages are in it because ground stations still send them.
+        #[allow(deprecated)]
         pub const SUBSET: &[u32] = &[$(<common::$data as mavlink::MessageData>::ID),+];
 
+        #[allow(deprecated)]
         fn parse_subset(id: u32, payload: &[u8]) -> Option<Result<MavMessage, ()>> {
             use mavlink::MessageData;
             match id {
@@ -235,6 +239,7 @@ macro_rules! subset {
             }
         }
 
+        #[allow(deprecated)]
         fn serialize_subset(raw: &mut MAVLinkV2MessageRaw, header: MavHeader, msg: &MavMessage) -> Result<(), MavError> {
             match msg {
                 $(MavMessage::$name(d) => raw.serialize_message_data(header, d),)+
@@ -268,6 +273,16 @@ subset! {
     HOME_POSITION: HOME_POSITION_DATA,
     EXTENDED_SYS_STATE: EXTENDED_SYS_STATE_DATA,
     BATTERY_STATUS: BATTERY_STATUS_DATA,
+    MISSION_COUNT: MISSION_COUNT_DATA,
+    MISSION_REQUEST_INT: MISSION_REQUEST_INT_DATA,
+    MISSION_REQUEST: MISSION_REQUEST_DATA,
+    MISSION_ITEM_INT: MISSION_ITEM_INT_DATA,
+    MISSION_ACK: MISSION_ACK_DATA,
+    MISSION_CURRENT: MISSION_CURRENT_DATA,
+    MISSION_ITEM_REACHED: MISSION_ITEM_REACHED_DATA,
+    MISSION_REQUEST_LIST: MISSION_REQUEST_LIST_DATA,
+    MISSION_CLEAR_ALL: MISSION_CLEAR_ALL_DATA,
+    MISSION_SET_CURRENT: MISSION_SET_CURRENT_DATA,
 }
 
 /// Writes `msg` as one MAVLink 2 frame (unsigned) into `out`; returns its

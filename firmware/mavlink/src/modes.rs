@@ -13,7 +13,7 @@
 //! | Land | AUTO LAND (6) | straight down to the ground it armed on at [`NavSettings::land_mps`], then disarms |
 //! | Return | AUTO RTL (5) | up to [`NavSettings::rtl_alt_m`] above home (if lower), over home at [`NavSettings::cruise_mps`], then Land |
 //! | Offboard | OFFBOARD (6, 0) | the ground station's `SET_POSITION_TARGET_LOCAL_NED`; entered only while they stream, Hold when they stop for [`NavSettings::offboard_loss_s`] |
-//! | Mission | AUTO MISSION (4) | the uploaded mission (`crate::mission`) |
+//! | Mission | AUTO MISSION (4) | the uploaded mission ([`crate::mission`]), item by item; then Hold |
 //!
 //! Each leg of an automatic mode is one planner segment
 //! ([`fc_loop::planner::Segment`], rest to rest), its duration chosen so that
@@ -148,6 +148,9 @@ pub struct NavSettings {
     pub land_mps: f32,
     /// `COM_OF_LOSS_T`: set-points silent this long end Offboard, s (PX4: 1).
     pub offboard_loss_s: f32,
+    /// `NAV_ACC_RAD`: a mission waypoint is reached within this, m, unless
+    /// the item gives its own (PX4: 10, for outdoor flight).
+    pub acc_rad_m: f32,
 }
 
 impl Default for NavSettings {
@@ -159,6 +162,7 @@ impl Default for NavSettings {
             climb_mps: 0.5,
             land_mps: 0.5,
             offboard_loss_s: 1.0,
+            acc_rad_m: 0.1,
         }
     }
 }
@@ -198,7 +202,7 @@ macro_rules! nav {
 
 /// The automatic modes' parameters, served after the flight loop's
 /// ([`crate::params::PARAMS`]) in `param_index` order.
-pub const NAV_PARAMS: [NavParam; 6] = [
+pub const NAV_PARAMS: [NavParam; 7] = [
     nav!(
         "MIS_TAKEOFF_ALT",
         "takeoff height above home, m",
@@ -234,6 +238,13 @@ pub const NAV_PARAMS: [NavParam; 6] = [
         0.1,
         60.0,
         offboard_loss_s
+    ),
+    nav!(
+        "NAV_ACC_RAD",
+        "a mission waypoint is reached within this, m",
+        0.01,
+        100.0,
+        acc_rad_m
     ),
 ];
 

@@ -32,6 +32,7 @@
 //! and answered where MAVLink expects an answer (`MAV_RESULT_UNSUPPORTED`).
 
 use crate::hil::{self, Home, StateFixSigmas};
+use crate::mission::{Mission, Step, MISSION_CAPACITY};
 use crate::modes::{nav_index_of, FlightMode, Legs, NavSettings, Route, NAV_PARAMS};
 use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
@@ -105,7 +106,7 @@ const FORCE: f32 = 21196.0;
 
 /// The telemetry streams and their default intervals, µs of simulated
 /// time (`MAV_CMD_SET_MESSAGE_INTERVAL` changes them): message id, interval.
-pub const STREAMS: [(u32, u64); 9] = [
+pub const STREAMS: [(u32, u64); 10] = [
     (0, 1_000_000),   // HEARTBEAT, 1 Hz (to the simulator too)
     (1, 500_000),     // SYS_STATUS, 2 Hz
     (30, 20_000),     // ATTITUDE, 50 Hz
@@ -115,6 +116,7 @@ pub const STREAMS: [(u32, u64); 9] = [
     (245, 200_000),   // EXTENDED_SYS_STATE, 5 Hz
     (242, 2_000_000), // HOME_POSITION, 0.5 Hz
     (147, 1_000_000), // BATTERY_STATUS, 1 Hz
+    (42, 1_000_000),  // MISSION_CURRENT, 1 Hz
 ];
 /// The shortest interval a stream may be set to, µs (the IMU's step).
 pub const MIN_INTERVAL_US: u64 = 1_000;
@@ -189,6 +191,12 @@ pub struct MavVehicle {
     nav: NavSettings,
     /// The automatic mode's route.
     route: Route,
+    /// The mission store and its transfers.
+    mission: Mission,
+    /// The mission item flown (Mission mode).
+    mission_phase: Option<MissionPhase>,
+    /// A mission's `DO_CHANGE_SPEED`, for the rest of it.
+    mission_cruise_mps: Option<f32>,
     /// The last offboard set-point, and when it came (simulated µs).
     offboard: Option<(Setpoint<f32>, u64)>,
     /// Where it armed (estimated), NED about the origin, m: the home a
@@ -251,6 +259,20 @@ fn param_id(index: usize) -> &'static str {
     }
 }
 
+/// The mission item flown.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum MissionPhase {
+    /// Flying to `goal` (NED, m); reached within `accept_m`, then held `hold_s`.
+    Flying {
+        seq: u16,
+        goal: Vector3<f32>,
+        accept_m: f32,
+        hold_s: f32,
+    },
+    /// Holding until `until_us`.
+    Holding { seq: u16, until_us: u64 },
+}
+
 /// A command, from `COMMAND_LONG` or `COMMAND_INT` (its x and y as f32).
 struct Command {
     command: MavCmd,
@@ -279,6 +301,9 @@ impl MavVehicle {
             mode: FlightMode::Position,
             nav: NavSettings::default(),
             route: Route::new(),
+            mission: Mission::new(),
+            mission_phase: None,
+            mission_cruise_mps: None,
             offboard: None,
             home_ned_m: Vector3::zeros(),
             home: None,
@@ -346,6 +371,8 @@ impl MavVehicle {
 
     /// Handles one message from system `from_system`; answers go to `out`.
     /// `now_us` is the caller's clock (only a free-running loop uses it).
+    // MISSION_REQUEST and MISSION_SET_CURRENT are deprecated, and sent.
+    #[allow(deprecated)]
     pub fn handle<S: MavSink, C: CycleClock>(
         &mut self,
         msg: &MavMessage,
@@ -376,6 +403,32 @@ impl MavVehicle {
                 self.on_command(&c, out)
             }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
+            MavMessage::MISSION_COUNT(_)
+            | MavMessage::MISSION_ITEM_INT(_)
+            | MavMessage::MISSION_REQUEST_LIST(_)
+            | MavMessage::MISSION_REQUEST_INT(_)
+            | MavMessage::MISSION_REQUEST(_)
+            | MavMessage::MISSION_CLEAR_ALL(_)
+            | MavMessage::MISSION_SET_CURRENT(_)
+            | MavMessage::MISSION_ACK(_) => {
+                if self.mode == FlightMode::Mission
+                    && !matches!(
+                        msg,
+                        MavMessage::MISSION_REQUEST_LIST(_)
+                            | MavMessage::MISSION_REQUEST_INT(_)
+                            | MavMessage::MISSION_REQUEST(_)
+                            | MavMessage::MISSION_ACK(_)
+                    )
+                {
+                    // The mission flown is not changed under it: Hold first.
+                    let t_us = self.last_sensor_us.unwrap_or(0);
+                    let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
+                }
+                let t_us = self.last_sensor_us.unwrap_or(0);
+                self.mission
+                    .handle(msg, t_us, self.home.as_ref(), self.home_ned_m[2], out)?;
+                Ok(())
+            }
             MavMessage::PARAM_REQUEST_LIST(m) if self.for_me(m.target_system) => {
                 for i in 0..PARAM_COUNT {
                     self.send_param(i, out)?;
@@ -477,6 +530,7 @@ impl MavVehicle {
         self.current_a = PACK_FULL_A * mean.clamp(0.0, 1.0);
         self.used_mah += self.current_a * dt_s.min(0.1) / 3.6;
         self.watch_ground_station(s.time_us, out)?;
+        self.mission.tick(s.time_us, out)?;
         self.fly_mode(s.time_us, out)?;
         self.telemetry(s.time_us, out)
     }
@@ -708,7 +762,19 @@ impl MavVehicle {
                     self.core.set_setpoint(&sp);
                 }
             }
-            FlightMode::Mission => return Err("no mission"),
+            FlightMode::Mission => {
+                if self.mission.items().is_empty() {
+                    return Err("no mission");
+                }
+                if !self.armed {
+                    return Err("disarmed");
+                }
+                if usize::from(self.mission.current()) >= self.mission.items().len() {
+                    self.mission.set_current(0);
+                }
+                self.mission_phase = None;
+                self.mission_cruise_mps = None;
+            }
             FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
                 if !self.armed {
                     return Err("disarmed");
@@ -743,6 +809,9 @@ impl MavVehicle {
                     return Err("goal out of range");
                 }
             }
+        }
+        if mode != FlightMode::Mission {
+            self.mission_phase = None;
         }
         self.mode = mode;
         Ok(())
@@ -780,6 +849,7 @@ impl MavVehicle {
                     return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("landed: disarmed"));
                 }
             }
+            FlightMode::Mission => return self.fly_mission(t_us, out),
             FlightMode::Offboard => {
                 let lost = self
                     .offboard
@@ -796,6 +866,131 @@ impl MavVehicle {
             _ => {}
         }
         Ok(())
+    }
+
+    /// Mission mode's step: the item flown (its route, its hold), then the
+    /// next; Land and Return items hand over to those modes; after the
+    /// last, Hold. At most every item once per step (a speed change takes
+    /// none of the vehicle's time).
+    fn fly_mission<S: MavSink>(&mut self, t_us: u64, out: &mut S) -> Result<(), S::Error> {
+        for _ in 0..=MISSION_CAPACITY {
+            match self.mission_phase {
+                None => {
+                    let seq = self.mission.current();
+                    let Some(item) = self.mission.items().get(usize::from(seq)).copied() else {
+                        let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
+                        return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("mission done: hold"));
+                    };
+                    let origin = self.home.unwrap_or_default();
+                    let sp = *self.core.setpoint();
+                    let from = Reference::from(&sp);
+                    let mut legs = Legs::new();
+                    let (goal, accept_m, hold_s) = match item.step(&origin, self.home_ned_m[2]) {
+                        Ok(Step::Goto { ned, hold_s, accept_m }) => {
+                            let cruise = self.mission_cruise_mps.unwrap_or(self.nav.cruise_mps);
+                            let _ = legs.push_back((ned, cruise));
+                            (ned, accept_m, hold_s)
+                        }
+                        Ok(Step::Takeoff { up_m }) => {
+                            let goal = Vector3::new(sp.pos_ned_m[0], sp.pos_ned_m[1], self.home_ned_m[2] - up_m);
+                            let _ = legs.push_back((goal, self.nav.climb_mps));
+                            (goal, 0.0, 0.0)
+                        }
+                        Ok(Step::Delay { s }) => {
+                            self.mission_phase = Some(MissionPhase::Holding {
+                                seq,
+                                until_us: t_us.saturating_add((s * 1e6) as u64),
+                            });
+                            return Ok(());
+                        }
+                        Ok(Step::Speed { mps }) => {
+                            self.mission_cruise_mps = Some(mps);
+                            self.mission_reached(seq, out)?;
+                            continue;
+                        }
+                        Ok(Step::Land) | Ok(Step::Return) => {
+                            self.mission_reached(seq, out)?;
+                            let next = if item.command == MavCmd::MAV_CMD_NAV_LAND {
+                                FlightMode::Land
+                            } else {
+                                FlightMode::Return
+                            };
+                            let _ = self.set_mode(next, t_us, f32::NAN);
+                            return Ok(());
+                        }
+                        Err(_) => {
+                            let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
+                            return self.say(
+                                out,
+                                MavSeverity::MAV_SEVERITY_WARNING,
+                                format_args!("mission item {seq} cannot be flown: hold"),
+                            );
+                        }
+                    };
+                    if !self.route.start(t_us, &from, legs, sp.yaw_rad) {
+                        let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
+                        return self.say(
+                            out,
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            format_args!("mission item {seq} out of range: hold"),
+                        );
+                    }
+                    self.mission_phase = Some(MissionPhase::Flying {
+                        seq,
+                        goal,
+                        accept_m,
+                        hold_s,
+                    });
+                    return Ok(());
+                }
+                Some(MissionPhase::Flying {
+                    seq,
+                    goal,
+                    accept_m,
+                    hold_s,
+                }) => {
+                    let Some((r, done)) = self.route.at(t_us) else {
+                        return Ok(());
+                    };
+                    self.core.set_setpoint(&r.setpoint());
+                    let accept = if accept_m > 0.0 { accept_m } else { self.nav.acc_rad_m };
+                    let near = self
+                        .core
+                        .navigator()
+                        .estimate()
+                        .is_some_and(|e| (e.pos_ned_m - goal).norm() <= accept);
+                    if !(done && near) {
+                        return Ok(());
+                    }
+                    if hold_s > 0.0 {
+                        self.mission_phase = Some(MissionPhase::Holding {
+                            seq,
+                            until_us: t_us.saturating_add((hold_s * 1e6) as u64),
+                        });
+                        return Ok(());
+                    }
+                    self.mission_reached(seq, out)?;
+                }
+                Some(MissionPhase::Holding { seq, until_us }) => {
+                    if t_us < until_us {
+                        return Ok(());
+                    }
+                    self.mission_reached(seq, out)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Item `seq` done: `MISSION_ITEM_REACHED`, the next one current.
+    fn mission_reached<S: MavSink>(&mut self, seq: u16, out: &mut S) -> Result<(), S::Error> {
+        self.mission_phase = None;
+        out.send(
+            Peer::GroundStation,
+            &MavMessage::MISSION_ITEM_REACHED(MISSION_ITEM_REACHED_DATA { seq }),
+        )?;
+        self.mission.set_current(seq.saturating_add(1));
+        out.send(Peer::GroundStation, &self.mission.current_message())
     }
 
     /// The ground-station failsafe (`FS_GCS_MS`): armed, a ground station
@@ -1094,6 +1289,7 @@ impl MavVehicle {
                 vtol_state: MavVtolState::MAV_VTOL_STATE_UNDEFINED,
                 landed_state: self.landed_state(),
             }),
+            42 => self.mission.current_message(),
             AUTOPILOT_VERSION_ID => MavMessage::AUTOPILOT_VERSION(autopilot_version(self.system_id)),
             _ => return None,
         })
@@ -1188,6 +1384,7 @@ pub fn autopilot_version(system_id: u8) -> AUTOPILOT_VERSION_DATA {
             | C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
             | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
             | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | C::MAV_PROTOCOL_CAPABILITY_MISSION_INT
             | C::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
         uid: u64::from(system_id),
         flight_sw_version: FLIGHT_SW_VERSION,

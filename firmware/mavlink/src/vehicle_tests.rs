@@ -495,7 +495,7 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
     while sent_frames < frames {
         // A message of the kinds the vehicle acts on, its fields random.
         t_us += 1000;
-        let msg = match rng.next() % 8 {
+        let msg = match rng.next() % 9 {
             0 => at_rest(t_us)[1].clone(),
             1 => MavMessage::HIL_SENSOR(HIL_SENSOR_DATA {
                 time_usec: if rng.next().is_multiple_of(8) { rng.next() } else { t_us },
@@ -561,6 +561,48 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
                 }
             }
             6 => param_set(param_id((rng.next() % PARAM_COUNT as u64) as usize), rng.f32()),
+            // The mission protocol: counts (some beyond the store), items of
+            // random commands, frames and coordinates, in and out of order.
+            7 => match rng.next() % 3 {
+                0 => mission_count((rng.next() % 24) as u16),
+                1 => {
+                    #[allow(deprecated)]
+                    const CMDS: [MavCmd; 7] = [
+                        MavCmd::MAV_CMD_NAV_WAYPOINT,
+                        MavCmd::MAV_CMD_NAV_TAKEOFF,
+                        MavCmd::MAV_CMD_NAV_LAND,
+                        MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH,
+                        MavCmd::MAV_CMD_NAV_DELAY,
+                        MavCmd::MAV_CMD_DO_CHANGE_SPEED,
+                        MavCmd::MAV_CMD_DO_SET_SERVO,
+                    ];
+                    #[allow(deprecated)]
+                    const FRAMES: [MavFrame; 6] = [
+                        MavFrame::MAV_FRAME_GLOBAL,
+                        MavFrame::MAV_FRAME_LOCAL_NED,
+                        MavFrame::MAV_FRAME_MISSION,
+                        MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                        MavFrame::MAV_FRAME_GLOBAL_INT,
+                        MavFrame::MAV_FRAME_BODY_FRD,
+                    ];
+                    let frame = FRAMES[(rng.next() % FRAMES.len() as u64) as usize];
+                    let c = CMDS[(rng.next() % CMDS.len() as u64) as usize];
+                    let small = |r: &mut Rng| (r.next() % 8) as f32;
+                    let p = [rng.f32(), small(&mut rng), rng.f32(), small(&mut rng)];
+                    item(
+                        (rng.next() % 18) as u16,
+                        c,
+                        frame,
+                        p,
+                        (rng.next() as i32, rng.next() as i32, rng.f32()),
+                    )
+                }
+                _ => MavMessage::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
+                    seq: (rng.next() % 18) as u16,
+                    target_system: 1,
+                    target_component: 1,
+                }),
+            },
             _ => MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
                 x: rng.f32(),
                 y: rng.f32(),
@@ -771,10 +813,10 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
             | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
             | C::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     ));
-    assert!(
-        !av.capabilities.contains(C::MAV_PROTOCOL_CAPABILITY_MISSION_INT),
-        "no mission yet"
-    );
+    assert!(av.capabilities.contains(C::MAV_PROTOCOL_CAPABILITY_MISSION_INT));
+    assert!(!av
+        .capabilities
+        .intersects(C::MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | C::MAV_PROTOCOL_CAPABILITY_FTP));
     // Home, the landed state, the battery on request; an unknown message is UNSUPPORTED.
     let mut out = Sent::default();
     for id in [242.0, 245.0, 147.0, 33.0, 9999.0] {
@@ -921,4 +963,216 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     let sp = v.core().setpoint().pos_ned_m;
     assert!(sp[0].abs() < 1e-3 && sp[1].abs() < 1e-3, "over home: {sp:?}");
     out.assert_text("landed: disarmed");
+}
+
+/// A mission item for the tests: `command` in `frame` at (x, y, z).
+fn item(seq: u16, command: MavCmd, frame: MavFrame, params: [f32; 4], xyz: (i32, i32, f32)) -> MavMessage {
+    MavMessage::MISSION_ITEM_INT(MISSION_ITEM_INT_DATA {
+        param1: params[0],
+        param2: params[1],
+        param3: params[2],
+        param4: params[3],
+        x: xyz.0,
+        y: xyz.1,
+        z: xyz.2,
+        seq,
+        command,
+        target_system: 1,
+        target_component: 1,
+        frame,
+        current: 0,
+        autocontinue: 1,
+    })
+}
+
+fn mission_count(count: u16) -> MavMessage {
+    MavMessage::MISSION_COUNT(MISSION_COUNT_DATA {
+        count,
+        target_system: 1,
+        target_component: 1,
+    })
+}
+
+impl Sent {
+    fn mission_acks(&self) -> Vec<MavMissionResult> {
+        self.0
+            .iter()
+            .filter_map(|(_, m)| match m {
+                MavMessage::MISSION_ACK(a) => Some(a.mavtype),
+                _ => None,
+            })
+            .collect()
+    }
+    fn requests(&self) -> Vec<u16> {
+        self.0
+            .iter()
+            .filter_map(|(_, m)| match m {
+                MavMessage::MISSION_REQUEST_INT(r) => Some(r.seq),
+                _ => None,
+            })
+            .collect()
+    }
+    fn reached(&self) -> Vec<u16> {
+        self.0
+            .iter()
+            .filter_map(|(_, m)| match m {
+                MavMessage::MISSION_ITEM_REACHED(r) => Some(r.seq),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+/// The mission protocol as the MAVLink specification draws it: an upload
+/// item by item on the vehicle's requests, acknowledged; a download that
+/// gives the same items back; the store's capacity, an item it cannot fly,
+/// a ground station that stops answering, a clear. Then the mission flown
+/// item by item (the samples say it stays at home, so the waypoint is
+/// there): reached and current reported, a hold, a speed change, a delay,
+/// and a return that hands over to Return.
+#[test]
+fn missions_upload_download_and_fly_item_by_item() {
+    use MavCmd as C;
+    let (rel, local, mis) = (
+        #[allow(deprecated)]
+        MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        MavFrame::MAV_FRAME_LOCAL_NED,
+        MavFrame::MAV_FRAME_MISSION,
+    );
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut out = Sent::default();
+    let t = rest(&mut v, &mut out, 1_000_000, 2000);
+    let items = [
+        item(
+            0,
+            C::MAV_CMD_NAV_WAYPOINT,
+            rel,
+            [1.0, 0.05, 0.0, 0.0],
+            (474_000_000, 85_000_000, 0.0),
+        ),
+        item(1, C::MAV_CMD_DO_CHANGE_SPEED, mis, [1.0, 0.5, -1.0, 0.0], (0, 0, 0.0)),
+        item(2, C::MAV_CMD_NAV_DELAY, mis, [0.5, 0.0, 0.0, 0.0], (0, 0, 0.0)),
+        item(3, C::MAV_CMD_NAV_RETURN_TO_LAUNCH, mis, [0.0; 4], (0, 0, 0.0)),
+    ];
+    let mut out = Sent::default();
+    v.handle(&mission_count(4), &mut out, &Still, 0).unwrap();
+    for it in &items {
+        v.handle(it, &mut out, &Still, 0).unwrap();
+    }
+    assert_eq!(out.requests(), [0, 1, 2, 3]);
+    assert_eq!(out.mission_acks(), [MavMissionResult::MAV_MISSION_ACCEPTED]);
+    // Downloaded as uploaded.
+    let mut out = Sent::default();
+    v.handle(
+        &MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 1,
+        }),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
+    let MavMessage::MISSION_COUNT(c) = &out.0[0].1 else {
+        panic!("{:?}", out.0)
+    };
+    assert_eq!(c.count, 4);
+    let ask = |seq| {
+        MavMessage::MISSION_REQUEST_INT(MISSION_REQUEST_INT_DATA {
+            seq,
+            target_system: 1,
+            target_component: 1,
+        })
+    };
+    v.handle(&ask(2), &mut out, &Still, 0).unwrap();
+    let MavMessage::MISSION_ITEM_INT(back) = &out.0[1].1 else {
+        panic!()
+    };
+    let MavMessage::MISSION_ITEM_INT(sent) = &items[2] else {
+        unreachable!()
+    };
+    assert_eq!((back.seq, back.command, back.param1), (2, sent.command, sent.param1));
+    v.handle(&ask(9), &mut out, &Still, 0).unwrap();
+    assert_eq!(out.mission_acks(), [MavMissionResult::MAV_MISSION_INVALID_SEQUENCE]);
+
+    // 17 items do not fit; an item it cannot fly ends the upload, empty.
+    let mut other = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut o = Sent::default();
+    rest(&mut other, &mut o, 1_000_000, 10);
+    let mut o = Sent::default();
+    other.handle(&mission_count(17), &mut o, &Still, 0).unwrap();
+    other.handle(&mission_count(2), &mut o, &Still, 0).unwrap();
+    other
+        .handle(
+            &item(0, C::MAV_CMD_DO_SET_SERVO, mis, [0.0; 4], (0, 0, 0.0)),
+            &mut o,
+            &Still,
+            0,
+        )
+        .unwrap();
+    other.handle(&mission_count(1), &mut o, &Still, 0).unwrap();
+    other
+        .handle(
+            &item(0, C::MAV_CMD_NAV_WAYPOINT, local, [0.0; 4], (50_000_000, 0, -1.0)),
+            &mut o,
+            &Still,
+            0,
+        )
+        .unwrap();
+    assert_eq!(
+        o.mission_acks(),
+        [
+            MavMissionResult::MAV_MISSION_NO_SPACE,
+            MavMissionResult::MAV_MISSION_UNSUPPORTED,
+            MavMissionResult::MAV_MISSION_UNSUPPORTED_FRAME, // 5 km away: out of the planner's reach
+        ]
+    );
+    // A ground station that stops answering: asked 5 more times, 0.5 s apart, then cancelled.
+    let mut o = Sent::default();
+    other.handle(&mission_count(3), &mut o, &Still, 0).unwrap();
+    rest(&mut other, &mut o, 1_010_000, 3500);
+    assert_eq!(o.requests(), [0, 0, 0, 0, 0, 0]);
+    assert_eq!(o.mission_acks(), [MavMissionResult::MAV_MISSION_OPERATION_CANCELLED]);
+
+    // Flown: Mission needs the vehicle armed.
+    let mut out = Sent::default();
+    v.handle(&set_mode(FlightMode::Mission), &mut out, &Still, 0).unwrap();
+    out.assert_text("Mission refused: disarmed");
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    v.handle(&set_mode(FlightMode::Mission), &mut out, &Still, 0).unwrap();
+    assert_eq!(v.mode(), FlightMode::Mission);
+    // The waypoint (home: a 0.5 s leg), held 1 s; the speed; the 0.5 s
+    // delay; the return.
+    let t = rest(&mut v, &mut out, t, 1_200);
+    assert_eq!(out.reached(), Vec::<u16>::new(), "still holding at the waypoint");
+    let t = rest(&mut v, &mut out, t, 400);
+    assert_eq!(out.reached(), [0, 1]);
+    rest(&mut v, &mut out, t, 600);
+    assert_eq!(out.reached(), [0, 1, 2, 3]);
+    assert_eq!(v.mode(), FlightMode::Return);
+    // MISSION_CURRENT followed each item.
+    let currents: Vec<u16> = out
+        .0
+        .iter()
+        .filter_map(|(_, m)| match m {
+            MavMessage::MISSION_CURRENT(c) => Some(c.seq),
+            _ => None,
+        })
+        .collect();
+    assert!(currents.windows(4).any(|w| w == [1, 2, 3, 4]), "{currents:?}");
+    // A clear while flying it: the mission is left for Hold first.
+    let mut out = Sent::default();
+    v.handle(&set_mode(FlightMode::Mission), &mut out, &Still, 0).unwrap();
+    v.handle(
+        &MavMessage::MISSION_CLEAR_ALL(MISSION_CLEAR_ALL_DATA {
+            target_system: 1,
+            target_component: 1,
+        }),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
+    assert_eq!(out.mission_acks(), [MavMissionResult::MAV_MISSION_ACCEPTED]);
+    assert_eq!(v.mode(), FlightMode::Hold);
 }
