@@ -168,7 +168,7 @@ python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --
 echo "== a pymavlink ground station (tools/mav_gcs.py) lists, reads and sets parameters, arms and flies it against rotorpy"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration 60 \
     --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
-echo "== MAVSDK (PyPI, its C++ library), unmodified, flies it as a PX4: health, home, takeoff, offboard, return to launch"
+echo "== MAVSDK (PyPI, its C++ library), unmodified, flies it as a PX4: health, home, takeoff, joystick, offboard, a mission, return to launch"
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "mavsdk==4.1.0"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --mavsdk --duration 120 \
     --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"

@@ -12,6 +12,10 @@ down about the start, m, with the simulated time).
 3. param get and set; `action.set_takeoff_altitude(1.5)` (PX4's
    MIS_TAKEOFF_ALT);
 4. `action.arm()`, `action.takeoff()`: Hold at 1.5 m (5 cm, rotorpy);
+5. joystick: `manual_control` input streamed at 20 Hz,
+   `start_position_control()` (Position), the stick forward: rotorpy moves
+   0.8 m along its heading (rotorpy's vehicle faces east), holding its
+   track and height;
 5. offboard: a set-point where it is, `start()`, a 2 m move north, `stop()`
    (Hold): within 5 cm of the set-point;
 6. mission: four waypoints uploaded (and downloaded back), started, its
@@ -19,7 +23,7 @@ down about the start, m, with the simulated time).
 7. `action.return_to_launch()`: landed and disarmed within 20 cm of home.
 
 Prints `mavsdk check: P passed, F failed` (and what failed); exits non-zero
-if anything failed. The joystick is not flown yet.
+if anything failed.
 """
 import argparse
 import asyncio
@@ -31,6 +35,7 @@ import time
 
 from mavsdk.asyncio import Configuration, ComponentType, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.manual_control import ManualControlAsync
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
@@ -165,9 +170,49 @@ class Flight:
             await self.settle_at([0.0, 0.0, -1.5], 0.05, 1.0, "rotorpy within 5 cm of 1.5 m up (1 s)")
             self.check(await tel.landed_state() == LandedState.IN_AIR, "landed state IN_AIR")
 
+            # The joystick, streamed at 20 Hz as MAVSDK's examples do.
+            manual = ManualControlAsync(system)
+            stick = [0.0, 0.0, 0.5, 0.0]
+            streaming = True
+
+            async def stream():
+                while streaming:
+                    await manual.set_manual_control_input(*stick)
+                    await asyncio.sleep(0.05)
+
+            task = asyncio.create_task(stream())
+            await asyncio.sleep(0.5)
+            await manual.start_position_control()
+            await self.until(lambda: mode_is(FlightMode.POSCTL), "joystick: Position mode")
+            self.truth.poll()
+            start = list(self.truth.ned)
+            yaw = math.radians((await tel.attitude_euler()).yaw_deg)
+            ahead = (math.cos(yaw), math.sin(yaw))  # forward, NED
+            stick[0] = 0.6  # forward: (0.6 - 0.05) / 0.95 of MPC_VEL_MANUAL, 0.58 m/s
+            low = [start[2]]
+
+            def along():
+                d = (self.truth.ned[0] - start[0], self.truth.ned[1] - start[1])
+                return d[0] * ahead[0] + d[1] * ahead[1], d[1] * ahead[0] - d[0] * ahead[1]
+
+            async def moved():
+                low.append(self.truth.ned[2])
+                return along()[0] >= 0.8
+
+            await self.until(moved, f"joystick forward: rotorpy 0.8 m along its heading ({math.degrees(yaw):.0f} deg)")
+            stick[0] = 0.0
+            cross = abs(along()[1])
+            dz = max(abs(z - start[2]) for z in low)
+            self.check(cross < 0.1 and dz < 0.1, f"on its track and height: {100 * cross:.1f} cm across, "
+                       f"{100 * dz:.1f} cm up or down (10 cm)")
+
             await offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.5, 0.0))
             await offboard.start()
             await self.until(lambda: mode_is(FlightMode.OFFBOARD), "offboard started")
+            # The joystick goes quiet only once Offboard flies (its loss in
+            # Position mode would land).
+            streaming = False
+            await task
             await offboard.set_position_ned(PositionNedYaw(2.0, 0.0, -1.5, 0.0))
             await self.settle_at([2.0, 0.0, -1.5], 0.05, 1.0, "offboard: rotorpy within 5 cm of 2 m north (1 s)")
             await offboard.stop()

@@ -28,11 +28,11 @@
 //! vehicle's logic add ≈ 50 KiB (only the messages used are linked: the
 //! whole common dialect would add ≈ 300 KiB); it was 320 KiB until PX4's
 //! modes, commands and ground-station telemetry came (seven messages more,
-//! the automatic modes' planner and parameters, the mission protocol:
-//! ≈ 26 KiB, 326 228 B to 353 548 B) —, static RAM ≤ 20 KiB (the vehicle's
-//! parameters, mixer, modes, mission store of 16 items and telemetry state
-//! on top of the loop; 19 428 B with the loop's held previews; 19 KiB until
-//! the mission store came).
+//! the automatic modes' planner and parameters, the mission protocol, the
+//! joystick, ESTIMATOR_STATUS: ≈ 30 KiB, 326 228 B to 357 004 B) —, static
+//! RAM ≤ 20 KiB (the vehicle's parameters, mixer, modes, mission store of 16
+//! items and telemetry state on top of the loop; 19 484 B with the loop's
+//! held previews; 19 KiB until the mission store came).
 //!
 //! `firmware-crtp` (the same loop behind CRTP over syslink, the Crazyflie's
 //! radio link, on the CRTP images' RTIC tasks): flash ≤ 368 KiB — the CRTP

@@ -7,7 +7,7 @@
 //!
 //! | mode | PX4 (main, sub) | what it flies |
 //! |---|---|---|
-//! | Position | POSCTL (3, 0) | holds where it was when entered |
+//! | Position | POSCTL (3, 0) | holds where it was when entered; a joystick (`MANUAL_CONTROL`) moves it ([`joystick_velocity`]) |
 //! | Hold | AUTO (4) LOITER (3) | the same (PX4's loiter) |
 //! | Takeoff | AUTO TAKEOFF (2) | straight up to [`NavSettings::takeoff_alt_m`] above home, then Hold |
 //! | Land | AUTO LAND (6) | straight down to the ground it armed on at [`NavSettings::land_mps`], then disarms |
@@ -151,6 +151,16 @@ pub struct NavSettings {
     /// `NAV_ACC_RAD`: a mission waypoint is reached within this, m, unless
     /// the item gives its own (PX4: 10, for outdoor flight).
     pub acc_rad_m: f32,
+    /// `MPC_VEL_MANUAL`: horizontal speed of a full joystick deflection in
+    /// Position mode, m/s (PX4: 10).
+    pub manual_mps: f32,
+    /// `MPC_Z_VEL_MAX_UP`: vertical speed of full throttle up or down in
+    /// Position mode, m/s (PX4: 3).
+    pub manual_z_mps: f32,
+    /// `MPC_MAN_Y_MAX`: heading rate of a full yaw deflection, °/s (PX4: 150).
+    pub manual_yaw_dps: f32,
+    /// `COM_RC_LOSS_T`: a joystick silent this long is lost (then Land), s (PX4: 0.5).
+    pub manual_loss_s: f32,
 }
 
 impl Default for NavSettings {
@@ -163,6 +173,10 @@ impl Default for NavSettings {
             land_mps: 0.5,
             offboard_loss_s: 1.0,
             acc_rad_m: 0.1,
+            manual_mps: 1.0,
+            manual_z_mps: 0.5,
+            manual_yaw_dps: 60.0,
+            manual_loss_s: 0.5,
         }
     }
 }
@@ -202,7 +216,7 @@ macro_rules! nav {
 
 /// The automatic modes' parameters, served after the flight loop's
 /// ([`crate::params::PARAMS`]) in `param_index` order.
-pub const NAV_PARAMS: [NavParam; 7] = [
+pub const NAV_PARAMS: [NavParam; 11] = [
     nav!(
         "MIS_TAKEOFF_ALT",
         "takeoff height above home, m",
@@ -246,6 +260,34 @@ pub const NAV_PARAMS: [NavParam; 7] = [
         100.0,
         acc_rad_m
     ),
+    nav!(
+        "MPC_VEL_MANUAL",
+        "horizontal speed of a full joystick deflection, m/s",
+        0.1,
+        20.0,
+        manual_mps
+    ),
+    nav!(
+        "MPC_Z_VEL_MAX_UP",
+        "vertical speed of full joystick throttle, m/s",
+        0.1,
+        8.0,
+        manual_z_mps
+    ),
+    nav!(
+        "MPC_MAN_Y_MAX",
+        "heading rate of a full yaw deflection, deg/s",
+        1.0,
+        400.0,
+        manual_yaw_dps
+    ),
+    nav!(
+        "COM_RC_LOSS_T",
+        "a joystick silent this long is lost (then land), s",
+        0.1,
+        60.0,
+        manual_loss_s
+    ),
 ];
 
 impl NavSettings {
@@ -265,6 +307,30 @@ impl NavSettings {
 pub fn nav_index_of(id: &[u8]) -> Option<usize> {
     let len = id.iter().position(|&b| b == 0).unwrap_or(id.len());
     NAV_PARAMS.iter().position(|p| p.id.as_bytes() == &id[..len])
+}
+
+/// A joystick's deflection in [−1000, 1000] (`MANUAL_CONTROL` x, y, r; z in
+/// [0, 1000], 500 centred) as PX4's Position mode reads it: the set-point's
+/// velocity (north, east, down, m/s, turned by heading `yaw_rad`) and
+/// heading rate (rad/s), each axis with a 5 % dead band and full scale at
+/// the [`NavSettings`]' speeds.
+pub fn joystick_velocity(nav: &NavSettings, x: i16, y: i16, z: i16, r: i16, yaw_rad: f32) -> (Vector3<f32>, f32) {
+    let axis = |v: i16, centre: f32, half: f32| {
+        let a = ((f32::from(v) - centre) / half).clamp(-1.0, 1.0);
+        if a.abs() < 0.05 {
+            0.0
+        } else {
+            (a - 0.05 * a.signum()) / 0.95
+        }
+    };
+    let (fwd, right) = (
+        axis(x, 0.0, 1000.0) * nav.manual_mps,
+        axis(y, 0.0, 1000.0) * nav.manual_mps,
+    );
+    let up = axis(z, 500.0, 500.0) * nav.manual_z_mps;
+    let (s, c) = (libm::sinf(yaw_rad), libm::cosf(yaw_rad));
+    let v = Vector3::new(c * fwd - s * right, s * fwd + c * right, -up);
+    (v, axis(r, 0.0, 1000.0) * nav.manual_yaw_dps.to_radians())
 }
 
 /// Duration of a rest-to-rest segment of length `d` whose peak speed is `v`
@@ -368,6 +434,26 @@ mod tests {
         assert_eq!(FlightMode::from_px4(1, 0), None);
         assert_eq!(FlightMode::from_px4(4, 1), None);
         assert_eq!(FlightMode::from_px4(4, 8), None);
+    }
+
+    #[test]
+    fn the_joystick_maps_as_px4s_position_mode() {
+        let nav = NavSettings::default();
+        // Centred (throttle at 500) and inside the dead band: nothing.
+        assert_eq!(joystick_velocity(&nav, 40, -40, 520, 0, 0.0), (Vector3::zeros(), 0.0));
+        // Full forward, heading north: 1 m/s north; heading east: east.
+        let (v, _) = joystick_velocity(&nav, 1000, 0, 500, 0, 0.0);
+        assert!((v - Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-6, "{v}");
+        let (v, _) = joystick_velocity(&nav, 1000, 0, 500, 0, core::f32::consts::FRAC_PI_2);
+        assert!((v - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-6, "{v}");
+        // Full right and full throttle: east and up; full yaw: 60 °/s.
+        let (v, r) = joystick_velocity(&nav, 0, 1000, 1000, 1000, 0.0);
+        assert!((v - Vector3::new(0.0, 1.0, -0.5)).norm() < 1e-6 && (r - 60f32.to_radians()).abs() < 1e-6);
+        // Half way out of the dead band is half speed, continuously from 0 at its edge.
+        let (v, _) = joystick_velocity(&nav, 525, 0, 500, 0, 0.0);
+        assert!((v[0] - 0.5).abs() < 1e-6, "{v}");
+        let (v, _) = joystick_velocity(&nav, -32768, 0, 0, 0, 0.0);
+        assert!((v - Vector3::new(-1.0, 0.0, 0.5)).norm() < 1e-6, "clamped: {v}");
     }
 
     #[test]

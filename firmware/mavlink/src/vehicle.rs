@@ -33,7 +33,7 @@
 
 use crate::hil::{self, Home, StateFixSigmas};
 use crate::mission::{Mission, Step, MISSION_CAPACITY};
-use crate::modes::{nav_index_of, FlightMode, Legs, NavSettings, Route, NAV_PARAMS};
+use crate::modes::{joystick_velocity, nav_index_of, FlightMode, Legs, NavSettings, Route, NAV_PARAMS};
 use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
 use core::convert::Infallible;
@@ -106,7 +106,7 @@ const FORCE: f32 = 21196.0;
 
 /// The telemetry streams and their default intervals, µs of simulated
 /// time (`MAV_CMD_SET_MESSAGE_INTERVAL` changes them): message id, interval.
-pub const STREAMS: [(u32, u64); 10] = [
+pub const STREAMS: [(u32, u64); 11] = [
     (0, 1_000_000),   // HEARTBEAT, 1 Hz (to the simulator too)
     (1, 500_000),     // SYS_STATUS, 2 Hz
     (30, 20_000),     // ATTITUDE, 50 Hz
@@ -117,6 +117,7 @@ pub const STREAMS: [(u32, u64); 10] = [
     (242, 2_000_000), // HOME_POSITION, 0.5 Hz
     (147, 1_000_000), // BATTERY_STATUS, 1 Hz
     (42, 1_000_000),  // MISSION_CURRENT, 1 Hz
+    (230, 500_000),   // ESTIMATOR_STATUS, 2 Hz
 ];
 /// The shortest interval a stream may be set to, µs (the IMU's step).
 pub const MIN_INTERVAL_US: u64 = 1_000;
@@ -199,6 +200,8 @@ pub struct MavVehicle {
     mission_cruise_mps: Option<f32>,
     /// The last offboard set-point, and when it came (simulated µs).
     offboard: Option<(Setpoint<f32>, u64)>,
+    /// The joystick's last `MANUAL_CONTROL` (x, y, z, r), and when it came.
+    manual: Option<([i16; 4], u64)>,
     /// Where it armed (estimated), NED about the origin, m: the home a
     /// return flies to (the origin until it arms).
     home_ned_m: Vector3<f32>,
@@ -305,6 +308,7 @@ impl MavVehicle {
             mission_phase: None,
             mission_cruise_mps: None,
             offboard: None,
+            manual: None,
             home_ned_m: Vector3::zeros(),
             home: None,
             last_fix_us: None,
@@ -403,6 +407,10 @@ impl MavVehicle {
                 self.on_command(&c, out)
             }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
+            MavMessage::MANUAL_CONTROL(m) if self.for_me(m.target) => {
+                self.manual = Some(([m.x, m.y, m.z, m.r], self.last_sensor_us.unwrap_or(0)));
+                Ok(())
+            }
             MavMessage::MISSION_COUNT(_)
             | MavMessage::MISSION_ITEM_INT(_)
             | MavMessage::MISSION_REQUEST_LIST(_)
@@ -531,7 +539,7 @@ impl MavVehicle {
         self.used_mah += self.current_a * dt_s.min(0.1) / 3.6;
         self.watch_ground_station(s.time_us, out)?;
         self.mission.tick(s.time_us, out)?;
-        self.fly_mode(s.time_us, out)?;
+        self.fly_mode(s.time_us, dt_s, out)?;
         self.telemetry(s.time_us, out)
     }
 
@@ -824,11 +832,12 @@ impl MavVehicle {
     /// Each step, what the mode flies: the automatic mode's route (a
     /// takeoff then holds; a return or a landing disarms on the ground),
     /// Offboard's loss of set-points (then Hold).
-    fn fly_mode<S: MavSink>(&mut self, t_us: u64, out: &mut S) -> Result<(), S::Error> {
+    fn fly_mode<S: MavSink>(&mut self, t_us: u64, dt_s: f32, out: &mut S) -> Result<(), S::Error> {
         if !self.armed {
             return Ok(());
         }
         match self.mode {
+            FlightMode::Position => return self.fly_joystick(t_us, dt_s, out),
             FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
                 let Some((r, done)) = self.route.at(t_us) else {
                     return Ok(());
@@ -865,6 +874,38 @@ impl MavVehicle {
             }
             _ => {}
         }
+        Ok(())
+    }
+
+    /// Position mode's step: the joystick moves the set-point
+    /// ([`joystick_velocity`]); a joystick heard and then silent for
+    /// `COM_RC_LOSS_T` is lost: Land, as for a lost ground station.
+    fn fly_joystick<S: MavSink>(&mut self, t_us: u64, dt_s: f32, out: &mut S) -> Result<(), S::Error> {
+        let Some(([x, y, z, r], at)) = self.manual else {
+            return Ok(());
+        };
+        if t_us.saturating_sub(at) as f32 * 1e-6 > self.nav.manual_loss_s {
+            self.manual = None;
+            if self.set_mode(FlightMode::Land, t_us, f32::NAN).is_ok() {
+                return self.say(
+                    out,
+                    MavSeverity::MAV_SEVERITY_CRITICAL,
+                    format_args!("joystick lost: landing"),
+                );
+            }
+            return Ok(());
+        }
+        let mut sp = *self.core.setpoint();
+        let (v, yaw_rate) = joystick_velocity(&self.nav, x, y, z, r, sp.yaw_rad);
+        let dt = dt_s.clamp(0.0, 0.1);
+        sp.pos_ned_m += v * dt;
+        // Not below the ground it armed on (throttle down on the ground).
+        sp.pos_ned_m[2] = sp.pos_ned_m[2].min(self.home_ned_m[2]);
+        sp.yaw_rad = fc_core::control::wrap_pi(sp.yaw_rad + yaw_rate * dt);
+        sp.vel_ned_mps = v;
+        sp.acc_ned_mps2 = Vector3::zeros();
+        sp.yaw_rate_radps = yaw_rate;
+        self.core.set_setpoint(&sp);
         Ok(())
     }
 
@@ -1290,9 +1331,45 @@ impl MavVehicle {
                 landed_state: self.landed_state(),
             }),
             42 => self.mission.current_message(),
+            230 => MavMessage::ESTIMATOR_STATUS(self.estimator_status(t_us)),
             AUTOPILOT_VERSION_ID => MavMessage::AUTOPILOT_VERSION(autopilot_version(self.system_id)),
             _ => return None,
         })
+    }
+
+    /// `ESTIMATOR_STATUS`: what the estimator gives (attitude, velocity,
+    /// position about the origin and, about the simulator's origin, a
+    /// global one) while it navigates; its 1σ position accuracy. The
+    /// innovation test ratios are not computed here: 0.
+    fn estimator_status(&self, t_us: u64) -> ESTIMATOR_STATUS_DATA {
+        use EstimatorStatusFlags as F;
+        let nav = self.core.navigator();
+        let sig = nav.estimator().sigmas();
+        let navigating = nav.mode() == NavMode::Navigating;
+        let mut flags = F::empty();
+        if navigating {
+            flags = F::ESTIMATOR_ATTITUDE
+                | F::ESTIMATOR_VELOCITY_HORIZ
+                | F::ESTIMATOR_VELOCITY_VERT
+                | F::ESTIMATOR_POS_HORIZ_REL
+                | F::ESTIMATOR_POS_VERT_ABS
+                | F::ESTIMATOR_PRED_POS_HORIZ_REL;
+            if self.home.is_some() {
+                flags |= F::ESTIMATOR_POS_HORIZ_ABS | F::ESTIMATOR_PRED_POS_HORIZ_ABS;
+            }
+        }
+        ESTIMATOR_STATUS_DATA {
+            time_usec: t_us,
+            vel_ratio: 0.0,
+            pos_horiz_ratio: 0.0,
+            pos_vert_ratio: 0.0,
+            mag_ratio: 0.0,
+            hagl_ratio: 0.0,
+            tas_ratio: 0.0,
+            pos_horiz_accuracy: sig[0].max(sig[1]),
+            pos_vert_accuracy: sig[2],
+            flags,
+        }
     }
 
     /// The modelled pack's voltage, V: 4.2 full to 3.3 empty, less the sag

@@ -562,9 +562,18 @@ fn a_million_random_and_mutated_frames_never_panic_and_every_one_is_accounted_fo
             }
             6 => param_set(param_id((rng.next() % PARAM_COUNT as u64) as usize), rng.f32()),
             // The mission protocol: counts (some beyond the store), items of
-            // random commands, frames and coordinates, in and out of order.
-            7 => match rng.next() % 3 {
+            // random commands, frames and coordinates, in and out of order;
+            // the joystick.
+            7 => match rng.next() % 4 {
                 0 => mission_count((rng.next() % 24) as u16),
+                3 => MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
+                    x: rng.next() as i16,
+                    y: rng.next() as i16,
+                    z: rng.next() as i16,
+                    r: rng.next() as i16,
+                    buttons: rng.next() as u16,
+                    target: 1,
+                }),
                 1 => {
                     #[allow(deprecated)]
                     const CMDS: [MavCmd; 7] = [
@@ -819,7 +828,7 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
         .intersects(C::MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | C::MAV_PROTOCOL_CAPABILITY_FTP));
     // Home, the landed state, the battery on request; an unknown message is UNSUPPORTED.
     let mut out = Sent::default();
-    for id in [242.0, 245.0, 147.0, 33.0, 9999.0] {
+    for id in [242.0, 245.0, 147.0, 33.0, 230.0, 9999.0] {
         v.handle(
             &command_of(MavCmd::MAV_CMD_REQUEST_MESSAGE, [id, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
             &mut out,
@@ -829,7 +838,15 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
         .unwrap();
     }
     let ok = MavResult::MAV_RESULT_ACCEPTED;
-    assert_eq!(out.acks(), [ok, ok, ok, ok, MavResult::MAV_RESULT_UNSUPPORTED]);
+    assert_eq!(out.acks(), [ok, ok, ok, ok, ok, MavResult::MAV_RESULT_UNSUPPORTED]);
+    let MavMessage::ESTIMATOR_STATUS(es) = last(&out, "ESTIMATOR_STATUS") else {
+        unreachable!()
+    };
+    use EstimatorStatusFlags as F;
+    assert!(es
+        .flags
+        .contains(F::ESTIMATOR_ATTITUDE | F::ESTIMATOR_POS_HORIZ_REL | F::ESTIMATOR_POS_HORIZ_ABS));
+    assert!(es.pos_horiz_accuracy > 0.0 && es.pos_horiz_accuracy < 0.05, "{es:?}");
     let MavMessage::HOME_POSITION(h) = last(&out, "HOME_POSITION") else {
         unreachable!()
     };
@@ -994,32 +1011,27 @@ fn mission_count(count: u16) -> MavMessage {
 }
 
 impl Sent {
+    /// What `f` picks from each message sent, in order.
+    fn pick<T>(&self, f: impl Fn(&MavMessage) -> Option<T>) -> Vec<T> {
+        self.0.iter().filter_map(|(_, m)| f(m)).collect()
+    }
     fn mission_acks(&self) -> Vec<MavMissionResult> {
-        self.0
-            .iter()
-            .filter_map(|(_, m)| match m {
-                MavMessage::MISSION_ACK(a) => Some(a.mavtype),
-                _ => None,
-            })
-            .collect()
+        self.pick(|m| match m {
+            MavMessage::MISSION_ACK(a) => Some(a.mavtype),
+            _ => None,
+        })
     }
     fn requests(&self) -> Vec<u16> {
-        self.0
-            .iter()
-            .filter_map(|(_, m)| match m {
-                MavMessage::MISSION_REQUEST_INT(r) => Some(r.seq),
-                _ => None,
-            })
-            .collect()
+        self.pick(|m| match m {
+            MavMessage::MISSION_REQUEST_INT(r) => Some(r.seq),
+            _ => None,
+        })
     }
     fn reached(&self) -> Vec<u16> {
-        self.0
-            .iter()
-            .filter_map(|(_, m)| match m {
-                MavMessage::MISSION_ITEM_REACHED(r) => Some(r.seq),
-                _ => None,
-            })
-            .collect()
+        self.pick(|m| match m {
+            MavMessage::MISSION_ITEM_REACHED(r) => Some(r.seq),
+            _ => None,
+        })
     }
 }
 
@@ -1151,14 +1163,10 @@ fn missions_upload_download_and_fly_item_by_item() {
     assert_eq!(out.reached(), [0, 1, 2, 3]);
     assert_eq!(v.mode(), FlightMode::Return);
     // MISSION_CURRENT followed each item.
-    let currents: Vec<u16> = out
-        .0
-        .iter()
-        .filter_map(|(_, m)| match m {
-            MavMessage::MISSION_CURRENT(c) => Some(c.seq),
-            _ => None,
-        })
-        .collect();
+    let currents = out.pick(|m| match m {
+        MavMessage::MISSION_CURRENT(c) => Some(c.seq),
+        _ => None,
+    });
     assert!(currents.windows(4).any(|w| w == [1, 2, 3, 4]), "{currents:?}");
     // A clear while flying it: the mission is left for Hold first.
     let mut out = Sent::default();
@@ -1175,4 +1183,129 @@ fn missions_upload_download_and_fly_item_by_item() {
     .unwrap();
     assert_eq!(out.mission_acks(), [MavMissionResult::MAV_MISSION_ACCEPTED]);
     assert_eq!(v.mode(), FlightMode::Hold);
+}
+
+/// `MANUAL_CONTROL` in Position mode moves the set-point at the joystick's
+/// velocity (full forward: `MPC_VEL_MANUAL`, 1 m/s, heading north: north);
+/// throttle down on the ground does not push it below the ground; a
+/// joystick that falls silent for `COM_RC_LOSS_T` (0.5 s) is lost: Land.
+#[test]
+fn a_joystick_moves_the_setpoint_in_position_mode_and_its_loss_lands() {
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut out = Sent::default();
+    let mut t = rest(&mut v, &mut out, 1_000_000, 2000);
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert_eq!((v.armed(), v.mode()), (true, FlightMode::Position));
+    let stick = |x: i16, z: i16| {
+        MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
+            x,
+            y: 0,
+            z,
+            r: 0,
+            buttons: 0,
+            target: 1,
+        })
+    };
+    // Throttle full down on the ground: stays on the ground.
+    for _ in 0..20 {
+        v.handle(&stick(0, 0), &mut out, &Still, 0).unwrap();
+        t = rest(&mut v, &mut out, t, 50);
+    }
+    assert!(v.core().setpoint().pos_ned_m[2] <= 1e-3 && v.core().setpoint().pos_ned_m[2] > -1e-3);
+    // Full forward, centred throttle, 20 Hz for 1 s: 1 m north at 1 m/s.
+    let north0 = v.core().setpoint().pos_ned_m[0];
+    for _ in 0..20 {
+        v.handle(&stick(1000, 500), &mut out, &Still, 0).unwrap();
+        t = rest(&mut v, &mut out, t, 50);
+    }
+    let sp = *v.core().setpoint();
+    assert!((sp.pos_ned_m[0] - north0 - 1.0).abs() < 0.01, "{sp:?}");
+    assert!((sp.vel_ned_mps[0] - 1.0).abs() < 1e-6 && sp.pos_ned_m[1].abs() < 1e-6);
+    // Silent: lost after 0.5 s, Land (here on the ground: landed at once).
+    let mut out = Sent::default();
+    rest(&mut v, &mut out, t, 700);
+    let texts = out.texts();
+    assert_eq!(texts, ["joystick lost: landing", "landed: disarmed"], "{texts:?}");
+    assert!(!v.armed());
+}
+
+/// What QGroundControl asks at connection (its `InitialConnectStateMachine`:
+/// AUTOPILOT_VERSION by REQUEST_MESSAGE, component information and the
+/// standard modes by REQUEST_MESSAGE, the whole parameter list, the mission
+/// download; geofence and rally only when the capabilities claim them),
+/// then home, replayed and answered: each request acknowledged, what the
+/// vehicle has given, what it has not `UNSUPPORTED` (QGroundControl then
+/// falls back to its PX4 plugin's tables), no fence or rally claimed.
+#[test]
+fn what_qgroundcontrol_asks_at_connection_is_answered() {
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut out = Sent::default();
+    rest(&mut v, &mut out, 1_000_000, 2000);
+    let request = |id: f32| command_of(MavCmd::MAV_CMD_REQUEST_MESSAGE, [id, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let mut out = Sent::default();
+    // AUTOPILOT_VERSION (148), COMPONENT_METADATA (397), AVAILABLE_MODES (435).
+    for id in [148.0, 397.0, 435.0] {
+        v.handle(&request(id), &mut out, &Still, 0).unwrap();
+    }
+    let unsupported = MavResult::MAV_RESULT_UNSUPPORTED;
+    assert_eq!(out.acks(), [MavResult::MAV_RESULT_ACCEPTED, unsupported, unsupported]);
+    let Some(MavMessage::AUTOPILOT_VERSION(av)) = out
+        .0
+        .iter()
+        .map(|(_, m)| m.clone())
+        .find(|m| message_name(m) == "AUTOPILOT_VERSION")
+    else {
+        panic!("no AUTOPILOT_VERSION")
+    };
+    use MavProtocolCapability as C;
+    assert!(!av
+        .capabilities
+        .intersects(C::MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | C::MAV_PROTOCOL_CAPABILITY_MISSION_RALLY));
+    // QGroundControl reads flight_sw_version's bytes as major.minor.patch.type.
+    assert_eq!(av.flight_sw_version.to_be_bytes(), [0, 1, 0, 255]);
+    // The parameter load: every index once, each with the total.
+    let mut out = Sent::default();
+    v.handle(
+        &MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 1,
+        }),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
+    let mut indices = out.pick(|m| match m {
+        MavMessage::PARAM_VALUE(p) if usize::from(p.param_count) == PARAM_COUNT => Some(p.param_index),
+        _ => None,
+    });
+    indices.sort_unstable();
+    assert_eq!(indices, (0..PARAM_COUNT as u16).collect::<Vec<_>>());
+    // The mission download: an empty store, counted.
+    let mut out = Sent::default();
+    v.handle(
+        &MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 1,
+        }),
+        &mut out,
+        &Still,
+        0,
+    )
+    .unwrap();
+    assert!(
+        matches!(
+            &out.0[..],
+            [(_, MavMessage::MISSION_COUNT(MISSION_COUNT_DATA { count: 0, .. }))]
+        ),
+        "{:?}",
+        out.0
+    );
+    // Home, by the older request QGroundControl also sends.
+    let mut out = Sent::default();
+    #[allow(deprecated)]
+    let home = command_of(MavCmd::MAV_CMD_GET_HOME_POSITION, [0.0; 7]);
+    v.handle(&home, &mut out, &Still, 0).unwrap();
+    assert_eq!(out.acks(), [MavResult::MAV_RESULT_ACCEPTED]);
+    assert_eq!(out.count("HOME_POSITION"), 1);
 }
