@@ -282,11 +282,7 @@ impl Default for SampleReader {
 
 /// A failed burst as the driver's error, naming the half it was reading.
 fn burst_error(second: bool, e: I2cError) -> SensorError {
-    let device = if second { ACC } else { GYRO };
-    match e {
-        I2cError::Timeout(_) => SensorError::Timeout { device, polls: 0 },
-        e => SensorError::bus(device, e),
-    }
+    SensorError::of_burst(if second { ACC } else { GYRO }, e)
 }
 
 impl SampleReader {

@@ -5,7 +5,7 @@
 //! §9.2, "Trimming coefficients" and the compensation formulas).
 
 use crate::error::{FreezeWatch, SensorError};
-use crate::i2c::{Burst, I2cError, Progress, Regs};
+use crate::i2c::{Burst, Progress, Regs};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
 
@@ -260,13 +260,6 @@ pub struct SampleReader {
     freeze: FreezeWatch<6>,
 }
 
-fn burst_error(e: I2cError) -> SensorError {
-    match e {
-        I2cError::Timeout(_) => SensorError::Timeout { device: DEV, polls: 0 },
-        e => SensorError::bus(DEV, e),
-    }
-}
-
 impl SampleReader {
     /// Idle, with the part's calibration ([`Bmp388::calibration`]).
     pub const fn new(cal: Calibration) -> Self {
@@ -279,7 +272,9 @@ impl SampleReader {
 
     /// Starts a sample's read.
     pub fn start<R: Regs>(&mut self, r: &R) -> Result<(), SensorError> {
-        self.burst.start(r, ADDR, reg::DATA, 6).map_err(burst_error)
+        self.burst
+            .start(r, ADDR, reg::DATA, 6)
+            .map_err(|e| SensorError::of_burst(DEV, e))
     }
 
     /// A sample under way.
@@ -295,7 +290,7 @@ impl SampleReader {
     fn advance(&mut self, p: Progress) -> Option<Result<BaroSample, SensorError>> {
         match p {
             Progress::Pending => None,
-            Progress::Failed(e) => Some(Err(burst_error(e))),
+            Progress::Failed(e) => Some(Err(SensorError::of_burst(DEV, e))),
             Progress::Done => {
                 let mut b = [0u8; 6];
                 b.copy_from_slice(self.burst.data());

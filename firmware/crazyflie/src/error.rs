@@ -73,6 +73,15 @@ impl SensorError {
         SensorError::Bus { device, kind: e.kind() }
     }
 
+    /// An interrupt-driven burst to `device` that failed: its bounded wait
+    /// ran out (a timeout), or the bus reported the error.
+    pub(crate) fn of_burst(device: &'static str, e: crate::i2c::I2cError) -> Self {
+        match e {
+            crate::i2c::I2cError::Timeout(_) => SensorError::Timeout { device, polls: 0 },
+            e => SensorError::bus(device, e),
+        }
+    }
+
     /// The device the error is about.
     pub fn device(&self) -> &'static str {
         match *self {
