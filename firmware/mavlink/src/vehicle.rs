@@ -419,6 +419,7 @@ impl MavVehicle {
             | MavMessage::MISSION_CLEAR_ALL(_)
             | MavMessage::MISSION_SET_CURRENT(_)
             | MavMessage::MISSION_ACK(_) => {
+                let t_us = self.last_sensor_us.unwrap_or(0);
                 if self.mode == FlightMode::Mission
                     && !matches!(
                         msg,
@@ -429,10 +430,8 @@ impl MavVehicle {
                     )
                 {
                     // The mission flown is not changed under it: Hold first.
-                    let t_us = self.last_sensor_us.unwrap_or(0);
                     let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
                 }
-                let t_us = self.last_sensor_us.unwrap_or(0);
                 self.mission
                     .handle(msg, t_us, self.home.as_ref(), self.home_ned_m[2], out)?;
                 Ok(())

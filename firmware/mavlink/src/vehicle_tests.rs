@@ -52,14 +52,15 @@ impl Sent {
         let texts = self.texts();
         assert!(texts.iter().any(|t| t == text), "{text:?} not among {texts:?}");
     }
+    /// What `f` picks from each message sent, in order.
+    fn pick<T>(&self, f: impl Fn(&MavMessage) -> Option<T>) -> Vec<T> {
+        self.0.iter().filter_map(|(_, m)| f(m)).collect()
+    }
     fn acks(&self) -> Vec<MavResult> {
-        self.0
-            .iter()
-            .filter_map(|(_, m)| match m {
-                MavMessage::COMMAND_ACK(a) => Some(a.result),
-                _ => None,
-            })
-            .collect()
+        self.pick(|m| match m {
+            MavMessage::COMMAND_ACK(a) => Some(a.result),
+            _ => None,
+        })
     }
     fn param(&self, id: &str) -> Option<f32> {
         self.0.iter().rev().find_map(|(_, m)| match m {
@@ -1002,6 +1003,14 @@ fn item(seq: u16, command: MavCmd, frame: MavFrame, params: [f32; 4], xyz: (i32,
     })
 }
 
+/// `MISSION_REQUEST_LIST` for this vehicle (a download's start).
+fn mission_request_list() -> MavMessage {
+    MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA {
+        target_system: 1,
+        target_component: 1,
+    })
+}
+
 fn mission_count(count: u16) -> MavMessage {
     MavMessage::MISSION_COUNT(MISSION_COUNT_DATA {
         count,
@@ -1011,10 +1020,6 @@ fn mission_count(count: u16) -> MavMessage {
 }
 
 impl Sent {
-    /// What `f` picks from each message sent, in order.
-    fn pick<T>(&self, f: impl Fn(&MavMessage) -> Option<T>) -> Vec<T> {
-        self.0.iter().filter_map(|(_, m)| f(m)).collect()
-    }
     fn mission_acks(&self) -> Vec<MavMissionResult> {
         self.pick(|m| match m {
             MavMessage::MISSION_ACK(a) => Some(a.mavtype),
@@ -1075,16 +1080,7 @@ fn missions_upload_download_and_fly_item_by_item() {
     assert_eq!(out.mission_acks(), [MavMissionResult::MAV_MISSION_ACCEPTED]);
     // Downloaded as uploaded.
     let mut out = Sent::default();
-    v.handle(
-        &MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA {
-            target_system: 1,
-            target_component: 1,
-        }),
-        &mut out,
-        &Still,
-        0,
-    )
-    .unwrap();
+    v.handle(&mission_request_list(), &mut out, &Still, 0).unwrap();
     let MavMessage::MISSION_COUNT(c) = &out.0[0].1 else {
         panic!("{:?}", out.0)
     };
@@ -1283,16 +1279,7 @@ fn what_qgroundcontrol_asks_at_connection_is_answered() {
     assert_eq!(indices, (0..PARAM_COUNT as u16).collect::<Vec<_>>());
     // The mission download: an empty store, counted.
     let mut out = Sent::default();
-    v.handle(
-        &MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA {
-            target_system: 1,
-            target_component: 1,
-        }),
-        &mut out,
-        &Still,
-        0,
-    )
-    .unwrap();
+    v.handle(&mission_request_list(), &mut out, &Still, 0).unwrap();
     assert!(
         matches!(
             &out.0[..],
