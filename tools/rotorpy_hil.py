@@ -105,6 +105,8 @@ def main():
     ap.add_argument("--mavsdk", action="store_true",
                     help="like --gcs, with tools/mavsdk_flight.py (MAVSDK, PyPI) as the ground station; "
                          "rotorpy's position is sent to it on UDP --truth-port")
+    ap.add_argument("--mavproxy", action="store_true",
+                    help="like --mavsdk, with tools/mavproxy_session.py (MAVProxy, PyPI) as the ground station")
     ap.add_argument("--truth-port", type=int, default=14560)
     ap.add_argument("--vehicle", choices=sorted(VEHICLES), default="crazyflie",
                     help="rotorpy's vehicle, flown with our vehicle file for it")
@@ -119,16 +121,18 @@ def main():
            "--vehicle", VEHICLES[a.vehicle][1], "--airframe", LAYOUTS[a.layout][0],
            "--hub-m", str(VEHICLES[a.vehicle][0]["rotor_pos"]["r1"][0] * 2 ** 0.5),
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
-    if (bool(a.waypoint) + bool(a.scenario) + a.gcs + a.mavsdk) != 1:
-        ap.error("give --waypoint(s), --scenario, --gcs or --mavsdk")
+    if (bool(a.waypoint) + bool(a.scenario) + a.gcs + a.mavsdk + a.mavproxy) != 1:
+        ap.error("give --waypoint(s), --scenario, --gcs, --mavsdk or --mavproxy")
     gcs = None
     truth_sock = None
     here = os.path.dirname(__file__)
-    if a.gcs or a.mavsdk:
+    if a.gcs or a.mavsdk or a.mavproxy:
         # The ground station listens first, as QGroundControl does.
-        if a.mavsdk:
-            script = [os.path.join(here, "mavsdk_flight.py"), "--url", f"udpin://127.0.0.1:{a.gcs_port}",
-                      "--truth-port", str(a.truth_port)]
+        if a.mavsdk or a.mavproxy:
+            script = [os.path.join(here, "mavsdk_flight.py"), "--url", f"udpin://127.0.0.1:{a.gcs_port}"]
+            if a.mavproxy:
+                script = [os.path.join(here, "mavproxy_session.py"), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
+            script += ["--truth-port", str(a.truth_port)]
             truth_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         else:
             script = [os.path.join(here, "mav_gcs.py"), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
@@ -175,7 +179,7 @@ def main():
             gcs.kill()
         gcs_out, _ = gcs.communicate(timeout=60)
         sys.stderr.write(gcs_out)
-        prefix = "mavsdk check:" if a.mavsdk else "gcs check:"
+        prefix = "mavsdk check:" if a.mavsdk else "mavproxy check:" if a.mavproxy else "gcs check:"
         line = [ln for ln in gcs_out.splitlines() if ln.startswith(prefix)]
         res["gcs"] = line[-1] if line else f"{prefix} 0 passed, 1 failed (the ground station did not finish)"
         text = json.dumps(res, indent=2)

@@ -1428,6 +1428,10 @@ impl MavVehicle {
         if self.mixer.is_none() {
             healthy.remove(S::MAV_SYS_STATUS_PREARM_CHECK);
         }
+        // There is no fence, so none is breached: a clear health bit reads
+        // as a breach to ground stations that watch it (MAVProxy's fence
+        // module prints "fence breach").
+        healthy |= S::MAV_SYS_STATUS_GEOFENCE;
         // Load: the last step's time against a 1 kHz step, per mille.
         let per_step = u64::from(self.cycles.1) / 1000;
         let load = (u64::from(self.cycles.0) * 1000).checked_div(per_step).unwrap_or(0);

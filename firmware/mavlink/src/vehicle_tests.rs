@@ -329,6 +329,16 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     assert_eq!(out.count("ATTITUDE"), 50);
     assert_eq!(out.count("LOCAL_POSITION_NED"), 50);
     assert_eq!(out.count("SYS_STATUS"), 2);
+    // No fence is present, and none reads as breached (MAVProxy's fence
+    // module calls a clear GEOFENCE health bit a breach).
+    for s in out.pick(|m| match m {
+        MavMessage::SYS_STATUS(s) => Some(s.clone()),
+        _ => None,
+    }) {
+        let fence = MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE;
+        assert!(!s.onboard_control_sensors_present.contains(fence));
+        assert!(s.onboard_control_sensors_health.contains(fence));
+    }
     let beats: Vec<Peer> = out
         .0
         .iter()

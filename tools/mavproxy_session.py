@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""MAVProxy (PyPI), unmodified, scripted non-interactively against the
+flight controller as against a PX4: its own PX4 mode table names the mode,
+its parameter module lists and sets parameters, its mode, arm and takeoff
+commands fly it. Run by tools/rotorpy_hil.py --mavproxy against
+`sil-host px4-hil --gcs` flying rotorpy; rotorpy's truth arrives on
+--truth-port as for tools/mavsdk_flight.py.
+
+MAVProxy runs as a user runs it (`mavproxy.py --master=...`), its commands
+written to its standard input and its console read back:
+
+1. it connects and shows the mode PX4 would show (POSCTL);
+2. `param fetch` lists every parameter; `param set` / `param show` one;
+3. `LOITER` switches to Hold (HEARTBEAT's custom_mode);
+4. `arm throttle` arms; `takeoff 1.5` takes off (MAVProxy sends the height
+   in param7, which PX4 reads as above sea level; rotorpy's origin is at
+   0 m): rotorpy climbs to 1.5 m within 5 cm and the mode returns to LOITER;
+5. `RTL` brings it back: landed and disarmed within 20 cm of home.
+
+Prints `mavproxy check: P passed, F failed` and exits non-zero on a failure.
+"""
+import argparse
+import json
+import math
+import queue
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+
+class Truth:
+    def __init__(self, port):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        self.sock.bind(("127.0.0.1", port))
+        self.sock.settimeout(0.05)
+        self.ned = None
+
+    def poll(self):
+        while True:
+            try:
+                data, _ = self.sock.recvfrom(256)
+            except (BlockingIOError, socket.timeout):
+                return self.ned
+            self.ned = json.loads(data)["ned"]
+
+
+class Session:
+    def __init__(self, url, truth, timeout):
+        self.truth = truth
+        self.timeout = timeout
+        self.results = []
+        self.lines = queue.Queue()
+        self.seen = []
+        self.p = subprocess.Popen(
+            ["mavproxy.py", f"--master={url}", "--source-system=255"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.p.stdout:
+            self.lines.put(line.rstrip("\n"))
+
+    def check(self, ok, what):
+        self.results.append((bool(ok), what))
+        print(("ok   " if ok else "FAIL ") + what, flush=True)
+        return ok
+
+    def send(self, cmd):
+        print(f"> {cmd}", flush=True)
+        self.p.stdin.write(cmd + "\n")
+        self.p.stdin.flush()
+
+    def expect(self, pred, timeout=None):
+        """The first console line (from now) for which `pred` holds, or None."""
+        end = time.time() + (timeout or self.timeout)
+        while time.time() < end:
+            self.truth.poll()
+            try:
+                line = self.lines.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            self.seen.append(line)
+            print(f"  | {line}", flush=True)
+            if pred(line):
+                return line
+        return None
+
+    def near(self, ned, tol, timeout=None):
+        end = time.time() + (timeout or self.timeout)
+        while time.time() < end:
+            p = self.truth.poll()
+            while not self.lines.empty():
+                print(f"  | {self.lines.get()}", flush=True)
+            if p is not None and math.dist(p, ned) <= tol:
+                return p
+        return None
+
+    def run(self):
+        self.check(self.expect(lambda l: "Detected vehicle" in l or "online system" in l) is not None,
+                   "MAVProxy detects the vehicle")
+        self.check(self.expect(lambda l: "POSCTL" in l, timeout=30) is not None,
+                   "its console shows the mode PX4 would show: POSCTL")
+        self.send("param fetch")
+        line = self.expect(lambda l: l.startswith("Received") and "parameters" in l)
+        self.check(line is not None, f"param fetch: {line}")
+        self.send("param set MPC_XY_CRUISE 0.8")
+        # `param show` prints MAVProxy's copy, which the vehicle's answer updates.
+        line = None
+        for _ in range(10):
+            self.send("param show MPC_XY_CRUISE")
+            line = self.expect(lambda l: "MPC_XY_CRUISE" in l and "0.8" in l, timeout=3)
+            if line is not None:
+                break
+        self.check(line is not None, f"param set and show: {line}")
+        # A mode's bare name is MAVProxy's way to switch (its `mode LOITER`
+        # hands PX4's mode tuple to pymavlink, which cannot pack it).
+        self.send("LOITER")
+        self.check(self.expect(lambda l: "Mode LOITER" in l) is not None, "mode LOITER (Hold)")
+        for _ in range(60):
+            self.send("arm throttle")
+            if self.expect(lambda l: "ARMED" in l and "DISARMED" not in l, timeout=2) is not None:
+                break
+        self.check(any("ARMED" in l and "DISARMED" not in l for l in self.seen), "arm throttle: ARMED")
+        self.send("takeoff 1.5")
+        self.check(self.expect(lambda l: "Mode TAKEOFF" in l) is not None, "takeoff: mode TAKEOFF")
+        p = self.near([0.0, 0.0, -1.5], 0.05)
+        self.check(p is not None, f"rotorpy within 5 cm of 1.5 m up ({p})")
+        self.check(any("Mode LOITER" in l for l in self.seen[-50:]) or self.expect(lambda l: "Mode LOITER" in l) is not None,
+                   "then LOITER")
+        self.send("RTL")
+        self.check(self.expect(lambda l: "Mode RTL" in l) is not None, "mode RTL")
+        line = self.expect(lambda l: "DISARMED" in l, timeout=3 * self.timeout)
+        p = self.truth.poll()
+        d = math.dist(p, [0.0, 0.0, 0.0]) if p is not None else math.inf
+        self.check(line is not None and d <= 0.2, f"landed and DISARMED {d:.3f} m from home (20 cm)")
+        self.send("exit")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--url", default="udpin:127.0.0.1:14550")
+    ap.add_argument("--truth-port", type=int, default=14560)
+    ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per step")
+    a = ap.parse_args()
+    s = Session(a.url, Truth(a.truth_port), a.timeout)
+    try:
+        s.run()
+    finally:
+        if s.p.poll() is None:
+            s.p.kill()
+    failed = [w for ok, w in s.results if not ok]
+    tail = f" ({'; '.join(failed)})" if failed else ""
+    print(f"mavproxy check: {len(s.results) - len(failed)} passed, {len(failed)} failed{tail}", flush=True)
+    return 0 if not failed and s.results else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
