@@ -172,6 +172,10 @@ echo "== MAVSDK (PyPI, its C++ library), unmodified, flies it as a PX4: health, 
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "mavsdk==4.1.0"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --mavsdk --duration 120 \
     --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
+echo "== MAVProxy (PyPI, pinned), unmodified, on its standard input: mode name, parameters, mode switch, arm, takeoff, return"
+python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "MAVProxy==1.8.75"
+python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --mavproxy --duration 90 \
+    --json target/rotorpy-hil-mavproxy.json | grep "^mavproxy check:" | tee -a "$log"
 echo "== cflib (PyPI, pinned), unmodified, flies sil-host crtp over its udp:// driver; then cflib's own examples"
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "cflib==0.1.34"
 python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
@@ -194,4 +198,4 @@ python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/
     --out target/cfclient-flight-tab.png | tee -a "$log"
 echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|mavsdk|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|mavsdk|mavproxy|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"

@@ -10,12 +10,20 @@ MAVProxy runs as a user runs it (`mavproxy.py --master=...`), its commands
 written to its standard input and its console read back:
 
 1. it connects and shows the mode PX4 would show (POSCTL);
-2. `param fetch` lists every parameter; `param set` / `param show` one;
-3. `LOITER` switches to Hold (HEARTBEAT's custom_mode);
-4. `arm throttle` arms; `takeoff 1.5` takes off (MAVProxy sends the height
-   in param7, which PX4 reads as above sea level; rotorpy's origin is at
-   0 m): rotorpy climbs to 1.5 m within 5 cm and the mode returns to LOITER;
-5. `RTL` brings it back: landed and disarmed within 20 cm of home.
+2. `param fetch` lists every parameter (after its FTP attempts time out:
+   the vehicle has no MAVLink FTP); `param set` / `param show` one;
+3. `mode` lists PX4's modes from pymavlink's table; `long DO_SET_MODE 1 4 3`
+   (custom mode; AUTO.LOITER) switches to Hold, and the console shows
+   LOITER. MAVProxy 1.8.75's own `mode LOITER` cannot switch a PX4: it
+   hands pymavlink's (base, main, sub) tuple to `set_mode_px4` as one float
+   ("required argument is not a float"), whatever the vehicle;
+4. `arm throttle` arms; `takeoff 1.5` takes off: rotorpy holds 1.5 m within
+   5 cm for 1 s and the mode returns to LOITER;
+5. `long DO_SET_MODE 1 4 5` (AUTO.RTL) brings it back: landed and disarmed
+   within 20 cm of home.
+
+MAVProxy writes its telemetry log and parameter file in a temporary
+directory, not the caller's.
 
 Prints `mavproxy check: P passed, F failed` and exits non-zero on a failure.
 """
@@ -23,9 +31,11 @@ import argparse
 import json
 import math
 import queue
+import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 
@@ -35,14 +45,14 @@ class Truth:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         self.sock.bind(("127.0.0.1", port))
-        self.sock.settimeout(0.05)
+        self.sock.setblocking(False)
         self.ned = None
 
     def poll(self):
         while True:
             try:
                 data, _ = self.sock.recvfrom(256)
-            except (BlockingIOError, socket.timeout):
+            except BlockingIOError:
                 return self.ned
             self.ned = json.loads(data)["ned"]
 
@@ -54,8 +64,9 @@ class Session:
         self.results = []
         self.lines = queue.Queue()
         self.seen = []
+        self.dir = tempfile.mkdtemp(prefix="mavproxy-")
         self.p = subprocess.Popen(
-            ["mavproxy.py", f"--master={url}", "--source-system=255"],
+            ["mavproxy.py", f"--master={url}", "--source-system=255"], cwd=self.dir,
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
         threading.Thread(target=self._read, daemon=True).start()
 
@@ -88,14 +99,23 @@ class Session:
                 return line
         return None
 
-    def near(self, ned, tol, timeout=None):
+    def near(self, ned, tol, hold=1.0, timeout=None):
+        """rotorpy's position once it has stayed within `tol` of `ned` for
+        `hold` wall seconds (at least half as long simulated), or None."""
         end = time.time() + (timeout or self.timeout)
+        since = None
         while time.time() < end:
             p = self.truth.poll()
             while not self.lines.empty():
-                print(f"  | {self.lines.get()}", flush=True)
+                self.seen.append(self.lines.get())
+                print(f"  | {self.seen[-1]}", flush=True)
             if p is not None and math.dist(p, ned) <= tol:
-                return p
+                since = since or time.time()
+                if time.time() - since >= hold:
+                    return p
+            else:
+                since = None
+            time.sleep(0.02)
         return None
 
     def run(self):
@@ -115,10 +135,14 @@ class Session:
             if line is not None:
                 break
         self.check(line is not None, f"param set and show: {line}")
-        # A mode's bare name is MAVProxy's way to switch (its `mode LOITER`
-        # hands PX4's mode tuple to pymavlink, which cannot pack it).
-        self.send("LOITER")
-        self.check(self.expect(lambda l: "Mode LOITER" in l) is not None, "mode LOITER (Hold)")
+        # MAVProxy lists PX4's modes from pymavlink's table.
+        self.send("mode")
+        line = self.expect(lambda l: "Available modes" in l and "LOITER" in l, timeout=5)
+        self.check(line is not None, f"mode: {line}")
+        # `long` sends any COMMAND_LONG: DO_SET_MODE, custom mode enabled,
+        # AUTO (4) . LOITER (3), PX4's Hold.
+        self.send("long DO_SET_MODE 1 4 3")
+        self.check(self.expect(lambda l: "Mode LOITER" in l) is not None, "mode switched to LOITER (Hold)")
         for _ in range(60):
             self.send("arm throttle")
             if self.expect(lambda l: "ARMED" in l and "DISARMED" not in l, timeout=2) is not None:
@@ -127,15 +151,18 @@ class Session:
         self.send("takeoff 1.5")
         self.check(self.expect(lambda l: "Mode TAKEOFF" in l) is not None, "takeoff: mode TAKEOFF")
         p = self.near([0.0, 0.0, -1.5], 0.05)
-        self.check(p is not None, f"rotorpy within 5 cm of 1.5 m up ({p})")
+        self.check(p is not None, f"rotorpy within 5 cm of 1.5 m up for 1 s ({p})")
         self.check(any("Mode LOITER" in l for l in self.seen[-50:]) or self.expect(lambda l: "Mode LOITER" in l) is not None,
                    "then LOITER")
-        self.send("RTL")
+        self.send("long DO_SET_MODE 1 4 5")
         self.check(self.expect(lambda l: "Mode RTL" in l) is not None, "mode RTL")
         line = self.expect(lambda l: "DISARMED" in l, timeout=3 * self.timeout)
         p = self.truth.poll()
         d = math.dist(p, [0.0, 0.0, 0.0]) if p is not None else math.inf
         self.check(line is not None and d <= 0.2, f"landed and DISARMED {d:.3f} m from home (20 cm)")
+        # The vehicle has no fence; MAVProxy's fence module reads a clear
+        # GEOFENCE health bit in SYS_STATUS as a breach.
+        self.check(not any("fence breach" in l for l in self.seen), "no fence breach reported")
         self.send("exit")
 
 
@@ -151,6 +178,7 @@ def main():
     finally:
         if s.p.poll() is None:
             s.p.kill()
+        shutil.rmtree(s.dir, ignore_errors=True)
     failed = [w for ok, w in s.results if not ok]
     tail = f" ({'; '.join(failed)})" if failed else ""
     print(f"mavproxy check: {len(s.results) - len(failed)} passed, {len(failed)} failed{tail}", flush=True)
