@@ -6,7 +6,10 @@ MAVSDK's public API. Run by tools/rotorpy_hil.py --mavsdk against
 rotorpy's truth, which rotorpy_hil.py sends to --truth-port (north, east,
 down about the start, m, with the simulated time).
 
-1. connect (`udpin://`, as to a PX4 SITL); the autopilot is PX4;
+1. connect (`udpin://`, as to a PX4 SITL); the autopilot is PX4; when
+   the simulation runs more than 2x slower than real time (the image in
+   QEMU), the vehicle's heartbeat rate and its ground-station timeouts are
+   fitted to it (`Flight.pace`);
 2. telemetry: health (local and global position, home, armable), home,
    position, attitude, battery, flight mode, landed state, armed;
 3. param get and set; `action.set_takeoff_altitude(1.5)` (PX4's
@@ -36,6 +39,8 @@ import time
 from mavsdk.asyncio import Configuration, ComponentType, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.manual_control import ManualControlAsync
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+from mavsdk.plugins.mavlink_direct import MavlinkMessage
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
@@ -53,6 +58,7 @@ class Truth:
         self.sock.setblocking(False)
         self.t, self.ned = None, None
         self.track = []
+        self.first = None  # (wall s, simulated s) of the first datagram
 
     def poll(self):
         while True:
@@ -63,6 +69,17 @@ class Truth:
             m = json.loads(data)
             self.t, self.ned = m["t"], m["ned"]
             self.track.append(self.ned)
+            if self.first is None:
+                self.first = (time.time(), self.t)
+
+    async def slowdown(self, span_s=0.5):
+        """Wall seconds per simulated second since the first datagram,
+        once at least `span_s` has been simulated."""
+        while True:
+            self.poll()
+            if self.first is not None and self.t - self.first[1] >= span_s:
+                return (time.time() - self.first[0]) / (self.t - self.first[1])
+            await asyncio.sleep(0.05)
 
     def closest(self, ned, since):
         """The closest rotorpy came to `ned` after track entry `since`, m."""
@@ -116,6 +133,35 @@ class Flight:
             print(f"     rotorpy at {self.truth.ned}, {self.truth.dist(ned):.3f} m from {ned}", flush=True)
         return ok
 
+    async def pace(self, system, param):
+        """Fits the vehicle's clocks to a simulation slower than real time
+        (the image in QEMU runs about 5x slower). MAVSDK paces itself by
+        the wall clock: it drops a system whose heartbeat is silent for 3 s
+        and sends its own heartbeat at 1 Hz, its joystick input and offboard
+        set-points at 20 Hz. The vehicle keeps simulated time. So, through
+        MAVSDK's public API, when a simulated second takes more than two of
+        wall time: the vehicle's heartbeat is asked for every 0.5 s of wall
+        time (MAV_CMD_SET_MESSAGE_INTERVAL, through mavlink_direct), and the
+        timeouts on the ground station's streams (FS_GCS_MS, COM_RC_LOSS_T,
+        COM_OF_LOSS_T) are lengthened by the slowdown."""
+        slow = await self.truth.slowdown()
+        print(f"     {slow:.1f} wall seconds per simulated second", flush=True)
+        if slow <= 2.0:
+            return
+        direct = MavlinkDirectAsync(system)
+        ack = await direct.send_command(MavlinkMessage(
+            message_name="COMMAND_LONG", target_system_id=1, target_component_id=1,
+            fields_json=json.dumps({"target_system": 1, "target_component": 1, "command": 511,
+                                    "confirmation": 0, "param1": 0, "param2": 0.5e6 / slow, "param3": 0,
+                                    "param4": 0, "param5": 0, "param6": 0, "param7": 0})))
+        self.check(json.loads(ack.fields_json).get("result") == 0,
+                   f"heartbeat every {0.5 / slow:.3f} simulated s (SET_MESSAGE_INTERVAL): {ack.fields_json}")
+        # FS_GCS_MS takes whole milliseconds; the others tenths of a second.
+        for name, value in (("FS_GCS_MS", float(round(5000 * slow))), ("COM_RC_LOSS_T", round(0.5 * slow, 1)),
+                            ("COM_OF_LOSS_T", round(1.0 * slow, 1))):
+            await param.set_param_float(name, value)
+            self.check(abs(await param.get_param_float(name) - value) < 1e-3, f"{name} lengthened to {value}")
+
     async def run(self, url):
         cfg = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
         async with Mavsdk(cfg) as mavsdk:
@@ -126,6 +172,7 @@ class Flight:
             self.check(await system.autopilot_type() == Autopilot.PX4, "it is a PX4 autopilot")
             tel, action = TelemetryAsync(system), ActionAsync(system)
             offboard, param = OffboardAsync(system), ParamAsync(system)
+            await self.pace(system, param)
 
             async def healthy():
                 h = await tel.health()

@@ -133,6 +133,9 @@ def main():
             if a.mavproxy:
                 script = [os.path.join(here, "mavproxy_session.py"), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
             script += ["--truth-port", str(a.truth_port)]
+            if a.target == "qemu":
+                # The image in QEMU flies about 5x slower than real time.
+                script += ["--timeout", "180"]
             truth_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         else:
             script = [os.path.join(here, "mav_gcs.py"), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
