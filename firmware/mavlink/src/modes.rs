@@ -3,7 +3,8 @@
 //! the mode is `HEARTBEAT.custom_mode` in PX4's encoding (`px4_custom_mode.h`:
 //! the main mode in bits 16–23, the sub mode in bits 24–31) and is asked for
 //! with `MAV_CMD_DO_SET_MODE` (`param1` `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`,
-//! `param2` the main mode, `param3` the sub mode).
+//! `param2` the main mode, `param3` the sub mode). Without that flag
+//! `param1` alone is read as PX4 reads it ([`FlightMode::from_base_mode`]).
 //!
 //! | mode | PX4 (main, sub) | what it flies |
 //! |---|---|---|
@@ -41,6 +42,12 @@ pub mod px4 {
     pub const SUB_RTL: u8 = 5;
     /// AUTO: land.
     pub const SUB_LAND: u8 = 6;
+    /// `MAV_MODE_FLAG_AUTO_ENABLED`.
+    pub const BASE_AUTO: u8 = 4;
+    /// `MAV_MODE_FLAG_GUIDED_ENABLED`.
+    pub const BASE_GUIDED: u8 = 8;
+    /// `MAV_MODE_FLAG_MANUAL_INPUT_ENABLED`.
+    pub const BASE_MANUAL_INPUT: u8 = 64;
 }
 
 /// A flight mode (see the module's table).
@@ -101,12 +108,29 @@ impl FlightMode {
         match (main, sub) {
             (MAIN_POSCTL, _) => Some(FlightMode::Position),
             (MAIN_OFFBOARD, _) => Some(FlightMode::Offboard),
+            // AUTO without a sub mode is PX4's mission.
+            (MAIN_AUTO, 0) => Some(FlightMode::Mission),
             (MAIN_AUTO, SUB_LOITER) => Some(FlightMode::Hold),
             (MAIN_AUTO, SUB_TAKEOFF) => Some(FlightMode::Takeoff),
             (MAIN_AUTO, SUB_LAND) => Some(FlightMode::Land),
             (MAIN_AUTO, SUB_RTL) => Some(FlightMode::Return),
             (MAIN_AUTO, SUB_MISSION) => Some(FlightMode::Mission),
             _ => None,
+        }
+    }
+
+    /// The mode a `DO_SET_MODE` without `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`
+    /// asks for, as PX4's commander reads its `base_mode`: AUTO is the
+    /// mission, manual input with GUIDED is position control. Manual input
+    /// alone (PX4's manual or stabilized) is not flown here.
+    pub fn from_base_mode(base: u8) -> Option<Self> {
+        use px4::*;
+        if base & BASE_AUTO != 0 {
+            Some(FlightMode::Mission)
+        } else if base & BASE_MANUAL_INPUT != 0 && base & BASE_GUIDED != 0 {
+            Some(FlightMode::Position)
+        } else {
+            None
         }
     }
 
@@ -434,6 +458,21 @@ mod tests {
         assert_eq!(FlightMode::from_px4(1, 0), None);
         assert_eq!(FlightMode::from_px4(4, 1), None);
         assert_eq!(FlightMode::from_px4(4, 8), None);
+        // AUTO alone: PX4 flies the mission.
+        assert_eq!(FlightMode::from_px4(4, 0), Some(FlightMode::Mission));
+    }
+
+    #[test]
+    fn a_base_mode_alone_is_read_as_px4s_commander_reads_it() {
+        // MAV_MODE values (common.xml): AUTO_DISARMED 92 and GUIDED_DISARMED
+        // 88 carry AUTO; MANUAL_DISARMED 64 and STABILIZE_DISARMED 80 are
+        // manual input without GUIDED; PREFLIGHT 0 is nothing.
+        assert_eq!(FlightMode::from_base_mode(92), Some(FlightMode::Mission));
+        assert_eq!(FlightMode::from_base_mode(4), Some(FlightMode::Mission));
+        assert_eq!(FlightMode::from_base_mode(64 | 8), Some(FlightMode::Position));
+        assert_eq!(FlightMode::from_base_mode(64), None);
+        assert_eq!(FlightMode::from_base_mode(80), None);
+        assert_eq!(FlightMode::from_base_mode(0), None);
     }
 
     #[test]

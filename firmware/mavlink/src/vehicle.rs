@@ -643,15 +643,30 @@ impl MavVehicle {
             MavCmd::MAV_CMD_NAV_LAND => self.mode_command(FlightMode::Land, f32::NAN, out)?,
             MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH => self.mode_command(FlightMode::Return, f32::NAN, out)?,
             MavCmd::MAV_CMD_DO_SET_MODE => {
-                let custom = (p[0] as u32) & MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() as u32 != 0;
-                match FlightMode::from_px4(p[1] as u8, p[2] as u8) {
-                    Some(m) if custom => self.mode_command(m, f32::NAN, out)?,
-                    _ => {
+                // `as` saturates (NaN to 0): an absurd parameter names no mode.
+                let base = p[0] as u8;
+                let custom = base & MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() != 0;
+                let mode = if custom {
+                    FlightMode::from_px4(p[1] as u8, p[2] as u8)
+                } else {
+                    FlightMode::from_base_mode(base)
+                };
+                match mode {
+                    Some(m) => self.mode_command(m, f32::NAN, out)?,
+                    None if custom => {
                         self.say(
                             out,
                             MavSeverity::MAV_SEVERITY_WARNING,
                             // As integers: f32's Display would link core's float formatting.
                             format_args!("mode {}/{} not flown here", p[1] as i32, p[2] as i32),
+                        )?;
+                        MavResult::MAV_RESULT_DENIED
+                    }
+                    None => {
+                        self.say(
+                            out,
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            format_args!("base mode {base} not flown here"),
                         )?;
                         MavResult::MAV_RESULT_DENIED
                     }

@@ -916,6 +916,22 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     );
     assert_eq!(v.mode(), FlightMode::Position);
 
+    // A base mode alone, read as PX4's commander reads it (MAVProxy's
+    // `mode 4`): AUTO is the mission (none yet: refused), manual input
+    // without GUIDED is not flown, GUIDED with manual input is Position.
+    let mut out = Sent::default();
+    v.handle(&set_mode(FlightMode::Hold), &mut out, &Still, 0).unwrap();
+    for base in [4.0, 64.0, 72.0] {
+        let c = command_of(MavCmd::MAV_CMD_DO_SET_MODE, [base, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        v.handle(&c, &mut out, &Still, 0).unwrap();
+    }
+    assert_eq!(out.acks(), [ok, denied, denied, ok]);
+    assert_eq!(
+        out.texts(),
+        ["Mission refused: no mission", "base mode 64 not flown here"]
+    );
+    assert_eq!(v.mode(), FlightMode::Position);
+
     // Hold, arm, take off to MIS_TAKEOFF_ALT: Takeoff, then Hold at 1.5 m.
     let mut out = Sent::default();
     v.handle(&set_mode(FlightMode::Hold), &mut out, &Still, 0).unwrap();
