@@ -28,33 +28,16 @@ directory, not the caller's.
 Prints `mavproxy check: P passed, F failed` and exits non-zero on a failure.
 """
 import argparse
-import json
 import math
 import queue
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
 import threading
 import time
 
-
-class Truth:
-    def __init__(self, port):
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        self.sock.bind(("127.0.0.1", port))
-        self.sock.setblocking(False)
-        self.ned = None
-
-    def poll(self):
-        while True:
-            try:
-                data, _ = self.sock.recvfrom(256)
-            except BlockingIOError:
-                return self.ned
-            self.ned = json.loads(data)["ned"]
+from hil_truth import Truth
 
 
 class Session:
@@ -105,7 +88,8 @@ class Session:
         end = time.time() + (timeout or self.timeout)
         since = None
         while time.time() < end:
-            p = self.truth.poll()
+            self.truth.poll()
+            p = self.truth.ned
             while not self.lines.empty():
                 self.seen.append(self.lines.get())
                 print(f"  | {self.seen[-1]}", flush=True)
@@ -157,7 +141,8 @@ class Session:
         self.send("long DO_SET_MODE 1 4 5")
         self.check(self.expect(lambda l: "Mode RTL" in l) is not None, "mode RTL")
         line = self.expect(lambda l: "DISARMED" in l, timeout=3 * self.timeout)
-        p = self.truth.poll()
+        self.truth.poll()
+        p = self.truth.ned
         d = math.dist(p, [0.0, 0.0, 0.0]) if p is not None else math.inf
         self.check(line is not None and d <= 0.2, f"landed and DISARMED {d:.3f} m from home (20 cm)")
         # The vehicle has no fence; MAVProxy's fence module reads a clear

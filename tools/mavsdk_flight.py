@@ -7,7 +7,7 @@ rotorpy's truth, which rotorpy_hil.py sends to --truth-port (north, east,
 down about the start, m, with the simulated time).
 
 1. connect (`udpin://`, as to a PX4 SITL); the autopilot is PX4; when
-   the simulation runs more than 2x slower than real time (the image in
+   the simulation runs more than 3x slower than real time (the image in
    QEMU), the vehicle's heartbeat rate and its ground-station timeouts are
    fitted to it (`Flight.pace`);
 2. telemetry: health (local and global position, home, armable), home,
@@ -32,7 +32,6 @@ import argparse
 import asyncio
 import json
 import math
-import socket
 import sys
 import time
 
@@ -47,50 +46,7 @@ from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync, FlightMode, LandedState
 from mavsdk import Autopilot
 
-
-class Truth:
-    """rotorpy's position (NED about the start, m) and time (s), latest."""
-
-    def __init__(self, port):
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        self.sock.bind(("127.0.0.1", port))
-        self.sock.setblocking(False)
-        self.t, self.ned = None, None
-        self.track = []
-        self.first = None  # (wall s, simulated s) of the first datagram
-
-    def poll(self):
-        while True:
-            try:
-                data, _ = self.sock.recvfrom(256)
-            except BlockingIOError:
-                return
-            m = json.loads(data)
-            self.t, self.ned = m["t"], m["ned"]
-            self.track.append(self.ned)
-            if self.first is None:
-                self.first = (time.time(), self.t)
-
-    async def slowdown(self, span_s=0.5):
-        """Wall seconds per simulated second since the first datagram,
-        once at least `span_s` has been simulated."""
-        while True:
-            self.poll()
-            if self.first is not None and self.t - self.first[1] >= span_s:
-                return (time.time() - self.first[0]) / (self.t - self.first[1])
-            await asyncio.sleep(0.05)
-
-    def closest(self, ned, since):
-        """The closest rotorpy came to `ned` after track entry `since`, m."""
-        self.poll()
-        return min((math.dist(p, ned) for p in self.track[since:]), default=math.inf)
-
-    def dist(self, ned):
-        self.poll()
-        if self.ned is None:
-            return math.inf
-        return math.dist(self.ned, ned)
+from hil_truth import Truth
 
 
 class Flight:
@@ -139,14 +95,14 @@ class Flight:
         the wall clock: it drops a system whose heartbeat is silent for 3 s
         and sends its own heartbeat at 1 Hz, its joystick input and offboard
         set-points at 20 Hz. The vehicle keeps simulated time. So, through
-        MAVSDK's public API, when a simulated second takes more than two of
+        MAVSDK's public API, when a simulated second takes more than three of
         wall time: the vehicle's heartbeat is asked for every 0.5 s of wall
         time (MAV_CMD_SET_MESSAGE_INTERVAL, through mavlink_direct), and the
         timeouts on the ground station's streams (FS_GCS_MS, COM_RC_LOSS_T,
         COM_OF_LOSS_T) are lengthened by the slowdown."""
         slow = await self.truth.slowdown()
         print(f"     {slow:.1f} wall seconds per simulated second", flush=True)
-        if slow <= 2.0:
+        if slow <= 3.0:
             return
         direct = MavlinkDirectAsync(system)
         ack = await direct.send_command(MavlinkMessage(
