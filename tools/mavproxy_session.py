@@ -10,15 +10,16 @@ MAVProxy runs as a user runs it (`mavproxy.py --master=...`), its commands
 written to its standard input and its console read back:
 
 1. it connects and shows the mode PX4 would show (POSCTL);
-2. `param fetch` lists every parameter (after its FTP attempts time out:
-   the vehicle has no MAVLink FTP); `param set` / `param show` one;
+2. `param fetch` fetches every parameter (after its FTP attempts time out:
+   the vehicle has no MAVLink FTP), `param show *` lists them;
+   `param set` / `param show` one;
 3. `mode` lists PX4's modes from pymavlink's table; `long DO_SET_MODE 1 4 3`
    (custom mode; AUTO.LOITER) switches to Hold, and the console shows
    LOITER. MAVProxy 1.8.75's own `mode LOITER` cannot switch a PX4: it
    hands pymavlink's (base, main, sub) tuple to `set_mode_px4` as one float
    ("required argument is not a float"), whatever the vehicle;
 4. `arm throttle` arms; `takeoff 1.5` takes off: rotorpy holds 1.5 m within
-   5 cm for 1 s and the mode returns to LOITER;
+   5 cm for 1 s (simulated) and the mode returns to LOITER;
 5. `long DO_SET_MODE 1 4 5` (AUTO.RTL) brings it back: landed and disarmed
    within 20 cm of home.
 
@@ -30,6 +31,7 @@ Prints `mavproxy check: P passed, F failed` and exits non-zero on a failure.
 import argparse
 import math
 import queue
+import re
 import shutil
 import subprocess
 import sys
@@ -82,9 +84,9 @@ class Session:
                 return line
         return None
 
-    def near(self, ned, tol, hold=1.0, timeout=None):
+    def near(self, ned, tol, hold_s=1.0, timeout=None):
         """rotorpy's position once it has stayed within `tol` of `ned` for
-        `hold` wall seconds (at least half as long simulated), or None."""
+        `hold_s` simulated seconds, or None."""
         end = time.time() + (timeout or self.timeout)
         since = None
         while time.time() < end:
@@ -94,8 +96,8 @@ class Session:
                 self.seen.append(self.lines.get())
                 print(f"  | {self.seen[-1]}", flush=True)
             if p is not None and math.dist(p, ned) <= tol:
-                since = since or time.time()
-                if time.time() - since >= hold:
+                since = self.truth.t if since is None else since
+                if self.truth.t - since >= hold_s:
                     return p
             else:
                 since = None
@@ -108,8 +110,27 @@ class Session:
         self.check(self.expect(lambda l: "POSCTL" in l, timeout=30) is not None,
                    "its console shows the mode PX4 would show: POSCTL")
         self.send("param fetch")
-        line = self.expect(lambda l: l.startswith("Received") and "parameters" in l)
+        # MAVProxy fetches them at connection too, and says so once it has
+        # them all (a line may start with its prompt).
+        def received(l):
+            return re.search(r"Received \d+ parameters", l) is not None
+
+        line = next((l for l in self.seen if received(l)), None) or self.expect(received)
         self.check(line is not None, f"param fetch: {line}")
+        # `param show *` lists them all, one `NAME value` line each.
+        count = int(re.search(r"Received (\d+)", line).group(1)) if line is not None else 0
+        listed = set()
+
+        def listing(l):
+            m = re.search(r"([A-Z][A-Z0-9_]*)\s+(-?[0-9][0-9.eE+-]*)$", l)
+            if m:
+                listed.add(m.group(1))
+            return count > 0 and len(listed) >= count
+
+        self.send("param show *")
+        self.expect(listing, timeout=10)
+        self.check(count > 0 and len(listed) == count and {"MPC_XY_CRUISE", "COM_OF_LOSS_T", "VEH_MASS"} <= listed,
+                   f"param show *: {len(listed)} of {count} listed")
         self.send("param set MPC_XY_CRUISE 0.8")
         # `param show` prints MAVProxy's copy, which the vehicle's answer updates.
         line = None
