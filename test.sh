@@ -172,7 +172,7 @@ echo "== MAVSDK (PyPI, its C++ library), unmodified, flies it as a PX4: health, 
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "mavsdk==4.1.0"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --mavsdk --duration 120 \
     --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
-echo "== the same MAVSDK script against the firmware-mavlink image in QEMU (about 5x slower than real time; about 6 min)"
+echo "== the same MAVSDK script against the firmware-mavlink image in QEMU (about 5x slower than real time; about 5 min)"
 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --mavsdk --duration 150 \
     --json target/rotorpy-hil-mavsdk-qemu.json | grep "^mavsdk check:" | tee -a "$log"
 echo "== MAVProxy (PyPI, pinned), unmodified, on its standard input: mode name, parameters, mode switch, arm, takeoff, return"
