@@ -1353,8 +1353,10 @@ impl MavVehicle {
 
     /// `ESTIMATOR_STATUS`: what the estimator gives (attitude, velocity,
     /// position about the origin and, about the simulator's origin, a
-    /// global one) while it navigates; its 1σ position accuracy. The
-    /// innovation test ratios are not computed here: 0.
+    /// global one) while it navigates; its 1σ position accuracy; the latest
+    /// fixes' innovation test ratios as PX4 gives them (the vertical one
+    /// the larger of the position's and the barometer's, the heading's as
+    /// `mag_ratio`; no height-above-ground or airspeed source: 0).
     fn estimator_status(&self, t_us: u64) -> ESTIMATOR_STATUS_DATA {
         use EstimatorStatusFlags as F;
         let nav = self.core.navigator();
@@ -1372,12 +1374,14 @@ impl MavVehicle {
                 flags |= F::ESTIMATOR_POS_HORIZ_ABS | F::ESTIMATOR_PRED_POS_HORIZ_ABS;
             }
         }
+        // PX4 sends the square roots of the estimator's ratios.
+        let r = nav.estimator().test_ratios();
         ESTIMATOR_STATUS_DATA {
             time_usec: t_us,
-            vel_ratio: 0.0,
-            pos_horiz_ratio: 0.0,
-            pos_vert_ratio: 0.0,
-            mag_ratio: 0.0,
+            vel_ratio: libm::sqrtf(r.vel),
+            pos_horiz_ratio: libm::sqrtf(r.pos_horiz),
+            pos_vert_ratio: libm::sqrtf(r.pos_vert.max(r.alt)),
+            mag_ratio: libm::sqrtf(r.yaw),
             hagl_ratio: 0.0,
             tas_ratio: 0.0,
             pos_horiz_accuracy: sig[0].max(sig[1]),

@@ -858,6 +858,10 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
         .flags
         .contains(F::ESTIMATOR_ATTITUDE | F::ESTIMATOR_POS_HORIZ_REL | F::ESTIMATOR_POS_HORIZ_ABS));
     assert!(es.pos_horiz_accuracy > 0.0 && es.pos_horiz_accuracy < 0.05, "{es:?}");
+    // At rest on consistent fixes: every test ratio inside the gate.
+    for r in [es.pos_horiz_ratio, es.pos_vert_ratio, es.vel_ratio, es.mag_ratio] {
+        assert!((0.0..1.0).contains(&r), "{es:?}");
+    }
     let MavMessage::HOME_POSITION(h) = last(&out, "HOME_POSITION") else {
         unreachable!()
     };

@@ -72,6 +72,39 @@ pub struct EskfCounters {
     pub pos_fused: u32,
 }
 
+/// The innovation test ratios of the latest fix part of each kind, as PX4's
+/// estimator keeps them: per axis innovation² / (gate² · S), S the
+/// innovation variance, the largest over the axes named; 0 before the
+/// first. (`ESTIMATOR_STATUS` sends their square roots; no root is taken
+/// here, on the estimator's step.) A scalar part (heading, altitude) above 1
+/// was outside the gate. A position or velocity is gated jointly on its
+/// three axes (its normalised innovation squared against gate²), so one
+/// axis above 1 does not alone say that it was refused: the counters do.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TestRatios {
+    /// Position, north and east.
+    pub pos_horiz: f32,
+    /// Position, down.
+    pub pos_vert: f32,
+    /// Velocity, the three axes.
+    pub vel: f32,
+    /// Heading.
+    pub yaw: f32,
+    /// Barometric altitude.
+    pub alt: f32,
+}
+
+/// innov² / (gate² · s); infinite for a variance that is not positive.
+fn test_ratio(innov: f32, s: f32, gate: f32) -> f32 {
+    let d = gate * gate * s;
+    if d > 0.0 {
+        innov * innov / d
+    } else {
+        f32::INFINITY
+    }
+}
+
 /// The nominal state at one past step, for delayed fixes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Past {
@@ -125,6 +158,7 @@ pub struct Eskf<const H: usize> {
     /// Position fixes rejected in a row.
     rejected_run: u16,
     counters: EskfCounters,
+    ratios: TestRatios,
 }
 
 impl<const H: usize> Eskf<H> {
@@ -159,6 +193,7 @@ impl<const H: usize> Eskf<H> {
             align_yaw: None,
             rejected_run: 0,
             counters: EskfCounters::default(),
+            ratios: TestRatios::default(),
         }
     }
 
@@ -218,6 +253,11 @@ impl<const H: usize> Eskf<H> {
     /// What was refused or repaired so far.
     pub fn counters(&self) -> EskfCounters {
         self.counters
+    }
+
+    /// The latest fixes' innovation test ratios.
+    pub fn test_ratios(&self) -> TestRatios {
+        self.ratios
     }
 
     /// The error-state covariance `[δp δv δθ δb_g δb_a]` (m, m/s, rad, rad/s, m/s²).
@@ -343,7 +383,9 @@ impl<const H: usize> Eskf<H> {
             let h = [(ITH, -r20 * r00 / n), (ITH + 1, -r20 * r10 / n), (ITH + 2, 1.0)];
             let y = crate::control::wrap_pi(yaw - quat_to_euler(&past.q)[2]);
             let sig = fix.yaw_sigma_rad;
-            if self.scalar_update(&mut dx, &h, y, sig * sig) {
+            let (fused, ratio) = self.scalar_update(&mut dx, &h, y, sig * sig);
+            self.ratios.yaw = ratio;
+            if fused {
                 self.counters.fused += 1;
             } else {
                 self.counters.yaw_rejected += 1;
@@ -352,7 +394,9 @@ impl<const H: usize> Eskf<H> {
         if let Some(alt) = fix.alt_m {
             let h = [(IP + 2, -1.0)];
             let sig = fix.alt_sigma_m;
-            if self.scalar_update(&mut dx, &h, alt + past.p[2], sig * sig) {
+            let (fused, ratio) = self.scalar_update(&mut dx, &h, alt + past.p[2], sig * sig);
+            self.ratios.alt = ratio;
+            if fused {
                 self.counters.fused += 1;
             } else {
                 self.counters.alt_rejected += 1;
@@ -498,6 +542,13 @@ impl<const H: usize> Eskf<H> {
             s[(i, i)] += sigma[i] * sigma[i];
         }
         let gate = self.cfg.gate_sigma;
+        let r = Vector3::from_fn(|i, _| test_ratio(y[i], s[(i, i)], gate));
+        if pos {
+            self.ratios.pos_horiz = r[0].max(r[1]);
+            self.ratios.pos_vert = r[2];
+        } else {
+            self.ratios.vel = r.max();
+        }
         let nis = match s.try_inverse() {
             Some(si) => (y.transpose() * si * y)[0],
             None => f32::INFINITY,
@@ -556,23 +607,26 @@ impl<const H: usize> Eskf<H> {
         ph
     }
 
-    /// One gated scalar update with the sparse row `h`; `false` (nothing
-    /// changed) if outside the gate.
-    fn scalar_update(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32) -> bool {
+    /// One gated scalar update with the sparse row `h`: whether it was
+    /// fused (`false`: nothing changed, outside the gate), and its test
+    /// ratio ([`TestRatios`]).
+    fn scalar_update(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32) -> (bool, f32) {
         self.scalar_update_with(dx, h, y, r, true)
     }
 
     /// One scalar update, behind the scalar gate when `gated` (a part
-    /// gated jointly beforehand is not).
-    fn scalar_update_with(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32, gated: bool) -> bool {
+    /// gated jointly beforehand is not): whether it was fused, and its test
+    /// ratio.
+    fn scalar_update_with(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32, gated: bool) -> (bool, f32) {
         let ph = self.cov_h(h);
         let s = sparse_dot(h, &ph) + r;
         let innov = y - sparse_dot(h, dx);
         let gate = self.cfg.gate_sigma;
+        let ratio = test_ratio(innov, s, gate);
         if !(s > 0.0 && (!gated || innov * innov <= gate * gate * s)) {
-            return false;
+            return (false, ratio);
         }
-        self.apply_gain(dx, &ph, s, innov)
+        (self.apply_gain(dx, &ph, s, innov), ratio)
     }
 
     /// `K = P hᵀ / s`, `δx += K·innov`, `P −= K (P hᵀ)ᵀ` (symmetric: the

@@ -29,7 +29,7 @@
 
 mod eskf;
 
-pub use eskf::{Eskf, EskfCounters, Mode, ERR};
+pub use eskf::{Eskf, EskfCounters, Mode, TestRatios, ERR};
 
 use nalgebra::Vector3;
 

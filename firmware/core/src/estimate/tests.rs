@@ -189,10 +189,26 @@ fn bad_samples_and_fixes_are_counted_and_never_enter() {
     let after = f.estimate().unwrap();
     assert!((after.pos_ned_m - before.pos_ned_m).amax() < 1e-4);
     assert!(quat_to_euler(&after.att).amax() < 1e-4);
-    // A 5 m outlier fails the gate; the estimate does not move.
+    // A fix where it is: test ratios well inside the gate.
+    f.fuse(&mocap(Vector3::zeros(), 0.0)).unwrap();
+    let r = f.test_ratios();
+    assert!(r.pos_horiz < 0.2 && r.pos_vert < 0.2 && r.yaw < 0.2, "{r:?}");
+    // A 5 m outlier fails the gate; the estimate does not move. Its
+    // north ratio is (5 m)² / (gate² · (P_nn + σ²)), PX4's definition, far
+    // above 1; down is untouched.
+    let s_nn = f.covariance()[(0, 0)] + 0.002 * 0.002;
     f.fuse(&mocap(Vector3::new(5.0, 0.0, 0.0), 0.0)).unwrap();
     assert_eq!(f.counters().pos_rejected, 1);
     assert!(f.estimate().unwrap().pos_ned_m.amax() < 1e-3);
+    let r = f.test_ratios();
+    let gate = EskfConfig::BMI088.gate_sigma;
+    let want = 25.0 / (gate * gate * s_nn);
+    assert!(
+        want > 1e4 && (r.pos_horiz / want - 1.0).abs() < 1e-3,
+        "{} vs {want}",
+        r.pos_horiz
+    );
+    assert!(r.pos_vert < 0.2, "{r:?}");
     // Refused before gating: bad sigma, non-finite value, negative age.
     let mut bad = mocap(Vector3::zeros(), 0.0);
     bad.pos_sigma_m[1] = 0.0;
