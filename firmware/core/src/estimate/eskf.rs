@@ -616,13 +616,13 @@ impl<const H: usize> Eskf<H> {
 
     /// One scalar update, behind the scalar gate when `gated` (a part
     /// gated jointly beforehand is not): whether it was fused, and its test
-    /// ratio.
+    /// ratio when gated here (0 otherwise: the joint gate takes its own).
     fn scalar_update_with(&mut self, dx: &mut ErrVec, h: &[(usize, f32)], y: f32, r: f32, gated: bool) -> (bool, f32) {
         let ph = self.cov_h(h);
         let s = sparse_dot(h, &ph) + r;
         let innov = y - sparse_dot(h, dx);
         let gate = self.cfg.gate_sigma;
-        let ratio = test_ratio(innov, s, gate);
+        let ratio = if gated { test_ratio(innov, s, gate) } else { 0.0 };
         if !(s > 0.0 && (!gated || innov * innov <= gate * gate * s)) {
             return (false, ratio);
         }
