@@ -22,6 +22,7 @@
 
 use crate::params::Refusal;
 use fc_loop::planner::{Reference, Segment};
+use mavlink::dialects::common::MavModeFlag;
 use nalgebra::Vector3;
 
 /// PX4's main and sub mode numbers (`px4_custom_mode.h`).
@@ -42,12 +43,6 @@ pub mod px4 {
     pub const SUB_RTL: u8 = 5;
     /// AUTO: land.
     pub const SUB_LAND: u8 = 6;
-    /// `MAV_MODE_FLAG_AUTO_ENABLED`.
-    pub const BASE_AUTO: u8 = 4;
-    /// `MAV_MODE_FLAG_GUIDED_ENABLED`.
-    pub const BASE_GUIDED: u8 = 8;
-    /// `MAV_MODE_FLAG_MANUAL_INPUT_ENABLED`.
-    pub const BASE_MANUAL_INPUT: u8 = 64;
 }
 
 /// A flight mode (see the module's table).
@@ -123,11 +118,12 @@ impl FlightMode {
     /// asks for, as PX4's commander reads its `base_mode`: AUTO is the
     /// mission, manual input with GUIDED is position control. Manual input
     /// alone (PX4's manual or stabilized) is not flown here.
-    pub fn from_base_mode(base: u8) -> Option<Self> {
-        use px4::*;
-        if base & BASE_AUTO != 0 {
+    pub fn from_base_mode(base: MavModeFlag) -> Option<Self> {
+        if base.contains(MavModeFlag::MAV_MODE_FLAG_AUTO_ENABLED) {
             Some(FlightMode::Mission)
-        } else if base & BASE_MANUAL_INPUT != 0 && base & BASE_GUIDED != 0 {
+        } else if base
+            .contains(MavModeFlag::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | MavModeFlag::MAV_MODE_FLAG_GUIDED_ENABLED)
+        {
             Some(FlightMode::Position)
         } else {
             None
@@ -467,12 +463,13 @@ mod tests {
         // MAV_MODE values (common.xml): AUTO_DISARMED 92 and GUIDED_DISARMED
         // 88 carry AUTO; MANUAL_DISARMED 64 and STABILIZE_DISARMED 80 are
         // manual input without GUIDED; PREFLIGHT 0 is nothing.
-        assert_eq!(FlightMode::from_base_mode(92), Some(FlightMode::Mission));
-        assert_eq!(FlightMode::from_base_mode(4), Some(FlightMode::Mission));
-        assert_eq!(FlightMode::from_base_mode(64 | 8), Some(FlightMode::Position));
-        assert_eq!(FlightMode::from_base_mode(64), None);
-        assert_eq!(FlightMode::from_base_mode(80), None);
-        assert_eq!(FlightMode::from_base_mode(0), None);
+        let base = |b: u8| FlightMode::from_base_mode(MavModeFlag::from_bits_truncate(b));
+        assert_eq!(base(92), Some(FlightMode::Mission));
+        assert_eq!(base(4), Some(FlightMode::Mission));
+        assert_eq!(base(64 | 8), Some(FlightMode::Position));
+        assert_eq!(base(64), None);
+        assert_eq!(base(80), None);
+        assert_eq!(base(0), None);
     }
 
     #[test]

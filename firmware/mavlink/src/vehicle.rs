@@ -645,11 +645,12 @@ impl MavVehicle {
             MavCmd::MAV_CMD_DO_SET_MODE => {
                 // `as` saturates (NaN to 0): an absurd parameter names no mode.
                 let base = p[0] as u8;
-                let custom = base & MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() != 0;
+                let flags = MavModeFlag::from_bits_truncate(base);
+                let custom = flags.contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED);
                 let mode = if custom {
                     FlightMode::from_px4(p[1] as u8, p[2] as u8)
                 } else {
-                    FlightMode::from_base_mode(base)
+                    FlightMode::from_base_mode(flags)
                 };
                 match mode {
                     Some(m) => self.mode_command(m, f32::NAN, out)?,
