@@ -55,6 +55,12 @@ class Session:
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
         threading.Thread(target=self._read, daemon=True).start()
 
+    def _take(self, line):
+        """Keeps a console line (for later checks) and echoes it."""
+        self.seen.append(line)
+        print(f"  | {line}", flush=True)
+        return line
+
     def _read(self):
         for line in self.p.stdout:
             self.lines.put(line.rstrip("\n"))
@@ -78,9 +84,7 @@ class Session:
                 line = self.lines.get(timeout=0.1)
             except queue.Empty:
                 continue
-            self.seen.append(line)
-            print(f"  | {line}", flush=True)
-            if pred(line):
+            if pred(self._take(line)):
                 return line
         return None
 
@@ -93,8 +97,7 @@ class Session:
             self.truth.poll()
             p = self.truth.ned
             while not self.lines.empty():
-                self.seen.append(self.lines.get())
-                print(f"  | {self.seen[-1]}", flush=True)
+                self._take(self.lines.get())
             if p is not None and math.dist(p, ned) <= tol:
                 since = self.truth.t if since is None else since
                 if self.truth.t - since >= hold_s:

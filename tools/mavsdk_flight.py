@@ -112,9 +112,10 @@ class Flight:
                                     "param4": 0, "param5": 0, "param6": 0, "param7": 0})))
         self.check(json.loads(ack.fields_json).get("result") == 0,
                    f"heartbeat every {0.5 / slow:.3f} simulated s (SET_MESSAGE_INTERVAL): {ack.fields_json}")
-        # FS_GCS_MS takes whole milliseconds; the others tenths of a second.
-        for name, value in (("FS_GCS_MS", float(round(5000 * slow))), ("COM_RC_LOSS_T", round(0.5 * slow, 1)),
-                            ("COM_OF_LOSS_T", round(1.0 * slow, 1))):
+        # The vehicle's own values, scaled: FS_GCS_MS takes whole
+        # milliseconds, the others tenths of a second.
+        for name, digits in (("FS_GCS_MS", 0), ("COM_RC_LOSS_T", 1), ("COM_OF_LOSS_T", 1)):
+            value = float(round(await param.get_param_float(name) * slow, digits))
             await param.set_param_float(name, value)
             self.check(abs(await param.get_param_float(name) - value) < 1e-3, f"{name} lengthened to {value}")
 

@@ -129,10 +129,10 @@ def main():
     if a.gcs or a.mavsdk or a.mavproxy:
         # The ground station listens first, as QGroundControl does.
         if a.mavsdk or a.mavproxy:
-            script = [os.path.join(here, "mavsdk_flight.py"), "--url", f"udpin://127.0.0.1:{a.gcs_port}"]
-            if a.mavproxy:
-                script = [os.path.join(here, "mavproxy_session.py"), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
-            script += ["--truth-port", str(a.truth_port)]
+            # MAVSDK's URL and MAVProxy's (pymavlink's) spell UDP differently.
+            name, url = (("mavsdk_flight.py", f"udpin://127.0.0.1:{a.gcs_port}") if a.mavsdk
+                         else ("mavproxy_session.py", f"udpin:127.0.0.1:{a.gcs_port}"))
+            script = [os.path.join(here, name), "--url", url, "--truth-port", str(a.truth_port)]
             if a.target == "qemu":
                 # The image in QEMU flies about 5x slower than real time.
                 script += ["--timeout", "180"]
