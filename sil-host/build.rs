@@ -7,8 +7,12 @@
 //! one's lock. Their paths reach the crate as `SIL_FIRMWARE_ELF_BUILT`,
 //! `SIL_FIRMWARE_MAVLINK_ELF_BUILT`, `SIL_FIRMWARE_CRTP_ELF_BUILT`,
 //! `SIL_FIRMWARE_CRAZYFLIE_ELF_BUILT` and `SIL_BOOT_SHIM_ELF_BUILT`; when
-//! the build fails (say the thumbv7em target is not installed) the host
-//! still builds, that variable is empty and `SIL_FIRMWARE_BUILD_ERROR` says why.
+//! the build fails (say the thumbv7em target or flip-link is not installed)
+//! the host still builds, that variable is empty and
+//! `SIL_FIRMWARE_BUILD_ERROR` says why; the script then runs again on every
+//! build of the host until the images build, so installing the target
+//! (`./test.sh` does) is enough: the README's two commands work in either
+//! order.
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -54,6 +58,10 @@ fn main() {
         }
         Err(e) => {
             println!("cargo:warning=the firmware image was not built: {e}");
+            // A path that does not exist is never fresh: cargo runs this
+            // script again on every build until the images build (nothing
+            // under firmware/ changes when a target or linker is installed).
+            println!("cargo:rerun-if-changed={}", target_dir.join("not-built-yet").display());
             println!("cargo:rustc-env=SIL_FIRMWARE_ELF_BUILT=");
             println!("cargo:rustc-env=SIL_FIRMWARE_MAVLINK_ELF_BUILT=");
             println!("cargo:rustc-env=SIL_FIRMWARE_CRTP_ELF_BUILT=");
