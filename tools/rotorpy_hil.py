@@ -18,7 +18,9 @@ measurements of the flight (from rotorpy's true state) added under
 --max-final-error from the last waypoint.
 """
 import argparse
+import importlib.metadata
 import json
+import platform
 import os
 import socket
 import subprocess
@@ -29,6 +31,8 @@ import sys
 os.environ["MAVLINK20"] = "1"
 
 import numpy as np  # noqa: E402
+from children import EndsWithFlight  # noqa: E402
+from measure import record  # noqa: E402
 from rotorpy.vehicles.crazyflie_params import quad_params as crazyflie_params  # noqa: E402
 from rotorpy.vehicles.hummingbird_params import quad_params as hummingbird_params  # noqa: E402
 from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
@@ -81,6 +85,21 @@ class Lockstep(PX4Multirotor):
         return {"cmd_motor_speeds": [c * self.rotor_speed_max for c in msg.controls[: self.num_rotors]]}
 
 
+# The packages a flight's figures depend on, recorded in its JSON: the same
+# versions (tools/requirements.txt) fly the same bits.
+FLOWN_WITH = ("numpy", "scipy", "rotorpy", "pymavlink", "mavsdk", "MAVProxy")
+
+
+def versions():
+    out = {"python": platform.python_version()}
+    for name in FLOWN_WITH:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sil-host", default="target/release/sil-host")
@@ -97,6 +116,8 @@ def main():
     ap.add_argument("--csv", help="the flight controller's trace")
     ap.add_argument("--ulog", help="the flight as a ULog (sil-host px4-hil --ulog)")
     ap.add_argument("--json", help="write the summary here too")
+    ap.add_argument("--measure", metavar="NAME",
+                    help="write the flight's figures to the measurements (tools/measure.py) as rotorpy_NAME_*")
     ap.add_argument("--seed", type=int, default=1, help="seeds rotorpy's IMU noise (numpy)")
     ap.add_argument("--gcs", action="store_true",
                     help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
@@ -153,6 +174,7 @@ def main():
         cmd += ["--ulog", a.ulog]
     np.random.seed(a.seed)
     fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    fc_watch = EndsWithFlight(fc, "sil-host px4-hil")
     vehicle = Lockstep(params_for(a.vehicle, a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
     state = dict(vehicle.initial_state)
     zero = {"cmd_motor_speeds": np.zeros(4)}
@@ -170,12 +192,14 @@ def main():
         if gcs is not None and k % 50 == 0 and gcs.poll() is not None:
             break
     # Hanging up ends the flight controller's session (and its summary).
+    fc_watch.done()
     vehicle.conn.close()
     out, _ = fc.communicate(timeout=60)
     if fc.returncode != 0:
         print(f"sil-host px4-hil failed ({fc.returncode})", file=sys.stderr)
         return 1
     res = json.loads(out)
+    res["versions"] = versions()
     track = np.array(track)
     if gcs is not None:
         if gcs.poll() is None:
@@ -212,6 +236,12 @@ def main():
     if a.json:
         with open(a.json, "w") as f:
             f.write(text + "\n")
+    if a.measure:
+        src = "rotorpy_hil.py --measure " + a.measure
+        if a.waypoint:
+            record(f"rotorpy_{a.measure}_final_error_m", err, "m", src)
+        if res.get("tracking_rmse_m") is not None:
+            record(f"rotorpy_{a.measure}_rmse_m", res["tracking_rmse_m"], "m", src)
     ok = bool(np.all(np.isfinite(track))) and err <= a.max_final_error
     if a.scenario:
         rmse = res.get("tracking_rmse_m")

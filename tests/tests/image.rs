@@ -86,6 +86,16 @@ fn footprint(elf: &std::path::Path) -> (u64, u64) {
 fn check(name: &str, elf: &std::path::Path, flash_budget: u64, ram_budget: u64) {
     let (flash, ram) = footprint(elf);
     eprintln!("{name}: flash {flash} B of {flash_budget}, static RAM {ram} B of {ram_budget}");
+    let key = name.replace(' ', "_");
+    let src = "image::check";
+    e2e_tests::measure(&format!("{key}_flash_bytes"), flash as f64, "B", src);
+    e2e_tests::measure(&format!("{key}_static_ram_bytes"), ram as f64, "B", src);
+    e2e_tests::measure(
+        &format!("{key}_flash_headroom_bytes"),
+        flash_budget as f64 - flash as f64,
+        "B",
+        src,
+    );
     assert!(flash <= flash_budget, "{name}: flash {flash} B over {flash_budget} B");
     assert!(ram <= ram_budget, "{name}: static RAM {ram} B over {ram_budget} B");
 }

@@ -14,6 +14,8 @@ use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use e2e_tests::measure;
+
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
@@ -71,6 +73,18 @@ fn every_controller_fits_its_cycle_budget() {
             task("IMU task (sample to estimate)"),
             task("controller task (estimate to output)"),
         );
+        measure(
+            &format!("imu_task_instructions_{form}"),
+            imu,
+            "instructions",
+            "qemu::every_controller_fits_its_cycle_budget",
+        );
+        measure(
+            &format!("controller_task_instructions_{form}"),
+            control,
+            "instructions",
+            "qemu::every_controller_fits_its_cycle_budget",
+        );
         assert!(imu <= 20_000.0, "{form}: IMU task {imu} instructions");
         assert!(
             imu + control <= 74_600.0,
@@ -87,6 +101,15 @@ fn every_controller_fits_its_cycle_budget() {
     assert_eq!(image.len(), 2, "{out}");
     for r in image {
         let instr: f64 = r[4].parse().unwrap_or_else(|_| panic!("{r:?}"));
+        let src = "qemu::every_controller_fits_its_cycle_budget";
+        measure(&format!("image_step_instructions_{}", r[1]), instr, "instructions", src);
+        // Of a 1 kHz step of the 168 MHz STM32F405 at CPI 1.5 × margin 1.5.
+        measure(
+            &format!("image_step_load_pct_{}", r[1]),
+            instr * 2.25 / 168_000.0 * 100.0,
+            "%",
+            src,
+        );
         assert!(instr <= 74_600.0, "fast MPC image step {instr} instructions: {r:?}");
         assert_eq!(r[2], "1000", "{r:?}");
     }
@@ -96,6 +119,13 @@ fn every_controller_fits_its_cycle_budget() {
     assert_eq!(est.len(), 2, "{out}");
     for r in est {
         let instr: f64 = r[4].parse().unwrap_or_else(|_| panic!("{r:?}"));
+        let what = if r[3].contains("gps") { "navigator" } else { "mocap" };
+        measure(
+            &format!("estimator_step_instructions_{what}"),
+            instr,
+            "instructions",
+            "qemu::every_controller_fits_its_cycle_budget",
+        );
         assert!(instr <= 20_000.0, "estimator step {instr} instructions: {r:?}");
     }
     for r in &rows {
@@ -135,6 +165,12 @@ fn every_controller_fits_its_cycle_budget() {
         .expect("stack line");
     // Designing and flying every controller, the whole loop included, within
     // a quarter of the SRAM (the controllers are designed in place).
+    measure(
+        "budget_stack_high_water_bytes",
+        stack as f64,
+        "B",
+        "qemu::every_controller_fits_its_cycle_budget",
+    );
     assert!(stack > 1024 && stack <= 32 * 1024, "stack high-water {stack} B");
     assert!(out.contains("budget: all fit"), "{out}");
     assert!(ok, "budget example exited with failure");
@@ -158,6 +194,9 @@ fn ours_beats_tinympc_on_the_same_chip() {
     assert_eq!(rows.len(), 4, "{out}");
     let num = |r: &Vec<&str>, k: usize| -> f64 { r[k].parse().unwrap_or_else(|_| panic!("{r:?}")) };
     let (ours, tiny) = (&rows[0], &rows[1]);
+    let src = "qemu::ours_beats_tinympc_on_the_same_chip";
+    measure("peer_tinympc_ratio_mean", num(tiny, 3) / num(ours, 3), "x", src);
+    measure("peer_tinympc_ratio_worst", num(tiny, 4) / num(ours, 4), "x", src);
     assert!(ours[0].starts_with("ours") && tiny[0].contains("1e-4"), "{out}");
     assert!(num(tiny, 3) >= 3.0 * num(ours, 3), "mean: {out}");
     assert!(num(tiny, 4) >= 3.0 * num(ours, 4), "worst: {out}");
@@ -183,14 +222,20 @@ fn mcu_and_host_compute_the_same_closed_loop() {
     let (h, m) = (parse(&host), parse(&mcu));
     assert_eq!(h.len(), 40);
     assert_eq!(h.len(), m.len());
+    let (mut iters, mut inputs) = (0.0f64, 0.0f64);
     for (a, b) in h.iter().zip(&m) {
         assert_eq!(a[0], b[0]);
         // QP iterations within one; inputs to f32 math-library rounding.
         assert!((a[1] - b[1]).abs() <= 1.0, "{a:?} vs {b:?}");
+        iters = iters.max((a[1] - b[1]).abs());
         for i in 2..6 {
             assert!((a[i] - b[i]).abs() <= 1e-4 * (1.0 + a[i].abs()), "{a:?} vs {b:?}");
+            inputs = inputs.max((a[i] - b[i]).abs() / (1.0 + a[i].abs()));
         }
     }
+    let src = "qemu::mcu_and_host_compute_the_same_closed_loop";
+    measure("mcu_vs_host_qp_iterations_max_diff", iters, "iterations", src);
+    measure("mcu_vs_host_inputs_max_rel_diff", inputs, "relative", src);
 }
 
 fn setpoint(family: Family, seconds: f64) -> FlightConfig {
@@ -207,6 +252,7 @@ fn setpoint(family: Family, seconds: f64) -> FlightConfig {
 #[test]
 #[ignore = "needs qemu-system-arm; ./test.sh installs it and runs these"]
 fn qemu_flight_matches_in_process_and_counts_instructions() {
+    let mut rmse_diff = 0.0f64;
     for family in [Family::Lqr, Family::Mpc] {
         let cfg = setpoint(family, 2.0);
         let local = fly(&cfg).unwrap();
@@ -221,6 +267,7 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
                 (a - b).abs() <= 0.02 * a,
                 "{family:?}: RMSE {a} in-process vs {b} in QEMU"
             );
+            rmse_diff = rmse_diff.max((a - b).abs() / a);
         }
         let (mean, max) = pil.instructions_per_step.expect("instructions per step");
         assert!(mean > 1000.0 && max >= mean, "{mean} {max}");
@@ -242,6 +289,8 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
         let j: Value = sil_host::report::flight_json(&cfg, &pil);
         assert!(j["instructions_per_step"]["max"].as_f64().unwrap() > 0.0);
     }
+    let src = "qemu::qemu_flight_matches_in_process_and_counts_instructions";
+    measure("qemu_vs_sil_rmse_max_rel_diff", rmse_diff, "relative", src);
 }
 
 /// The last `timing:` line of the image's log and its nine figures:
@@ -304,6 +353,12 @@ fn the_fast_mpc_meets_every_deadline_under_a_parameter_read_flood() {
         .zip(&pil.rows)
         .flat_map(|(a, b)| (1..14).map(move |j| (a[j] - b[j]).abs() / (1.0 + a[j].abs())))
         .fold(0.0f64, f64::max);
+    measure(
+        "qemu_vs_sil_states_max_rel_diff_flood",
+        states,
+        "relative",
+        "qemu::the_fast_mpc_meets_every_deadline_under_a_parameter_read_flood",
+    );
     assert!(states < 1e-5, "states differ by {states:e} (relative)");
 }
 

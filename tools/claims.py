@@ -1,0 +1,158 @@
+#!/usr/bin/env python3
+"""Holds the figures the README and the book state to the measurements the
+checks wrote (`./test.sh` gathers them into target/measurements.json).
+
+A stated figure is marked where it stands, invisible in the rendered page:
+
+    at most <!--m:image_step_instructions_quaternion-->68 232<!--/m--> instructions
+
+    claims.py check target/measurements.json   # every marked figure within its key's tolerance
+    claims.py write target/measurements.json   # rewrite every marked figure from the measurements
+    claims.py selftest target/measurements.json  # a planted drift must fail the check
+
+`check` fails on a marked figure whose key no check measured, and on one
+that drifted beyond the tolerance TOLERANCES gives for its key (each with
+its reason); `write` keeps each figure's style (decimals, grouping, a
+trailing ×). Files: README.md and every page under docs/book/src (the
+generated study report apart). Ends with `claims check: N passed, N failed`.
+"""
+import json
+import re
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+MARK = re.compile(r"<!--m:([a-z0-9_]+)-->(.*?)<!--/m-->", re.S)
+NUMBER = re.compile(r"-?[0-9][0-9  ,]*(?:\.[0-9]+)?(?:[eE]-?[0-9]+)?")
+
+# (pattern on the key, relative tolerance, absolute tolerance, why).
+TOLERANCES = [
+    (r"instructions", 0.005, 0.0,
+     "QEMU counts instructions deterministically; 0.5 % is the drift a compiler release brings"),
+    (r"load_pct", 0.0, 0.6, "derived from an instruction count, shown to whole percent"),
+    (r"_bytes$", 0.005, 0.0, "sizes from `size -A`; 0.5 % is the drift a compiler release brings"),
+    (r"^peer_", 0.05, 0.0, "a ratio of two instruction counts, shown to whole units"),
+    (r"_pct", 0.0, 0.5, "a share of flights, shown to a tenth"),
+    (r"_m$", 0.10, 0.0005, "a flight's error; the last bit of the platform's libm moves it"),
+    (r"diff", 0.0, 1e-9, "an upper bound the page states; the measurement must not exceed it"),
+    (r".", 0.0, 0.0, "anything else is stated exactly"),
+]
+
+
+def tolerance(key):
+    for pat, rel, abs_, why in TOLERANCES:
+        if re.search(pat, key):
+            return rel, abs_, why
+    raise AssertionError("the last pattern matches every key")
+
+
+def pages():
+    book = ROOT / "docs" / "book" / "src"
+    return [ROOT / "README.md"] + sorted(p for p in book.rglob("*.md") if "study" not in p.relative_to(book).parts)
+
+
+def parse(text):
+    m = NUMBER.search(text)
+    if not m:
+        return None
+    return float(m.group(0).replace(" ", "").replace("\u2009", "").replace(",", ""))
+
+
+def fmt(value, like):
+    """`value` written as the figure `like` is (decimals, thousands grouping)."""
+    m = NUMBER.search(like)
+    shown = m.group(0)
+    decimals = len(shown.split(".")[1]) if "." in shown else 0
+    out = f"{value:,.{decimals}f}"
+    sep = " " if " " in shown else "\u2009" if "\u2009" in shown else "," if "," in shown else ""
+    out = out.replace(",", sep)
+    return like[: m.start()] + out + like[m.end():]
+
+
+def load(path):
+    d = json.load(open(path))
+    return {k: v["value"] for k, v in d["measurements"].items()}
+
+
+def within(key, stated, measured):
+    rel, abs_, _ = tolerance(key)
+    if "diff" in key:
+        # A stated bound: the measurement must be at or under it.
+        return measured <= stated + abs_
+    return abs(stated - measured) <= max(rel * abs(measured), abs_)
+
+
+def check(measured, files):
+    passed = failed = 0
+    for f in files:
+        for m in MARK.finditer(f.read_text()):
+            key, shown = m.group(1), m.group(2)
+            stated = parse(shown)
+            line = f.read_text()[: m.start()].count("\n") + 1
+            where = f"{f.relative_to(ROOT)}:{line}"
+            if key not in measured:
+                failed += 1
+                print(f"FAIL {where}: {key} = {shown!r}, which no check measured")
+            elif stated is None or not within(key, stated, measured[key]):
+                failed += 1
+                print(f"FAIL {where}: {key} states {shown!r}, measured {measured[key]:g} "
+                      f"(tolerance: {tolerance(key)[2]})")
+            else:
+                passed += 1
+    return passed, failed
+
+
+def write(measured, files):
+    for f in files:
+        text = f.read_text()
+
+        def repl(m):
+            key, shown = m.group(1), m.group(2)
+            if key not in measured:
+                return m.group(0)
+            value = measured[key]
+            if "diff" in key:
+                return m.group(0)  # a stated bound is the author's, not a measurement
+            return f"<!--m:{key}-->{fmt(value, shown)}<!--/m-->"
+
+        new = MARK.sub(repl, text)
+        if new != text:
+            f.write_text(new)
+            print(f"wrote {f.relative_to(ROOT)}")
+
+
+def main():
+    if len(sys.argv) != 3 or sys.argv[1] not in ("check", "write", "selftest"):
+        raise SystemExit(__doc__)
+    measured = load(sys.argv[2])
+    if sys.argv[1] == "write":
+        write(measured, pages())
+        return
+    if sys.argv[1] == "selftest":
+        # A planted drift: the README's first marked figure moved by 10 %.
+        with tempfile.TemporaryDirectory() as d:
+            copy = Path(d) / "README.md"
+            shutil.copy(ROOT / "README.md", copy)
+            text = copy.read_text()
+            m = MARK.search(text)
+            key, shown = m.group(1), m.group(2)
+            drifted = fmt(parse(shown) * 1.1 + 1, shown)
+            copy.write_text(text[: m.start(2)] + drifted + text[m.end(2):])
+            global ROOT
+            root, ROOT = ROOT, Path(d)
+            _, failed = check(measured, [copy])
+            ROOT = root
+        ok = failed == 1
+        print(f"claims selftest: a planted drift of {key} ({shown!r} -> {drifted!r}) "
+              f"{'fails the check' if ok else 'was NOT caught'}")
+        print(f"claims check: {int(ok)} passed, {int(not ok)} failed")
+        sys.exit(0 if ok else 1)
+    passed, failed = check(measured, pages())
+    print(f"claims check: {passed} passed, {failed} failed")
+    sys.exit(1 if failed or not passed else 0)
+
+
+if __name__ == "__main__":
+    main()
