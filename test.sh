@@ -2,11 +2,55 @@
 # Every test of the project, as CI runs it: formatting, lints (host and
 # thumbv7em), the firmware image build, and all unit, property and
 # end-to-end tests, the book, the independent checks against python-control,
-# scipy, rotorpy and pyulog, and the sweep on Slurm. Installs what a fresh
-# machine lacks (the thumbv7em target, QEMU, Slurm, mdbook, Python packages).
+# scipy, rotorpy and pyulog, the 400-vehicle sweep and the sweep on Slurm;
+# then every figure the README and the book mark held to what the checks
+# measured (tools/claims.py). Installs what a fresh machine lacks (the
+# thumbv7em target, QEMU, Slurm, mdbook) and the Python packages, pinned
+# with their hashes (tools/requirements.txt), into a venv of its own (.venv).
+#
+#   ./test.sh          everything (CI)
+#   ./test.sh --fast   the inner loop: fmt, clippy, the workspace tests, the
+#                      QEMU budget and equivalence tests, the independent
+#                      checks and three rotorpy flights
+#
+# Prints each stage's wall time in a table at its end (also when a stage
+# fails) and writes the measurements to target/measurements.json.
 set -euo pipefail
 cd "$(dirname "$0")"
+FAST=0
+case "${1:-}" in
+    "") ;;
+    --fast) FAST=1 ;;
+    *) echo "usage: $0 [--fast]" >&2; exit 2 ;;
+esac
+full() { [ "$FAST" = 0 ]; }
 
+# Stages and their wall times.
+STAGE="" STAGE_T0=0 TIMES=()
+end_stage() {
+    if [ -n "$STAGE" ]; then TIMES+=("$(printf '| %-62s | %5d |' "$STAGE" $((SECONDS - STAGE_T0)))"); fi
+    STAGE=""
+}
+stage() { end_stage; STAGE=$1; STAGE_T0=$SECONDS; echo "== $1"; }
+print_times() {
+    end_stage
+    echo
+    echo "| stage$(printf '%57s') | wall s |"
+    echo "|$(printf -- '-%.0s' {1..64})|-------:|"
+    printf '%s\n' "${TIMES[@]}"
+    printf '| %-62s | %5d |\n' "total" "$SECONDS"
+}
+log=$(mktemp)
+trap 'rc=$?; print_times; rm -f "$log"; exit $rc' EXIT
+# No check waits forever: each flight and session is bounded by its own
+# timeouts, and by this one (seconds) around it.
+bounded() { local s=$1; shift; timeout --kill-after=30 "$s" "$@"; }
+# The figures the checks measure (tests/lib.rs, tools/measure.py).
+mkdir -p target
+export FC_MEASUREMENTS="$PWD/target/measurements.jsonl"
+rm -f "$FC_MEASUREMENTS"
+
+stage "toolchain, QEMU, Python venv (install what is missing)"
 # rust-toolchain.toml pins stable + thumbv7em-none-eabihf; make sure both are present.
 rustup show active-toolchain >/dev/null
 rustup target list --installed | grep -qx thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
@@ -22,22 +66,36 @@ if ! command -v qemu-system-arm >/dev/null || ! command -v arm-none-eabi-objcopy
     $SUDO apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends qemu-system-arm binutils-arm-none-eabi >/dev/null
 fi
+# Every Python package a check uses, at the exact version and hash of
+# tools/requirements.txt (pip-compile --generate-hashes of
+# tools/requirements.in), in .venv: a reused machine's own packages do not
+# leak in. Re-installed when the pinned file changes.
+if [ ! -x .venv/bin/python ] || ! cmp -s tools/requirements.txt .venv/requirements.txt; then
+    rm -rf .venv
+    python3 -m venv .venv
+    .venv/bin/python -m pip install --quiet --disable-pip-version-check --require-hashes -r tools/requirements.txt
+    cp tools/requirements.txt .venv/requirements.txt
+fi
+# shellcheck disable=SC1091
+. .venv/bin/activate
+python3 -m pip check
+python3 -c 'import sys; assert sys.prefix.endswith(".venv"), sys.prefix'
 
-echo "== format"
+stage "format"
 cargo fmt --all -- --check
-echo "== clippy (host, all targets)"
+stage "clippy (host, all targets)"
 cargo clippy --workspace --all-targets -- -D warnings
-echo "== clippy + build (the STM32F405 image and its QEMU harness binaries, thumbv7em-none-eabihf)"
+if full; then
+stage "clippy + build: the STM32F405 and Crazyflie images (thumbv7em)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --bins -- -D warnings
 # The MAVLink crate is no_std (the firmware-mavlink image links it), linted on the MCU target too.
 cargo clippy -p fc-mavlink --target thumbv7em-none-eabihf -- -D warnings
 # So is the CRTP crate (the Crazyflie's protocol).
 cargo clippy -p fc-crtp --target thumbv7em-none-eabihf -- -D warnings
 cargo build -p fc-stm32f405 --release --target thumbv7em-none-eabihf
-echo "== clippy + build (the Crazyflie 2.1 image, its boot shim and its board crate on thumbv7em-none-eabihf)"
 cargo clippy -p fc-crazyflie --target thumbv7em-none-eabihf --bins -- -D warnings
 cargo build -p fc-crazyflie --release --target thumbv7em-none-eabihf
-echo "== the hardware build (clock-tree bring-up on, defmt over RTT; not run here)"
+stage "the hardware builds (clock-tree bring-up on, defmt over RTT; not run here)"
 cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
 cargo board-build  # the alias a user with a board runs (.cargo/config.toml; `cargo board-run` flashes it)
 cargo clippy -p fc-crazyflie --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
@@ -59,6 +117,8 @@ PY
 # <= 28 KiB (the QEMU build's are tests/tests/image.rs's).
 python3 - target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie <<'PY'
 import subprocess, sys
+sys.path.insert(0, "tools")
+from measure import record
 out = subprocess.run(["size", "-A", sys.argv[1]], capture_output=True, text=True, check=True).stdout
 flash = ram = 0
 for line in out.splitlines():
@@ -74,13 +134,15 @@ for line in out.splitlines():
         ram += size
 budget = (384 * 1024, 28 * 1024)
 print(f"firmware-crazyflie as flashed: flash {flash} B of {budget[0]}, static RAM {ram} B of {budget[1]}")
+for key, v in (("flash", flash), ("static_ram", ram), ("flash_headroom", budget[0] - flash)):
+    record(f"crazyflie_image_as_flashed_{key}_bytes", v, "B", "test.sh: size -A")
 assert flash <= budget[0] and ram <= budget[1], "over budget"
 PY
-echo "== image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
+echo "image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
 size target/thumbv7em-none-eabihf/release/firmware target/thumbv7em-none-eabihf/release/firmware-crtp target/thumbv7em-none-eabihf/release/firmware-crazyflie target/hardware/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie  # binutils (with gcc) reads the ARM ELF
-echo "== API docs (warnings denied; the doctests run with the tests below)"
+stage "API docs (warnings denied; the doctests run with the tests below)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
-echo "== the book (docs/book, mdBook): built with its warnings refused, every internal link and anchor checked"
+stage "the book (mdBook): warnings refused, every internal link and anchor checked"
 if ! mdbook --version 2>/dev/null | grep -q '^mdbook v0\.5\.'; then
     cargo install mdbook --version 0.5.4 --locked --no-default-features --features search --quiet
 fi
@@ -91,102 +153,98 @@ if grep -qE '(WARN|ERROR)' "$book_log"; then
     exit 1
 fi
 rm -f "$book_log"
-echo "== tests"
-log=$(mktemp)
-trap 'rm -f "$log"' EXIT
+python3 tools/check_book.py target/book | tee -a "$log"
+fi
+if full; then
+stage "tests: every unit, property and end-to-end test, QEMU included"
 # --include-ignored: the QEMU (processor-in-the-loop) tests, ignored by a
 # plain `cargo test` on machines without QEMU.
-cargo test --workspace -- --include-ignored 2>&1 | tee "$log"
-# One closing line over every test binary (cargo's last line is often a
-# doc-test run with 0 tests).
-python3 tools/check_book.py target/book | tee -a "$log"
-echo "== independent LQR design check (python-control)"
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore numpy scipy control
+cargo test --workspace -- --include-ignored 2>&1 | tee -a "$log"
+else
+stage "tests: the workspace's (QEMU apart), then the QEMU budget and equivalence tests"
+cargo test --workspace 2>&1 | tee -a "$log"
+cargo test -p e2e-tests --test qemu -- --ignored --exact every_controller_fits_its_cycle_budget \
+    mcu_and_host_compute_the_same_closed_loop 2>&1 | tee -a "$log"
+fi
+stage "independent checks: python-control, scipy, DAQP, a wire client from the book"
 cargo build -q -p sil-host
-python3 tools/check_design.py target/debug/sil-host | tee -a "$log"
-echo "== independent re-solve of MPC steps (scipy)"
-python3 tools/check_mpc_step.py target/debug/sil-host | tee -a "$log"
-echo "== a second peer on the same QPs: DAQP (PyPI daqp), on the host (tools/peer_daqp.py says why not on the chip)"
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore daqp
 cargo build -q --release -p sil-host
+python3 tools/check_design.py target/debug/sil-host | tee -a "$log"
+python3 tools/check_mpc_step.py target/debug/sil-host | tee -a "$log"
+# A second peer on the same QPs: DAQP (PyPI daqp), on the host (tools/peer_daqp.py says why not on the chip).
 python3 tools/peer_daqp.py target/release/sil-host | tee -a "$log"
-echo "== a client written from the book's wire format (docs/book/src/protocols/wire.md), against sil-host serve"
-python3 tools/check_wire.py target/debug/sil-host | tee -a "$log"
-echo "== the main job, quick: sil-host report --quick (index, HTML and every linked figure)"
+# A client written from the book's wire format (docs/book/src/protocols/wire.md), against sil-host serve.
+bounded 300 python3 tools/check_wire.py target/debug/sil-host | tee -a "$log"
+if full; then
+stage "the main job, quick: sil-host report --quick (index, HTML and every linked figure)"
 rm -rf target/report-quick
 cargo run -q --release -p sil-host -- report --quick --no-progress --out target/report-quick
 python3 tools/check_report.py target/report-quick | tee -a "$log"
-echo "== a flight against rotorpy, a simulator this project did not write (PX4 HIL over TCP 4560)"
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore rotorpy pymavlink pyulog
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
-    --duration 15 --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg | grep "rotorpy check:" | tee -a "$log"
-echo "== flight logs: the rotorpy flight's ULog and a SIL flight's, read back with pyulog against their JSON"
+stage "the front page's sweep: 400 vehicles x both forms, success >= 99 %"
+bounded 900 target/release/sil-host sweep --samples 400 --seed 1 --no-progress --out target/sweep-400
+python3 tools/check_sweep.py target/sweep-400/sweep.json --samples 400 --min-success 99 | tee -a "$log"
+fi
+stage "flights against rotorpy, a simulator this project did not write (PX4 HIL over TCP 4560)"
+hil() { bounded 900 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host "$@"; }
+hil --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measure lqr_crazyflie_step \
+    --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg | grep "rotorpy check:" | tee -a "$log"
+hil --scenario circle --duration 25 --measure lqr_crazyflie_circle \
+    --json target/rotorpy-hil-circle.json | grep "rotorpy check:" | tee -a "$log"
+# The fast MPC at its preset (1 kHz, no parameter changed) on rotorpy's Crazyflie. It does not
+# settle there: it wanders about the goal (2-12 cm between 8 and 30 s, 10.3 cm at 15 s, with
+# numpy 2.4.6, scipy 1.17.1 and rotorpy 2.1.3 or 3.0.0), and its circle is 1.13x the LQR's;
+# the book's 1.4 cm and 6.1 cm did not reproduce on a fresh machine (book: the MPC chapter).
+# Its bounds say what it does, 15 cm and 1.25x, until issue 44 fixes it.
+lqr_rmse() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["tracking_rmse_m"])' "$1"; }
+hil --vehicle crazyflie --controller mpc --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 \
+    --max-final-error 0.15 --measure mpc_crazyflie_step \
+    --json target/rotorpy-hil-crazyflie-mpc.json | grep "rotorpy check:" | tee -a "$log"
+if full; then
+hil --vehicle crazyflie --controller mpc --scenario circle --duration 25 --measure mpc_crazyflie_circle \
+    --max-rmse "$(python3 -c "print(1.25 * $(lqr_rmse target/rotorpy-hil-circle.json))")" \
+    --json target/rotorpy-hil-crazyflie-mpc-circle.json | grep "rotorpy check:" | tee -a "$log"
+hil --controller pd --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measure pd_crazyflie_step \
+    --json target/rotorpy-hil-pd.json | grep "rotorpy check:" | tee -a "$log"
+# One flight per standard motor layout: rotorpy's motors put in PX4's, Betaflight's, the
+# Crazyflie's and the OS4's "+" order, the flight controller told so (MOT_FRAME).
+for layout in px4 betaflight crazyflie plus; do
+    hil --layout "$layout" --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 10 \
+        --json "target/rotorpy-hil-$layout.json" | grep "rotorpy check:" | tee -a "$log"
+done
+# The Hummingbird (vehicles/hummingbird-rotorpy.toml): the fast MPC's step within 5 cm and its
+# circle's RMSE within the LQR's on the same vehicle.
+hil --vehicle hummingbird --scenario circle --duration 25 --measure lqr_hummingbird_circle \
+    --json target/rotorpy-hil-hummingbird-circle.json | grep "rotorpy check:" | tee -a "$log"
+hil --vehicle hummingbird --controller mpc --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 \
+    --max-final-error 0.05 --measure mpc_hummingbird_step \
+    --json target/rotorpy-hil-hummingbird-mpc.json | grep "rotorpy check:" | tee -a "$log"
+hil --vehicle hummingbird --controller mpc --scenario circle --duration 25 --measure mpc_hummingbird_circle \
+    --max-rmse "$(lqr_rmse target/rotorpy-hil-hummingbird-circle.json)" \
+    --json target/rotorpy-hil-hummingbird-mpc-circle.json | grep "rotorpy check:" | tee -a "$log"
+stage "flight logs: the rotorpy flight's ULog and a SIL flight's, read back with pyulog"
 # pyulog's ulog_info (its console script may not be on PATH; its main() is the same).
 python3 -c 'import sys, pyulog.info; sys.argv = ["ulog_info", sys.argv[1]]; pyulog.info.main()' target/rotorpy-hil.ulg
 python3 tools/check_ulog.py hil target/rotorpy-hil.ulg target/rotorpy-hil.json | tee -a "$log"
 python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --scenario circle --duration 25 \
-    --json target/rotorpy-hil-circle.json | grep "rotorpy check:" | tee -a "$log"
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --controller pd --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
-    --duration 15 --json target/rotorpy-hil-pd.json | grep "rotorpy check:" | tee -a "$log"
-# One flight per standard motor layout: rotorpy's motors put in PX4's, Betaflight's, the
-# Crazyflie's and the OS4's "+" order, the flight controller told so (MOT_FRAME).
-for layout in px4 betaflight crazyflie plus; do
-    python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --layout "$layout" --waypoint 0,0,0,-1 \
-        --waypoint 5,1,0,-1 --duration 10 --json "target/rotorpy-hil-$layout.json" | grep "rotorpy check:" | tee -a "$log"
-done
-# The fast MPC at its preset (1 kHz, no parameter changed) on rotorpy's Crazyflie and its
-# Hummingbird (vehicles/hummingbird-rotorpy.toml): the Hummingbird's step within 5 cm and its
-# circle's RMSE within the LQR's on the same vehicle (the LQR's Crazyflie circle is flown above).
-lqr_rmse() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["tracking_rmse_m"])' "$1"; }
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --vehicle hummingbird --scenario circle --duration 25 \
-    --json target/rotorpy-hil-hummingbird-circle.json | grep "rotorpy check:" | tee -a "$log"
-# On the Crazyflie the MPC does not settle: it wanders about the goal (2-12 cm between 8 and
-# 30 s, 10.3 cm at 15 s, with numpy 2.4.6, scipy 1.17.1 and rotorpy 2.1.3 or 3.0.0), and its
-# circle is 1.13x the LQR's; the book's 1.4 cm and 6.1 cm did not reproduce on a fresh machine
-# (book: the MPC chapter). Its bounds say what it does, 15 cm and 1.25x, until that is fixed.
-for vehicle in crazyflie hummingbird; do
-    circle=target/rotorpy-hil-circle.json
-    step_bound=0.15
-    rmse_factor=1.25
-    if [ "$vehicle" = hummingbird ]; then
-        circle=target/rotorpy-hil-hummingbird-circle.json
-        step_bound=0.05
-        rmse_factor=1.0
-    fi
-    python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --vehicle "$vehicle" --controller mpc \
-        --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --max-final-error "$step_bound" \
-        --json "target/rotorpy-hil-$vehicle-mpc.json" | grep "rotorpy check:" | tee -a "$log"
-    python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --vehicle "$vehicle" --controller mpc \
-        --scenario circle --duration 25 \
-        --max-rmse "$(python3 -c "print($rmse_factor * $(lqr_rmse "$circle"))")" \
-        --json "target/rotorpy-hil-$vehicle-mpc-circle.json" | grep "rotorpy check:" | tee -a "$log"
-done
-echo "== the same step flight on the real image: firmware-mavlink in QEMU, USART1 bridged to rotorpy (about 4 min)"
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 \
-    --duration 15 --json target/rotorpy-hil-qemu.json | grep "rotorpy check:" | tee -a "$log"
-echo "== a pymavlink ground station (tools/mav_gcs.py) lists, reads and sets parameters, arms and flies it against rotorpy"
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --gcs --duration 60 \
-    --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
-echo "== MAVSDK (PyPI, its C++ library), unmodified, flies it as a PX4: health, home, takeoff, joystick, offboard, a mission, return to launch"
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "mavsdk==4.1.0"
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --mavsdk --duration 120 \
-    --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
-echo "== the same MAVSDK script against the firmware-mavlink image in QEMU (about 5x slower than real time; about 5 min)"
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --target qemu --mavsdk --duration 150 \
+stage "the same step flight on the image: firmware-mavlink in QEMU, USART1 bridged to rotorpy"
+hil --target qemu --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measure lqr_crazyflie_step_qemu \
+    --json target/rotorpy-hil-qemu.json | grep "rotorpy check:" | tee -a "$log"
+stage "a pymavlink ground station (tools/mav_gcs.py) flies it against rotorpy"
+hil --gcs --duration 60 --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
+stage "MAVSDK (pinned), unmodified, flies it as a PX4, in process"
+hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
+stage "the same MAVSDK script against firmware-mavlink in QEMU (about 5 min)"
+hil --target qemu --mavsdk --duration 150 \
     --json target/rotorpy-hil-mavsdk-qemu.json | grep "^mavsdk check:" | tee -a "$log"
-echo "== MAVProxy (PyPI, pinned), unmodified, on its standard input: mode name, parameters, mode switch, arm, takeoff, return"
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "MAVProxy==1.8.75"
-python3 tools/rotorpy_hil.py --sil-host target/release/sil-host --mavproxy --duration 90 \
-    --json target/rotorpy-hil-mavproxy.json | grep "^mavproxy check:" | tee -a "$log"
-echo "== cflib (PyPI, pinned), unmodified, flies sil-host crtp over its udp:// driver; then cflib's own examples"
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore "cflib==0.1.34"
-python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
-echo "== the same cflib sessions against the firmware-crtp image in QEMU, through tools/nrf51_bridge.py (syslink on USART6)"
-python3 tools/crtp_cflib.py target/release/sil-host --qemu | tee -a "$log"
-echo "== and against the Crazyflie 2.1 image (linked at 0x08004000, booted by QEMU's stand-in for its bootloader, motors on TIM2/TIM4)"
-python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
-echo "== cfclient (PyPI, pinned, in its own venv), unmodified, connects under Xvfb; a screenshot of its flight tab"
+stage "MAVProxy (pinned), unmodified, on its standard input"
+hil --mavproxy --duration 90 --json target/rotorpy-hil-mavproxy.json | grep "^mavproxy check:" | tee -a "$log"
+stage "cflib (pinned), unmodified, flies sil-host crtp; then cflib's own examples"
+bounded 900 python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
+stage "the same cflib sessions against firmware-crtp in QEMU (syslink through tools/nrf51_bridge.py)"
+bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu | tee -a "$log"
+stage "and against the Crazyflie 2.1 image in QEMU (behind the bootloader's stand-in)"
+bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
+stage "cfclient (pinned, in its own venv), unmodified, connects under Xvfb"
 if ! command -v Xvfb >/dev/null || ! command -v xdotool >/dev/null || ! command -v import >/dev/null; then
     echo "== installing Xvfb, xdotool, ImageMagick and Qt's X11 libraries (apt)"
     if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
@@ -195,10 +253,35 @@ if ! command -v Xvfb >/dev/null || ! command -v xdotool >/dev/null || ! command 
         libgl1 libegl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1 libxcb-randr0 \
         libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 libfontconfig1 libdbus-1-3 fonts-dejavu-core >/dev/null
 fi
-[ -x target/cfclient-venv/bin/cfclient ] || python3 -m venv target/cfclient-venv
-target/cfclient-venv/bin/python -m pip install --quiet --disable-pip-version-check "cfclient==2026.8.1"
-python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/cfclient \
+# Its own venv (PyQt6 and cflib's pins differ from the checks'), pinned with hashes too.
+if [ ! -x target/cfclient-venv/bin/cfclient ] || ! cmp -s tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt; then
+    rm -rf target/cfclient-venv
+    python3 -m venv target/cfclient-venv
+    target/cfclient-venv/bin/python -m pip install --quiet --disable-pip-version-check --require-hashes \
+        -r tools/requirements-cfclient.txt
+    cp tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt
+fi
+bounded 600 python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/cfclient \
     --out target/cfclient-flight-tab.png | tee -a "$log"
-echo "== the robustness sweep as a Slurm job array (a single-node Slurm on this machine: slurm-wlm, munge)"
-tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 --out target/slurm-sweep | tee -a "$log"
-awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|mavsdk|mavproxy|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient) check:/ { p += $3; f += $5 } END { printf "tests: %d passed, %d failed, %d skipped\n", p, f, i }' "$log"
+stage "the robustness sweep as a Slurm job array (single-node Slurm: slurm-wlm, munge)"
+bounded 1200 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 \
+    --out target/slurm-sweep | tee -a "$log"
+fi
+stage "measurements, and the figures the README and the book mark held to them"
+# Tests count tests: a `test result:` line's counts, and one per check line's.
+counts=$(awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|mavsdk|mavproxy|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient|sweep) check:/ { p += $3; f += $5 } END { print p, f, i }' "$log")
+read -r passed failed skipped <<<"$counts"
+touch "$FC_MEASUREMENTS"
+if full; then
+    python3 tools/measure.py "$FC_MEASUREMENTS" target/measurements.json \
+        "tests_passed=$passed:tests:test.sh" "tests_failed=$failed:tests:test.sh"
+    python3 tools/claims.py check target/measurements.json | tee -a "$log"
+    python3 tools/claims.py selftest target/measurements.json | tee -a "$log"
+    counts=$(awk '/^claims check:/ { p += $3; f += $5 } END { print p + 0, f + 0 }' "$log")
+    read -r cp cf <<<"$counts"
+    passed=$((passed + cp)) failed=$((failed + cf))
+else
+    python3 tools/measure.py "$FC_MEASUREMENTS" target/measurements.json
+fi
+echo "tests: $passed passed, $failed failed, $skipped skipped"
+[ "$failed" = 0 ]

@@ -7,8 +7,8 @@ file of the built book, and every #anchor to an id on the page it names.
 
 External links (with a scheme) are not followed. The study report under
 study/ is the generated report, whose own links tools/check_report.py
-checks; the book's links *into* it are checked here. One check per page;
-ends with `book check: N passed, N failed`.
+checks; the book's links *into* it are checked here. A line per page; the
+whole is one check, ending with `book check: 1 passed, 0 failed` (or 0, 1).
 """
 import sys
 from html.parser import HTMLParser
@@ -72,7 +72,8 @@ def main():
         else:
             passed += 1
             print(f"  ok   {name}: {len(parse(page).links)} links")
-    print(f"book check: {passed} passed, {failed} failed")
+    print(f"{passed} of {len(pages)} pages' links and anchors resolve")
+    print(f"book check: {int(not failed)} passed, {int(bool(failed))} failed")
     sys.exit(1 if failed else 0)
 
 

@@ -3,7 +3,8 @@
 and index.html exist, every relative link in index.md (figures, PNG/SVG,
 sweep pages) resolves to a non-empty file, PNGs are PNGs and SVGs are SVG,
 the HTML carries its figures inline, and the report links into the book. Prints `report check: N passed, M
-failed` and exits non-zero on any failure."""
+failed` (the whole is one check: 1 passed or 1 failed, each part
+on a line of its own) and exits non-zero on any failure."""
 import re
 import sys
 from pathlib import Path
@@ -42,5 +43,6 @@ for section in ["## Headline", "## Figures", "Table 4.", "## Prediction horizon"
 book = [l for l in links if "docs/book/src/" in l and l.endswith(".md")]
 check(len(book) >= 5 and "## Read on" in md, f"index.md links into the book's chapters (found {len(book)})")
 check(html.count("<svg") >= 14 and "<img" not in html, "index.html inlines its figures")
-print(f"report check: {passed} passed, {failed} failed")
+print(f"{passed} of {passed + failed} parts of the report hold")
+print(f"report check: {int(not failed)} passed, {int(bool(failed))} failed")
 sys.exit(1 if failed else 0)

@@ -158,10 +158,14 @@ class Session:
         self.check(any("ARMED" in l and "DISARMED" not in l for l in self.seen), "arm throttle: ARMED")
         self.send("takeoff 1.5")
         self.check(self.expect(lambda l: "Mode TAKEOFF" in l) is not None, "takeoff: mode TAKEOFF")
+        # Only a LOITER line after the TAKEOFF line counts (the Hold switch
+        # above printed one already).
+        after_takeoff = len(self.seen)
         p = self.near([0.0, 0.0, -1.5], 0.05)
         self.check(p is not None, f"rotorpy within 5 cm of 1.5 m up for 1 s ({p})")
-        self.check(any("Mode LOITER" in l for l in self.seen[-50:]) or self.expect(lambda l: "Mode LOITER" in l) is not None,
-                   "then LOITER")
+        self.check(any("Mode LOITER" in l for l in self.seen[after_takeoff:])
+                   or self.expect(lambda l: "Mode LOITER" in l) is not None,
+                   "then LOITER, after TAKEOFF")
         self.send("long DO_SET_MODE 1 4 5")
         self.check(self.expect(lambda l: "Mode RTL" in l) is not None, "mode RTL")
         line = self.expect(lambda l: "DISARMED" in l, timeout=3 * self.timeout)
