@@ -136,10 +136,31 @@ fn values_are_sent_as_the_type_asked_for() {
 
 /// A vehicle at rest on the ground, aligned on a mocap fix (position and
 /// heading) for `ms` ms.
+/// A vehicle at rest for `ms`, its radio chip's battery report (3.9 V) in.
 fn at_rest(ms: u64) -> CrtpVehicle {
     let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    v.set_battery(3.9, 0);
     rest(&mut v, 0, ms);
     v
+}
+
+/// A vehicle whose radio chip has not reported the battery yet does not
+/// arm on a voltage it never measured, and says why; the first report lets it.
+#[test]
+fn no_battery_reading_no_arming() {
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    rest(&mut v, 0, 3000);
+    assert!(!v.battery_reported());
+    assert_eq!(v.battery_v(), 0.0, "no reading is not a full battery");
+    let arm = pk(Port::Supervisor, 1, &[0x01, 1]);
+    let (a, said) = ask_said(&mut v, arm);
+    assert_eq!(a.payload(), &[0x81, 0, 0]);
+    assert!(said.contains("arming refused: no battery reading yet"), "{said}");
+    v.set_battery(f32::NAN, 0);
+    assert!(!v.battery_reported(), "a NaN is no reading");
+    v.set_battery(3.9, 0);
+    assert!(v.battery_reported());
+    assert_eq!(ask(&mut v, arm).payload(), &[0x81, 1, 1]);
 }
 
 fn rest(v: &mut CrtpVehicle, from_ms: u64, ms: u64) {

@@ -591,7 +591,9 @@ pub struct CrtpCore {
     motors: [f32; 4],
     /// A position source with heading has been seen (pose, or the host's).
     heading_seen: bool,
-    vbat_v: f32,
+    /// The battery voltage the radio chip last reported, V; `None` until
+    /// it reports one (no reading is not a full battery).
+    vbat_v: Option<f32>,
     pm_state: i8,
     counters: CrtpCounters,
     /// Every IMU sample checked, the last good one held.
@@ -627,7 +629,7 @@ impl CrtpCore {
             u: Vector4::zeros(),
             motors: [0.0; 4],
             heading_seen: false,
-            vbat_v: 4.2,
+            vbat_v: None,
             pm_state: 0,
             counters: CrtpCounters::default(),
             imu: ImuGuard::new(),
@@ -796,16 +798,23 @@ impl CrtpCore {
         self.mixer.as_ref()
     }
 
-    /// The battery voltage the nRF51 last reported, V (4.2 until it does).
+    /// The battery voltage the nRF51 last reported, V; 0 until it reports
+    /// one (the vehicle does not arm before: [`Self::battery_reported`]).
     pub fn battery_v(&self) -> f32 {
-        self.vbat_v
+        self.vbat_v.unwrap_or(0.0)
+    }
+
+    /// Whether the nRF51 (or the simulator, in process) has reported the
+    /// battery since boot.
+    pub fn battery_reported(&self) -> bool {
+        self.vbat_v.is_some()
     }
 
     /// The battery: voltage, V, and the Crazyflie's `pm.state` (0 on
     /// battery, 1 charging, 2 charged, 3 low, 4 shut down).
     pub fn set_battery(&mut self, vbat_v: f32, state: i8) {
         if vbat_v.is_finite() {
-            self.vbat_v = vbat_v;
+            self.vbat_v = Some(vbat_v);
         }
         self.pm_state = state;
     }
@@ -1047,7 +1056,7 @@ impl CrtpCore {
             * self.core.vehicle().omega_max_radps
             * self.core.vehicle().omega_max_radps;
         v[12] = (self.u[0] / u1_max).clamp(0.0, 1.0) * 65535.0;
-        v[16] = self.vbat_v;
+        v[16] = self.battery_v();
         v[17] = f32::from(self.pm_state);
         for i in 0..4 {
             v[18 + i] = self.motors[i].clamp(0.0, 1.0) * 65535.0;
@@ -1065,7 +1074,7 @@ impl CrtpCore {
             && !self.tumbled
             && !self.locked
             && self.sensors.is_ok()
-            && self.vbat_v >= BATTERY_FLOOR_V
+            && self.vbat_v.is_some_and(|v| v >= BATTERY_FLOOR_V)
     }
 
     /// The supervisor's state bits (cflib's `Supervisor.STATES` order).
@@ -1109,12 +1118,18 @@ impl CrtpCore {
             self.say(format_args!("arming refused: {down}"));
             return false;
         }
-        if self.vbat_v < BATTERY_FLOOR_V {
-            let v = self.vbat_v;
-            self.say(format_args!(
-                "arming refused: battery {v:.2} V below {BATTERY_FLOOR_V:.2} V"
-            ));
-            return false;
+        match self.vbat_v {
+            None => {
+                self.say(format_args!("arming refused: no battery reading yet"));
+                return false;
+            }
+            Some(v) if v < BATTERY_FLOOR_V => {
+                self.say(format_args!(
+                    "arming refused: battery {v:.2} V below {BATTERY_FLOOR_V:.2} V"
+                ));
+                return false;
+            }
+            Some(_) => {}
         }
         let why = match self.core.navigator().mode() {
             _ if self.locked => Some("locked: restart"),
