@@ -106,7 +106,7 @@ const FORCE: f32 = 21196.0;
 
 /// The telemetry streams and their default intervals, µs of simulated
 /// time (`MAV_CMD_SET_MESSAGE_INTERVAL` changes them): message id, interval.
-pub const STREAMS: [(u32, u64); 11] = [
+pub const STREAMS: [(u32, u64); 10] = [
     (0, 1_000_000),   // HEARTBEAT, 1 Hz (to the simulator too)
     (1, 500_000),     // SYS_STATUS, 2 Hz
     (30, 20_000),     // ATTITUDE, 50 Hz
@@ -115,7 +115,6 @@ pub const STREAMS: [(u32, u64); 11] = [
     (31, 100_000),    // ATTITUDE_QUATERNION, 10 Hz
     (245, 200_000),   // EXTENDED_SYS_STATE, 5 Hz
     (242, 2_000_000), // HOME_POSITION, 0.5 Hz
-    (147, 1_000_000), // BATTERY_STATUS, 1 Hz
     (42, 1_000_000),  // MISSION_CURRENT, 1 Hz
     (230, 500_000),   // ESTIMATOR_STATUS, 2 Hz
 ];
@@ -126,13 +125,6 @@ const AUTOPILOT_VERSION_ID: u32 = 148;
 /// This firmware's version in PX4's encoding (major, minor, patch, 255 for
 /// a release): the crates' version, 0.1.0.
 pub const FLIGHT_SW_VERSION: u32 = 0x0001_00FF;
-/// The modelled pack's capacity, mAh (a simulator gives no battery; the
-/// Crazyflie 2.1's 250 mAh 1S LiPo).
-pub const PACK_MAH: f32 = 250.0;
-/// The modelled pack's current with every motor at full command, A.
-pub const PACK_FULL_A: f32 = 8.0;
-/// The modelled pack's internal resistance, Ω.
-pub const PACK_OHM: f32 = 0.05;
 /// A flagged `HIL_SENSOR` barometer (and magnetometer) is fused at most
 /// this often, µs (50 Hz; `HIL_SENSOR` comes at the IMU's rate).
 pub const BARO_PERIOD_US: u64 = fc_loop::baro::PERIOD_US;
@@ -229,9 +221,6 @@ pub struct MavVehicle {
     /// The telemetry streams: interval (µs, 0: off) and next time due, in
     /// [`STREAMS`]' order.
     streams: [(u64, u64); STREAMS.len()],
-    /// Charge drawn from the modelled pack, mAh, and its current, A.
-    used_mah: f32,
-    current_a: f32,
     /// Frames the links' readers refused (for `SYS_STATUS.errors_comm`).
     link_errors: u32,
     /// Position last reported by the simulator, NED about home, m.
@@ -320,8 +309,6 @@ impl MavVehicle {
             motors: [0.0; 4],
             cycles: (0, 1),
             streams: STREAMS.map(|(_, us)| (us, 0)),
-            used_mah: 0.0,
-            current_a: 0.0,
             link_errors: 0,
             reported_ned_m: None,
             counters: VehicleCounters::default(),
@@ -500,7 +487,6 @@ impl MavVehicle {
             for (k, st) in self.streams.iter_mut().enumerate() {
                 *st = (STREAMS[k].1, s.time_us);
             }
-            self.used_mah = 0.0;
         }
         let dt_s = self
             .last_sensor_us
@@ -532,10 +518,6 @@ impl MavVehicle {
             Peer::Simulator,
             &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.armed)),
         )?;
-        // The modelled pack: current with the motors' mean command.
-        let mean = self.motors.iter().sum::<f32>() / 4.0;
-        self.current_a = PACK_FULL_A * mean.clamp(0.0, 1.0);
-        self.used_mah += self.current_a * dt_s.min(0.1) / 3.6;
         self.watch_ground_station(s.time_us, out)?;
         self.mission.tick(s.time_us, out)?;
         self.fly_mode(s.time_us, dt_s, out)?;
@@ -1324,7 +1306,6 @@ impl MavVehicle {
                     hdg: (libm::fmodf(yaw_deg + 360.0, 360.0) * 100.0) as u16 % 36_000,
                 })
             }
-            147 => MavMessage::BATTERY_STATUS(self.battery_status()),
             242 => {
                 let h = self.home?;
                 let (latitude, longitude, altitude) = h.geodetic(&self.home_ned_m.cast());
@@ -1391,33 +1372,6 @@ impl MavVehicle {
         }
     }
 
-    /// The modelled pack's voltage, V: 4.2 full to 3.3 empty, less the sag
-    /// of its current.
-    fn pack_v(&self) -> f32 {
-        let used = (self.used_mah / PACK_MAH).clamp(0.0, 1.0);
-        4.2 - 0.9 * used - PACK_OHM * self.current_a
-    }
-
-    fn pack_remaining_pct(&self) -> i8 {
-        (100.0 * (1.0 - self.used_mah / PACK_MAH)).clamp(0.0, 100.0) as i8
-    }
-
-    fn battery_status(&self) -> BATTERY_STATUS_DATA {
-        let mut voltages = [u16::MAX; 10];
-        voltages[0] = (self.pack_v() * 1e3) as u16;
-        BATTERY_STATUS_DATA {
-            current_consumed: self.used_mah as i32,
-            energy_consumed: -1,
-            temperature: i16::MAX,
-            voltages,
-            current_battery: (self.current_a * 100.0) as i16,
-            id: 0,
-            battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
-            mavtype: MavBatteryType::MAV_BATTERY_TYPE_LIPO,
-            battery_remaining: self.pack_remaining_pct(),
-        }
-    }
-
     fn sys_status(&self) -> SYS_STATUS_DATA {
         use MavSysStatusSensor as S;
         // The position source: the simulator's state as an external
@@ -1429,7 +1383,6 @@ impl MavVehicle {
             | S::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
             | S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
             | S::MAV_SYS_STATUS_SENSOR_VISION_POSITION
-            | S::MAV_SYS_STATUS_SENSOR_BATTERY
             | S::MAV_SYS_STATUS_PREARM_CHECK;
         if self.home.is_some() {
             present |= S::MAV_SYS_STATUS_SENSOR_GPS;
@@ -1460,15 +1413,18 @@ impl MavVehicle {
             onboard_control_sensors_enabled: present,
             onboard_control_sensors_health: healthy,
             load: load.min(1000) as u16,
-            voltage_battery: (self.pack_v() * 1e3) as u16,
-            current_battery: (self.current_a * 100.0) as i16,
+            // No battery is measured (no board input, and a simulator over
+            // PX4's HIL interface sends none): unknown, as MAVLink spells it,
+            // rather than a model passed off as a measurement.
+            voltage_battery: u16::MAX,
+            current_battery: -1,
             drop_rate_comm: 0,
             errors_comm: self.link_errors.min(u32::from(u16::MAX)) as u16,
             errors_count1: self.counters.sensors_refused.min(u32::from(u16::MAX)) as u16,
             errors_count2: self.counters.params_refused.min(u32::from(u16::MAX)) as u16,
             errors_count3: self.counters.commands_refused.min(u32::from(u16::MAX)) as u16,
             errors_count4: self.core.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
-            battery_remaining: self.pack_remaining_pct(),
+            battery_remaining: -1,
         }
     }
 }

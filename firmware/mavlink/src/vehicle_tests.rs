@@ -338,7 +338,20 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
         let fence = MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE;
         assert!(!s.onboard_control_sensors_present.contains(fence));
         assert!(s.onboard_control_sensors_health.contains(fence));
+        // No battery is measured: unknown, as MAVLink spells it (UINT16_MAX
+        // mV, -1 cA, -1 %), and no battery sensor present.
+        assert_eq!(
+            (s.voltage_battery, s.current_battery, s.battery_remaining),
+            (u16::MAX, -1, -1)
+        );
+        let battery = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY;
+        assert!(!s.onboard_control_sensors_present.contains(battery));
     }
+    assert_eq!(
+        out.count("BATTERY_STATUS"),
+        0,
+        "no modelled battery passed off as measured"
+    );
     let beats: Vec<Peer> = out
         .0
         .iter()
@@ -837,9 +850,10 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     assert!(!av
         .capabilities
         .intersects(C::MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | C::MAV_PROTOCOL_CAPABILITY_FTP));
-    // Home, the landed state, the battery on request; an unknown message is UNSUPPORTED.
+    // Home and the landed state on request; the battery (147), which the
+    // vehicle does not measure, and an unknown message are UNSUPPORTED.
     let mut out = Sent::default();
-    for id in [242.0, 245.0, 147.0, 33.0, 230.0, 9999.0] {
+    for id in [242.0, 245.0, 33.0, 230.0, 147.0, 9999.0] {
         v.handle(
             &command_of(MavCmd::MAV_CMD_REQUEST_MESSAGE, [id, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
             &mut out,
@@ -849,7 +863,8 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
         .unwrap();
     }
     let ok = MavResult::MAV_RESULT_ACCEPTED;
-    assert_eq!(out.acks(), [ok, ok, ok, ok, ok, MavResult::MAV_RESULT_UNSUPPORTED]);
+    let unsupported = MavResult::MAV_RESULT_UNSUPPORTED;
+    assert_eq!(out.acks(), [ok, ok, ok, ok, unsupported, unsupported]);
     let MavMessage::ESTIMATOR_STATUS(es) = last(&out, "ESTIMATOR_STATUS") else {
         unreachable!()
     };
@@ -873,14 +888,9 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
         unreachable!()
     };
     assert_eq!(x.landed_state, MavLandedState::MAV_LANDED_STATE_ON_GROUND);
-    let MavMessage::BATTERY_STATUS(b) = last(&out, "BATTERY_STATUS") else {
-        unreachable!()
-    };
-    assert_eq!(
-        (b.voltages[0], b.battery_remaining),
-        (4200, 100),
-        "the modelled pack, full"
-    );
+    // No battery is measured, so none is reported (SYS_STATUS's side:
+    // `telemetry_comes_at_its_rates…`).
+    assert!(out.0.iter().all(|m| !matches!(m.1, MavMessage::BATTERY_STATUS(_))));
     let MavMessage::GLOBAL_POSITION_INT(g) = last(&out, "GLOBAL_POSITION_INT") else {
         unreachable!()
     };
