@@ -23,12 +23,15 @@ import sys
 import tempfile
 from pathlib import Path
 
+from measure import budgets
+
 ROOT = Path(__file__).resolve().parent.parent
 MARK = re.compile(r"<!--m:([a-z0-9_]+)-->(.*?)<!--/m-->", re.S)
 NUMBER = re.compile(r"-?[0-9][0-9  ,]*(?:\.[0-9]+)?(?:[eE]-?[0-9]+)?")
 
 # (pattern on the key, relative tolerance, absolute tolerance, why).
 TOLERANCES = [
+    (r"^budget_", 0.0, 0.0, "a budget (firmware/stm32f405/src/budgets.rs) is stated exactly"),
     (r"instructions", 0.005, 0.0,
      "QEMU counts instructions deterministically; 0.5 % is the drift a compiler release brings"),
     (r"load_pct", 0.0, 0.6, "derived from an instruction count, shown to whole percent"),
@@ -72,8 +75,11 @@ def fmt(value, like):
 
 
 def load(path):
+    """The measurements at `path`, with the budgets they are held to."""
     d = json.load(open(path))
-    return {k: v["value"] for k, v in d["measurements"].items()}
+    out = {k: v["value"] for k, v in d["measurements"].items()}
+    out.update(budgets())
+    return out
 
 
 def within(key, stated, measured):

@@ -199,6 +199,25 @@ def report(sil, failed_before):
               f'-> estimate {est} instructions, deadline {deadline}: 168 000 cycles at CPI 1.5 x 1.5), no step dropped; '
               f'the controller drove the outputs at worst {ans} instructions after data-ready, {late} steps after '
               f'the deadline (a design is one)')
+    if QEMU:
+        # QEMU models no IWDG (its registers read 0): what can be seen here is
+        # that each image started it once both tasks ran, and that no update
+        # of its timeout (widened for a re-design) failed.
+        check('IWDG started' in out and 'ERROR IWDG' not in out,
+              'the image started its IWDG once the IMU task and the controller ran')
+    if QEMU and not CRAZYFLIE:
+        # firmware-crtp logs TIM3's four compare values (duty = commanded
+        # rotor speed / Ωmax) when its motors start or stop and once a second
+        # while they run. At hover the four are alike and the rotors turn
+        # well inside their range; landed, every output is 0.
+        tim3 = [(tuple(int(x) for x in m.group(1).split(',')), int(m.group(2)))
+                for m in re.finditer(r'motors: TIM3 compare \[([0-9, ]+)\] of reload (\d+)', out)]
+        running = [c for c, _ in tim3 if min(c) > 0]
+        hover = [c for c, r in tim3 if min(c) >= 0.2 * r and max(c) <= 0.8 * r and max(c) - min(c) <= 0.1 * r]
+        check(len(running) >= 3 and len(hover) >= 1 and all(r == 52_499 and max(c) <= r for c, r in tim3)
+              and tim3 and tim3[-1][0] == (0, 0, 0, 0),
+              f'firmware-crtp drove TIM3 (400 Hz, reload 52499): {len(running)} compare sets logged armed, '
+              f'{len(hover)} at hover (e.g. {hover[:1]}), the last (landed) {tim3[-1][0] if tim3 else None}')
     if CRAZYFLIE:
         # The image logs, once a second armed, the four TIM2/TIM4 compares the
         # thrust curve gave. Hovering rotorpy's 30 g Crazyflie takes 74 mN a
@@ -206,11 +225,6 @@ def report(sil, failed_before):
         sets = [tuple(int(x) for x in m.group(1).split(','))
                 for m in re.finditer(r'motors: compare \[([0-9, ]+)\]', out)]
         hover = [c for c in sets if all(120 <= x <= 175 for x in c) and max(c) - min(c) <= 20]
-        # QEMU models no IWDG (its registers read 0): what can be seen here is
-        # that the image started it once both tasks ran, and that no update of
-        # its timeout (widened for the re-design) failed.
-        check('IWDG started' in out and 'ERROR IWDG' not in out,
-              'the Crazyflie image started its IWDG once the IMU task and the controller ran')
         check(len(sets) >= 3 and len(hover) >= 1 and all(max(c) <= 255 for c in sets),
               f'the Crazyflie image drove TIM2/TIM4: {len(sets)} compare sets logged armed, '
               f'{len(hover)} at hover (e.g. {hover[:1]})')

@@ -6,6 +6,22 @@ nothing when it is unset (a tool run by hand). The Rust twin is
 import json
 import math
 import os
+import re
+
+BUDGETS_RS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "firmware", "stm32f405", "src", "budgets.rs")
+
+
+def budgets():
+    """The budgets of firmware/stm32f405/src/budgets.rs, the one place they
+    are set: {"budget_<name in lower case>": value}."""
+    out = {}
+    with open(BUDGETS_RS) as f:
+        for m in re.finditer(r"pub const ([A-Z0-9_]+): u32 = ([0-9_]+)(?: \* ([0-9_]+))?;", f.read()):
+            v = int(m.group(2).replace("_", "")) * int((m.group(3) or "1").replace("_", ""))
+            out["budget_" + m.group(1).lower()] = v
+    if len(out) < 10:
+        raise SystemExit(f"{BUDGETS_RS}: only {len(out)} budgets read")
+    return out
 
 
 def record(key, value, unit, source):

@@ -44,6 +44,7 @@
 //! queues: 8 steps or designs for the controller, 2 designs from the link,
 //! 8 answers for the simulator).
 
+use fc_stm32f405::budgets::*;
 use std::process::Command;
 
 const FLASH: std::ops::Range<u64> = 0x0800_0000..0x0810_0000;
@@ -83,7 +84,8 @@ fn footprint(elf: &std::path::Path) -> (u64, u64) {
     (flash, ram)
 }
 
-fn check(name: &str, elf: &std::path::Path, flash_budget: u64, ram_budget: u64) {
+fn check(name: &str, elf: &std::path::Path, flash_budget: u32, ram_budget: u32) {
+    let (flash_budget, ram_budget) = (u64::from(flash_budget), u64::from(ram_budget));
     let (flash, ram) = footprint(elf);
     eprintln!("{name}: flash {flash} B of {flash_budget}, static RAM {ram} B of {ram_budget}");
     let key = name.replace(' ', "_");
@@ -105,19 +107,19 @@ fn the_image_fits_its_flash_and_static_ram_budgets() {
     let elf = sil_host::link::firmware_elf().expect("building the thumbv7em image");
     // Static RAM: the flight loop and its controller, the estimator, the
     // USART queue, and the RTIC tasks' job and answer queues (≈ 3 KiB).
-    check("image", &elf, 288 * 1024, 22 * 1024);
+    check("image", &elf, FIRMWARE_FLASH_BYTES, FIRMWARE_STATIC_RAM_BYTES);
 }
 
 #[test]
 fn the_mavlink_image_fits_its_flash_and_static_ram_budgets() {
     let elf = sil_host::link::firmware_mavlink_elf().expect("building the thumbv7em MAVLink image");
-    check("mavlink image", &elf, 368 * 1024, 20 * 1024);
+    check("mavlink image", &elf, MAVLINK_FLASH_BYTES, MAVLINK_STATIC_RAM_BYTES);
 }
 
 #[test]
 fn the_crtp_image_fits_its_flash_and_static_ram_budgets() {
     let elf = sil_host::link::firmware_crtp_elf().expect("building the thumbv7em CRTP image");
-    check("crtp image", &elf, 368 * 1024, 26 * 1024);
+    check("crtp image", &elf, CRTP_FLASH_BYTES, CRTP_STATIC_RAM_BYTES);
 }
 
 /// What the ELF at `elf` loads: each LOAD program header's physical
@@ -154,7 +156,12 @@ fn load_segments(elf: &std::path::Path) -> Vec<(u64, u64)> {
 #[test]
 fn the_crazyflie_image_fits_its_budgets_and_leaves_the_bootloader_sector_alone() {
     let elf = sil_host::link::firmware_crazyflie_elf().expect("building the Crazyflie image");
-    check("crazyflie image", &elf, 368 * 1024, 26 * 1024);
+    check(
+        "crazyflie image",
+        &elf,
+        CRAZYFLIE_FLASH_BYTES,
+        CRAZYFLIE_STATIC_RAM_BYTES,
+    );
     let flash: Vec<(u64, u64)> = load_segments(&elf)
         .into_iter()
         .filter(|(a, _)| FLASH.contains(a))

@@ -15,6 +15,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use e2e_tests::measure;
+use fc_stm32f405::budgets::{ESTIMATOR_STEP_INSTRUCTIONS, IMAGE_STEP_INSTRUCTIONS, PEER_MIN_RATIO, STACK_BYTES};
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -85,9 +86,12 @@ fn every_controller_fits_its_cycle_budget() {
             "instructions",
             "qemu::every_controller_fits_its_cycle_budget",
         );
-        assert!(imu <= 20_000.0, "{form}: IMU task {imu} instructions");
         assert!(
-            imu + control <= 74_600.0,
+            imu <= f64::from(ESTIMATOR_STEP_INSTRUCTIONS),
+            "{form}: IMU task {imu} instructions"
+        );
+        assert!(
+            imu + control <= f64::from(IMAGE_STEP_INSTRUCTIONS),
             "{form}: IMU task {imu} + controller task {control}"
         );
     }
@@ -110,7 +114,10 @@ fn every_controller_fits_its_cycle_budget() {
             "%",
             src,
         );
-        assert!(instr <= 74_600.0, "fast MPC image step {instr} instructions: {r:?}");
+        assert!(
+            instr <= f64::from(IMAGE_STEP_INSTRUCTIONS),
+            "fast MPC image step {instr} instructions: {r:?}"
+        );
         assert_eq!(r[2], "1000", "{r:?}");
     }
     // The estimator of sensor flights: one predict and one fix update per
@@ -126,7 +133,10 @@ fn every_controller_fits_its_cycle_budget() {
             "instructions",
             "qemu::every_controller_fits_its_cycle_budget",
         );
-        assert!(instr <= 20_000.0, "estimator step {instr} instructions: {r:?}");
+        assert!(
+            instr <= f64::from(ESTIMATOR_STEP_INSTRUCTIONS),
+            "estimator step {instr} instructions: {r:?}"
+        );
     }
     for r in &rows {
         let instr: f64 = r[4].parse().unwrap_or_else(|_| panic!("row {r:?}"));
@@ -166,12 +176,15 @@ fn every_controller_fits_its_cycle_budget() {
     // Designing and flying every controller, the whole loop included, within
     // a quarter of the SRAM (the controllers are designed in place).
     measure(
-        "budget_stack_high_water_bytes",
+        "harness_stack_high_water_bytes",
         stack as f64,
         "B",
         "qemu::every_controller_fits_its_cycle_budget",
     );
-    assert!(stack > 1024 && stack <= 32 * 1024, "stack high-water {stack} B");
+    assert!(
+        stack > 1024 && stack <= STACK_BYTES as usize,
+        "stack high-water {stack} B"
+    );
     assert!(out.contains("budget: all fit"), "{out}");
     assert!(ok, "budget example exited with failure");
 }
@@ -198,8 +211,8 @@ fn ours_beats_tinympc_on_the_same_chip() {
     measure("peer_tinympc_ratio_mean", num(tiny, 3) / num(ours, 3), "x", src);
     measure("peer_tinympc_ratio_worst", num(tiny, 4) / num(ours, 4), "x", src);
     assert!(ours[0].starts_with("ours") && tiny[0].contains("1e-4"), "{out}");
-    assert!(num(tiny, 3) >= 3.0 * num(ours, 3), "mean: {out}");
-    assert!(num(tiny, 4) >= 3.0 * num(ours, 4), "worst: {out}");
+    assert!(num(tiny, 3) >= f64::from(PEER_MIN_RATIO) * num(ours, 3), "mean: {out}");
+    assert!(num(tiny, 4) >= f64::from(PEER_MIN_RATIO) * num(ours, 4), "worst: {out}");
     assert!(num(ours, 5) <= num(tiny, 5) * 1.001, "cost: {out}");
 }
 
@@ -288,9 +301,56 @@ fn qemu_flight_matches_in_process_and_counts_instructions() {
         assert!(!log.contains("WARN") && !log.contains("ERROR"), "{log}");
         let j: Value = sil_host::report::flight_json(&cfg, &pil);
         assert!(j["instructions_per_step"]["max"].as_f64().unwrap() > 0.0);
+        // The motors: TIM3's compare values, read back by the image once a
+        // second of steps, are the step's inputs through the inverse mixer.
+        let lines = motor_lines(&pil.firmware_log);
+        // A line at the 500th step and then every 1000th (the LQR's 500 Hz
+        // steps: one in 2 s; the fast MPC's 1 kHz: two).
+        assert!(!lines.is_empty(), "{family:?}: no motors line:\n{log}");
+        for &(compare, reload, u) in &lines {
+            assert_eq!(reload, 52_499, "400 Hz from 84 MHz");
+            assert_eq!(compare, expected_compare(&u, reload), "{family:?}: U {u:?}");
+        }
+        // Flying: some step had all four motors running (a saturating step
+        // may stop one).
+        assert!(
+            lines.iter().any(|(c, _, _)| c.iter().all(|&x| x > 0)),
+            "{family:?}: {lines:?}"
+        );
     }
     let src = "qemu::qemu_flight_matches_in_process_and_counts_instructions";
     measure("qemu_vs_sil_rmse_max_rel_diff", rmse_diff, "relative", src);
+}
+
+/// The `motors:` lines of the `firmware` image's log: TIM3's four compare
+/// values, its reload value and the step's inputs `U`.
+fn motor_lines(log: &[String]) -> Vec<([u32; 4], u32, [f32; 4])> {
+    log.iter()
+        .filter_map(|l| l.split_once("motors: TIM3 compare ").map(|(_, t)| t))
+        .map(|t| {
+            let nums: Vec<&str> = t
+                .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == 'e'))
+                .filter(|w| !w.is_empty() && w.chars().any(|c| c.is_ascii_digit()))
+                .collect();
+            assert_eq!(nums.len(), 9, "motors line {t:?}");
+            let int = |w: &str| w.parse::<u32>().unwrap_or_else(|_| panic!("{t:?}"));
+            let float = |w: &str| w.parse::<f32>().unwrap_or_else(|_| panic!("{t:?}"));
+            (
+                core::array::from_fn(|i| int(nums[i])),
+                int(nums[4]),
+                core::array::from_fn(|i| float(nums[5 + i])),
+            )
+        })
+        .collect()
+}
+
+/// What TIM3 must hold for the inputs `u` on the OS4 (the vehicle these
+/// flights fly): each rotor's commanded speed (model §3's inverse mixer)
+/// over Ωmax, times the reload value, truncated (RM0090: duty = CCR / (ARR + 1)).
+fn expected_compare(u: &[f32; 4], reload: u32) -> [u32; 4] {
+    let v = fc_core::VehicleParams::<f32>::os4();
+    let w = fc_core::model::mixer::rotor_speeds(&v, &nalgebra::Vector4::from(*u));
+    core::array::from_fn(|i| ((w[i] / v.omega_max_radps).clamp(0.0, 1.0) * reload as f32) as u32)
 }
 
 /// The last `timing:` line of the image's log and its nine figures:
@@ -474,7 +534,10 @@ fn qemu_sensor_flight_matches_in_process() {
         if family == Family::Mpc {
             // The fast MPC at every 1 kHz sample: the image's own step count
             // within the budget harness's bound (issue 29).
-            assert!(max <= 74_600.0, "fast MPC image step {max} instructions");
+            assert!(
+                max <= f64::from(IMAGE_STEP_INSTRUCTIONS),
+                "fast MPC image step {max} instructions"
+            );
         }
         assert_eq!(pil.failsafe_steps, 0);
     }

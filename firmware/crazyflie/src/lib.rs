@@ -22,8 +22,10 @@
 //! - [`supervisor`]: the board's part of the vehicle's supervisor (whether
 //!   its sensors started, named in the arming refusal; a failed read is a
 //!   missing sample, which the vehicle holds for 10 ms, then descends);
-//! - [`watchdog`]: the independent watchdog's plan and its feeding rule (fed
-//!   only when the IMU task and the controller both made progress).
+//!
+//! The independent watchdog's plan and its feeding rule (fed only when the
+//! IMU task and the controller both made progress) are the chip's, shared
+//! with the plain STM32F405's CRTP image: `fc_stm32f405::watchdog`.
 //!
 //! Every wait is bounded, every fallible step returns a [`SensorError`] (or
 //! the module's own error) that names what was wrong, and nothing allocates.
@@ -42,7 +44,6 @@ pub mod pins;
 pub mod reads;
 pub mod sensor_bus;
 pub mod supervisor;
-pub mod watchdog;
 
 pub use error::SensorError;
 

@@ -14,7 +14,7 @@
 //!   missing sample (`None` to `CrtpCore::imu_begin`), counted there.
 //!
 //! A data-ready line that stops altogether runs no step at all; the IWDG,
-//! fed only while the IMU task steps ([`crate::watchdog`]), then resets the
+//! fed only while the IMU task steps (`fc_stm32f405::watchdog`), then resets the
 //! chip and the motors stop.
 
 use crate::SensorError;

@@ -17,7 +17,7 @@
 //!
 //! A data-ready line that stops altogether runs no step at all: on the
 //! Crazyflie 2.1 image the IWDG, fed only while samples are stepped, resets
-//! the chip (`fc_crazyflie::watchdog`), which stops the motors.
+//! the chip (`fc_stm32f405::watchdog`), which stops the motors.
 
 use fc_core::estimate::ImuSample;
 

@@ -17,6 +17,9 @@
 //! Logs through defmt: boot, the radio's `RADIO_READY` echo, arming, and
 //! link errors on either port as they happen.
 
+use crate::watchdog::{self, FeedRule, Seen};
+use core::cell::Cell;
+use core::sync::atomic::{AtomicBool, Ordering};
 use fc_core::estimate::ImuSample;
 use fc_crtp::supervisor::ImuCounters;
 use fc_crtp::syslink::SyslinkCounters;
@@ -56,6 +59,102 @@ pub trait Watchdog: Sync {
     /// The link's task (the lowest priority), after each batch of steps:
     /// starts the watchdog once both tasks ran, feeds it when both ran again.
     fn service(&self);
+}
+
+/// The chip's IWDG under [`crate::watchdog`]'s rule: started once the IMU
+/// task and the controller have both run (a board without samples never
+/// starts it), fed only when both ran again since the last feed, its
+/// timeout widened while the controller's task designs.
+pub struct Iwdg {
+    rule: FeedRule,
+    seen: critical_section::Mutex<Cell<Seen>>,
+    started: AtomicBool,
+    failed: AtomicBool,
+}
+
+impl Iwdg {
+    /// Not started: the first [`Watchdog::service`] after both tasks ran
+    /// starts it (an image's `static WATCHDOG`).
+    pub const fn new() -> Self {
+        Self {
+            rule: FeedRule::new(),
+            seen: critical_section::Mutex::new(Cell::new(Seen::new())),
+            started: AtomicBool::new(false),
+            failed: AtomicBool::new(false),
+        }
+    }
+
+    fn registers() -> &'static stm32f4::stm32f405::iwdg::RegisterBlock {
+        // SAFETY: the IWDG's fixed address; only this type writes it.
+        unsafe { &*stm32f4::stm32f405::IWDG::ptr() }
+    }
+
+    fn refused(&self, e: watchdog::WatchdogError) {
+        if !self.failed.swap(true, Ordering::Relaxed) {
+            defmt::error!("IWDG: {}", defmt::Display2Format(&e));
+        }
+    }
+}
+
+impl Watchdog for Iwdg {
+    fn imu_step(&self) {
+        self.rule.imu_step();
+    }
+
+    fn controller_step(&self) {
+        self.rule.controller_step();
+    }
+
+    fn designing(&self, running: bool) {
+        if !self.started.load(Ordering::Relaxed) {
+            return;
+        }
+        let r = if running {
+            watchdog::set_timeout(
+                Self::registers(),
+                watchdog::DESIGN_PRESCALER_BITS,
+                watchdog::DESIGN_RELOAD,
+            )
+        } else {
+            watchdog::set_timeout(Self::registers(), watchdog::PRESCALER_BITS, watchdog::RELOAD)
+        };
+        if let Err(e) = r {
+            self.refused(e);
+        }
+    }
+
+    fn service(&self) {
+        let may = critical_section::with(|cs| {
+            let cell = self.seen.borrow(cs);
+            let mut seen = cell.get();
+            let may = self.rule.may_feed(&mut seen);
+            cell.set(seen);
+            may
+        });
+        if !may {
+            return;
+        }
+        if self.started.load(Ordering::Relaxed) {
+            watchdog::feed(Self::registers());
+        } else if !self.failed.load(Ordering::Relaxed) {
+            match watchdog::start(Self::registers()) {
+                Ok(()) => {
+                    self.started.store(true, Ordering::Relaxed);
+                    defmt::info!(
+                        "IWDG started: {=u32} µs, fed while the IMU task and the controller both run",
+                        watchdog::timeout_us(watchdog::LSI_HZ)
+                    );
+                }
+                Err(e) => self.refused(e),
+            }
+        }
+    }
+}
+
+impl Default for Iwdg {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 /// A board's own IMU, read on its bus's interrupts (the Crazyflie 2.1's

@@ -7,12 +7,14 @@
 #![cfg_attr(target_os = "none", no_std)]
 #![deny(missing_docs)]
 
+pub mod budgets;
 pub mod clocks;
 #[cfg(target_os = "none")]
 pub mod crtp_image;
 #[cfg(target_os = "none")]
 pub mod stack;
 pub mod timing;
+pub mod watchdog;
 
 pub use clocks::{ClockError, ClockPlan};
 

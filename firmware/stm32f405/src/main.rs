@@ -16,10 +16,20 @@
 //! result. So no controller step, design or link write delays an IMU step
 //! by more than those short locks. The image measures it: for every step
 //! the time from data-ready to the estimate, and to the controller's
-//! answer (its `Actuator`, the motors' stand-in, handed to the transmitter),
+//! answer (its `Actuator`, handed to the transmitter),
 //! against the deadline of one 1 kHz period (168 000 cycles; under
 //! QEMU, 74 667 instructions: CPI 1.5 with a 1.5 margin), logged once a
 //! second of steps.
+//!
+//! The motors: each step's inputs `U` drive TIM3's four PWM outputs at
+//! 400 Hz ([`hal_shim::stm32f405::PwmActuators`]; PA6, PA7, PB0, PB1 on most
+//! F405 boards, the pins being the board's to mux), each rotor's duty its
+//! commanded speed over Ωmax (the inverse mixer of the vehicle in force,
+//! [`fc_core::model::mixer::rotor_speeds`]): a brushed-motor drive, as the
+//! Crazyflie's. An ESC's 1–2 ms pulses are a board's choice not made here.
+//! The compare values are logged once a second of steps (QEMU models TIM3;
+//! `tests/tests/qemu.rs` checks them against the step's `U`); a fault
+//! handler sets them to 0 first ([`board`]).
 //!
 //! Time is SysTick at 168 MHz, widened in software; under QEMU's
 //! `-icount shift=0` one instruction is one nanosecond of virtual time, so
@@ -44,8 +54,8 @@ mod app {
     use fc_proto::{encode, Counters, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use fc_stm32f405::log_changes;
     use fc_stm32f405::timing::{StepTiming, Timing};
-    use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, SysTickClock, TxTimeout, Usart};
-    use hal_shim::ByteLink;
+    use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, PwmActuators, SysTickClock, TxTimeout, Usart};
+    use hal_shim::{ActuatorOutput, ByteLink};
     use heapless::spsc::{Consumer, Producer, Queue};
     use stm32f4::stm32f405::Interrupt;
 
@@ -77,6 +87,8 @@ mod app {
         /// The cycle clock, one handle per task.
         sample_clock: SysTickClock,
         control_clock: SysTickClock,
+        /// The four motors on TIM3, and the steps they have been driven.
+        motors: (PwmActuators, u32),
     }
 
     #[init(local = [
@@ -94,6 +106,9 @@ mod app {
         let (lp, ctrl) = fc.split();
         let (jobs_in, jobs_out) = cx.local.jobs.split();
         let (answers_in, answers_out) = cx.local.answers.split();
+        // Duties are computed by the controller's task (the vehicle in force
+        // can change): the driver takes them as they are.
+        let motors = PwmActuators::start(fc_stm32f405::APB1_TIMER_CLK_HZ, MOTOR_PWM_HZ, |d| *d);
         defmt::info!(
             "up: protocol v{=u16}, waiting on USART1; tasks: data-ready (3), controller (2), link (1)",
             PROTOCOL_VERSION
@@ -114,6 +129,7 @@ mod app {
                 answers_out,
                 sample_clock: clock,
                 control_clock: clock,
+                motors: (motors, 0),
             },
         )
     }
@@ -175,23 +191,27 @@ mod app {
 
     /// The controller: each job the sample task handed over, in order;
     /// a step's answers sent as soon as it is flown.
-    #[task(binds = CAN2_RX0, priority = 2, shared = [lp, tx, timing], local = [ctrl, jobs_out, control_clock])]
+    #[task(binds = CAN2_RX0, priority = 2, shared = [lp, tx, timing], local = [ctrl, jobs_out, control_clock, motors])]
     fn controller(cx: controller::Context) {
         let controller::LocalResources {
             ctrl,
             jobs_out,
             control_clock: clock,
+            motors,
             ..
         } = cx.local;
         let (lp, mut tx, mut timing) = (cx.shared.lp, cx.shared.tx, cx.shared.timing);
         let mut lp = ByRef(lp);
         while let Some((job, entry)) = jobs_out.dequeue() {
             let step = matches!(job, Job::Step(_));
-            let mut out = Transmit(&mut tx, None);
+            let mut out = Transmit(&mut tx, None, None);
             let sent = run_job(&mut lp, ctrl, job, &mut out, clock);
-            // The step is flown when its first answer (`Actuator`: the
-            // motors' stand-in) goes to the transmitter.
+            // The step is flown when its first answer (`Actuator`) goes to
+            // the transmitter; its inputs then go to the motors.
             let done = out.1.unwrap_or_else(ticks_now);
+            if let Some(u) = out.2 {
+                drive(motors, &lp.lock(|lp| *lp.vehicle()), u);
+            }
             timing.lock(|t| {
                 if step {
                     t.flown(entry, done);
@@ -215,7 +235,7 @@ mod app {
         } = cx.local;
         let (mut lp, mut tx, mut timing) = (cx.shared.lp, cx.shared.tx, cx.shared.timing);
         while let Some(m) = answers_out.dequeue() {
-            if Transmit(&mut tx, None).send(&m).is_err() {
+            if Transmit(&mut tx, None, None).send(&m).is_err() {
                 timing.lock(|t| t.tx_timeout());
             }
         }
@@ -238,14 +258,35 @@ mod app {
         }
     }
 
+    /// The motors' PWM frequency, Hz.
+    const MOTOR_PWM_HZ: u32 = 400;
+
+    /// A step's inputs `U` `[U1 N, U2 N, U3 N, U4 N·m]` on the motors: each
+    /// rotor's duty its commanded speed over Ωmax for the vehicle `v` (a
+    /// non-finite `U` stops the rotors it reaches); the compare values
+    /// logged once every 1000 steps (a second at 1 kHz).
+    fn drive(motors: &mut (PwmActuators, u32), v: &fc_core::VehicleParams<f32>, u: [f32; 4]) {
+        let speeds = fc_core::model::mixer::rotor_speeds(v, &nalgebra::Vector4::from(u));
+        motors.0.apply(speeds.map(|w| w / v.omega_max_radps).into());
+        motors.1 = motors.1.wrapping_add(1);
+        if motors.1 % 1000 == 500 {
+            let (reload, compare) = motors.0.registers();
+            defmt::info!("motors: TIM3 compare {} of reload {=u32} for U {}", compare, reload, u);
+        }
+    }
+
     /// Answers written to USART1 under its lock, one frame at a time; the
-    /// time of the first (SysTick ticks).
-    struct Transmit<'a, M>(&'a mut M, Option<u64>);
+    /// time of the first (SysTick ticks) and the inputs of the step's
+    /// `Actuator`, if one was sent.
+    struct Transmit<'a, M>(&'a mut M, Option<u64>, Option<[f32; 4]>);
 
     impl<M: Mutex<T = Usart>> Outbox for Transmit<'_, M> {
         type Error = TxTimeout;
         fn send(&mut self, msg: &FromFc) -> Result<(), TxTimeout> {
             self.1.get_or_insert_with(ticks_now);
+            if let FromFc::Actuator { u, .. } = msg {
+                self.2 = Some(*u);
+            }
             let mut frame = [0u8; MAX_FRAME];
             match encode(msg, &mut frame) {
                 Ok(n) => self.0.lock(|u| u.write_all(&frame[..n])),

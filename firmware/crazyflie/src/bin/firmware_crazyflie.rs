@@ -15,7 +15,7 @@
 //! zeroes them first. The LEDs show booting, aligning, ready, armed and
 //! failsafe (`fc_crazyflie::leds`; QEMU models no GPIO). The IWDG starts
 //! once the IMU task and the controller have both run and is fed only
-//! while both keep running (`fc_crazyflie::watchdog`; QEMU models no IWDG).
+//! while both keep running (`fc_stm32f405::watchdog`; QEMU models no IWDG).
 //! Its IMU: in QEMU (the default `qemu` feature; QEMU models no I2C or
 //! GPIO) the simulator's `Imu` frame on USART1; on the board build (`cargo
 //! cf-build`) the BMI088 on I2C3, started at boot, each sample read on
@@ -44,11 +44,8 @@ pub use target::{imu_bus, vehicle, BoardOutputs, ImuBus, WATCHDOG};
 
 #[cfg(target_os = "none")]
 mod target {
-    use core::cell::Cell;
-    use core::sync::atomic::{AtomicBool, Ordering};
     use fc_crazyflie::leds::{self, pattern, Indication, LedPin, Leds, Lit};
     use fc_crazyflie::motors::{self, MotorOutput, CF21_LEGACY_PROPELLERS};
-    use fc_crazyflie::watchdog::{self, FeedRule, Seen};
     use fc_crtp::vehicle::{CrtpCore, CrtpVehicle};
     use fc_loop::nav::NavMode;
     use fc_loop::params::{Airframe, Settings};
@@ -153,92 +150,9 @@ mod target {
         }
     }
 
-    /// The IWDG under `fc_crazyflie::watchdog`'s rule: started once the IMU
-    /// task and the controller have both run (a board without samples never
-    /// starts it), fed only when both ran again since the last feed, its
-    /// timeout widened while the controller's task designs.
-    pub struct Iwdg {
-        rule: FeedRule,
-        seen: critical_section::Mutex<Cell<Seen>>,
-        started: AtomicBool,
-        failed: AtomicBool,
-    }
-
-    /// The image's watchdog.
-    pub static WATCHDOG: Iwdg = Iwdg {
-        rule: FeedRule::new(),
-        seen: critical_section::Mutex::new(Cell::new(Seen::new())),
-        started: AtomicBool::new(false),
-        failed: AtomicBool::new(false),
-    };
-
-    impl Iwdg {
-        fn registers() -> &'static stm32f4::stm32f405::iwdg::RegisterBlock {
-            // SAFETY: the IWDG's fixed address; only this type writes it.
-            unsafe { &*stm32f4::stm32f405::IWDG::ptr() }
-        }
-
-        fn refused(&self, e: watchdog::WatchdogError) {
-            if !self.failed.swap(true, Ordering::Relaxed) {
-                defmt::error!("IWDG: {}", defmt::Display2Format(&e));
-            }
-        }
-    }
-
-    impl fc_stm32f405::crtp_image::Watchdog for Iwdg {
-        fn imu_step(&self) {
-            self.rule.imu_step();
-        }
-
-        fn controller_step(&self) {
-            self.rule.controller_step();
-        }
-
-        fn designing(&self, running: bool) {
-            if !self.started.load(Ordering::Relaxed) {
-                return;
-            }
-            let r = if running {
-                watchdog::set_timeout(
-                    Self::registers(),
-                    watchdog::DESIGN_PRESCALER_BITS,
-                    watchdog::DESIGN_RELOAD,
-                )
-            } else {
-                watchdog::set_timeout(Self::registers(), watchdog::PRESCALER_BITS, watchdog::RELOAD)
-            };
-            if let Err(e) = r {
-                self.refused(e);
-            }
-        }
-
-        fn service(&self) {
-            let may = critical_section::with(|cs| {
-                let cell = self.seen.borrow(cs);
-                let mut seen = cell.get();
-                let may = self.rule.may_feed(&mut seen);
-                cell.set(seen);
-                may
-            });
-            if !may {
-                return;
-            }
-            if self.started.load(Ordering::Relaxed) {
-                watchdog::feed(Self::registers());
-            } else if !self.failed.load(Ordering::Relaxed) {
-                match watchdog::start(Self::registers()) {
-                    Ok(()) => {
-                        self.started.store(true, Ordering::Relaxed);
-                        defmt::info!(
-                            "IWDG started: {=u32} µs, fed while the IMU task and the controller both run",
-                            watchdog::timeout_us(watchdog::LSI_HZ)
-                        );
-                    }
-                    Err(e) => self.refused(e),
-                }
-            }
-        }
-    }
+    /// The image's watchdog: the chip's IWDG under its feeding rule
+    /// (`fc_stm32f405::crtp_image::Iwdg`, shared with `firmware-crtp`).
+    pub static WATCHDOG: fc_stm32f405::crtp_image::Iwdg = fc_stm32f405::crtp_image::Iwdg::new();
 
     /// In QEMU (which models no I2C and no GPIO) the IMU is the
     /// simulator's, on USART1, and taken as up.

@@ -76,7 +76,7 @@ mod target {
     const STEPS: u32 = 60;
     /// Stack allowed for designing and flying any controller (a quarter of
     /// the SRAM), enforced like the cycle budgets.
-    const STACK_BUDGET: usize = 32 * 1024;
+    const STACK_BUDGET: usize = fc_stm32f405::budgets::STACK_BYTES as usize;
     /// Runs `f` and returns its result with the stack high-water mark it
     /// reached (bytes from the top of RAM, so including the callers' frames).
     #[inline(never)]
@@ -121,7 +121,7 @@ mod target {
     static mut NAV: Option<Eskf<{ fc_loop::nav::HISTORY }>> = None;
 
     /// Largest instructions of one estimator step allowed (the bound).
-    const ESTIMATOR_BUDGET: u32 = 20_000;
+    const ESTIMATOR_BUDGET: u32 = fc_stm32f405::budgets::ESTIMATOR_STEP_INSTRUCTIONS;
 
     /// An IMU at rest, level.
     const REST: ImuSample = ImuSample {
@@ -497,7 +497,7 @@ mod target {
 
     /// Largest instructions of one whole image step of the fast MPC at
     /// 1 kHz (the bound: 168 000 cycles ÷ CPI 1.5 ÷ margin 1.5).
-    const IMAGE_STEP_BUDGET: u32 = 74_600;
+    const IMAGE_STEP_BUDGET: u32 = fc_stm32f405::budgets::IMAGE_STEP_INSTRUCTIONS;
 
     /// Worst instructions of one whole image step at 1 kHz, as a vehicle
     /// flies the controller `id`: an `Imu` sample in (pseudo-random rates

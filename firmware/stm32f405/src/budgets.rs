@@ -1,0 +1,61 @@
+//! Every budget the images are held to, in one place, each with the reason
+//! it is what it is. The cycle harness (`src/bin/budget.rs`), the tests
+//! (`tests/tests/image.rs`, `tests/tests/qemu.rs`), `./test.sh` (the image
+//! as flashed) and the book (`tools/claims.py` reads this file: each
+//! constant is the figure `budget_<name in lower case>`) take them from
+//! here. A change that outgrows a budget shrinks the image, or moves the
+//! budget in a commit of its own that says why.
+//!
+//! The chip: the STM32F405's 1 MiB of flash (sectors 0–3 of 16 KiB, 4 of
+//! 64 KiB, 5–11 of 128 KiB) and 128 KiB of SRAM (plus 64 KiB of CCM, which
+//! no DMA reaches). Cycle figures are QEMU instruction counts at an
+//! assumed CPI of 1.5 with a 1.5 margin (only silicon can confirm the CPI).
+
+/// `firmware` (our framed protocol), flash: 288 KiB of the 1 MiB, so that
+/// the first 384 KiB (sectors 0–5) hold the image with room for MAVLink
+/// signing (SHA-256, a few KiB) and leave sectors 6–11 (768 KiB) free.
+pub const FIRMWARE_FLASH_BYTES: u32 = 288 * 1024;
+/// `firmware`, static RAM: 22 KiB, the flight loop and its controller
+/// (≈ 7 KiB), the estimator, the queues; the stack's 32 KiB and a parameter
+/// store's page buffer (≤ 4 KiB) must still fit beside it in the SRAM.
+pub const FIRMWARE_STATIC_RAM_BYTES: u32 = 22 * 1024;
+/// `firmware-mavlink`, flash: 368 KiB, the MAVLink dialect's messages
+/// included, below sectors 6–11 with the 16 KiB left under 384 KiB for
+/// signing (SHA-256 and the signing state).
+pub const MAVLINK_FLASH_BYTES: u32 = 368 * 1024;
+/// `firmware-mavlink`, static RAM: 20 KiB, as `firmware`'s, less the
+/// RTIC queues it does without.
+pub const MAVLINK_STATIC_RAM_BYTES: u32 = 20 * 1024;
+/// `firmware-crtp`, flash: 368 KiB, as `firmware-mavlink`'s.
+pub const CRTP_FLASH_BYTES: u32 = 368 * 1024;
+/// `firmware-crtp`, static RAM: 26 KiB (the CRTP TOCs, the planner and the
+/// syslink queues over `firmware`'s).
+pub const CRTP_STATIC_RAM_BYTES: u32 = 26 * 1024;
+/// `firmware-crazyflie` built for QEMU, flash: 368 KiB, as `firmware-crtp`'s.
+pub const CRAZYFLIE_FLASH_BYTES: u32 = 368 * 1024;
+/// `firmware-crazyflie` built for QEMU, static RAM: 26 KiB, as `firmware-crtp`'s.
+pub const CRAZYFLIE_STATIC_RAM_BYTES: u32 = 26 * 1024;
+/// `firmware-crazyflie` as flashed (its own sensors, defmt over RTT),
+/// flash: 384 KiB of the 1008 KiB above Bitcraze's 16 KiB bootloader, so
+/// that it ends below the sectors the Crazyflie firmware keeps its
+/// parameters in.
+pub const CRAZYFLIE_AS_FLASHED_FLASH_BYTES: u32 = 384 * 1024;
+/// `firmware-crazyflie` as flashed, static RAM: 28 KiB (RTT's buffers,
+/// 2.5 KiB, over the QEMU build's).
+pub const CRAZYFLIE_AS_FLASHED_STATIC_RAM_BYTES: u32 = 28 * 1024;
+
+/// The whole image step of the fast MPC at 1 kHz (the IMU sample and a
+/// fix in, the estimator, the MPC, the output), instructions: one 1 kHz
+/// period of the 168 MHz STM32F405, 168 000 cycles, ÷ CPI 1.5 ÷ margin 1.5.
+pub const IMAGE_STEP_INSTRUCTIONS: u32 = 74_600;
+/// One estimator step (predict and a whole fix), instructions: the IMU
+/// task's share of the 1 kHz step, leaving the controller's task the rest
+/// of [`IMAGE_STEP_INSTRUCTIONS`].
+pub const ESTIMATOR_STEP_INSTRUCTIONS: u32 = 20_000;
+/// Stack for designing and flying any controller, bytes: a quarter of the
+/// SRAM (the controllers are designed in place, in static RAM).
+pub const STACK_BYTES: u32 = 32 * 1024;
+/// Our QP step against tinympc-rs's on the same chip: at least this many
+/// times fewer instructions, mean and worst (a budget, since QEMU's counts
+/// are deterministic; what it measures is in the book).
+pub const PEER_MIN_RATIO: u32 = 3;
