@@ -518,6 +518,17 @@ struct DesignLqrArgs {
     /// Print JSON (the only output format; accepted for clarity).
     #[arg(long)]
     json: bool,
+    /// The LQR the flight controller flies instead: the project's weights,
+    /// the inputs weighted for the vehicle, designed in discrete time at
+    /// --period-s (prints A, B, Q, R, ts_s and the discrete K).
+    #[arg(long)]
+    flown: bool,
+    /// With --flown: the vehicle from a TOML file (see `fly --help`); the OS4 if not given.
+    #[arg(long, value_name = "FILE", requires = "flown")]
+    vehicle: Option<PathBuf>,
+    /// With --flown: the control period, s (the flight loop flies the LQR every 2 ms).
+    #[arg(long, default_value_t = 0.002, value_name = "S", requires = "flown")]
+    period_s: f64,
 }
 
 /// Options shared by every command that builds a plant.
@@ -925,7 +936,18 @@ fn design_cmd(a: &DesignArgs) -> Result<()> {
             if !d.yaw_deg.is_finite() {
                 bail!("--yaw-deg must be finite");
             }
-            let v = sil_host::report::lqr_design_json(d.model, d.yaw_deg.to_radians())?;
+            let v = if d.flown {
+                if !(d.period_s.is_finite() && d.period_s > 0.0) {
+                    bail!("--period-s must be a positive number of seconds");
+                }
+                let p = match &d.vehicle {
+                    Some(f) => sil_host::config::load_vehicle(f)?,
+                    None => fc_core::VehicleParams::OS4,
+                };
+                sil_host::report::lqr_flown_design_json(d.model, d.yaw_deg.to_radians(), &p, d.period_s)?
+            } else {
+                sil_host::report::lqr_design_json(d.model, d.yaw_deg.to_radians())?
+            };
             println!("{}", serde_json::to_string_pretty(&v)?);
             Ok(())
         }

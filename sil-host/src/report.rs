@@ -196,6 +196,37 @@ pub fn lqr_design_json(model: AttitudeForm, yaw: f64) -> anyhow::Result<Value> {
     }))
 }
 
+/// `design lqr --flown`: the LQR the flight controller flies, for the
+/// vehicle `p` at heading `yaw` (rad): the project's weights
+/// ([`fc_core::control::lqr_euler::tuned_weights`],
+/// [`fc_core::control::lqr_quat::tuned_weights`]) with the inputs weighted
+/// for `p` and the project's tuning, designed in discrete time (zero-order
+/// hold at `ts` s, the DARE with `Q·ts`, `R·ts`) as
+/// [`fc_core::control::ControllerSpec::build`] designs it. Prints the
+/// continuous model `A`, `B`, the weights `Q`, `R` (per second), `ts` and
+/// the discrete gain `K` (`U = Uss − K δX`), all row-major. The quaternion
+/// LQR flies in its heading's frame, so its gain is the one at ψ = 0.
+pub fn lqr_flown_design_json(model: AttitudeForm, yaw: f64, p: &VehicleParams<f64>, ts: f64) -> anyhow::Result<Value> {
+    use fc_core::control::{lqr_euler, lqr_quat, lqr_table, Tuning};
+    let ((mut q, r), lm, yaw) = match model {
+        AttitudeForm::Euler => (lqr_euler::tuned_weights(), euler_hover_model(p, yaw), yaw),
+        AttitudeForm::Quaternion => (lqr_quat::tuned_weights(), quat_hover_model(p, 0.0), 0.0),
+    };
+    let mut r = lqr_table::inputs_weighted_for(&r, p);
+    Tuning::project().lqr.apply_lqr(&mut q, &mut r);
+    let sol = lqr_table::design_discrete(&lm, &q, &r, ts).map_err(|e| anyhow::anyhow!("design failed: {e:?}"))?;
+    Ok(json!({
+        "model": model.name(),
+        "yaw_deg": yaw.to_degrees(),
+        "ts_s": ts,
+        "A": rows(&lm.a),
+        "B": rows(&lm.b),
+        "Q": rows(&q),
+        "R": rows(&r),
+        "K": rows(&sol.k),
+    }))
+}
+
 /// The QP of the MPC's last step, exactly as its solver saw it (f32 values
 /// widened to f64): `min ½zᵀHz + gᵀz, lb ≤ z ≤ ub`, z = the moves of
 /// `U − U_hover`, 4 per move. `None` for other controllers or before a step.
