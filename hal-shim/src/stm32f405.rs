@@ -359,6 +359,13 @@ impl LoopTimer {
         Self { _private: () }
     }
 
+    /// What TIM2 holds: its prescaler and auto-reload values, read back
+    /// (for checks; the period is `(PSC + 1)(ARR + 1)` timer clocks, RM0090).
+    pub fn registers(&self) -> (u32, u32) {
+        let t = tim2();
+        (u32::from(t.psc().read().psc().bits()), t.arr().read().arr().bits())
+    }
+
     /// True once per period: the update flag, cleared when seen. Never blocks.
     pub fn expired(&mut self) -> bool {
         let t = tim2();

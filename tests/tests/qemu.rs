@@ -559,13 +559,25 @@ fn stm32_drivers_behave_in_qemu() {
             .map(|s| s.parse().unwrap())
             .collect()
     };
-    // TIM2 fires periodically (QEMU's timer model has its own clock, so the
-    // count is not the silicon's 20, and it varies from run to run and with
-    // the host's load: 13–50 seen, and 4 with the 2-core host also building
-    // the workspace and running the other QEMU tests; it must not be stuck
-    // or run away).
+    // TIM2 programmed for 1 kHz: RM0090's period, (PSC + 1)(ARR + 1) timer
+    // clocks, is 84 000 of the 84 MHz APB1 timer clock, with a 1 MHz tick
+    // (PSC 83, ARR 999).
+    let (psc, arr) = match nums("drivers: loop timer psc ")[..] {
+        [psc, arr] => (psc, arr),
+        ref v => panic!("{v:?}"),
+    };
+    assert_eq!((psc, arr), (83, 999));
+    assert_eq!(
+        u64::from(fc_stm32f405::APB1_TIMER_CLK_HZ) / ((psc + 1) * (arr + 1)),
+        1000
+    );
+    // And it fires. How often is QEMU's, not the chip's: its timer model
+    // does not count TIM2 in the emulated clock's instruction time (56
+    // periods in 20 ms were seen, where the chip gives 20), and the count
+    // varies from run to run and with the host's load (4–56 seen): only
+    // that it fires is the chip's behaviour here.
     let periods = nums("drivers: loop timer 1000 Hz: ")[0];
-    assert!((1..=200).contains(&periods), "{periods}");
+    assert!(periods >= 1, "TIM2 never raised its update flag");
     // PWM: 400 Hz from 84 MHz needs prescaler 4 → ARR 52 499; duties 0.5, 0.25,
     // 2.0 (clamped to 1) and NaN (motor off).
     let v = nums("drivers: pwm arr ");

@@ -31,6 +31,8 @@ mod target {
             }
         }
         hprintln!("drivers: loop timer 1000 Hz: {} periods in 20 ms", periods);
+        let (psc, arr) = timer.registers();
+        hprintln!("drivers: loop timer psc {} arr {}", psc, arr);
         // PWM: duty = U / 10 per channel, clamped; read the compare registers back.
         let mut pwm = PwmActuators::start(APB1_TIMER_CLK_HZ, 400, |u| {
             [u[0] / 10.0, u[1] / 10.0, u[2] / 10.0, u[3] / 10.0]
