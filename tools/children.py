@@ -13,11 +13,12 @@ import threading
 
 class EndsWithFlight:
     """Watches `proc` from a thread: should it exit before `done()` is called,
-    the tool prints what ended and exits at once with status 2 (the child's
-    own stderr, inherited or drained, has already said why)."""
+    the tool stops `others` (the tool's other children: a ground station, a
+    radio bridge), prints what ended and exits at once with status 2 (the
+    child's own stderr, inherited or drained, has already said why)."""
 
-    def __init__(self, proc, what):
-        self.proc, self.what = proc, what
+    def __init__(self, proc, what, others=()):
+        self.proc, self.what, self.others = proc, what, list(others)
         self._done = threading.Event()
         threading.Thread(target=self._watch, daemon=True).start()
 
@@ -28,6 +29,9 @@ class EndsWithFlight:
     def _watch(self):
         rc = self.proc.wait()
         if not self._done.is_set():
+            for p in self.others:
+                if p is not None and p.poll() is None:
+                    p.kill()
             sys.stderr.write(f"FAIL: {self.what} exited ({rc}) before the flight ended\n")
             sys.stderr.flush()
             os._exit(2)

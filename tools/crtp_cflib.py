@@ -56,6 +56,8 @@ from cflib.crazyflie.log import LogConfig
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crazyflie.syncLogger import SyncLogger
 
+from children import EndsWithFlight
+
 PORT = 19850
 TRUTH_PORT = 19870
 URI = f'udp://127.0.0.1:{PORT}'
@@ -148,6 +150,9 @@ class Sil:
                 line = self.sil.stderr.readline()
                 if 'parameters written' in line:
                     break
+        # sil-host ending before `stop` (no image to run, a crash) ends this
+        # script at once, its bridge stopped: cflib would wait on the radio.
+        self.watch = EndsWithFlight(self.sil, "sil-host crtp", others=[self.bridge])
         # sil-host's stderr, drained (a full pipe would stall it) and kept.
         self.err = []
         threading.Thread(target=self._drain, daemon=True).start()
@@ -163,6 +168,7 @@ class Sil:
     def stop(self):
         """Stops both (sil-host stops its QEMU on SIGTERM); returns sil-host's
         summary and the bridge's line."""
+        self.watch.done()
         self.sil.terminate()
         try:
             out, _ = self.sil.communicate(timeout=30)

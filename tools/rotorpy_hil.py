@@ -186,7 +186,7 @@ def main():
         cmd += ["--ulog", a.ulog]
     np.random.seed(a.seed)
     fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
-    fc_watch = EndsWithFlight(fc, "sil-host px4-hil")
+    fc_watch = EndsWithFlight(fc, "sil-host px4-hil", others=[gcs])
     vehicle = Lockstep(params_for(a.vehicle, a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
     state = dict(vehicle.initial_state)
     zero = {"cmd_motor_speeds": np.zeros(4)}
