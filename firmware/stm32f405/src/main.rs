@@ -22,14 +22,14 @@
 //! second of steps.
 //!
 //! The motors: each step's inputs `U` drive TIM3's four PWM outputs at
-//! 400 Hz ([`hal_shim::stm32f405::PwmActuators`]; PA6, PA7, PB0, PB1 on most
+//! 400 Hz (`hal_shim::stm32f405::PwmActuators`; PA6, PA7, PB0, PB1 on most
 //! F405 boards, the pins being the board's to mux), each rotor's duty its
 //! commanded speed over Ωmax (the inverse mixer of the vehicle in force,
-//! [`fc_core::model::mixer::rotor_speeds`]): a brushed-motor drive, as the
+//! `fc_core::model::mixer::rotor_speeds`): a brushed-motor drive, as the
 //! Crazyflie's. An ESC's 1–2 ms pulses are a board's choice not made here.
 //! The compare values are logged once a second of steps (QEMU models TIM3;
 //! `tests/tests/qemu.rs` checks them against the step's `U`); a fault
-//! handler sets them to 0 first ([`board`]).
+//! handler sets them to 0 first (`board`).
 //!
 //! Time is SysTick at 168 MHz, widened in software; under QEMU's
 //! `-icount shift=0` one instruction is one nanosecond of virtual time, so
