@@ -169,11 +169,18 @@ cargo test -p e2e-tests --test qemu -- --ignored --exact every_controller_fits_i
 fi
 stage "independent checks: python-control, scipy, DAQP, a wire client from the book"
 cargo build -q -p sil-host
-cargo build -q --release -p sil-host
+# The flights' sil-host: the release build; --fast flies the debug build the
+# tests already made (one host build fewer; the flights are in lockstep with
+# rotorpy, whose Python step is the slower).
+SIL=target/debug/sil-host
+if full; then
+    cargo build -q --release -p sil-host
+    SIL=target/release/sil-host
+fi
 python3 tools/check_design.py target/debug/sil-host | tee -a "$log"
 python3 tools/check_mpc_step.py target/debug/sil-host | tee -a "$log"
 # A second peer on the same QPs: DAQP (PyPI daqp), on the host (tools/peer_daqp.py says why not on the chip).
-python3 tools/peer_daqp.py target/release/sil-host | tee -a "$log"
+python3 tools/peer_daqp.py "$SIL" | tee -a "$log"
 # A client written from the book's wire format (docs/book/src/protocols/wire.md), against sil-host serve.
 bounded 300 python3 tools/check_wire.py target/debug/sil-host | tee -a "$log"
 if full; then
@@ -186,7 +193,7 @@ bounded 900 target/release/sil-host sweep --samples 400 --seed 1 --no-progress -
 python3 tools/check_sweep.py target/sweep-400/sweep.json --samples 400 --min-success 99 | tee -a "$log"
 fi
 stage "flights against rotorpy, a simulator this project did not write (PX4 HIL over TCP 4560)"
-hil() { bounded 900 python3 tools/rotorpy_hil.py --sil-host target/release/sil-host "$@"; }
+hil() { bounded 900 python3 tools/rotorpy_hil.py --sil-host "$SIL" "$@"; }
 hil --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measure lqr_crazyflie_step \
     --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg | grep "rotorpy check:" | tee -a "$log"
 hil --scenario circle --duration 25 --measure lqr_crazyflie_circle \
