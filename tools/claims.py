@@ -93,10 +93,11 @@ def within(key, stated, measured):
 def check(measured, files, root=ROOT):
     passed = failed = 0
     for f in files:
-        for m in MARK.finditer(f.read_text()):
+        text = f.read_text()
+        for m in MARK.finditer(text):
             key, shown = m.group(1), m.group(2)
             stated = parse(shown)
-            line = f.read_text()[: m.start()].count("\n") + 1
+            line = text.count("\n", 0, m.start()) + 1
             where = f"{f.relative_to(root)}:{line}"
             if key not in measured:
                 failed += 1
