@@ -11,6 +11,7 @@ pub mod budgets;
 pub mod clocks;
 #[cfg(target_os = "none")]
 pub mod crtp_image;
+pub mod equivalence;
 #[cfg(target_os = "none")]
 pub mod stack;
 pub mod timing;
