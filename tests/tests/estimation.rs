@@ -3,6 +3,7 @@
 //! consistency (NEES against the χ² band), flying on it against flying on
 //! the truth, convergence from a bad start, and each fault.
 
+use e2e_tests::measure;
 use fc_core::control::{Family, StateEstimate};
 use fc_core::estimate::{Eskf, EskfConfig};
 use fc_core::{euler_to_quat, hover_input, hover_quat_state, quat_mul};
@@ -37,6 +38,15 @@ fn mocap_on_the_helix_estimates_within_the_issue_bounds() {
         let r = fly(&cfg).unwrap();
         let e = est(&r);
         assert!(!r.diverged);
+        let src = "estimation::mocap_on_the_helix_estimates_within_the_issue_bounds";
+        let what = if d == DisturbanceSet::NONE {
+            "calm"
+        } else {
+            "wind_mismatch"
+        };
+        measure(&format!("est_mocap_helix_{what}_att_deg"), e.rms_att_deg, "deg", src);
+        measure(&format!("est_mocap_helix_{what}_pos_m"), e.rms_pos_m, "m", src);
+        measure(&format!("est_mocap_helix_{what}_vel_mps"), e.rms_vel_mps, "m/s", src);
         assert!(e.rms_att_deg <= 0.3, "{d}: attitude {:.3}°", e.rms_att_deg);
         assert!(e.rms_pos_m <= 0.005, "{d}: position {:.4} m", e.rms_pos_m);
         assert!(e.rms_vel_mps <= 0.02, "{d}: velocity {:.4} m/s", e.rms_vel_mps);
@@ -59,6 +69,8 @@ fn gps_holds_position_within_thirty_centimetres_for_ten_minutes() {
     let r = fly(&cfg).unwrap();
     let e = est(&r);
     assert!(!r.diverged);
+    let src = "estimation::gps_holds_position_within_thirty_centimetres_for_ten_minutes";
+    measure("est_gps_helix_pos_m", e.rms_pos_m, "m", src);
     assert!(e.rms_pos_m <= 0.3, "position RMS {:.3} m", e.rms_pos_m);
     assert!(e.max_pos_m <= 1.5, "largest position error {:.3} m", e.max_pos_m);
     assert_eq!(e.failsafe_steps, 0);
@@ -72,6 +84,7 @@ fn gps_holds_position_within_thirty_centimetres_for_ten_minutes() {
 fn flying_on_the_estimate_tracks_nearly_as_well_as_on_the_truth() {
     // The product controllers (the fast MPC at 200 Hz over the 1 kHz
     // estimator) on the helix; the MPC's flights are 30 s (debug builds).
+    let mut ratios: Vec<(Family, f64)> = Vec::new();
     for d in [DisturbanceSet::NONE, "wind,mismatch".parse::<DisturbanceSet>().unwrap()] {
         for (family, bound) in [(Family::Pd, 1.5), (Family::Lqr, 1.3), (Family::Mpc, 1.3)] {
             for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
@@ -83,12 +96,23 @@ fn flying_on_the_estimate_tracks_nearly_as_well_as_on_the_truth() {
                 let truth = rmse3(&fly(&cfg).unwrap());
                 cfg.sensors = Some(SensorConfig::new(FixProfile::Mocap, 1));
                 let ekf = rmse3(&fly(&cfg).unwrap());
+                ratios.push((family, ekf / truth));
                 assert!(
                     ekf <= bound * truth,
                     "{family:?} {form:?} {d}: {ekf:.4} m on the estimate, {truth:.4} m on the truth"
                 );
             }
         }
+    }
+    let src = "estimation::flying_on_the_estimate_tracks_nearly_as_well_as_on_the_truth";
+    for (family, name) in [(Family::Pd, "pd"), (Family::Lqr, "lqr"), (Family::Mpc, "mpc")] {
+        let r: Vec<f64> = ratios.iter().filter(|(f, _)| *f == family).map(|(_, r)| *r).collect();
+        let (lo, hi) = (
+            r.iter().copied().fold(f64::INFINITY, f64::min),
+            r.iter().copied().fold(0.0, f64::max),
+        );
+        measure(&format!("est_over_truth_{name}_min_ratio"), lo, "x", src);
+        measure(&format!("est_over_truth_{name}_max_ratio"), hi, "x", src);
     }
 }
 
@@ -135,6 +159,9 @@ fn the_filter_is_consistent_over_fifty_seeds() {
         100.0 * per_run,
         100.0 * inside
     );
+    let src = "estimation::the_filter_is_consistent_over_fifty_seeds";
+    measure("nees_inside_band_pct", 100.0 * per_run, "%", src);
+    measure("nees_mean", mean, "", src);
     assert!(
         per_run >= 0.9,
         "each run's NEES inside its 95 % band only {:.1} % of the time",

@@ -2,6 +2,7 @@
 //! box, robust to the mismatch plant, the thesis preset flying too, and the
 //! QP's a-priori iteration bound never exceeded.
 
+use e2e_tests::measure;
 use fc_core::control::{Family, Preset};
 use sil_host::flight::{fly, FlightConfig, FlightResult};
 use sil_host::{AttitudeForm, DisturbanceSet, Scenario, ScenarioKind};
@@ -41,6 +42,48 @@ fn fast_mpc_is_offset_free_under_wind() {
             "{m:?}: final error {} m",
             r.metrics.final_error_m
         );
+        let src = "mpc::fast_mpc_is_offset_free_under_wind";
+        measure(
+            &format!("mpc_setpoint_wind_final_error_{}_m", m.name()),
+            r.metrics.final_error_m,
+            "m",
+            src,
+        );
+    }
+}
+
+/// The fast MPC's set-point on the true state, calm: settled (2 % band)
+/// sooner than the thesis' own MPC (6.9 s in x, 2.8 s in z, its Table 5.x)
+/// and on the target.
+#[test]
+fn fast_mpc_settles_the_setpoint() {
+    for m in MODELS {
+        let r = run(
+            m,
+            Preset::Project,
+            Scenario::default_for(ScenarioKind::Setpoint),
+            "none",
+        );
+        let (x, z) = (r.metrics.x.settling_s.unwrap(), r.metrics.z.settling_s.unwrap());
+        eprintln!(
+            "{m:?}: settles x {x:.2} s, z {z:.2} s, final error {:.2e} m",
+            r.metrics.final_error_m
+        );
+        assert!(x < 6.9 && z < 2.8, "{m:?}: x {x} s, z {z} s");
+        assert!(
+            r.metrics.final_error_m < 1e-3,
+            "{m:?}: final error {}",
+            r.metrics.final_error_m
+        );
+        let src = "mpc::fast_mpc_settles_the_setpoint";
+        measure(&format!("mpc_setpoint_settling_x_{}_s", m.name()), x, "s", src);
+        measure(&format!("mpc_setpoint_settling_z_{}_s", m.name()), z, "s", src);
+        measure(
+            &format!("mpc_setpoint_final_error_{}_m", m.name()),
+            r.metrics.final_error_m,
+            "m",
+            src,
+        );
     }
 }
 
@@ -61,6 +104,18 @@ fn fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm() {
             "{m:?}: helix position RMSE {c:.5} m calm, {w:.5} m wind ({:.3}x)",
             w / c
         );
+        let src = "mpc::fast_mpc_tracks_the_helix_as_well_in_wind_as_in_calm";
+        for (what, r) in [("calm", &calm), ("wind", &windy)] {
+            for (axis, a) in [("x", r.metrics.x), ("y", r.metrics.y), ("z", r.metrics.z)] {
+                measure(
+                    &format!("mpc_helix_{what}_rmse_{axis}_{}_m", m.name()),
+                    a.rmse_m,
+                    "m",
+                    src,
+                );
+            }
+        }
+        measure(&format!("mpc_helix_wind_calm_{}_ratio", m.name()), w / c, "x", src);
         assert!(c < 0.03, "{m:?}: calm RMSE {c}");
         assert!(w <= 1.15 * c, "{m:?}: wind {w} m vs calm {c} m");
         assert!(windy.metrics.x.rmse_m <= 1.15 * calm.metrics.x.rmse_m, "{m:?}: x");
@@ -115,6 +170,17 @@ fn thesis_preset_flies_the_setpoint() {
         );
         // 4 Hz: 20 s of flight is 81 steps.
         assert_eq!(r.steps, 81);
+        let src = "mpc::thesis_preset_flies_the_setpoint";
+        for (axis, a) in [
+            ("x", r.metrics.x),
+            ("y", r.metrics.y),
+            ("z", r.metrics.z),
+            ("yaw", r.metrics.yaw),
+        ] {
+            if let Some(t) = a.settling_s {
+                measure(&format!("mpc_thesis_settling_{axis}_{}_s", m.name()), t, "s", src);
+            }
+        }
     }
 }
 
@@ -205,11 +271,19 @@ fn fast_mpc_flies_the_same_on_any_simulator_grid() {
             .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
             .fold(0.0f64, f64::max)
     };
+    let mut apart = 0.0f64;
     for i in 0..flights.len() {
         for j in i + 1..flights.len() {
             let d = worst(&flights[i], &flights[j]);
             eprintln!("grids {:?} and {:?}: {d:.4} m apart at most", grids[i], grids[j]);
             assert!(d <= 0.02, "grids {:?} and {:?}: {d} m apart", grids[i], grids[j]);
+            apart = apart.max(d);
         }
     }
+    measure(
+        "mpc_grids_apart_max_m",
+        apart,
+        "m",
+        "mpc::fast_mpc_flies_the_same_on_any_simulator_grid",
+    );
 }
