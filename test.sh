@@ -244,7 +244,7 @@ hil_start --controller pd --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 
 # Crazyflie's and the OS4's "+" order, the flight controller told so (MOT_FRAME).
 for layout in px4 betaflight crazyflie plus; do
     hil_start --layout "$layout" --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 10 \
-        --json "target/rotorpy-hil-$layout.json"
+        --measure "layout_$layout" --json "target/rotorpy-hil-$layout.json"
 done
 # The Hummingbird (vehicles/hummingbird-rotorpy.toml): the fast MPC's step within 5 cm and its
 # circle's RMSE within the LQR's on the same vehicle.

@@ -195,6 +195,12 @@ fn a_sensor_gap_in_the_wind_costs_the_fast_mpc_under_a_centimetre() {
     // purpose: if the MPC's observer read the gap as one step's innovation
     // (no `resume`), the growth would be 4.2 mm.
     assert!(growth < 0.002, "{growth} m");
+    e2e_tests::measure(
+        "link_gap_error_growth_m",
+        growth,
+        "m",
+        "link::a_sensor_gap_in_the_wind_costs_the_fast_mpc_under_a_centimetre",
+    );
     assert_eq!(base.link_counters.unwrap().failsafe_entries, 0);
     assert_eq!(gap.link_counters.unwrap().failsafe_entries, 1);
     assert_eq!(
