@@ -14,7 +14,10 @@ A stated figure is marked where it stands, invisible in the rendered page:
 that drifted beyond the tolerance TOLERANCES gives for its key (each with
 its reason); `write` keeps each figure's style (decimals, grouping, a
 trailing ×). Files: README.md and every page under docs/book/src (the
-generated study report apart). Ends with `claims check: N passed, N failed`.
+generated study report apart). `check` also holds the introduction's copy
+of the study's headline table to the committed report (docs/study) and that
+report's set-point columns to the quick report ./test.sh makes. Ends with
+`claims check: N passed, N failed`.
 """
 import json
 import re
@@ -123,6 +126,55 @@ def check(measured, files, root=ROOT):
     return passed, failed
 
 
+def headline_rows(path):
+    """The study's headline table in `path` (a page or a report's index.md):
+    {controller: [cells]}, the table whose header starts `| controller`
+    and names the set-point settling."""
+    rows, inside = {}, False
+    for line in path.read_text().splitlines():
+        if line.startswith("| controller") and "set-point settling" in line:
+            inside = True
+            continue
+        if inside:
+            if not line.startswith("|"):
+                break
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            if not set(cells[0]) <= set("-"):
+                rows[cells[0]] = cells[1:]
+    return rows
+
+
+def study_tables(root=ROOT):
+    """The introduction's copy of the study's headline table against the
+    report it is copied from (docs/study, `sil-host report`'s output), and
+    that report's set-point columns (settling, overshoot: the quick report
+    flies the same set-point) against the report ./test.sh just made
+    (target/report-quick). Returns (passed, failed)."""
+    passed = failed = 0
+    intro = headline_rows(root / "docs" / "book" / "src" / "introduction.md")
+    study = headline_rows(root / "docs" / "study" / "index.md")
+    quick_md = root / "target" / "report-quick" / "index.md"
+    quick = headline_rows(quick_md) if quick_md.is_file() else None
+    if not intro or not study:
+        print("FAIL study table: no headline table in the introduction or docs/study/index.md")
+        return 0, 1
+    for name, cells in intro.items():
+        theirs = study.get(name)
+        if theirs is None or theirs[: len(cells)] != cells:
+            failed += 1
+            print(f"FAIL introduction.md's study table, {name}: {cells} but docs/study has {theirs}")
+        else:
+            passed += 1
+        if quick is not None:
+            q = quick.get(name)
+            if q is None or q[:2] != cells[:2]:
+                failed += 1
+                print(f"FAIL the study's set-point figures, {name}: {cells[:2]} but a fresh report has {q and q[:2]}")
+            else:
+                passed += 1
+    return passed, failed
+
+
 def write(measured, files):
     for f in files:
         text = f.read_text()
@@ -168,6 +220,8 @@ def main():
         print(f"claims check: {int(ok)} passed, {int(not ok)} failed")
         sys.exit(0 if ok else 1)
     passed, failed = check(measured, pages())
+    p, f = study_tables()
+    passed, failed = passed + p, failed + f
     print(f"claims check: {passed} passed, {failed} failed")
     sys.exit(1 if failed or not passed else 0)
 
