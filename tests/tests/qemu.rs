@@ -73,6 +73,34 @@ fn every_controller_fits_its_cycle_budget() {
         .filter(|l| l.starts_with("| ") && !l.starts_with("| controller"))
         .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
         .collect();
+    // Every row's figures, for the firmware chapter's table (written from
+    // them): `harness_<controller>_<form>_<rate>_<measured>_…`.
+    for r in &rows {
+        let slug: String = format!("{}_{}_{}_{}", r[0], r[1], r[2], r[3])
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() {
+                    c.to_ascii_lowercase()
+                } else {
+                    '_'
+                }
+            })
+            .collect::<String>()
+            .split('_')
+            .filter(|w| !w.is_empty())
+            .collect::<Vec<_>>()
+            .join("_");
+        let src = "qemu::every_controller_fits_its_cycle_budget";
+        if let Ok(v) = r[4].parse::<f64>() {
+            measure(&format!("harness_{slug}_instructions"), v, "instructions", src);
+        }
+        if let Ok(v) = r[6].trim_end_matches('%').trim().parse::<f64>() {
+            measure(&format!("harness_{slug}_load_pct"), v, "%", src);
+        }
+        if let Ok(v) = r[8].parse::<f64>() {
+            measure(&format!("harness_{slug}_stack_bytes"), v, "B", src);
+        }
+    }
     // 4 PD/LQR variants × (control, loop) + 4 MPC variants × (control,
     // certified at 1 kHz, FGM info, loop) + the fast MPC's QP alone and its
     // whole image step, with and without the link's frames, and its two
