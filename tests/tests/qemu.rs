@@ -168,19 +168,6 @@ fn every_controller_fits_its_cycle_budget() {
         );
         assert_eq!(r[2], "1000", "{r:?}");
     }
-    // The fast MPC's exact QP alone (the MPC chapter's figure), both forms.
-    for r in rows
-        .iter()
-        .filter(|r| r[0] == "mpc-fast" && r[3].starts_with("QP alone"))
-    {
-        let instr: f64 = r[4].parse().unwrap_or_else(|_| panic!("{r:?}"));
-        measure(
-            &format!("qp_exact_instructions_{}", r[1]),
-            instr,
-            "instructions",
-            "qemu::every_controller_fits_its_cycle_budget",
-        );
-    }
     // The estimator of sensor flights: one predict and one fix update per
     // step at 1 kHz, within the 20 000 instructions.
     let est: Vec<_> = rows.iter().filter(|r| r[0] == "estimator (ESKF)").collect();
@@ -502,12 +489,12 @@ fn the_fast_mpc_meets_every_deadline_under_a_parameter_read_flood() {
     ));
     cfg.param_flood = 1;
     let pil = fly_target(&cfg, &Target::Qemu).unwrap();
-    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed]) =
-        last_timing(&pil.firmware_log);
+    let (timing, figures) = last_timing(&pil.firmware_log);
+    let [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed] = figures;
     println!("fast MPC with a parameter read a step, image tasks: {timing}");
     measure_timing(
         "flood",
-        &[steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed],
+        &figures,
         "qemu::the_fast_mpc_meets_every_deadline_under_a_parameter_read_flood",
     );
     assert!(steps >= 3000, "{timing}");
@@ -563,11 +550,12 @@ fn a_redesign_delays_the_controller_task_not_the_samples() {
     drop(c);
     let log = q.finish().unwrap();
     let all = log.join("\n");
-    let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed]) = last_timing(&log);
+    let (timing, figures) = last_timing(&log);
+    let [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed] = figures;
     println!("re-design before the first step, image tasks: {timing}");
     measure_timing(
         "redesign",
-        &[steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed],
+        &figures,
         "qemu::a_redesign_delays_the_controller_task_not_the_samples",
     );
     assert!(steps >= 1000, "{timing}");
@@ -624,18 +612,12 @@ fn qemu_sensor_flight_matches_in_process() {
         // The image's tasks (data-ready at priority 3, controller at 2,
         // link at 1) measured every step against one 1 kHz period at CPI
         // 1.5 with a 1.5 margin (74 667 instructions): none late, none dropped.
-        let (timing, [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed]) =
-            last_timing(&pil.firmware_log);
+        let (timing, figures) = last_timing(&pil.firmware_log);
+        let [steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed] = figures;
         println!("{family:?} sensor flight in QEMU, image tasks: {timing}");
-        measure_timing(
-            if family == Family::Mpc {
-                "sensor_mpc"
-            } else {
-                "sensor_lqr"
-            },
-            &[steps, estimate, answer, deadline, missed, jobs, answers, tx, imu_missed],
-            "qemu::qemu_sensor_flight_matches_in_process",
-        );
+        let name = if family == Family::Mpc { "mpc" } else { "lqr" };
+        let src = "qemu::qemu_sensor_flight_matches_in_process";
+        measure_timing(&format!("sensor_{name}"), &figures, src);
         assert!(steps >= 1000 && deadline == 74_666, "{timing}");
         assert_eq!(
             (missed, jobs, answers, tx, imu_missed),
@@ -661,8 +643,6 @@ fn qemu_sensor_flight_matches_in_process() {
         // flight include the host-timed pre-emptions (see
         // `qemu_flight_does_not_depend_on_the_hosts_load`), hence their own
         // key suffix and tolerance (tools/claims.py).
-        let name = if family == Family::Mpc { "mpc" } else { "lqr" };
-        let src = "qemu::qemu_sensor_flight_matches_in_process";
         measure(
             &format!("qemu_sensor_{name}_step_mean_icount"),
             mean,
