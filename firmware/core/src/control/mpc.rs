@@ -63,11 +63,21 @@ pub struct MpcConfig {
     pub observer_tau_s: Option<f64>,
     /// Time constant of its moment part, s (used when `observer_tau_s` is
     /// set; at most one execution period means the estimate is the last
-    /// step's whole rate innovation). A fast moment estimate is what keeps the
-    /// attitude loop stable with slow rotors: the torque the rotors have not
-    /// yet delivered shows up as a moment "disturbance" and is asked for
-    /// again on the next step, which makes up for most of the lag.
+    /// step's whole rate innovation). Without
+    /// [`observer_rotor_lag`](Self::observer_rotor_lag) the torque the rotors
+    /// have not yet delivered shows up as a moment "disturbance" and is asked
+    /// for again on the next step; with it, the estimate holds what the lag
+    /// model leaves out (a rotor slower or faster than the vehicle's own).
     pub observer_moment_tau_s: f64,
+    /// The observer compares the vehicle with the input its rotors have
+    /// delivered (a first-order lag of the input sent, the vehicle's
+    /// `rotor_tau_s`), not with the input sent. Compared with the input
+    /// sent, the torque and thrust not yet delivered read as a disturbance
+    /// and are asked for again: positive feedback around the lag, which
+    /// amplifies the MPC's own commands near `1/√(τ·τ_rotor)` and, with a
+    /// 72 ms rotor, sets up a limit cycle that swings the motors from zero
+    /// to full speed (docs/book/src/mpc.md).
+    pub observer_rotor_lag: bool,
     /// Damped-trend prediction of the horizontal disturbance force: its
     /// horizon `T`, s (`None`: the estimate is held constant over the
     /// prediction). The estimate's rate ḋ is extrapolated as
@@ -127,6 +137,7 @@ impl MpcConfig {
             terminal: false,
             observer_tau_s: Some(0.5),
             observer_moment_tau_s: 0.5,
+            observer_rotor_lag: false,
             disturbance_trend_s: None,
             disturbance_trend_max_mps2: 0.0,
             disturbance_rate_filter_s: 0.1,
@@ -172,7 +183,9 @@ impl MpcConfig {
     /// moves through half its swing within the 1 s horizon. The moment
     /// estimate has τ = 4 ms (four 1 kHz steps): 2 ms lost one sweep vehicle
     /// (fast rotors, 4.5 ms of latency), 5–6 ms doubled the helix error
-    /// under `wind,mismatch`, 10 ms doubled the sweep's worst.
+    /// under `wind,mismatch`, 10 ms doubled the sweep's worst (those
+    /// figures were measured before the observer compared the vehicle with
+    /// the input its rotors delivered, [`MpcConfig::observer_rotor_lag`]).
     pub fn fast(form: AttitudeForm) -> Self {
         let a = match form {
             AttitudeForm::Euler => 1.0,
@@ -201,6 +214,7 @@ impl MpcConfig {
             terminal: true,
             observer_tau_s: Some(0.02),
             observer_moment_tau_s: 0.004,
+            observer_rotor_lag: true,
             disturbance_trend_s: Some(0.3),
             disturbance_trend_max_mps2: 0.4,
             disturbance_rate_filter_s: 0.05,
@@ -309,6 +323,9 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     preview_valid: bool,
     z: SVector<T, NZ>,
     du_prev: Vector4<T>,
+    /// The input deviation the rotors have delivered by the lag model
+    /// ([`MpcConfig::observer_rotor_lag`]).
+    du_delivered: Vector4<T>,
     /// Disturbance estimate: acceleration NED (m/s²) and angular acceleration body (rad/s²).
     dist: SVector<T, 6>,
     /// The two cascaded low-passes of the horizontal estimate the trend's
@@ -484,6 +501,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             preview_valid: false,
             z: SVector::zeros(),
             du_prev: Vector4::zeros(),
+            du_delivered: Vector4::zeros(),
             dist: SVector::zeros(),
             dist_lp: [[T::zero(); 2]; 2],
             trend: [T::zero(); N],
@@ -964,6 +982,19 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let t_nominal = lit::<T>(self.cfg.exec_dt_s);
         let dt = self.next_dt.take().unwrap_or(t_nominal);
         let Some(tau) = self.cfg.observer_tau_s else { return };
+        // The input the rotors delivered over the step: the lag's mean over
+        // it, `u + (u₀ − u)·(τr/dt)·(1 − e^(−dt/τr))` from `u₀` at its
+        // start towards the input sent `u` (exact for a first-order lag).
+        let du_applied = if self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero() {
+            let r = dt / self.params.rotor_tau_s;
+            let decay = (-r).exp();
+            let mean = (T::one() - decay) / r;
+            let u0 = self.du_delivered;
+            self.du_delivered = self.du_prev + (u0 - self.du_prev) * decay;
+            self.du_prev + (u0 - self.du_prev) * mean
+        } else {
+            self.du_prev
+        };
         let Some((x_prev, yaw_prev)) = self.last else { return };
         self.last_dt = dt;
         let scale = dt / t_nominal;
@@ -979,7 +1010,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
                 p += self.ad_e[(i, j)] * x_prev[j];
             }
             for c in 0..4 {
-                p += self.bd_e[(i, c)] * self.du_prev[c];
+                p += self.bd_e[(i, c)] * du_applied[c];
             }
             for c in 0..6 {
                 p += self.wd_e[(i, c)] * dh[c];
@@ -1117,6 +1148,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
     fn reset(&mut self) {
         self.z = SVector::zeros();
         self.du_prev = Vector4::zeros();
+        self.du_delivered = Vector4::zeros();
         self.dist = SVector::zeros();
         self.dist_lp = [[T::zero(); 2]; 2];
         self.last = None;
@@ -1174,12 +1206,14 @@ mod tests {
 
     /// At hover, with no disturbance, a step of any measured length is
     /// predicted as what it is: the estimate stays zero. Told nothing, a
-    /// 3 ms step read as a 1 ms one would be.
+    /// 3 ms step read as a 1 ms one would be. (Rotors without lag, as the
+    /// observer is told: `rotors_that_lag_are_not_a_disturbance` has the lag.)
     #[test]
     fn a_measured_step_is_not_a_disturbance() {
         let p = VehicleParams::<f64>::os4();
         let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
         cfg.exec_dt_s = 0.001;
+        cfg.observer_rotor_lag = false;
         // A climb: the thrust is not the hover thrust.
         let sp = Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0);
         // The vehicle from hover for `dt` under the MPC's first input, as the model has it.
@@ -1208,5 +1242,39 @@ mod tests {
         assert_eq!(mpc.next_dt, None);
         mpc.elapsed(1.0);
         assert_eq!(mpc.next_dt, None);
+    }
+
+    /// Rotors with the vehicle's first-order lag deliver, over a step, the
+    /// lag's mean of the thrust sent: the observer that models the lag
+    /// estimates no disturbance; one that compares with the thrust sent
+    /// takes the thrust not yet delivered for a force (and asks for it
+    /// again, the positive feedback that swung rotorpy's Crazyflie).
+    #[test]
+    fn rotors_that_lag_are_not_a_disturbance() {
+        let p = VehicleParams::<f64>::os4();
+        let sp = Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0);
+        let fly = |lag_model: bool, dt: f64| {
+            let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
+            cfg.observer_rotor_lag = lag_model;
+            let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+            let mut est = hover_at(-1.0);
+            let u = mpc.update(&est, &sp).unwrap().u;
+            // From hover thrust towards u[0] with the rotors' time constant:
+            // the mean over the step (the analytic first-order response).
+            let u_hover = p.mass_kg * p.gravity_mps2;
+            let r = dt / p.rotor_tau_s;
+            let delivered = u[0] + (u_hover - u[0]) * (1.0 - (-r).exp()) / r;
+            assert!((u[0] - u_hover).abs() > 1.0, "a climb asks for more thrust: {}", u[0]);
+            let a = p.gravity_mps2 - delivered / p.mass_kg;
+            est.vel_ned_mps[2] = a * dt;
+            est.pos_ned_m[2] += 0.5 * a * dt * dt;
+            mpc.elapsed(dt);
+            mpc.update(&est, &sp).unwrap();
+            mpc.disturbance_estimate().0[2]
+        };
+        for dt in [0.001, 0.002, 0.0017] {
+            assert!(fly(true, dt).abs() < 1e-3, "dt {dt}: {}", fly(true, dt));
+            assert!(fly(false, dt) > 0.05, "dt {dt}: {}", fly(false, dt));
+        }
     }
 }
