@@ -225,38 +225,42 @@ hil_start() {
     HIL_N=$((HIL_N + 1))
 }
 hil_wait() { while [ ${#HIL_PIDS[@]} -gt 0 ]; do hil_reap_first; done; }
-hil_start --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measure lqr_crazyflie_step \
+# The step to (1, 0, -1) m: each controller at its preset, holding the goal
+# within 2 cm from 10 s to 30 s on rotorpy's truth, calm, and within 3 cm in
+# a steady 0.5 m/s wind (rotorpy's ConstantWind), on both of rotorpy's vehicles.
+step() { echo --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 30 --hold-from 10; }
+lqr_rmse() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["rotorpy"]["rmse_m"])' "$1"; }
+hil_start $(step) --max-hold-error 0.02 --measure lqr_crazyflie_step \
     --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg
 hil_start --scenario circle --duration 25 --measure lqr_crazyflie_circle \
     --json target/rotorpy-hil-circle.json
-# The fast MPC at its preset (1 kHz, no parameter changed) on rotorpy's Crazyflie. It does not
-# settle there: it wanders about the goal (the book's MPC chapter), and its circle is worse
-# than the LQR's. Its bounds say what it does, 15 cm over the hold window and 1.25x the LQR's
-# RMSE, until issue 44 fixes it.
-lqr_rmse() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["rotorpy"]["rmse_m"])' "$1"; }
-hil_start --vehicle crazyflie --controller mpc --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 \
-    --max-hold-error 0.15 --measure mpc_crazyflie_step \
+hil_start --vehicle crazyflie --controller mpc $(step) --max-hold-error 0.02 --measure mpc_crazyflie_step \
     --json target/rotorpy-hil-crazyflie-mpc.json
 if full; then
-hil_start --controller pd --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measure pd_crazyflie_step \
+hil_start --controller pd $(step) --max-hold-error 0.02 --measure pd_crazyflie_step \
     --json target/rotorpy-hil-pd.json
+for vehicle in crazyflie hummingbird; do
+    for controller in pd lqr mpc; do
+        if [ "$vehicle" = hummingbird ]; then
+            hil_start --vehicle "$vehicle" --controller "$controller" $(step) --max-hold-error 0.02 \
+                --measure "${controller}_${vehicle}_step" --json "target/rotorpy-hil-$vehicle-$controller.json"
+        fi
+        hil_start --vehicle "$vehicle" --controller "$controller" $(step) --wind 0.5,0,0 --max-hold-error 0.03 \
+            --measure "${controller}_${vehicle}_step_wind" --json "target/rotorpy-hil-$vehicle-$controller-wind.json"
+    done
+done
 # One flight per standard motor layout: rotorpy's motors put in PX4's, Betaflight's, the
 # Crazyflie's and the OS4's "+" order, the flight controller told so (MOT_FRAME).
 for layout in px4 betaflight crazyflie plus; do
     hil_start --layout "$layout" --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 10 \
         --measure "layout_$layout" --json "target/rotorpy-hil-$layout.json"
 done
-# The Hummingbird (vehicles/hummingbird-rotorpy.toml): the fast MPC's step within 5 cm and its
-# circle's RMSE within the LQR's on the same vehicle.
 hil_start --vehicle hummingbird --scenario circle --duration 25 --measure lqr_hummingbird_circle \
     --json target/rotorpy-hil-hummingbird-circle.json
-hil_start --vehicle hummingbird --controller mpc --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 \
-    --max-hold-error 0.05 --measure mpc_hummingbird_step \
-    --json target/rotorpy-hil-hummingbird-mpc.json
-# The circles held to the LQR's RMSE on the same vehicle need those flights done.
+# The fast MPC's circles held to the LQR's RMSE on the same vehicle (those flights done first).
 hil_wait
 hil_start --vehicle crazyflie --controller mpc --scenario circle --duration 25 --measure mpc_crazyflie_circle \
-    --max-rmse "$(python3 -c "print(1.25 * $(lqr_rmse target/rotorpy-hil-circle.json))")" \
+    --max-rmse "$(lqr_rmse target/rotorpy-hil-circle.json)" \
     --json target/rotorpy-hil-crazyflie-mpc-circle.json
 hil_start --vehicle hummingbird --controller mpc --scenario circle --duration 25 --measure mpc_hummingbird_circle \
     --max-rmse "$(lqr_rmse target/rotorpy-hil-hummingbird-circle.json)" \

@@ -42,6 +42,7 @@ from measure import record  # noqa: E402
 from rotorpy.vehicles.crazyflie_params import quad_params as crazyflie_params  # noqa: E402
 from rotorpy.vehicles.hummingbird_params import quad_params as hummingbird_params  # noqa: E402
 from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
+from rotorpy.wind.default_winds import ConstantWind  # noqa: E402
 
 
 # Motor layouts as each vendor numbers its motors: (forward, right) hub position
@@ -129,6 +130,8 @@ def main():
     ap.add_argument("--measure", metavar="NAME",
                     help="write the flight's figures to the measurements (tools/measure.py) as rotorpy_NAME_*")
     ap.add_argument("--seed", type=int, default=1, help="seeds rotorpy's IMU noise (numpy)")
+    ap.add_argument("--wind", metavar="N,E,D",
+                    help="a steady wind, m/s NED (rotorpy's ConstantWind, the air's velocity over the ground)")
     ap.add_argument("--gcs", action="store_true",
                     help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
                          "sets parameters, arms and flies the vehicle; the flight ends when it is done")
@@ -189,10 +192,16 @@ def main():
     fc_watch = EndsWithFlight(fc, "sil-host px4-hil", others=[gcs])
     vehicle = Lockstep(params_for(a.vehicle, a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
     state = dict(vehicle.initial_state)
+    wind = None
+    if a.wind:
+        wn, we, wd = (float(v) for v in a.wind.split(","))
+        wind = ConstantWind(we, wn, -wd)  # rotorpy's world frame is ENU
     zero = {"cmd_motor_speeds": np.zeros(4)}
     track = []
     steps = int(round(a.duration / a.dt))
     for k in range(steps):
+        if wind is not None:
+            state["wind"] = wind.update(k * a.dt, state["x"])
         state = vehicle.step(state, zero, a.dt)
         x = np.asarray(state["x"], dtype=float)  # ENU
         track.append([k * a.dt, x[1], x[0], -x[2]])  # t, north, east, down
@@ -234,6 +243,7 @@ def main():
         "dt_s": a.dt,
         "final_ned_m": final.tolist(),
         "max_altitude_m": float(-track[:, 3].min()),
+        "wind_ned_mps": [float(v) for v in a.wind.split(",")] if a.wind else [0.0, 0.0, 0.0],
     }
     end_s = float(track[-1, 0])
     if a.waypoint:

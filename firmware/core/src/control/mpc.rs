@@ -69,14 +69,18 @@ pub struct MpcConfig {
     /// for again on the next step; with it, the estimate holds what the lag
     /// model leaves out (a rotor slower or faster than the vehicle's own).
     pub observer_moment_tau_s: f64,
-    /// The observer compares the vehicle with the input its rotors have
-    /// delivered (a first-order lag of the input sent, the vehicle's
-    /// `rotor_tau_s`), not with the input sent. Compared with the input
-    /// sent, the torque and thrust not yet delivered read as a disturbance
-    /// and are asked for again: positive feedback around the lag, which
-    /// amplifies the MPC's own commands near `1/√(τ·τ_rotor)` and, with a
-    /// 72 ms rotor, sets up a limit cycle that swings the motors from zero
-    /// to full speed (docs/book/src/mpc.md).
+    /// The observer compares the vehicle with the thrust and yaw torque its
+    /// rotors have delivered (a first-order lag of the input sent, the
+    /// vehicle's `rotor_tau_s`), not with the input sent. Compared with the
+    /// input sent, the thrust and torque not yet delivered read as a
+    /// disturbance and are asked for again: positive feedback around the
+    /// lag, which amplifies the MPC's own commands near `1/√(τ·τ_rotor)`
+    /// and, with a 72 ms rotor, set up a limit cycle that swung the motors
+    /// from zero to full speed (docs/book/src/mpc.md). Roll and pitch keep
+    /// the input sent: there the fast moment estimate's re-asking makes up
+    /// for slow rotors, which the robustness sweep and gust rejection on a
+    /// plant without lag rely on (the heavy roll/pitch-rate weights keep
+    /// that loop damped).
     pub observer_rotor_lag: bool,
     /// Damped-trend prediction of the horizontal disturbance force: its
     /// horizon `T`, s (`None`: the estimate is held constant over the
@@ -346,6 +350,10 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     /// adjoint pass runs on each channel's few states instead of all 12.
     decoupled: bool,
 }
+
+/// The input channels (`U1` thrust, `U4` yaw torque) whose delivery the
+/// observer models with the rotors' lag ([`MpcConfig::observer_rotor_lag`]).
+const LAGGED_CHANNELS: [usize; 2] = [0, 3];
 
 /// The hover model's independent channels in the heading frame: each
 /// input moves only its own states (state order `[x y z ẋ ẏ ż a₁ a₂ a₃ p q r]`,
@@ -982,16 +990,21 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let t_nominal = lit::<T>(self.cfg.exec_dt_s);
         let dt = self.next_dt.take().unwrap_or(t_nominal);
         let Some(tau) = self.cfg.observer_tau_s else { return };
-        // The input the rotors delivered over the step: the lag's mean over
-        // it, `u + (u₀ − u)·(τr/dt)·(1 − e^(−dt/τr))` from `u₀` at its
-        // start towards the input sent `u` (exact for a first-order lag).
+        // The thrust and yaw torque the rotors delivered over the step: the
+        // lag's mean over it, `u + (u₀ − u)·(τr/dt)·(1 − e^(−dt/τr))` from
+        // `u₀` at its start towards the input sent `u` (exact for a
+        // first-order lag). Roll and pitch keep the input sent.
         let du_applied = if self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero() {
             let r = dt / self.params.rotor_tau_s;
             let decay = (-r).exp();
             let mean = (T::one() - decay) / r;
             let u0 = self.du_delivered;
             self.du_delivered = self.du_prev + (u0 - self.du_prev) * decay;
-            self.du_prev + (u0 - self.du_prev) * mean
+            let mut applied = self.du_prev;
+            for c in LAGGED_CHANNELS {
+                applied[c] += (u0[c] - self.du_prev[c]) * mean;
+            }
+            applied
         } else {
             self.du_prev
         };
