@@ -330,6 +330,9 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     /// The input deviation the rotors have delivered by the lag model
     /// ([`MpcConfig::observer_rotor_lag`]).
     du_delivered: Vector4<T>,
+    /// `(dt, e^(−dt/τr), (1 − e^(−dt/τr))·τr/dt)` of the last step: a loop
+    /// on a steady period computes the exponential once.
+    lag_factors: (T, T, T),
     /// Disturbance estimate: acceleration NED (m/s²) and angular acceleration body (rad/s²).
     dist: SVector<T, 6>,
     /// The two cascaded low-passes of the horizontal estimate the trend's
@@ -510,6 +513,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             z: SVector::zeros(),
             du_prev: Vector4::zeros(),
             du_delivered: Vector4::zeros(),
+            lag_factors: (T::zero(), T::one(), T::one()),
             dist: SVector::zeros(),
             dist_lp: [[T::zero(); 2]; 2],
             trend: [T::zero(); N],
@@ -552,6 +556,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         self.bx = params.input_box();
         self.u_hover = crate::model::hover_input(&params);
         self.params = params;
+        // The rotors' time constant may have changed.
+        self.lag_factors = (T::zero(), T::one(), T::one());
         self.settings = qp_settings(&cfg);
         self.last_dt = lit(cfg.exec_dt_s);
         self.trend = [T::zero(); N];
@@ -995,9 +1001,12 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         // `u₀` at its start towards the input sent `u` (exact for a
         // first-order lag). Roll and pitch keep the input sent.
         let du_applied = if self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero() {
-            let r = dt / self.params.rotor_tau_s;
-            let decay = (-r).exp();
-            let mean = (T::one() - decay) / r;
+            if self.lag_factors.0 != dt {
+                let r = dt / self.params.rotor_tau_s;
+                let decay = (-r).exp();
+                self.lag_factors = (dt, decay, (T::one() - decay) / r);
+            }
+            let (_, decay, mean) = self.lag_factors;
             let u0 = self.du_delivered;
             self.du_delivered = self.du_prev + (u0 - self.du_prev) * decay;
             let mut applied = self.du_prev;
@@ -1162,6 +1171,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         self.z = SVector::zeros();
         self.du_prev = Vector4::zeros();
         self.du_delivered = Vector4::zeros();
+        self.lag_factors = (T::zero(), T::one(), T::one());
         self.dist = SVector::zeros();
         self.dist_lp = [[T::zero(); 2]; 2];
         self.last = None;
