@@ -12,7 +12,7 @@
 //! ```
 //! Scenario file (angles in degrees):
 //! ```toml
-//! kind = "helix"          # setpoint | circle | helix
+//! kind = "helix"          # setpoint | circle | helix | eight
 //! radius_m = 3.0
 //! period_s = 25.0
 //! climb_rate_mps = 0.1

@@ -505,7 +505,7 @@ pub fn fly_endpoint<E: Endpoint>(
         diverged: false,
         estimation: None,
     };
-    let mut metrics = MetricsAccumulator::new(&nominal);
+    let mut metrics = MetricsAccumulator::new(&nominal).tracking_from(sc.tracking_from_s());
     let mut total_cost = 0.0;
     let mut total_it = 0u64;
     let mut failing_since: Option<f64> = None;

@@ -67,16 +67,18 @@ pub enum Mission {
 }
 
 impl Mission {
-    /// The set-point at `t` (s after the first sample), and whether a
-    /// trajectory is being tracked (for the RMSE).
+    /// The set-point at `t` (s after the first sample), and whether the
+    /// tracking error counts (for the RMSE: from the scenario's
+    /// [`tracking_from_s`](crate::scenario::Scenario::tracking_from_s) after it starts).
     pub fn setpoint_at(&self, t: f64) -> (Setpoint<f32>, bool) {
         match self {
             Mission::Waypoints(w) => (setpoint_at(w, t), false),
             Mission::Scenario { scenario, from_s } => {
-                let tracking = t >= *from_s;
+                let moving = t >= *from_s;
+                let tracking = t >= *from_s + scenario.tracking_from_s();
                 let r = scenario.reference((t - from_s).max(0.0));
                 let mut sp = Setpoint::hold(r.pos.cast(), r.yaw as f32);
-                if tracking {
+                if moving {
                     sp.vel_ned_mps = r.vel.cast();
                     sp.acc_ned_mps2 = r.acc.cast();
                     sp.jerk_ned_mps3 = r.jerk.cast();
@@ -135,6 +137,9 @@ pub struct HilResult {
     pub duration_s: f64,
     /// When the vehicle armed (its `COMMAND_ACK` or `HEARTBEAT`), s.
     pub armed_at_s: Option<f64>,
+    /// Its heading estimate then (`ATTITUDE`), rad: the mission's headings
+    /// are about it.
+    pub takeoff_heading_rad: Option<f64>,
     /// The last position the simulator reported (NED about home, m).
     pub final_pos_ned_m: [f64; 3],
     /// Its distance from the mission's last set-point, m.
@@ -362,8 +367,14 @@ fn setpoint_at(mission: &[Waypoint], t: f64) -> Setpoint<f32> {
 }
 
 /// `sp` as the message a ground station sends for it (position, velocity,
-/// acceleration, yaw, yaw rate; the jerk has no field).
-pub fn position_target(sp: &Setpoint<f32>, t_ms: u32) -> MavMessage {
+/// acceleration, yaw, yaw rate; the jerk has no field). Without a
+/// `heading_rad` the heading is masked: the vehicle keeps the one it holds
+/// (on the ground, its own).
+pub fn position_target(sp: &Setpoint<f32>, heading_rad: Option<f32>, t_ms: u32) -> MavMessage {
+    let type_mask = match heading_rad {
+        Some(_) => common::PositionTargetTypemask::empty(),
+        None => common::PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE,
+    };
     MavMessage::SET_POSITION_TARGET_LOCAL_NED(common::SET_POSITION_TARGET_LOCAL_NED_DATA {
         time_boot_ms: t_ms,
         x: sp.pos_ned_m[0],
@@ -375,9 +386,9 @@ pub fn position_target(sp: &Setpoint<f32>, t_ms: u32) -> MavMessage {
         afx: sp.acc_ned_mps2[0],
         afy: sp.acc_ned_mps2[1],
         afz: sp.acc_ned_mps2[2],
-        yaw: sp.yaw_rad,
+        yaw: heading_rad.unwrap_or(0.0),
         yaw_rate: sp.yaw_rate_radps,
-        type_mask: common::PositionTargetTypemask::empty(),
+        type_mask,
         target_system: SYSTEM_ID,
         target_component: COMPONENT_ID,
         coordinate_frame: common::MavFrame::MAV_FRAME_LOCAL_NED,
@@ -495,6 +506,8 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     // Simulated time of the last HIL_SENSOR (the log's clock), the last
     // attitude estimate's heading, and the arming state last logged.
     let (mut t_now, mut est_yaw, mut logged_armed) = (0.0f64, 0.0f32, None::<bool>);
+    // The vehicle's heading estimate when it armed, rad.
+    let mut takeoff_yaw = None::<f32>;
     let mut buf = [0u8; 4096];
     let mut dgram = [0u8; 2048];
     let mut out = Vec::new();
@@ -553,14 +566,23 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             // its velocity and acceleration), and at least every 0.2 s (an
             // Offboard stream: PX4 leaves Offboard when it stops for 1 s);
             // arming every 0.5 s until armed.
+            //
+            // The mission's headings are about the take-off heading, as a
+            // ground station flies a pattern about the vehicle's heading:
+            // until armed the heading is masked (the vehicle keeps its own),
+            // then it is the vehicle's estimate at arming plus the mission's.
             let mut tracking = false;
             if let Some(mission) = &cfg.mission {
-                let (s, track) = mission.setpoint_at(t);
+                let (mut s, track) = mission.setpoint_at(t);
                 tracking = track;
+                if let Some(h) = takeoff_yaw {
+                    s.yaw_rad = fc_core::control::wrap_pi(s.yaw_rad + h);
+                }
                 reference = Some(s);
                 let changed = sp.is_none_or(|old| old != s);
                 if (changed && t >= next_sp_s - 1e-9) || t >= next_sp_s + SETPOINT_REPEAT_S {
-                    v.deliver(&position_target(&s, (t * 1e3) as u32), &mut out)?;
+                    let heading = takeoff_yaw.map(|_| s.yaw_rad);
+                    v.deliver(&position_target(&s, heading, (t * 1e3) as u32), &mut out)?;
                     if let Some(log) = ulog.as_mut() {
                         log.setpoint(t, &s)?;
                     }
@@ -636,6 +658,8 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 }
                 if armed && res.armed_at_s.is_none() {
                     res.armed_at_s = Some(t);
+                    takeoff_yaw = Some(est_yaw);
+                    res.takeoff_heading_rad = Some(f64::from(est_yaw));
                 }
                 if let Some(log) = ulog.as_mut() {
                     if logged_armed != Some(armed) || matches!(m, MavMessage::HEARTBEAT(_)) {

@@ -184,10 +184,10 @@ struct Px4HilArgs {
     /// Fly only what the ground station (--gcs) commands: no mission of our own.
     #[arg(long, requires = "gcs", conflicts_with_all = ["waypoints", "scenario"])]
     gcs_only: bool,
-    /// Mission: `T,N,E,D` (from T s, hold N, E, D m about home; heading 0), repeatable, in time order.
+    /// Mission: `T,N,E,D` (from T s, hold N, E, D m about home; heading: the one it has at take-off), repeatable, in time order.
     #[arg(long = "waypoint", value_name = "T,N,E,D", required_unless_present_any = ["scenario", "gcs_only"])]
     waypoints: Vec<String>,
-    /// Or a scenario's trajectory (`circle`, `helix`, `setpoint`; docs/book/src/model.md §9, starting 1 m
+    /// Or a scenario's trajectory (`circle`, `helix`, `setpoint`, `eight`; docs/book/src/model.md §9, starting 1 m
     /// above home), flown from --scenario-start s after holding its start point.
     #[arg(long, value_enum, conflicts_with = "waypoints")]
     scenario: Option<ScenarioKind>,
@@ -337,7 +337,7 @@ struct FlyArgs {
     /// Form of the controller and of the plant: `euler` or `quaternion`.
     #[arg(long, value_parser = form_parser(), default_value = "quaternion")]
     model: AttitudeForm,
-    /// Scenario (docs/book/src/model.md §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s).
+    /// Scenario (docs/book/src/model.md §9): `setpoint` (step to 3,2,-5 m and 15°), `circle` (R 2 m, 20 s), `helix` (circle climbing 0.05 m/s), `eight` (figure-8, A 1 m, 6 s lap, 20 s; RMSE from the end of the first lap).
     #[arg(long, value_enum, default_value = "setpoint")]
     scenario: ScenarioKind,
     /// Disturbances on the plant: none, wind, mismatch or wind,mismatch (docs/book/src/model.md §9).

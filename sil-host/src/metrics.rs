@@ -51,6 +51,11 @@ pub struct FlightMetrics {
     pub max_box_violation: f64,
     /// Position error at the end of the flight, m.
     pub final_error_m: f64,
+    /// 3-D position RMSE from [`MetricsAccumulator::tracking_from`]'s time
+    /// on, m (`None` before it or when not asked for).
+    pub tracking_rmse_m: Option<f64>,
+    /// Largest 3-D position error over the same span, m.
+    pub tracking_worst_m: Option<f64>,
 }
 
 impl FlightMetrics {
@@ -168,6 +173,10 @@ pub struct MetricsAccumulator {
     inputs: usize,
     violation: f64,
     last_error_m: f64,
+    /// From when the tracking error counts, s; its sum of squares, samples
+    /// and largest value.
+    track_from_s: f64,
+    track: (f64, usize, f64),
 }
 
 impl MetricsAccumulator {
@@ -184,7 +193,16 @@ impl MetricsAccumulator {
             inputs: 0,
             violation: 0.0,
             last_error_m: f64::NAN,
+            track_from_s: f64::INFINITY,
+            track: (0.0, 0, 0.0),
         }
+    }
+
+    /// Also measures the 3-D tracking error from `t_s` on
+    /// ([`FlightMetrics::tracking_rmse_m`]).
+    pub fn tracking_from(mut self, t_s: f64) -> Self {
+        self.track_from_s = t_s;
+        self
     }
 
     /// Adds one sample at time `t`, s: measured and reference `[x, y, z, ψ]`
@@ -201,6 +219,11 @@ impl MetricsAccumulator {
             + (actual[1] - reference[1]).powi(2)
             + (actual[2] - reference[2]).powi(2))
         .sqrt();
+        if t >= self.track_from_s - 1e-9 {
+            self.track.0 += self.last_error_m * self.last_error_m;
+            self.track.1 += 1;
+            self.track.2 = self.track.2.max(self.last_error_m);
+        }
     }
 
     /// The metrics of the samples pushed so far.
@@ -217,6 +240,8 @@ impl MetricsAccumulator {
             },
             max_box_violation: self.violation,
             final_error_m: self.last_error_m,
+            tracking_rmse_m: (self.track.1 > 0).then(|| (self.track.0 / self.track.1 as f64).sqrt()),
+            tracking_worst_m: (self.track.1 > 0).then_some(self.track.2),
         }
     }
 }

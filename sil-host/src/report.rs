@@ -53,6 +53,9 @@ pub fn flight_json(cfg: &FlightConfig, res: &FlightResult) -> Value {
         "u_norm": m.u_norm,
         "max_box_violation": m.max_box_violation,
         "final_error_m": m.final_error_m,
+        "tracking_from_s": cfg.scenario.tracking_from_s(),
+        "tracking_rmse_m": m.tracking_rmse_m,
+        "tracking_worst_m": m.tracking_worst_m,
         "saturated_steps": res.saturated_steps,
         "steps": res.steps,
         "diverged": res.diverged,
@@ -131,7 +134,7 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
     };
     format!(
         "{} {} {} [{}]: RMSE x {:.3} y {:.3} z {:.3} m, yaw {:.2}°; settle/overshoot x {} y {} z {} yaw {}; \
-         final error {:.3} m; u_norm {:.4}; saturated {}/{} steps; controller {:.0} ns/step (max {:.0}); \
+         final error {:.3} m;{} u_norm {:.4}; saturated {}/{} steps; controller {:.0} ns/step (max {:.0}); \
          QP iterations mean {:.1} max {} (bound {}){}",
         cfg.spec.family.name(),
         cfg.spec.form.name(),
@@ -146,6 +149,10 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
         st(&m.z),
         st(&m.yaw),
         m.final_error_m,
+        match (m.tracking_rmse_m, cfg.scenario.tracking_from_s()) {
+            (Some(r), from) if from > 0.0 => format!(" tracking RMSE {r:.3} m from {from} s;"),
+            _ => String::new(),
+        },
         m.u_norm,
         res.saturated_steps,
         res.steps,

@@ -1,4 +1,5 @@
-//! Scenarios of docs/book/src/model.md §9: `setpoint`, `circle` and `helix`, every number a parameter.
+//! Scenarios of docs/book/src/model.md §9 (`setpoint`, `circle` and `helix`)
+//! and the aggressive `eight`, every number a parameter.
 
 use fc_core::VehicleParams;
 use nalgebra::Vector3;
@@ -14,6 +15,11 @@ pub enum ScenarioKind {
     Circle,
     /// The circle while climbing at a constant rate.
     Helix,
+    /// A figure-8 at constant altitude through the start point: the
+    /// lemniscate of Gerono `(A sin ωτ, (A/2) sin 2ωτ)` north and east,
+    /// A = `radius_m`, one lap every `period_s` (1 m and 6 s by default:
+    /// 1.48 m/s and 2.33 m/s² at peak), heading held.
+    Eight,
 }
 
 impl ScenarioKind {
@@ -23,6 +29,7 @@ impl ScenarioKind {
             ScenarioKind::Setpoint => "setpoint",
             ScenarioKind::Circle => "circle",
             ScenarioKind::Helix => "helix",
+            ScenarioKind::Eight => "eight",
         }
     }
 }
@@ -40,9 +47,9 @@ pub struct Scenario {
     pub target_ned_m: [f64; 3],
     /// `setpoint`: target heading, rad.
     pub target_yaw_rad: f64,
-    /// `circle`/`helix`: radius R, m.
+    /// `circle`/`helix`: radius R, m; `eight`: its half-length A, m.
     pub radius_m: f64,
-    /// `circle`/`helix`: period of one revolution, s.
+    /// `circle`/`helix`: period of one revolution, s; `eight`: of one lap.
     pub period_s: f64,
     /// `helix`: climb rate v (altitude gain per second), m/s.
     pub climb_rate_mps: f64,
@@ -92,20 +99,33 @@ pub const LIMITS: Limits = Limits {
 
 impl Scenario {
     /// The docs/book/src/model.md §9 defaults for a kind.
+    /// (`eight`: A = 1 m, a 6 s lap, 20 s.)
     pub fn default_for(kind: ScenarioKind) -> Self {
+        let eight = kind == ScenarioKind::Eight;
         Self {
             kind,
             start_ned_m: [0.0, 0.0, -1.0],
             start_yaw_rad: 0.0,
             target_ned_m: [3.0, 2.0, -5.0],
             target_yaw_rad: 15f64.to_radians(),
-            radius_m: 2.0,
-            period_s: 20.0,
+            radius_m: if eight { 1.0 } else { 2.0 },
+            period_s: if eight { 6.0 } else { 20.0 },
             climb_rate_mps: 0.05,
             duration_s: match kind {
-                ScenarioKind::Setpoint => 20.0,
+                ScenarioKind::Setpoint | ScenarioKind::Eight => 20.0,
                 _ => 100.0,
             },
+        }
+    }
+
+    /// When the tracking error counts, s after the reference starts: the
+    /// `eight`'s first lap is its entry (it starts at full speed from a
+    /// hover), so its RMSE is taken from the end of that lap; every other
+    /// kind from its start.
+    pub fn tracking_from_s(&self) -> f64 {
+        match self.kind {
+            ScenarioKind::Eight => self.period_s,
+            _ => 0.0,
         }
     }
 
@@ -135,6 +155,21 @@ impl Scenario {
                     vel: Vector3::new(r * w * c, r * w * s, -v),
                     acc: Vector3::new(-r * w * w * s, r * w * w * c, 0.0),
                     jerk: Vector3::new(-r * w * w * w * c, -r * w * w * w * s, 0.0),
+                    yaw: self.start_yaw_rad,
+                    yaw_rate: 0.0,
+                }
+            }
+            ScenarioKind::Eight => {
+                // North A sin θ, east (A/2) sin 2θ, θ = ωτ.
+                let a = self.radius_m;
+                let w = 2.0 * std::f64::consts::PI / self.period_s;
+                let (s1, c1) = (w * t).sin_cos();
+                let (s2, c2) = (2.0 * w * t).sin_cos();
+                Reference {
+                    pos: s0 + Vector3::new(a * s1, 0.5 * a * s2, 0.0),
+                    vel: Vector3::new(a * w * c1, a * w * c2, 0.0),
+                    acc: Vector3::new(-a * w * w * s1, -2.0 * a * w * w * s2, 0.0),
+                    jerk: Vector3::new(-a * w.powi(3) * c1, -4.0 * a * w.powi(3) * c2, 0.0),
                     yaw: self.start_yaw_rad,
                     yaw_rate: 0.0,
                 }
@@ -187,14 +222,22 @@ impl Scenario {
     }
 
     /// Largest horizontal acceleration the reference asks for, m/s² (the
-    /// circle's and helix's centripetal `r·ω²`; a set-point is a step and
-    /// asks for none by itself).
+    /// circle's and helix's centripetal `r·ω²`; the eight's
+    /// `A·ω²·max √(sin²θ + 4 sin²2θ)`, found on a 0.1° grid of θ; a
+    /// set-point is a step and asks for none by itself).
     pub fn peak_horizontal_acceleration(&self) -> f64 {
+        let w = 2.0 * std::f64::consts::PI / self.period_s;
         match self.kind {
             ScenarioKind::Setpoint => 0.0,
-            ScenarioKind::Circle | ScenarioKind::Helix => {
-                let w = 2.0 * std::f64::consts::PI / self.period_s;
-                self.radius_m * w * w
+            ScenarioKind::Circle | ScenarioKind::Helix => self.radius_m * w * w,
+            ScenarioKind::Eight => {
+                let peak = (0..3600)
+                    .map(|i| {
+                        let th = f64::from(i) * std::f64::consts::PI / 1800.0;
+                        (th.sin().powi(2) + 4.0 * (2.0 * th).sin().powi(2)).sqrt()
+                    })
+                    .fold(0.0, f64::max);
+                self.radius_m * w * w * peak
             }
         }
     }
@@ -218,5 +261,57 @@ impl Scenario {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The eight's feed-forward is the derivative of its position (central
+    /// differences, an independent computation of each), it passes through
+    /// its start and closes after one lap.
+    #[test]
+    fn the_eights_derivatives_are_those_of_its_path() {
+        let sc = Scenario::default_for(ScenarioKind::Eight);
+        let h = 1e-4;
+        for i in 0..60 {
+            let t = 0.1 * f64::from(i) + 0.05;
+            let (m, r, p) = (sc.reference(t - h), sc.reference(t), sc.reference(t + h));
+            let fd = |a: Vector3<f64>, b: Vector3<f64>| (b - a) / (2.0 * h);
+            assert!((fd(m.pos, p.pos) - r.vel).norm() < 1e-6, "velocity at {t}");
+            assert!((fd(m.vel, p.vel) - r.acc).norm() < 1e-6, "acceleration at {t}");
+            assert!((fd(m.acc, p.acc) - r.jerk).norm() < 1e-5, "jerk at {t}");
+            assert_eq!((r.pos[2], r.yaw, r.yaw_rate), (-1.0, 0.0, 0.0), "level, heading held");
+        }
+        let start = Vector3::from(sc.start_ned_m);
+        assert!((sc.reference(0.0).pos - start).norm() < 1e-12);
+        assert!((sc.reference(sc.period_s).pos - start).norm() < 1e-12);
+        // Half a lap out: A sin(π/2) north, (A/2) sin π east.
+        assert!((sc.reference(1.5).pos - start - Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
+        assert_eq!(sc.tracking_from_s(), 6.0);
+    }
+
+    /// The figures for A = 1 m and a 6 s lap: 1.48 m/s at peak (the
+    /// crossing, √2·Aω), and the peak acceleration found on a fine grid
+    /// (2.33 m/s²); the Crazyflie can fly it.
+    #[test]
+    fn the_eight_peaks_at_1_48_m_per_s() {
+        let sc = Scenario::default_for(ScenarioKind::Eight);
+        let speed = (0..6000)
+            .map(|i| sc.reference(f64::from(i) * 1e-3).vel.norm())
+            .fold(0.0, f64::max);
+        assert!((speed - 1.4810).abs() < 1e-3, "{speed}");
+        let acc = (0..6000)
+            .map(|i| sc.reference(f64::from(i) * 1e-3).acc.norm())
+            .fold(0.0, f64::max);
+        assert!((sc.peak_horizontal_acceleration() - acc).abs() < 1e-3, "{acc}");
+        assert!((acc - 2.3303).abs() < 1e-3, "{acc}");
+        sc.validate().unwrap();
+        let cf = crate::config::load_vehicle(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../vehicles/crazyflie-rotorpy.toml"),
+        )
+        .unwrap();
+        sc.check_feasible(&cf).unwrap();
     }
 }
