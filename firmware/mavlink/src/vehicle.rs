@@ -192,6 +192,9 @@ pub struct MavVehicle {
     mission_cruise_mps: Option<f32>,
     /// The last offboard set-point, and when it came (simulated µs).
     offboard: Option<(Setpoint<f32>, u64)>,
+    /// The last streamed acceleration and its sender's time
+    /// (`time_boot_ms`), for the jerk the message has no field for.
+    offboard_acc: Option<(Vector3<f32>, u32)>,
     /// The joystick's last `MANUAL_CONTROL` (x, y, z, r), and when it came.
     manual: Option<([i16; 4], u64)>,
     /// Where it armed (estimated), NED about the origin, m: the home a
@@ -297,6 +300,7 @@ impl MavVehicle {
             mission_phase: None,
             mission_cruise_mps: None,
             offboard: None,
+            offboard_acc: None,
             manual: None,
             home_ned_m: Vector3::zeros(),
             home: None,
@@ -1127,10 +1131,26 @@ impl MavVehicle {
         }
         // The frame and mask here; the values (finite, within range) by the
         // flight loop, as for every protocol. Kept for Offboard; flown only
-        // in Offboard, as PX4 does.
-        let sp = setpoint_from_target(m, self.core.setpoint().yaw_rad).filter(|sp| sp.is_valid());
+        // in Offboard, as PX4 does. A masked heading keeps the one held:
+        // armed, the set-point's; on the ground, the vehicle's own, so a
+        // take-off in Offboard keeps the heading it has.
+        let held_yaw = match (self.armed, self.core.navigator().estimate()) {
+            (false, Some(e)) => fc_core::quat_to_euler(&e.att)[2],
+            _ => self.core.setpoint().yaw_rad,
+        };
+        let sp = setpoint_from_target(m, held_yaw).filter(|sp| sp.is_valid());
         match sp {
-            Some(sp) => {
+            Some(mut sp) => {
+                let acc_given = !m.type_mask.intersects(
+                    PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE,
+                );
+                let last = self.offboard_acc.take();
+                if acc_given {
+                    sp.jerk_ned_mps3 = streamed_jerk(last, sp.acc_ned_mps2, m.time_boot_ms);
+                    self.offboard_acc = Some((sp.acc_ned_mps2, m.time_boot_ms));
+                }
                 self.offboard = Some((sp, self.last_sensor_us.unwrap_or(0)));
                 if self.mode == FlightMode::Offboard && self.armed {
                     self.core.set_setpoint(&sp);
@@ -1452,6 +1472,40 @@ pub fn autopilot_version(system_id: u8) -> AUTOPILOT_VERSION_DATA {
         flight_custom_version: [0; 8],
         middleware_custom_version: [0; 8],
         os_custom_version: [0; 8],
+    }
+}
+
+/// The longest gap between two streamed accelerations that still gives a
+/// jerk, ms (an Offboard stream comes at 10–50 Hz; PX4 leaves Offboard
+/// after 1 s without one).
+pub const JERK_GAP_MAX_MS: u32 = 100;
+
+/// The largest jerk taken from a stream, m/s³ per axis: a change of
+/// acceleration steeper than this is a new set-point, not a trajectory's
+/// slope (a 1 m, 6 s figure-8 asks for 4.6).
+pub const JERK_MAX_MPS3: f32 = 50.0;
+
+/// The jerk feed-forward of a streamed trajectory, m/s³ NED:
+/// `SET_POSITION_TARGET_LOCAL_NED` carries position, velocity and
+/// acceleration but no jerk, and without it the controllers fly a moving
+/// reference with no attitude-rate feed-forward (a figure-8's error grows
+/// tenfold). The slope of the acceleration between the `last` streamed
+/// one and `acc`, over the sender's clock (`time_boot_ms`); zero when
+/// there is no last one, the gap is not in (0, [`JERK_GAP_MAX_MS`]] ms, or
+/// the slope is steeper than [`JERK_MAX_MPS3`] on an axis (a step).
+pub fn streamed_jerk(last: Option<(Vector3<f32>, u32)>, acc: Vector3<f32>, t_ms: u32) -> Vector3<f32> {
+    let Some((a0, t0)) = last else {
+        return Vector3::zeros();
+    };
+    let gap = t_ms.wrapping_sub(t0);
+    if gap == 0 || gap > JERK_GAP_MAX_MS {
+        return Vector3::zeros();
+    }
+    let j = (acc - a0) / (gap as f32 * 1e-3);
+    if j.iter().all(|v| v.is_finite() && v.abs() <= JERK_MAX_MPS3) {
+        j
+    } else {
+        Vector3::zeros()
     }
 }
 

@@ -410,6 +410,37 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     assert!(v.armed());
     assert_eq!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     assert_eq!(v.core().setpoint().yaw_rad, 0.5);
+    // The stream's jerk is the slope of its acceleration over the sender's
+    // clock: +0.1 m/s² in 10 ms is 10 m/s³; a steeper change is a step
+    // (no jerk), as is a gap of more than 100 ms.
+    for (t_ms, afx, jerk) in [(10, 0.1, 10.0), (20, 5.0, 0.0), (30, 5.2, 20.0), (300, 5.3, 0.0)] {
+        let streamed = SET_POSITION_TARGET_LOCAL_NED_DATA {
+            time_boot_ms: t_ms,
+            afx,
+            ..sp
+        };
+        v.handle(
+            &MavMessage::SET_POSITION_TARGET_LOCAL_NED(streamed),
+            &mut out,
+            &Still,
+            0,
+        )
+        .unwrap();
+        let j = v.core().setpoint().jerk_ned_mps3;
+        assert!(
+            (j[0] - jerk).abs() < 1e-3 && j[1] == 0.0 && j[2] == 0.0,
+            "{t_ms} ms: {j:?}"
+        );
+    }
+    // A heading masked while armed keeps the one held.
+    let masked = SET_POSITION_TARGET_LOCAL_NED_DATA {
+        yaw: 2.0,
+        type_mask: PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE,
+        ..sp
+    };
+    v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(masked), &mut out, &Still, 0)
+        .unwrap();
+    assert_eq!(v.core().setpoint().yaw_rad, 0.5);
     // A NaN velocity (not masked) is refused by the flight loop: counted,
     // said, and the set-point in force stays.
     let bad = SET_POSITION_TARGET_LOCAL_NED_DATA {
@@ -1335,4 +1366,32 @@ fn what_qgroundcontrol_asks_at_connection_is_answered() {
     v.handle(&home, &mut out, &Still, 0).unwrap();
     assert_eq!(out.acks(), [MavResult::MAV_RESULT_ACCEPTED]);
     assert_eq!(out.count("HOME_POSITION"), 1);
+}
+
+/// The jerk taken from a streamed figure-8 (A = 1 m, a 6 s lap, sent every
+/// 10 ms) is the analytic one, `(−Aω³ cos ωt, −4Aω³ cos 2ωt)`, to the
+/// slope's own error (half a period of the snap: under 0.05 m/s³).
+#[test]
+fn the_jerk_of_a_streamed_eight_is_its_analytic_jerk() {
+    use super::streamed_jerk;
+    let w = 2.0 * core::f32::consts::PI / 6.0;
+    let acc = |t: f32| Vector3::new(-w * w * libm::sinf(w * t), -2.0 * w * w * libm::sinf(2.0 * w * t), 0.0);
+    let mut last = None;
+    for k in 0..600u32 {
+        let t = k as f32 * 0.01;
+        let j = streamed_jerk(last, acc(t), k * 10);
+        if k > 0 {
+            // The slope is the jerk half a period back.
+            let tm = t - 0.005;
+            let want = Vector3::new(
+                -w.powi(3) * libm::cosf(w * tm),
+                -4.0 * w.powi(3) * libm::cosf(2.0 * w * tm),
+                0.0,
+            );
+            assert!((j - want).amax() < 0.05, "{t} s: {j:?} vs {want:?}");
+        } else {
+            assert_eq!(j, Vector3::zeros(), "no jerk from one sample");
+        }
+        last = Some((acc(t), k * 10));
+    }
 }
