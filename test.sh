@@ -229,6 +229,9 @@ hil_wait() { while [ ${#HIL_PIDS[@]} -gt 0 ]; do hil_reap_first; done; }
 # within 2 cm from 10 s to 30 s on rotorpy's truth, calm, and within 3 cm in
 # a steady 0.5 m/s wind (rotorpy's ConstantWind), on both of rotorpy's vehicles.
 step() { echo --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 30 --hold-from 10; }
+# A reference's flight: the circle 25 s (22 s of it), the figure-8 23 s (3
+# laps and a third; 14 s after the first lap).
+ref_s() { if [ "$1" = eight ]; then echo 23; else echo 25; fi; }
 lqr_rmse() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["rotorpy"]["rmse_m"])' "$1"; }
 hil_start $(step) --max-hold-error 0.02 --measure lqr_crazyflie_step \
     --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg
@@ -257,14 +260,39 @@ for layout in px4 betaflight crazyflie plus; do
 done
 hil_start --vehicle hummingbird --scenario circle --duration 25 --measure lqr_hummingbird_circle \
     --json target/rotorpy-hil-hummingbird-circle.json
-# The fast MPC's circles held to the LQR's RMSE on the same vehicle (those flights done first).
+# The peer: rotorpy's own SE3 geometric controller (Lee/Mellinger), from its
+# true state, on the same vehicles, references, windows and figures
+# (docs/book/src/peers.md); and the rest of ours on the circle and the
+# figure-8 (a 1 m lemniscate, 6 s lap, counted from the end of its first lap).
+for vehicle in crazyflie hummingbird; do
+    hil_start --vehicle "$vehicle" --controller se3 $(step) --max-hold-error 0.02 \
+        --measure "se3_${vehicle}_step" --json "target/rotorpy-hil-$vehicle-se3-step.json"
+    for ref in circle eight; do
+        hil_start --vehicle "$vehicle" --controller se3 --scenario "$ref" --duration "$(ref_s "$ref")" \
+            --measure "se3_${vehicle}_$ref" --json "target/rotorpy-hil-$vehicle-se3-$ref.json"
+    done
+    hil_start --vehicle "$vehicle" --controller pd --scenario circle --duration 25 \
+        --measure "pd_${vehicle}_circle" --json "target/rotorpy-hil-$vehicle-pd-circle.json"
+    for controller in pd lqr; do
+        hil_start --vehicle "$vehicle" --controller "$controller" --scenario eight --duration 23 \
+            --measure "${controller}_${vehicle}_eight" --json "target/rotorpy-hil-$vehicle-$controller-eight.json"
+    done
+done
+# The fast MPC's circles held to the LQR's RMSE on the same vehicle, and its
+# circle and figure-8 in their steady part to SE3's (those flights done first).
 hil_wait
 hil_start --vehicle crazyflie --controller mpc --scenario circle --duration 25 --measure mpc_crazyflie_circle \
-    --max-rmse "$(lqr_rmse target/rotorpy-hil-circle.json)" \
+    --max-rmse "$(lqr_rmse target/rotorpy-hil-circle.json)" --beat target/rotorpy-hil-crazyflie-se3-circle.json \
     --json target/rotorpy-hil-crazyflie-mpc-circle.json
 hil_start --vehicle hummingbird --controller mpc --scenario circle --duration 25 --measure mpc_hummingbird_circle \
     --max-rmse "$(lqr_rmse target/rotorpy-hil-hummingbird-circle.json)" \
+    --beat target/rotorpy-hil-hummingbird-se3-circle.json \
     --json target/rotorpy-hil-hummingbird-mpc-circle.json
+for vehicle in crazyflie hummingbird; do
+    hil_start --vehicle "$vehicle" --controller mpc --scenario eight --duration 23 \
+        --measure "mpc_${vehicle}_eight" --beat "target/rotorpy-hil-$vehicle-se3-eight.json" \
+        --json "target/rotorpy-hil-$vehicle-mpc-eight.json"
+done
 fi
 hil_wait
 if full; then

@@ -41,7 +41,10 @@ from children import EndsWithFlight  # noqa: E402
 from measure import record  # noqa: E402
 from rotorpy.vehicles.crazyflie_params import quad_params as crazyflie_params  # noqa: E402
 from rotorpy.vehicles.hummingbird_params import quad_params as hummingbird_params  # noqa: E402
+from rotorpy.controllers.quadrotor_control import SE3Control  # noqa: E402
+from rotorpy.vehicles.multirotor import Multirotor  # noqa: E402
 from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
+from reference import Reference, window_figures  # noqa: E402
 from rotorpy.wind.default_winds import ConstantWind  # noqa: E402
 
 
@@ -85,11 +88,53 @@ class Lockstep(PX4Multirotor):
     controller's answer (its own waits 10 ms of wall time and then flies
     with the motors off: a flight controller in an emulator is slower)."""
 
+    commanded = np.zeros(4)
+
     def _fetch_latest_px4_control(self, blocking=True):
         msg = self.conn.recv_match(type="HIL_ACTUATOR_CONTROLS", blocking=True, timeout=30.0)
         if msg is None:
             raise RuntimeError("no HIL_ACTUATOR_CONTROLS from the flight controller in 30 s")
+        self.commanded = np.array(msg.controls[: self.num_rotors], dtype=float)
         return {"cmd_motor_speeds": [c * self.rotor_speed_max for c in msg.controls[: self.num_rotors]]}
+
+
+class Peer:
+    """rotorpy's own SE3 geometric controller (`SE3Control`, the
+    Lee/Mellinger family) flying rotorpy's vehicle from its true state, at
+    every step of `dt` (500 Hz at the default 2 ms): the peer our flight
+    controller is measured against, on the same vehicle, reference, wind and
+    windows. It starts where ours does, on the ground at home facing east
+    (rotorpy's yaw 0), and holds that heading."""
+
+    def __init__(self, quad_params, reference):
+        self.vehicle = Multirotor(quad_params, initial_state=PX4Multirotor_initial(quad_params), aero=True,
+                                  enable_ground=True,
+                                  integrator_kwargs={"method": "Radau", "rtol": 1e-3, "atol": 1e-6, "max_step": 0.01})
+        self.initial_state = dict(self.vehicle.initial_state)
+        self.controller = SE3Control(quad_params)
+        self.reference = reference
+        self.rotor_speed_max = quad_params["rotor_speed_max"]
+        self.commanded = np.zeros(4)
+
+    def step(self, state, t, dt):
+        pos, vel, acc, jerk, snap = self.reference.at(t)
+        enu = lambda v: np.array([v[1], v[0], -v[2]])  # noqa: E731
+        flat = {"x": enu(pos), "x_dot": enu(vel), "x_ddot": enu(acc), "x_dddot": enu(jerk), "x_ddddot": enu(snap),
+                "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
+        control = self.controller.update(t, state, flat)
+        self.commanded = np.asarray(control["cmd_motor_speeds"], dtype=float) / self.rotor_speed_max
+        return self.vehicle.step(state, control, dt)
+
+
+def PX4Multirotor_initial(quad_params):
+    """PX4Multirotor's own start: at home, at rest, rotors stopped."""
+    return {"x": np.zeros(3), "v": np.zeros(3), "q": np.array([0, 0, 0, 1]), "w": np.zeros(3),
+            "wind": np.zeros(3), "rotor_speeds": np.zeros(quad_params["num_rotors"])}
+
+
+def hover_fraction(q):
+    """The rotor speed that holds `q`'s weight, as a fraction of its maximum."""
+    return float(np.sqrt(q["mass"] * 9.81 / (q["num_rotors"] * q["k_eta"])) / q["rotor_speed_max"])
 
 
 # The packages a flight's figures depend on, recorded in its JSON: the same
@@ -110,10 +155,13 @@ def versions():
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sil-host", default="target/release/sil-host")
-    ap.add_argument("--controller", default="lqr")
+    ap.add_argument("--controller", default="lqr",
+                    help="pd | lqr | mpc: ours (sil-host px4-hil); se3: rotorpy's SE3Control from its true "
+                         "state, the peer (no sil-host)")
     ap.add_argument("--target", default="in-process", help="in-process | qemu (the firmware-mavlink image)")
     ap.add_argument("--waypoint", action="append", help="T,N,E,D (NED about the start, m)")
-    ap.add_argument("--scenario", help="circle | helix: its trajectory from --scenario-start s (RMSE reported)")
+    ap.add_argument("--scenario", help="circle | eight | helix: its trajectory from --scenario-start s (RMSE "
+                                       "reported from then, the eight's from the end of its first lap)")
     ap.add_argument("--scenario-start", type=float, default=3.0)
     ap.add_argument("--duration", type=float, default=12.0, help="simulated seconds")
     ap.add_argument("--dt", type=float, default=0.002, help="rotorpy's step, s")
@@ -124,6 +172,9 @@ def main():
                     help="s: the hold window's start (default: the last waypoint's time + 5 s, at most "
                          "1 s before the end)")
     ap.add_argument("--max-rmse", type=float, default=0.15, help="m (scenario tracking, 3-D)")
+    ap.add_argument("--beat", metavar="JSON",
+                    help="another flight's summary (--json): this flight's RMSE over the steady window "
+                         "must not exceed that flight's")
     ap.add_argument("--csv", help="the flight controller's trace")
     ap.add_argument("--ulog", help="the flight as a ULog (sil-host px4-hil --ulog)")
     ap.add_argument("--json", help="write the summary here too")
@@ -188,21 +239,32 @@ def main():
     if a.ulog:
         cmd += ["--ulog", a.ulog]
     np.random.seed(a.seed)
-    fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
-    fc_watch = EndsWithFlight(fc, "sil-host px4-hil", others=[gcs])
-    vehicle = Lockstep(params_for(a.vehicle, a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
+    waypoints = [tuple(float(v) for v in w.split(",")) for w in a.waypoint or []]
+    reference = None
+    if waypoints or a.scenario in ("circle", "eight"):
+        reference = Reference(waypoints=waypoints, kind=a.scenario, start_s=a.scenario_start)
+    peer = a.controller == "se3"
+    if peer:
+        if reference is None or gcs is not None:
+            ap.error("--controller se3 flies --waypoint(s) or --scenario circle|eight")
+        vehicle = Peer(params_for(a.vehicle, "rotorpy"), reference)
+    else:
+        fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+        fc_watch = EndsWithFlight(fc, "sil-host px4-hil", others=[gcs])
+        vehicle = Lockstep(params_for(a.vehicle, a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
     state = dict(vehicle.initial_state)
     wind = None
     if a.wind:
         wn, we, wd = (float(v) for v in a.wind.split(","))
         wind = ConstantWind(we, wn, -wd)  # rotorpy's world frame is ENU
     zero = {"cmd_motor_speeds": np.zeros(4)}
-    track = []
+    track, commands = [], []
     steps = int(round(a.duration / a.dt))
     for k in range(steps):
         if wind is not None:
             state["wind"] = wind.update(k * a.dt, state["x"])
-        state = vehicle.step(state, zero, a.dt)
+        state = vehicle.step(state, k * a.dt, a.dt) if peer else vehicle.step(state, zero, a.dt)
+        commands.append(vehicle.commanded)
         x = np.asarray(state["x"], dtype=float)  # ENU
         track.append([k * a.dt, x[1], x[0], -x[2]])  # t, north, east, down
         if truth_sock is not None and k % 10 == 0:
@@ -212,14 +274,18 @@ def main():
             break
         if gcs is not None and k % 50 == 0 and gcs.poll() is not None:
             break
-    # Hanging up ends the flight controller's session (and its summary).
-    fc_watch.done()
-    vehicle.conn.close()
-    out, _ = fc.communicate(timeout=60)
-    if fc.returncode != 0:
-        print(f"sil-host px4-hil failed ({fc.returncode})", file=sys.stderr)
-        return 1
+    if peer:
+        out = json.dumps({"controller": "se3", "target": "rotorpy (true state)", "steps": len(track)})
+    else:
+        # Hanging up ends the flight controller's session (and its summary).
+        fc_watch.done()
+        vehicle.conn.close()
+        out, _ = fc.communicate(timeout=60)
+        if fc.returncode != 0:
+            print(f"sil-host px4-hil failed ({fc.returncode})", file=sys.stderr)
+            return 1
     res = json.loads(out)
+    res.setdefault("controller", a.controller)
     res["versions"] = versions()
     track = np.array(track)
     if gcs is not None:
@@ -257,16 +323,33 @@ def main():
         res["rotorpy"].update(final_error_m=err, hold_window_s=[hold_from, end_s], hold_worst_m=hold)
     else:
         # Tracking a moving reference: rotorpy's truth against the set-point
-        # the flight controller flew at each of its trace's rows (50 Hz).
-        trace = np.genfromtxt(csv_path, delimiter=",", names=True)
-        rows = trace[(trace["t"] >= a.scenario_start) & np.isfinite(trace["sp_north"])]
-        k = np.clip(np.rint(rows["t"] / a.dt).astype(int), 0, len(track) - 1)
-        sp = np.stack([rows["sp_north"], rows["sp_east"], rows["sp_down"]], axis=1)
+        # the flight controller flew at each of its trace's rows (50 Hz); the
+        # peer's, at each step.
+        # The eight's first lap is its entry: its error counts from the end
+        # of that lap (sil-host's Scenario::tracking_from_s).
+        from_s = a.scenario_start + (6.0 if a.scenario == "eight" else 0.0)
+        if peer:
+            # The peer's reference at each of rotorpy's steps.
+            t_rows = track[:, 0][track[:, 0] >= from_s]
+            sp = np.array([reference.at(t)[0] for t in t_rows])
+        else:
+            trace = np.genfromtxt(csv_path, delimiter=",", names=True)
+            rows = trace[(trace["t"] >= from_s) & np.isfinite(trace["sp_north"])]
+            t_rows = rows["t"]
+            sp = np.stack([rows["sp_north"], rows["sp_east"], rows["sp_down"]], axis=1)
+            if reference is not None and len(t_rows):
+                # The peer's reference is the one ours flew (to float noise).
+                mine = np.array([reference.at(t)[0] for t in t_rows])
+                res["rotorpy"]["reference_mismatch_m"] = float(np.abs(mine - sp).max())
+        k = np.clip(np.rint(t_rows / a.dt).astype(int), 0, len(track) - 1)
         dist = np.linalg.norm(track[k, 1:4] - sp, axis=1)
         err = float(dist[-1]) if len(dist) else float("inf")
         res["rotorpy"].update(
-            window_s=[a.scenario_start, end_s], rmse_m=float(np.sqrt(np.mean(dist**2))) if len(dist) else None,
+            window_s=[from_s, end_s], rmse_m=float(np.sqrt(np.mean(dist**2))) if len(dist) else None,
             worst_m=float(dist.max()) if len(dist) else None, final_error_m=err, rows=int(len(dist)))
+    if reference is not None:
+        q = params_for(a.vehicle, "rotorpy")
+        res["rotorpy"]["windows"] = window_figures(reference, track, np.array(commands), hover_fraction(q), end_s)
     text = json.dumps(res, indent=2)
     print(text)
     if a.json:
@@ -283,7 +366,31 @@ def main():
             record(f"rotorpy_{a.measure}_worst_m", r["worst_m"], "m", src)
         if res.get("max_estimate_error_m") is not None:
             record(f"rotorpy_{a.measure}_estimate_error_max_m", res["max_estimate_error_m"], "m", src)
+        # The peer table's figures (tools/peer_table.py).
+        for name, w in r.get("windows", {}).items():
+            if name == "settling_s":
+                if w is not None:
+                    record(f"rotorpy_{a.measure}_settling_s", w, "s", src)
+                continue
+            for fig in ("rmse_m", "worst_m", "final_m"):
+                record(f"rotorpy_{a.measure}_{name}_{fig}", w[fig], "m", src)
+            record(f"rotorpy_{a.measure}_{name}_effort", w["effort"], "fraction of the maximum rotor speed", src)
     ok = bool(np.all(np.isfinite(track)))
+    if a.beat:
+        with open(a.beat) as f:
+            other = json.load(f)
+        theirs = other["rotorpy"]["windows"]["steady"]["rmse_m"]
+        mine = r["windows"]["steady"]["rmse_m"]
+        beats = mine <= theirs
+        ok = ok and beats
+        w = r["windows"]["steady"]["window_s"]
+        print(f"rotorpy check: {int(beats)} passed, {int(not beats)} failed ({a.controller} "
+              f"{100 * mine:.2f} cm RMSE over {w[0]:g}-{w[1]:.0f} s against {other.get('controller', a.beat)}'s "
+              f"{100 * theirs:.2f} cm on the same vehicle and reference, rotorpy's truth)")
+    mismatch = r.get("reference_mismatch_m", 0.0)
+    if mismatch > 1e-3:
+        ok = False
+        print(f"FAIL: the flight controller's set-points left the reference by {mismatch:.4f} m", file=sys.stderr)
     if a.waypoint:
         ok = ok and r["hold_worst_m"] <= a.max_hold_error
         what = (f"worst {100 * r['hold_worst_m']:.1f} cm from the goal over {r['hold_window_s'][0]:.0f}-"
@@ -292,7 +399,7 @@ def main():
     else:
         ok = ok and r["rmse_m"] is not None and r["rmse_m"] <= a.max_rmse
         what = (f"tracking RMSE {r['rmse_m']:.4f} m (bound {a.max_rmse:.4f} m), worst {r['worst_m']:.3f} m, "
-                f"final {r['final_error_m']:.3f} m from {a.scenario_start:g} s, rotorpy's truth")
+                f"final {r['final_error_m']:.3f} m from {r['window_s'][0]:g} s, rotorpy's truth")
     if not ok:
         print(f"FAIL: {what}; summary {res}", file=sys.stderr)
     print(f"rotorpy check: {int(ok)} passed, {int(not ok)} failed ({what})")
