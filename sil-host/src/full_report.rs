@@ -317,7 +317,7 @@ fn eight_markdown(rows: &[(String, Vec<Outcome>)]) -> String {
             .fold(0.0, f64::max),
         sc.peak_horizontal_acceleration(),
         sc.duration_s,
-        sc.tracking_from_s()
+        sc.tracking_from_s().unwrap_or(0.0)
     );
     for (title, o) in rows {
         let m = |k: usize| &o[k].res.metrics;

@@ -75,7 +75,7 @@ impl Mission {
             Mission::Waypoints(w) => (setpoint_at(w, t), false),
             Mission::Scenario { scenario, from_s } => {
                 let moving = t >= *from_s;
-                let tracking = t >= *from_s + scenario.tracking_from_s();
+                let tracking = t >= *from_s + scenario.tracking_from_s().unwrap_or(0.0);
                 let r = scenario.reference((t - from_s).max(0.0));
                 let mut sp = Setpoint::hold(r.pos.cast(), r.yaw as f32);
                 if moving {

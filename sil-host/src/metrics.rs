@@ -198,10 +198,10 @@ impl MetricsAccumulator {
         }
     }
 
-    /// Also measures the 3-D tracking error from `t_s` on
+    /// Also measures the 3-D tracking error from `t_s` on, if given
     /// ([`FlightMetrics::tracking_rmse_m`]).
-    pub fn tracking_from(mut self, t_s: f64) -> Self {
-        self.track_from_s = t_s;
+    pub fn tracking_from(mut self, t_s: Option<f64>) -> Self {
+        self.track_from_s = t_s.unwrap_or(f64::INFINITY);
         self
     }
 
@@ -247,10 +247,12 @@ impl MetricsAccumulator {
 }
 
 /// All metrics of a stored trace, with `p` the controller's nominal vehicle
-/// (for the hover input and the input box); the same as pushing every sample
-/// into a [`MetricsAccumulator`].
-pub fn flight_metrics(trace: &Trace, p: &VehicleParams<f64>) -> FlightMetrics {
-    let mut acc = MetricsAccumulator::new(p);
+/// (for the hover input and the input box) and the tracking error counted
+/// from `tracking_from_s` (the scenario's
+/// [`tracking_from_s`](crate::scenario::Scenario::tracking_from_s)); the
+/// same as pushing every sample into a [`MetricsAccumulator`].
+pub fn flight_metrics(trace: &Trace, p: &VehicleParams<f64>, tracking_from_s: Option<f64>) -> FlightMetrics {
+    let mut acc = MetricsAccumulator::new(p).tracking_from(tracking_from_s);
     for (((t, a), r), u) in trace
         .t
         .iter()
@@ -344,7 +346,7 @@ mod tests {
             reference: vec![[0.0; 4]; 2],
             u_cmd: vec![[uh[0], 0.0, 0.0, 0.0], [uh[0], 11.268 + 0.5, 0.0, 0.0]],
         };
-        let m = flight_metrics(&tr, &p);
+        let m = flight_metrics(&tr, &p, None);
         assert!((m.max_box_violation - 0.5).abs() < 1e-9);
         let second = ((11.768f64) / 11.268).powi(2);
         assert!((m.u_norm - (second / 2.0).sqrt()).abs() < 1e-9);

@@ -150,7 +150,7 @@ pub fn flight_summary(cfg: &FlightConfig, res: &FlightResult) -> String {
         st(&m.yaw),
         m.final_error_m,
         match (m.tracking_rmse_m, cfg.scenario.tracking_from_s()) {
-            (Some(r), from) if from > 0.0 => format!(" tracking RMSE {r:.3} m from {from} s;"),
+            (Some(r), Some(from)) if from > 0.0 => format!(" tracking RMSE {r:.3} m from {from} s;"),
             _ => String::new(),
         },
         m.u_norm,

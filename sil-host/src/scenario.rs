@@ -120,12 +120,14 @@ impl Scenario {
 
     /// When the tracking error counts, s after the reference starts: the
     /// `eight`'s first lap is its entry (it starts at full speed from a
-    /// hover), so its RMSE is taken from the end of that lap; every other
-    /// kind from its start.
-    pub fn tracking_from_s(&self) -> f64 {
+    /// hover), so its RMSE is taken from the end of that lap; the circle
+    /// and helix from their start; a set-point is a step, not tracked
+    /// (`None`).
+    pub fn tracking_from_s(&self) -> Option<f64> {
         match self.kind {
-            ScenarioKind::Eight => self.period_s,
-            _ => 0.0,
+            ScenarioKind::Eight => Some(self.period_s),
+            ScenarioKind::Circle | ScenarioKind::Helix => Some(0.0),
+            ScenarioKind::Setpoint => None,
         }
     }
 
@@ -289,7 +291,7 @@ mod tests {
         assert!((sc.reference(sc.period_s).pos - start).norm() < 1e-12);
         // Half a lap out: A sin(π/2) north, (A/2) sin π east.
         assert!((sc.reference(1.5).pos - start - Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
-        assert_eq!(sc.tracking_from_s(), 6.0);
+        assert_eq!(sc.tracking_from_s(), Some(6.0));
     }
 
     /// The figures for A = 1 m and a 6 s lap: 1.48 m/s at peak (the

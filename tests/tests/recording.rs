@@ -15,7 +15,10 @@ fn a_streamed_flight_writes_and_measures_what_a_kept_one_does() {
         let cfg = FlightConfig::new(family, AttitudeForm::Quaternion, Scenario::default_for(kind));
         let kept = fly(&cfg).unwrap();
         // The metrics computed online equal the ones of the stored trace.
-        assert_eq!(kept.metrics, flight_metrics(&kept.trace, &cfg.vehicle));
+        assert_eq!(
+            kept.metrics,
+            flight_metrics(&kept.trace, &cfg.vehicle, cfg.scenario.tracking_from_s())
+        );
 
         let (want, got) = (dir.join("kept.csv"), dir.join("streamed.csv"));
         write_csv(&want, &kept.rows, Some(&kept.reference)).unwrap();
