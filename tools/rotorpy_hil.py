@@ -44,7 +44,7 @@ from rotorpy.vehicles.hummingbird_params import quad_params as hummingbird_param
 from rotorpy.controllers.quadrotor_control import SE3Control  # noqa: E402
 from rotorpy.vehicles.multirotor import Multirotor  # noqa: E402
 from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
-from reference import Reference, window_figures  # noqa: E402
+from reference import EIGHT_PERIOD_S, Reference, window_figures  # noqa: E402
 from rotorpy.wind.default_winds import ConstantWind  # noqa: E402
 
 
@@ -106,7 +106,7 @@ class Peer:
     windows. It starts where ours does, on the ground at home facing east
     (rotorpy's yaw 0), and holds that heading."""
 
-    def __init__(self, quad_params, reference):
+    def __init__(self, quad_params, reference, dt):
         # PX4Multirotor's integrator (Radau, rtol 1e-3, atol 1e-6), its first
         # step the step asked for: SE3 from the true state brings the vehicle
         # to rest to 1e-13 m/s, where scipy's first-step guess shrinks to
@@ -115,7 +115,7 @@ class Peer:
         self.vehicle = Multirotor(quad_params, initial_state=PX4Multirotor_initial(quad_params), aero=True,
                                   enable_ground=True,
                                   integrator_kwargs={"method": "Radau", "rtol": 1e-3, "atol": 1e-6, "max_step": 0.01,
-                                                     "first_step": None})
+                                                     "first_step": dt})
         self.initial_state = dict(self.vehicle.initial_state)
         self.controller = SE3Control(quad_params)
         self.reference = reference
@@ -123,7 +123,6 @@ class Peer:
         self.commanded = np.zeros(4)
 
     def step(self, state, t, dt):
-        self.vehicle.integrator_kwargs["first_step"] = dt
         pos, vel, acc, jerk, snap = self.reference.at(t)
         enu = lambda v: np.array([v[1], v[0], -v[2]])  # noqa: E731
         flat = {"x": enu(pos), "x_dot": enu(vel), "x_ddot": enu(acc), "x_dddot": enu(jerk), "x_ddddot": enu(snap),
@@ -254,7 +253,7 @@ def main():
     if peer:
         if reference is None or gcs is not None:
             ap.error("--controller se3 flies --waypoint(s) or --scenario circle|eight")
-        vehicle = Peer(params_for(a.vehicle, "rotorpy"), reference)
+        vehicle = Peer(params_for(a.vehicle, "rotorpy"), reference, a.dt)
     else:
         fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
         fc_watch = EndsWithFlight(fc, "sil-host px4-hil", others=[gcs])
@@ -334,7 +333,7 @@ def main():
         # peer's, at each step.
         # The eight's first lap is its entry: its error counts from the end
         # of that lap (sil-host's Scenario::tracking_from_s).
-        from_s = a.scenario_start + (6.0 if a.scenario == "eight" else 0.0)
+        from_s = a.scenario_start + (EIGHT_PERIOD_S if a.scenario == "eight" else 0.0)
         if peer:
             # The peer's reference at each of rotorpy's steps.
             t_rows = track[:, 0][track[:, 0] >= from_s]

@@ -506,8 +506,6 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     // Simulated time of the last HIL_SENSOR (the log's clock), the last
     // attitude estimate's heading, and the arming state last logged.
     let (mut t_now, mut est_yaw, mut logged_armed) = (0.0f64, 0.0f32, None::<bool>);
-    // The vehicle's heading estimate when it armed, rad.
-    let mut takeoff_yaw = None::<f32>;
     let mut buf = [0u8; 4096];
     let mut dgram = [0u8; 2048];
     let mut out = Vec::new();
@@ -572,6 +570,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             // until armed the heading is masked (the vehicle keeps its own),
             // then it is the vehicle's estimate at arming plus the mission's.
             let mut tracking = false;
+            let takeoff_yaw = res.takeoff_heading_rad.map(|h| h as f32);
             if let Some(mission) = &cfg.mission {
                 let (mut s, track) = mission.setpoint_at(t);
                 tracking = track;
@@ -658,7 +657,6 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 }
                 if armed && res.armed_at_s.is_none() {
                     res.armed_at_s = Some(t);
-                    takeoff_yaw = Some(est_yaw);
                     res.takeoff_heading_rad = Some(f64::from(est_yaw));
                 }
                 if let Some(log) = ulog.as_mut() {
