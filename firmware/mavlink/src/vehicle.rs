@@ -1141,13 +1141,8 @@ impl MavVehicle {
         let sp = setpoint_from_target(m, held_yaw).filter(|sp| sp.is_valid());
         match sp {
             Some(mut sp) => {
-                let acc_given = !m.type_mask.intersects(
-                    PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
-                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
-                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE,
-                );
                 let last = self.offboard_acc.take();
-                if acc_given {
+                if !acc_masked(m.type_mask) {
                     sp.jerk_ned_mps3 = streamed_jerk(last, sp.acc_ned_mps2, m.time_boot_ms);
                     self.offboard_acc = Some((sp.acc_ned_mps2, m.time_boot_ms));
                 }
@@ -1509,6 +1504,17 @@ pub fn streamed_jerk(last: Option<(Vector3<f32>, u32)>, acc: Vector3<f32>, t_ms:
     }
 }
 
+/// Whether a `SET_POSITION_TARGET_LOCAL_NED` masks its acceleration (any
+/// axis).
+fn acc_masked(mask: PositionTargetTypemask) -> bool {
+    use PositionTargetTypemask as T;
+    mask.intersects(
+        T::POSITION_TARGET_TYPEMASK_AX_IGNORE
+            | T::POSITION_TARGET_TYPEMASK_AY_IGNORE
+            | T::POSITION_TARGET_TYPEMASK_AZ_IGNORE,
+    )
+}
+
 /// `SET_POSITION_TARGET_LOCAL_NED` as a set-point: `None` unless the frame
 /// is `MAV_FRAME_LOCAL_NED` and the position is given. A masked yaw keeps
 /// `yaw_rad`. The values are not checked here:
@@ -1530,11 +1536,6 @@ pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32
             | T::POSITION_TARGET_TYPEMASK_VY_IGNORE
             | T::POSITION_TARGET_TYPEMASK_VZ_IGNORE,
     );
-    let acc_masked = mask.intersects(
-        T::POSITION_TARGET_TYPEMASK_AX_IGNORE
-            | T::POSITION_TARGET_TYPEMASK_AY_IGNORE
-            | T::POSITION_TARGET_TYPEMASK_AZ_IGNORE,
-    );
     let yaw = if mask.contains(T::POSITION_TARGET_TYPEMASK_YAW_IGNORE) {
         yaw_rad
     } else {
@@ -1544,7 +1545,7 @@ pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32
     if !vel_masked {
         sp.vel_ned_mps = Vector3::new(m.vx, m.vy, m.vz);
     }
-    if !acc_masked {
+    if !acc_masked(mask) {
         sp.acc_ned_mps2 = Vector3::new(m.afx, m.afy, m.afz);
     }
     if !mask.contains(T::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE) {
