@@ -411,8 +411,9 @@ fn decks_are_read_only_and_absent() {
 /// (`CrtpVehicle::handle`) is answered at once with the same value.
 #[test]
 fn a_redesigning_write_is_answered_once_the_controllers_side_has_designed() {
-    use crate::vehicle::{fly_step, run_work, ControllerWork};
+    use crate::vehicle::{fly_step, pass_step, run_work, ControllerWork};
     use fc_loop::Exclusive;
+    use nalgebra::Vector4;
     let w_pos = (0..PARAM_COUNT)
         .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
         .unwrap();
@@ -451,6 +452,13 @@ fn a_redesigning_write_is_answered_once_the_controllers_side_has_designed() {
     };
     let step = core.imu_begin(3_001_000, Some(&imu), &[], &clock);
     fly_step(&mut Exclusive(&mut *core), ctrl, step, &clock);
+    // An image lends the controller to the design (at the link's priority):
+    // the controller's task passes its steps meanwhile, motors off.
+    let step = core.imu_begin(3_002_000, Some(&imu), &[], &clock);
+    assert!(step.job.is_some(), "a step the controller would fly");
+    let u = pass_step(&mut Exclusive(&mut *core), step, &clock);
+    assert_eq!(u, Vector4::zeros(), "nothing flown without a controller");
+    assert_eq!(core.motors(), [0.0; 4]);
     // The controller's side designs; the answer is queued for the link.
     let (r, answer) = run_work(&mut Exclusive(&mut *core), ctrl, work);
     assert!(r.is_ok() && answer.is_none(), "a CRTP write is answered over CRTP");
@@ -796,4 +804,13 @@ fn the_barometer_is_fused_as_its_change_from_the_first_reading() {
     assert!((down(&v) + 0.2).abs() < 0.1, "{}", down(&v));
     assert!(!v.baro(6_200_000, f32::NAN));
     assert!(!v.baro(6_300_000, 50_000.0), "50 km is not a measurement");
+}
+
+/// The supervisor's tumble threshold, held as a cosine, is the cosine of
+/// its angle (60°).
+#[test]
+fn the_tumble_cosine_is_the_tumble_angles() {
+    use crate::vehicle::{COS_TUMBLE_TILT, TUMBLE_TILT_RAD};
+    let exact = f64::from(TUMBLE_TILT_RAD).cos();
+    assert!((f64::from(COS_TUMBLE_TILT) - exact).abs() < 1e-7, "{exact}");
 }

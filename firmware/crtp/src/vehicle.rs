@@ -70,6 +70,11 @@ pub const SETPOINT_LEVEL_MS: u64 = 500;
 pub const SETPOINT_STOP_MS: u64 = 2000;
 /// Tilt beyond which an armed vehicle is tumbled: motors off, rad (60°).
 pub const TUMBLE_TILT_RAD: f32 = core::f32::consts::FRAC_PI_3;
+/// cos([`TUMBLE_TILT_RAD`]): the supervisor compares the body z axis' down
+/// component with it every step, so it is not computed there (libm's
+/// `cosf` works in f64, which the Cortex-M4 has no unit for: ≈ 1 000
+/// instructions a step).
+pub const COS_TUMBLE_TILT: f32 = 0.5;
 /// A landing has landed within this of its goal height, m.
 pub const LANDED_M: f32 = 0.05;
 /// 1σ of an external position (the Crazyflie's `locSrv.extPosStdDev`), m.
@@ -429,6 +434,21 @@ where
     v.lock(|v| v.borrow_mut().imu_end(&step, answer.u))
 }
 
+/// Answers `step` without a controller: the controller's task's step while
+/// its controller is lent to a re-design ([`ControllerWork::designs`]),
+/// which runs only disarmed with no mode flown (a take-off is refused while
+/// one is under way). The loop records the step as one the controller did
+/// not fly; the motors stay off. Returns the inputs applied (zero).
+pub fn pass_step<M: Mutex, C: CycleClock>(v: &mut M, step: ImuStep, clock: &C) -> Vector4<f32>
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    if let Some(Job::Step(s)) = step.job {
+        let _ = LoopOf(v).lock(|l| l.finish(&s, None, clock));
+    }
+    v.lock(|v| v.borrow_mut().imu_end(&step, None))
+}
+
 /// Runs `work` ([`CrtpCore::take_work`]) on the controller `ctrl`, the
 /// design with the vehicle `v` unlocked; returns its result and, for the
 /// simulator's write, its answer ([`CrtpCore::work_done`]).
@@ -588,7 +608,6 @@ pub struct CrtpCore {
     seq: u32,
     /// Inputs of the last step `[U1 N, U2 N, U3 N, U4 N·m]` (zero: motors off).
     u: Vector4<f32>,
-    motors: [f32; 4],
     /// A position source with heading has been seen (pose, or the host's).
     heading_seen: bool,
     /// The battery voltage the radio chip last reported, V; `None` until
@@ -627,7 +646,6 @@ impl CrtpCore {
             now_us: 0,
             seq: 0,
             u: Vector4::zeros(),
-            motors: [0.0; 4],
             heading_seen: false,
             vbat_v: None,
             pm_state: 0,
@@ -787,9 +805,11 @@ impl CrtpCore {
         self.u
     }
 
-    /// The motor commands of the last step (the mixer's unit; zero off).
+    /// The motor commands of the last step (the mixer's unit; zero off),
+    /// mixed when asked (the log, a test), not in the step.
     pub fn motors(&self) -> [f32; 4] {
-        self.motors
+        // Off, the step's inputs are zero: so are their commands.
+        self.mixer.as_ref().map_or([0.0; 4], |m| m.commands(&self.u).commands)
     }
 
     /// The mixer of the parameters in force (`None` until started): the
@@ -878,10 +898,6 @@ impl CrtpCore {
             Some(u) if on => Vector4::from(u),
             _ => Vector4::zeros(),
         };
-        self.motors = match self.mixer.map(|m| m.commands(&self.u)) {
-            Some(c) if on => c.commands,
-            _ => [0.0; 4],
-        };
         self.u
     }
 
@@ -945,7 +961,7 @@ impl CrtpCore {
         let q = est.att;
         // The body z axis' down component: cos(tilt).
         let cos_tilt = 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]);
-        if self.flying() && cos_tilt < libm::cosf(TUMBLE_TILT_RAD) {
+        if self.flying() && cos_tilt < COS_TUMBLE_TILT {
             self.tumbled = true;
             self.mode = Mode::Idle;
             self.say(format_args!("tumbled: motors off"));
@@ -1058,8 +1074,9 @@ impl CrtpCore {
         v[12] = (self.u[0] / u1_max).clamp(0.0, 1.0) * 65535.0;
         v[16] = self.battery_v();
         v[17] = f32::from(self.pm_state);
+        let motors = self.motors();
         for i in 0..4 {
-            v[18 + i] = self.motors[i].clamp(0.0, 1.0) * 65535.0;
+            v[18 + i] = motors[i].clamp(0.0, 1.0) * 65535.0;
         }
         v[22] = f32::from(u8::from(self.can_fly()));
         v[23] = f32::from(u8::from(self.armed));
