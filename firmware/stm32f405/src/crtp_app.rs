@@ -10,16 +10,19 @@
 //! | 4 | `radio_bytes` | USART6 receive | the nRF51's bytes into their queue (1 Mbaud: a byte every 10 µs), the link pended |
 //! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame), or pended by the board's IMU | decodes the simulator's frames, takes the board's sample; a sample steps the estimator ([`CrtpCore::imu_begin`]) and goes to the controller |
 //! | 3 | `gyro_ready`, `imu_bus_event`, `imu_bus_error` | EXTI15_10, I2C3_EV, I2C3_ER | the board's own IMU ([`ImuBus`]: the Crazyflie's BMI088; none in QEMU): data-ready starts the reads, the bus's interrupts advance them |
-//! | 2 | `controller` | CAN2_RX0 (pended) | owns the controller: flies each step ([`fly_step`]), drives the outputs, answers the simulator; runs the designs a packet or the simulator asked for ([`run_work`]) |
-//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle, answers and log blocks queued for the radio; the simulator's queued answers; the log |
+//! | 2 | `controller` | CAN2_RX0 (pended) | flies each step on the controller ([`fly_step`]), drives the outputs, answers the simulator; a take-off's reset ([`run_work`]) |
+//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle, answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
 //!
 //! The vehicle's shared part ([`CrtpCore`]) is locked for an estimator
 //! step, a packet, a step's result; never for a controller step, a design
-//! or a USART write. So a take-off's design or a re-designing parameter
-//! write (tens of milliseconds) delays only the controller's task, not a
-//! sample. The image measures it as `firmware` does
-//! (`fc_stm32f405::timing`): for every step, data-ready → estimate and
-//! data-ready → outputs driven, against one 1 kHz period.
+//! or a USART write. A re-designing parameter write (tens of milliseconds,
+//! allowed only disarmed, and no take-off while it runs) borrows the
+//! controller for the link's task, which designs it in place: the
+//! controller's task meanwhile answers every step on time with the motors
+//! off ([`pass_step`]), so a design delays neither a sample nor a step.
+//! The image measures it as `firmware` does (`fc_stm32f405::timing`): for
+//! every step, data-ready → estimate and data-ready → outputs driven,
+//! against one 1 kHz period.
 
 use fc_stm32f405::crtp_image::{ImuBus, Outputs, Watchdog};
 
@@ -30,7 +33,7 @@ mod app {
     use fc_core::control::AnyController;
     use fc_core::estimate::{Fix, ImuSample};
     use fc_crtp::syslink::Syslink;
-    use fc_crtp::vehicle::{fly_step, run_work, ControllerWork, CrtpCore, ImuStep};
+    use fc_crtp::vehicle::{fly_step, pass_step, run_work, ControllerWork, CrtpCore, ImuStep};
     use fc_loop::params::Refusal;
     use fc_loop::{fix_from_wire, Mutex};
     use fc_proto::{FrameDecoder, FromFc, ToFc};
@@ -42,10 +45,9 @@ mod app {
     use nalgebra::Vector3;
     use stm32f4::stm32f405::Interrupt;
 
-    /// Work waiting for the controller's task from the sample's: steps,
-    /// and the simulator's re-designing parameter writes between them.
+    /// Work waiting for the controller's task from the sample's: steps.
     const TASKS: usize = 8;
-    /// Work from the link's task (one design at a time: 2 is room enough).
+    /// Work from the link's task (a take-off's reset: 2 is room enough).
     const WORKS: usize = 2;
     /// The sample task's answers to the simulator, waiting for the link.
     const ANSWERS: usize = 8;
@@ -60,7 +62,7 @@ mod app {
             seq: Option<u32>,
             entry: u64,
         },
-        /// A design ([`CrtpCore::take_work`]).
+        /// Controller work that designs nothing ([`CrtpCore::take_work`]).
         Work(ControllerWork),
     }
 
@@ -76,11 +78,13 @@ mod app {
         sim: SimCounters,
         /// The board's own IMU (none in QEMU).
         imu: crate::ImuBus,
+        /// The controller: the controller's task's, lent to the link's
+        /// task for a re-design (`None` meanwhile).
+        ctrl: Option<&'static mut AnyController<f32>>,
     }
 
     #[local]
     struct Local {
-        ctrl: &'static mut AnyController<f32>,
         outputs: crate::BoardOutputs,
         decoder: FrameDecoder,
         fixes: heapless::Vec<Fix, FIXES>,
@@ -135,9 +139,9 @@ mod app {
                 timing: Timing::new(fc_stm32f405::timing::DEADLINE_TICKS),
                 sim: SimCounters::default(),
                 imu,
+                ctrl: Some(ctrl),
             },
             Local {
-                ctrl,
                 outputs,
                 decoder: FrameDecoder::new(),
                 fixes: heapless::Vec::new(),
@@ -173,7 +177,7 @@ mod app {
     }
 
     /// The simulator's frames: a parameter write (answered, or its design
-    /// handed to the controller), a fix (kept for the next sample), a
+    /// left to the link's task), a fix (kept for the next sample), a
     /// sample (data-ready: the estimator's step, then the controller's).
     #[task(binds = USART1, priority = 3, shared = [v, timing, sim, imu], local = [decoder, fixes, tasks_in, answers_in, sample_clock])]
     fn data_ready(cx: data_ready::Context) {
@@ -211,18 +215,10 @@ mod app {
                 };
                 match m {
                     ToFc::ParamSet { index, value } => {
-                        let (mut answer, work) = st.v.lock(|v| match v.sim_param(index, value) {
-                            Some(a) => (Some(a), None),
-                            None => (None, v.take_work()),
-                        });
-                        if let Some(work) = work {
-                            if st.tasks_in.enqueue(Task::Work(work)).is_err() {
-                                // No room for the design: refused as busy.
-                                answer = st.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
-                            }
-                            rtic::pend(Interrupt::CAN2_RX0);
-                        }
-                        if let Some(a) = answer {
+                        // A write that re-designs stays queued in the
+                        // vehicle: the link's task (pended as this one
+                        // ends) takes it, designs and answers.
+                        if let Some(a) = st.v.lock(|v| v.sim_param(index, value)) {
                             if answers_in.enqueue(a).is_err() {
                                 st.timing.lock(|t| t.answers_dropped(1));
                             }
@@ -318,21 +314,25 @@ mod app {
         }
     }
 
-    /// The controller: the link's designs first, then the sample task's
-    /// work in order; each step flown, its outputs driven and the
-    /// simulator answered.
-    #[task(binds = CAN2_RX0, priority = 2, shared = [v, sim_tx, timing], local = [ctrl, outputs, tasks_out, works_out, control_clock])]
+    /// The controller: the link's work first (a take-off's reset), then
+    /// the sample task's steps in order; each step flown on the controller
+    /// (passed, motors off, while the link's task designs it), its outputs
+    /// driven and the simulator answered.
+    #[task(binds = CAN2_RX0, priority = 2, shared = [v, sim_tx, timing, ctrl], local = [outputs, tasks_out, works_out, control_clock])]
     fn controller(cx: controller::Context) {
         let controller::LocalResources {
-            ctrl,
             outputs,
             tasks_out,
             works_out,
             control_clock: clock,
             ..
         } = cx.local;
-        let (mut v, mut sim_tx, mut timing) = (cx.shared.v, cx.shared.sim_tx, cx.shared.timing);
-        loop {
+        let (mut v, mut sim_tx, mut timing, mut ctrl) =
+            (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.ctrl);
+        // The link's task (below this one) cannot run before this task
+        // ends: the controller is this task's until then, or the link's
+        // for its whole design.
+        ctrl.lock(|ctrl| loop {
             let task = match works_out.dequeue() {
                 Some(w) => Task::Work(w),
                 None => match tasks_out.dequeue() {
@@ -342,14 +342,12 @@ mod app {
             };
             match task {
                 Task::Work(work) => {
-                    let designs = work.designs();
-                    if designs {
-                        crate::WATCHDOG.designing(true);
-                    }
-                    let (_, answer) = run_work(&mut v, ctrl, work);
-                    if designs {
-                        crate::WATCHDOG.designing(false);
-                    }
+                    let answer = match ctrl.as_deref_mut() {
+                        Some(c) => run_work(&mut v, c, work).1,
+                        // Not reached (a take-off is refused while a
+                        // design runs); refused if it were.
+                        None => v.lock(|v| v.work_done(&work, Err(Refusal::Busy))),
+                    };
                     if let Some(a) = answer {
                         if sim_tx.lock(|u| send(u, &a)).is_err() {
                             timing.lock(|t| t.tx_timeout());
@@ -357,7 +355,11 @@ mod app {
                     }
                 }
                 Task::Step { step, seq, entry } => {
-                    let u = fly_step(&mut v, ctrl, step, clock);
+                    let flown = ctrl.is_some();
+                    let u = match ctrl.as_deref_mut() {
+                        Some(c) => fly_step(&mut v, c, step, clock),
+                        None => pass_step(&mut v, step, clock),
+                    };
                     v.lock(|v| outputs.drive(v, &u));
                     // The step is flown when its outputs are driven.
                     let done = ticks_now();
@@ -374,23 +376,34 @@ mod app {
                         }
                         None => Ok(()),
                     };
-                    // The log blocks due, sampled at this step.
-                    v.lock(|v| v.sample_logs());
+                    // The log blocks due, sampled at this step; what the
+                    // outputs show besides the motors.
+                    let (armed, nav, battery_v) = v.lock(|v| {
+                        v.sample_logs();
+                        (v.armed(), v.core().navigator().mode(), v.battery_v())
+                    });
+                    outputs.report(armed, nav, battery_v);
                     timing.lock(|t| {
-                        t.flown(entry, done);
+                        if flown {
+                            t.flown(entry, done);
+                        } else {
+                            t.passed(entry, done);
+                        }
                         if sent.is_err() {
                             t.tx_timeout();
                         }
                     });
                 }
             }
-        }
+        });
         rtic::pend(Interrupt::CAN2_RX1);
     }
 
-    /// The link: the radio's packets, the log blocks and answers that fell
-    /// due, the simulator's queued answers, then what changed in the log.
-    #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim], local = [radio, syslink, works_in, answers_out, last, logged, tx_errors])]
+    /// The link: the simulator's re-designs, the radio's packets (a
+    /// re-design one asks for run at once), the log blocks and answers
+    /// that fell due, the simulator's queued answers, then what changed in
+    /// the log.
+    #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, tx_errors])]
     fn link(cx: link::Context) {
         let link::LocalResources {
             radio,
@@ -403,8 +416,15 @@ mod app {
             ..
         } = cx.local;
         let (v, mut sim_tx, mut timing, mut sim) = (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.sim);
-        let mut vehicle = Handing { v, works: works_in };
+        let mut vehicle = Handing {
+            v,
+            works: works_in,
+            ctrl: cx.shared.ctrl,
+            answer: None,
+        };
         let mut ok = true;
+        // The simulator's re-designing write, if one waits.
+        vehicle.lock(|_| ());
         let mut buf = [0u8; 64];
         loop {
             let n = read_queued(Port::Usart6, &mut buf);
@@ -414,7 +434,7 @@ mod app {
             ok &= syslink.receive(&buf[..n], &mut vehicle, radio).is_ok();
         }
         syslink.poll(&mut vehicle);
-        while let Some(m) = answers_out.dequeue() {
+        while let Some(m) = answers_out.dequeue().or_else(|| vehicle.answer.take()) {
             ok &= sim_tx.lock(|u| send(u, &m)).is_ok();
         }
         if !ok {
@@ -429,25 +449,66 @@ mod app {
     }
 
     /// The vehicle as the link's task locks it: the controller work a
-    /// packet asked for goes to the controller's task as the lock ends.
-    struct Handing<'a, M> {
+    /// packet asked for runs as the lock ends, a re-design here
+    /// ([`Handing::design`]), anything else in the controller's task.
+    struct Handing<'a, M, C> {
         v: M,
         works: &'a mut Producer<'static, ControllerWork>,
+        ctrl: C,
+        /// The simulator's answer to its re-designing write, once designed.
+        answer: Option<FromFc>,
     }
 
-    impl<M: Mutex<T = &'static mut CrtpCore>> Mutex for Handing<'_, M> {
+    impl<M, C> Handing<'_, M, C>
+    where
+        M: Mutex<T = &'static mut CrtpCore>,
+        C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
+    {
+        /// Runs the re-design `work` on the controller, borrowed from the
+        /// controller's task for it (which passes its steps meanwhile, the
+        /// vehicle disarmed); returns the simulator's answer, if it asked.
+        fn design(&mut self, work: ControllerWork) -> Option<FromFc> {
+            let Some(c) = self.ctrl.lock(|c| c.take()) else {
+                // Not reached (the controller's task gives it back before
+                // it ends); refused if it were.
+                return self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+            };
+            crate::WATCHDOG.designing(true);
+            let (_, answer) = run_work(&mut self.v, c, work);
+            crate::WATCHDOG.designing(false);
+            self.ctrl.lock(|slot| *slot = Some(c));
+            answer
+        }
+    }
+
+    impl<M, C> Mutex for Handing<'_, M, C>
+    where
+        M: Mutex<T = &'static mut CrtpCore>,
+        C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
+    {
         type T = CrtpCore;
         fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpCore) -> R) -> R {
             let (r, work) = self.v.lock(|v| {
                 let r = f(v);
                 (r, v.take_work())
             });
-            if let Some(work) = work {
-                if self.works.enqueue(work).is_err() {
-                    // Not reached (one design at a time); refused if it were.
-                    self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+            match work {
+                // A packet's design is answered over CRTP (`work_done`),
+                // the simulator's by a message for it.
+                Some(work) if work.designs() => {
+                    if let Some(a) = self.design(work) {
+                        self.answer = Some(a);
+                    }
                 }
-                rtic::pend(Interrupt::CAN2_RX0);
+                Some(work) => {
+                    if self.works.enqueue(work).is_err() {
+                        // Not reached (one piece of work at a time);
+                        // refused if it were.
+                        self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+                    }
+                    rtic::pend(Interrupt::CAN2_RX0);
+                }
+                None => {}
             }
             r
         }

@@ -43,6 +43,11 @@ pub trait Outputs {
     /// Applies the inputs `u` `[U1 N, U2 N, U3 N, U4 N·m]` of a step of
     /// the vehicle `v` (zero: motors off).
     fn drive(&mut self, v: &CrtpCore, u: &Vector4<f32>);
+    /// After the step is answered, off its deadline and with the vehicle
+    /// unlocked: what the outputs show besides the motors (LEDs) and their
+    /// log lines, for a vehicle `armed` whose navigator is in `nav` on a
+    /// battery at `battery_v` V.
+    fn report(&mut self, armed: bool, nav: fc_loop::nav::NavMode, battery_v: f32);
 }
 
 /// A board's watchdog, as the image's tasks report to it (each method is

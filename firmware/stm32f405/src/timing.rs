@@ -41,6 +41,9 @@ pub struct StepTiming {
     pub answers_dropped: u32,
     /// Frames the transmitter gave up on.
     pub tx_timeouts: u32,
+    /// Steps answered with the motors off while the controller was lent to
+    /// a re-design (disarmed; counted in `steps` too).
+    pub passed: u32,
 }
 
 /// The tasks' shared record.
@@ -64,6 +67,7 @@ impl Timing {
                 jobs_dropped: 0,
                 answers_dropped: 0,
                 tx_timeouts: 0,
+                passed: 0,
             },
         }
     }
@@ -87,6 +91,13 @@ impl Timing {
         if took > self.deadline_ticks {
             t.missed = t.missed.wrapping_add(1);
         }
+    }
+
+    /// A step whose sample arrived at `entry` was answered at `done` with
+    /// the motors off, its controller lent to a re-design.
+    pub fn passed(&mut self, entry: u64, done: u64) {
+        self.flown(entry, done);
+        self.now.passed = self.now.passed.wrapping_add(1);
     }
 
     /// A job found the controller's queue full: its step is missed.
@@ -130,7 +141,7 @@ impl StepTiming {
             return;
         }
         defmt::info!(
-            "timing: {=u32} steps, worst data-ready->estimate {=u64} instructions, worst data-ready->answer {=u64} instructions, deadline {=u64}: {=u32} missed ({=u32} jobs, {=u32} answers dropped, {=u32} tx timeouts); {=u32} IMU deadlines missed",
+            "timing: {=u32} steps, worst data-ready->estimate {=u64} instructions, worst data-ready->answer {=u64} instructions, deadline {=u64}: {=u32} missed ({=u32} jobs, {=u32} answers dropped, {=u32} tx timeouts); {=u32} IMU deadlines missed; {=u32} steps passed during a design",
             self.steps,
             instructions(self.worst_estimate_ticks),
             instructions(self.worst_answer_ticks),
@@ -139,7 +150,8 @@ impl StepTiming {
             self.jobs_dropped,
             self.answers_dropped,
             self.tx_timeouts,
-            self.imu_missed
+            self.imu_missed,
+            self.passed
         );
         *logged = *self;
     }
@@ -178,5 +190,12 @@ mod tests {
         t.estimated(2000, 2101);
         assert_eq!(t.snapshot().imu_missed, 1, "an estimate past the deadline");
         assert!(t.snapshot().due(&s));
+        t.passed(3000, 3050);
+        let p = t.snapshot();
+        assert_eq!(
+            (p.steps, p.passed, p.missed),
+            (3, 1, 2),
+            "a passed step is a step, in time"
+        );
     }
 }

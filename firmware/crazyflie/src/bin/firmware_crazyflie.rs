@@ -72,6 +72,8 @@ mod target {
         last_lit: Lit,
         saturated: bool,
         saturations: u32,
+        /// The last step's motor outputs (for [`Outputs::report`]).
+        out: MotorOutput,
         armed_steps: u32,
         steps: u32,
     }
@@ -101,6 +103,7 @@ mod target {
                 last_lit,
                 saturated: false,
                 saturations: 0,
+                out: MotorOutput::OFF,
                 armed_steps: 0,
                 steps: 0,
             }
@@ -116,9 +119,14 @@ mod target {
                 _ => MotorOutput::OFF,
             };
             motors::set(self.tim2, self.tim4, &out);
+            self.out = out;
+        }
+
+        fn report(&mut self, armed: bool, nav: NavMode, battery_v: f32) {
+            let out = self.out;
             // The LEDs, on the steps' clock (1 kHz: `steps` is ms).
             self.steps = self.steps.wrapping_add(1);
-            let shown = match (v.armed(), v.core().navigator().mode()) {
+            let shown = match (armed, nav) {
                 (true, NavMode::Failsafe) => Indication::Failsafe,
                 (true, _) => Indication::Armed,
                 (false, NavMode::Aligning) => Indication::Aligning,
@@ -131,9 +139,9 @@ mod target {
                 let _ = self.leds.show(lit);
             }
             // Once a second of armed flight (at 1 kHz), what the motors get.
-            self.armed_steps = if v.armed() { self.armed_steps.wrapping_add(1) } else { 0 };
+            self.armed_steps = if armed { self.armed_steps.wrapping_add(1) } else { 0 };
             if self.armed_steps % 1000 == 500 {
-                defmt::info!("motors: compare {} at {=f32} V", out.compare, v.battery_v());
+                defmt::info!("motors: compare {} at {=f32} V", out.compare, battery_v);
             }
             if out.saturated != self.saturated {
                 self.saturated = out.saturated;

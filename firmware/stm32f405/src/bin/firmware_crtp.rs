@@ -56,6 +56,9 @@ impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
             }
             _ => self.pwm.disarm(),
         }
+    }
+
+    fn report(&mut self, _: bool, _: fc_loop::nav::NavMode, _: f32) {
         // What TIM3 holds: logged when the motors start or stop, and once a
         // second (at 1 kHz) while they run.
         let (reload, compare) = self.pwm.registers();
