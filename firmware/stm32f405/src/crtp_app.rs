@@ -45,25 +45,23 @@ mod app {
     use nalgebra::Vector3;
     use stm32f4::stm32f405::Interrupt;
 
-    /// Work waiting for the controller's task from the sample's: steps.
+    /// Steps waiting for the controller's task from the sample's.
     const TASKS: usize = 8;
     /// Work from the link's task (a take-off's reset: 2 is room enough).
     const WORKS: usize = 2;
     /// The sample task's answers to the simulator, waiting for the link.
     const ANSWERS: usize = 8;
 
-    /// Work for the controller's task, in the order the simulator sent it.
-    pub enum Task {
-        /// A sample's step: its controller half, the simulator's sequence
-        /// number (`None`: the board's own sample, not answered), and its
-        /// data-ready time (SysTick ticks).
-        Step {
-            step: ImuStep,
-            seq: Option<u32>,
-            entry: u64,
-        },
-        /// Controller work that designs nothing ([`CrtpCore::take_work`]).
-        Work(ControllerWork),
+    /// A sample's step for the controller's task, in the order the
+    /// samples came.
+    pub struct Task {
+        /// The sample's step: its controller half.
+        step: ImuStep,
+        /// The simulator's sequence number (`None`: the board's own
+        /// sample, not answered).
+        seq: Option<u32>,
+        /// Its data-ready time (SysTick ticks).
+        entry: u64,
     }
 
     #[shared]
@@ -280,7 +278,7 @@ mod app {
             let done = ticks_now();
             crate::WATCHDOG.imu_step();
             self.timing.lock(|t| t.estimated(entry, done));
-            if self.tasks_in.enqueue(Task::Step { step, seq, entry }).is_err() {
+            if self.tasks_in.enqueue(Task { step, seq, entry }).is_err() {
                 self.timing.lock(|t| t.job_dropped());
             }
             rtic::pend(Interrupt::CAN2_RX0);
@@ -333,68 +331,62 @@ mod app {
         // ends: the controller is this task's until then, or the link's
         // for its whole design.
         ctrl.lock(|ctrl| loop {
-            let task = match works_out.dequeue() {
-                Some(w) => Task::Work(w),
-                None => match tasks_out.dequeue() {
-                    Some(t) => t,
-                    None => break,
-                },
-            };
-            match task {
-                Task::Work(work) => {
-                    let answer = match ctrl.as_deref_mut() {
-                        Some(c) => run_work(&mut v, c, work).1,
-                        // Not reached (a take-off is refused while a
-                        // design runs); refused if it were.
-                        None => v.lock(|v| v.work_done(&work, Err(Refusal::Busy))),
-                    };
-                    if let Some(a) = answer {
-                        if sim_tx.lock(|u| send(u, &a)).is_err() {
-                            timing.lock(|t| t.tx_timeout());
-                        }
+            // The link's work (a take-off's reset) before the next step.
+            if let Some(work) = works_out.dequeue() {
+                let answer = match ctrl.as_deref_mut() {
+                    Some(c) => run_work(&mut v, c, work).1,
+                    // Not reached (a take-off is refused while a
+                    // design runs); refused if it were.
+                    None => v.lock(|v| v.work_done(&work, Err(Refusal::Busy))),
+                };
+                if let Some(a) = answer {
+                    if sim_tx.lock(|u| send(u, &a)).is_err() {
+                        timing.lock(|t| t.tx_timeout());
                     }
                 }
-                Task::Step { step, seq, entry } => {
-                    let flown = ctrl.is_some();
-                    let u = match ctrl.as_deref_mut() {
-                        Some(c) => fly_step(&mut v, c, step, clock),
-                        None => pass_step(&mut v, step, clock),
-                    };
-                    v.lock(|v| outputs.drive(v, &u));
-                    // The step is flown when its outputs are driven.
-                    let done = ticks_now();
-                    crate::WATCHDOG.controller_step();
-                    // The simulator's sample is answered; the board's own is not.
-                    let sent = match seq {
-                        Some(seq) => {
-                            let answer = FromFc::Actuator {
-                                seq,
-                                u: [u[0], u[1], u[2], u[3]],
-                                failsafe: false,
-                            };
-                            sim_tx.lock(|tx| send(tx, &answer))
-                        }
-                        None => Ok(()),
-                    };
-                    // The log blocks due, sampled at this step; what the
-                    // outputs show besides the motors.
-                    let (armed, nav, battery_v) = v.lock(|v| {
-                        v.sample_logs();
-                        (v.armed(), v.core().navigator().mode(), v.battery_v())
-                    });
-                    outputs.report(armed, nav, battery_v);
-                    timing.lock(|t| {
-                        if flown {
-                            t.flown(entry, done);
-                        } else {
-                            t.passed(entry, done);
-                        }
-                        if sent.is_err() {
-                            t.tx_timeout();
-                        }
-                    });
-                }
+                continue;
             }
+            let Some(Task { step, seq, entry }) = tasks_out.dequeue() else {
+                break;
+            };
+            let flown = ctrl.is_some();
+            let u = match ctrl.as_deref_mut() {
+                Some(c) => fly_step(&mut v, c, step, clock),
+                None => pass_step(&mut v, step, clock),
+            };
+            v.lock(|v| outputs.drive(v, &u));
+            // The step is flown when its outputs are driven.
+            let done = ticks_now();
+            crate::WATCHDOG.controller_step();
+            // The simulator's sample is answered; the board's own is not.
+            let sent = match seq {
+                Some(seq) => {
+                    let answer = FromFc::Actuator {
+                        seq,
+                        u: [u[0], u[1], u[2], u[3]],
+                        failsafe: false,
+                    };
+                    sim_tx.lock(|tx| send(tx, &answer))
+                }
+                None => Ok(()),
+            };
+            // The log blocks due, sampled at this step; what the
+            // outputs show besides the motors.
+            let (armed, nav, battery_v) = v.lock(|v| {
+                v.sample_logs();
+                (v.armed(), v.core().navigator().mode(), v.battery_v())
+            });
+            outputs.report(armed, nav, battery_v);
+            timing.lock(|t| {
+                if flown {
+                    t.flown(entry, done);
+                } else {
+                    t.passed(entry, done);
+                }
+                if sent.is_err() {
+                    t.tx_timeout();
+                }
+            });
         });
         rtic::pend(Interrupt::CAN2_RX1);
     }
