@@ -6,6 +6,7 @@
 pub mod hil;
 pub mod mission;
 pub mod modes;
+pub mod signing;
 /// The parameter table (it lives with the flight loop, which both protocols drive).
 pub use fc_loop::params;
 pub mod vehicle;
@@ -13,6 +14,7 @@ pub mod vehicle;
 pub use mavlink::dialects::common::{self, MavMessage};
 pub use mavlink::MavHeader;
 use mavlink::{MAVLinkV2MessageRaw, Message};
+use signing::{SignError, Signing, FLAG_SIGNED, SIGNATURE_LEN};
 
 /// MAVLink 2's start byte.
 const STX_V2: u8 = 0xFD;
@@ -30,9 +32,12 @@ pub enum MavError {
     BadCrc,
     /// A message id the common dialect does not have.
     UnknownMessage(u32),
-    /// A frame this reader does not accept: signed, or with 32-bit system
-    /// ids (its incompatibility flags, given).
+    /// A frame this reader does not accept: with 32-bit system ids or an
+    /// unknown incompatibility flag (its flags, given).
     Unsupported(u8),
+    /// Dropped by the signing check (unsigned, badly signed or replayed
+    /// while a key is set).
+    Signing(SignError),
     /// The payload did not decode as its message.
     Malformed(u32),
     /// A message addressed to another system (its target, given).
@@ -52,9 +57,10 @@ impl core::fmt::Display for MavError {
             MavError::Unsupported(flags) => {
                 write!(
                     f,
-                    "MAVLink frame with incompatibility flags {flags:#04x} (signed or 32-bit ids) is not supported"
+                    "MAVLink frame with incompatibility flags {flags:#04x} (32-bit ids or unknown) is not supported"
                 )
             }
+            MavError::Signing(e) => write!(f, "{e}"),
             MavError::Malformed(id) => write!(f, "MAVLink message {id} did not decode"),
             MavError::OtherSystem(t) => write!(f, "MAVLink message addressed to system {t}, not this one"),
             MavError::Unused(id) => write!(f, "MAVLink message {id} is not one this flight controller uses"),
@@ -72,8 +78,10 @@ pub struct MavCounters {
     pub bad_crc: u32,
     /// Frames of message ids the dialect does not have.
     pub unknown: u32,
-    /// Signed or 32-bit-system-id frames.
+    /// Frames with 32-bit system ids or unknown incompatibility flags.
     pub unsupported: u32,
+    /// Frames the signing check dropped (its own counters tell why).
+    pub signing: u32,
     /// Payloads that did not decode.
     pub malformed: u32,
     /// Messages for other systems.
@@ -86,9 +94,10 @@ pub struct MavCounters {
 
 impl MavCounters {
     /// Frames refused, of every kind (bad CRC, unknown, unsupported,
-    /// malformed, other systems); unused messages and noise are not refusals.
+    /// signing, malformed, other systems); unused messages and noise are
+    /// not refusals.
     pub fn refused(&self) -> u32 {
-        self.bad_crc + self.unknown + self.unsupported + self.malformed + self.other_system
+        self.bad_crc + self.unknown + self.unsupported + self.signing + self.malformed + self.other_system
     }
 }
 
@@ -129,6 +138,7 @@ impl MavReader {
                 bad_crc: 0,
                 unknown: 0,
                 unsupported: 0,
+                signing: 0,
                 malformed: 0,
                 other_system: 0,
                 unused: 0,
@@ -143,8 +153,31 @@ impl MavReader {
     }
 
     /// Feeds one byte: `Some` when it completes a frame, with the message
-    /// or the reason it was refused (also counted).
+    /// or the reason it was refused (also counted). Signed frames are read
+    /// and delivered unchecked: this is a reader without a key (see
+    /// [`MavReader::push_signed`]).
     pub fn push(&mut self, byte: u8) -> Option<Result<(MavHeader, MavMessage), MavError>> {
+        self.push_checked(byte, None)
+    }
+
+    /// [`MavReader::push`] with the signing check of `signing`: with a key
+    /// set, a frame unsigned (but for [`signing::UNSIGNED_ALLOWED`]),
+    /// signed with another key or replayed is refused
+    /// ([`MavError::Signing`]); [`Signing::last_authenticated`] tells
+    /// whether the frame delivered was signed with the key.
+    pub fn push_signed(
+        &mut self,
+        byte: u8,
+        signing: &mut Signing,
+    ) -> Option<Result<(MavHeader, MavMessage), MavError>> {
+        self.push_checked(byte, Some(signing))
+    }
+
+    fn push_checked(
+        &mut self,
+        byte: u8,
+        signing: Option<&mut Signing>,
+    ) -> Option<Result<(MavHeader, MavMessage), MavError>> {
         if self.len == 0 && byte != STX_V2 {
             self.counters.skipped_bytes = self.counters.skipped_bytes.wrapping_add(1);
             return None;
@@ -153,17 +186,18 @@ impl MavReader {
         self.len += 1;
         if self.len == 3 {
             let flags = self.raw.as_slice()[2];
-            if flags != 0 {
+            if flags & !FLAG_SIGNED != 0 {
                 self.len = 0;
                 return Some(Err(self.count(MavError::Unsupported(flags))));
             }
-            self.need = HEADER_LEN + usize::from(self.raw.as_slice()[1]) + CRC_LEN;
+            let signature = if flags & FLAG_SIGNED != 0 { SIGNATURE_LEN } else { 0 };
+            self.need = HEADER_LEN + usize::from(self.raw.as_slice()[1]) + CRC_LEN + signature;
         }
         if self.len < 3 || self.len < self.need {
             return None;
         }
         self.len = 0;
-        Some(self.decode().map_err(|e| self.count(e)))
+        Some(self.decode(signing).map_err(|e| self.count(e)))
     }
 
     fn count(&mut self, e: MavError) -> MavError {
@@ -172,6 +206,7 @@ impl MavReader {
             MavError::BadCrc => &mut c.bad_crc,
             MavError::UnknownMessage(_) => &mut c.unknown,
             MavError::Unsupported(_) => &mut c.unsupported,
+            MavError::Signing(_) => &mut c.signing,
             MavError::Malformed(_) => &mut c.malformed,
             MavError::OtherSystem(_) => &mut c.other_system,
             MavError::Unused(_) => &mut c.unused,
@@ -182,7 +217,7 @@ impl MavReader {
     }
 
     /// The complete frame in `raw`, checked and decoded.
-    fn decode(&mut self) -> Result<(MavHeader, MavMessage), MavError> {
+    fn decode(&mut self, signing: Option<&mut Signing>) -> Result<(MavHeader, MavMessage), MavError> {
         let raw = &self.raw;
         let id = raw.message_id();
         let extra = <MavMessage as Message>::extra_crc(id);
@@ -193,6 +228,9 @@ impl MavReader {
         }
         if !raw.has_valid_crc_with_extra_crc(extra) {
             return Err(MavError::BadCrc);
+        }
+        if let Some(s) = signing {
+            s.check(raw.raw_bytes(), id).map_err(MavError::Signing)?;
         }
         let msg = match parse_subset(id, raw.payload()) {
             Some(Ok(m)) => m,
@@ -285,6 +323,7 @@ subset! {
     MISSION_SET_CURRENT: MISSION_SET_CURRENT_DATA,
     MANUAL_CONTROL: MANUAL_CONTROL_DATA,
     ESTIMATOR_STATUS: ESTIMATOR_STATUS_DATA,
+    SETUP_SIGNING: SETUP_SIGNING_DATA,
 }
 
 /// Writes `msg` as one MAVLink 2 frame (unsigned) into `out`; returns its
@@ -302,6 +341,19 @@ pub fn encode(header: MavHeader, msg: &MavMessage, out: &mut [u8]) -> Result<usi
         .ok_or(MavError::BufferTooSmall)?
         .copy_from_slice(bytes);
     Ok(bytes.len())
+}
+
+/// [`encode`], then signed by `signing` when it has a key
+/// ([`Signing::sign`]); `out` needs [`MAX_FRAME`] bytes for any message.
+pub fn encode_signed(
+    header: MavHeader,
+    msg: &MavMessage,
+    out: &mut [u8],
+    signing: &mut Signing,
+) -> Result<usize, MavError> {
+    let n = encode(header, msg, out)?;
+    let extra = <MavMessage as Message>::extra_crc(msg.message_id());
+    signing.sign(out, n, extra).ok_or(MavError::BufferTooSmall)
 }
 
 /// The message id of `msg` (for logs and counters).

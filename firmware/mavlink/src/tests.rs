@@ -100,11 +100,11 @@ fn bad_frames_are_refused_counted_and_the_next_one_reads() {
         read_all(&mut r, &unknown),
         vec![Err(MavError::UnknownMessage(0x05_1234))]
     );
-    // Signed frames are not supported.
-    let mut signed = hb.clone();
-    signed[2] = 0x01;
-    let got = read_all(&mut r, &signed);
-    assert_eq!(got[0], Err(MavError::Unsupported(0x01)));
+    // 32-bit system ids are not supported (signed frames are: see `signing`).
+    let mut wide = hb.clone();
+    wide[2] = 0x02;
+    let got = read_all(&mut r, &wide);
+    assert_eq!(got[0], Err(MavError::Unsupported(0x02)));
     // A command for system 7 is not for system 1.
     let cmd = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
         target_system: 7,
@@ -261,4 +261,205 @@ fn a_vertical_field_has_no_heading_and_flags_gate_the_magnetometer() {
     );
     m.ymag = f32::NAN;
     assert_eq!(imu_from_hil_sensor(&m).unwrap().mag_frd_gauss, None);
+}
+
+/// Signing against pymavlink 2.4 (its `MAVLinkSigning`: key bytes 0..=31).
+mod signing {
+    use super::*;
+    use crate::signing::{SetupOutcome, SetupRefusal, SignError, Signing, UNSIGNED_ALLOWED};
+
+    fn hex(s: &str) -> Vec<u8> {
+        (0..s.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+            .collect()
+    }
+
+    const KEY: [u8; 32] = {
+        let mut k = [0u8; 32];
+        let mut i = 0;
+        while i < 32 {
+            k[i] = i as u8;
+            i += 1;
+        }
+        k
+    };
+
+    /// pymavlink, system 255, component 190, link 3, timestamp 123456789:
+    /// `command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)` (arm).
+    const ARM: &str = "fd20010000ffbe4c00000000803f0000000000000000000000000000000000000000000000009001010149d00315cd5b0700004c8962cf42a2";
+    /// The same client's next frame (timestamp 123456790): a ground
+    /// station's `heartbeat_send(6, 8, 0, 0, 4)`.
+    const GCS_HEARTBEAT: &str = "fd09010001ffbe000000000000000608000403ca3e0316cd5b070000355ad8a586f5";
+    /// pymavlink as the vehicle (system 1, component 1, sequence 7, link 0,
+    /// timestamp 1000): `heartbeat_send(2, 12, 0x81, 0, 4)`.
+    const VEHICLE_HEARTBEAT: &str = "fd09010007010100000000000000020c810403c7c600e80300000000982cf5b010eb";
+
+    fn read(reader: &mut MavReader, s: &mut Signing, frame: &[u8]) -> Option<Result<MavMessage, MavError>> {
+        let mut last = None;
+        for &b in frame {
+            if let Some(r) = reader.push_signed(b, s) {
+                last = Some(r.map(|(_, m)| m));
+            }
+        }
+        last
+    }
+
+    #[test]
+    fn a_pymavlink_signed_arm_is_accepted_with_its_key_and_only_once() {
+        let mut s = Signing::with_key(KEY, 0);
+        let mut r = MavReader::new(1);
+        let m = read(&mut r, &mut s, &hex(ARM)).unwrap().unwrap();
+        assert!(
+            matches!(m, MavMessage::COMMAND_LONG(c) if c.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM && c.param1 == 1.0)
+        );
+        assert!(s.last_authenticated());
+        assert_eq!(s.timestamp(), 123_456_789, "this side's clock follows the newest heard");
+        // Replayed: the same frame again.
+        let e = read(&mut r, &mut s, &hex(ARM)).unwrap().unwrap_err();
+        assert_eq!(e, MavError::Signing(SignError::Replayed));
+        // The next frame of the stream is newer.
+        assert!(read(&mut r, &mut s, &hex(GCS_HEARTBEAT)).unwrap().is_ok());
+        let c = s.counters();
+        assert_eq!((c.accepted, c.replayed, c.dropped()), (2, 1, 1));
+        assert_eq!(r.counters().signing, 1);
+    }
+
+    #[test]
+    fn another_key_a_flipped_bit_or_no_signature_is_refused() {
+        let mut other = KEY;
+        other[31] ^= 1;
+        let mut s = Signing::with_key(other, 0);
+        let mut r = MavReader::new(1);
+        let e = read(&mut r, &mut s, &hex(ARM)).unwrap().unwrap_err();
+        assert_eq!(e, MavError::Signing(SignError::BadSignature));
+        // A flipped signature bit, right key.
+        let mut s = Signing::with_key(KEY, 0);
+        let mut f = hex(ARM);
+        let n = f.len();
+        f[n - 1] ^= 0x80;
+        assert_eq!(
+            read(&mut r, &mut s, &f).unwrap().unwrap_err(),
+            MavError::Signing(SignError::BadSignature)
+        );
+        // The same arm, unsigned.
+        let cmd = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: 1,
+            target_component: 1,
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            param1: 1.0,
+            ..COMMAND_LONG_DATA::DEFAULT
+        });
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(HEADER, &cmd, &mut buf).unwrap();
+        assert_eq!(
+            read(&mut r, &mut s, &buf[..n]).unwrap().unwrap_err(),
+            MavError::Signing(SignError::Unsigned(76))
+        );
+        assert_eq!(s.counters().unsigned, 1);
+        // Without a key everything passes, signed or not.
+        let mut open = Signing::new();
+        assert!(read(&mut r, &mut open, &buf[..n]).unwrap().is_ok());
+        assert!(read(&mut r, &mut open, &hex(ARM)).unwrap().is_ok());
+        assert!(!open.last_authenticated());
+        assert_eq!(open.counters().dropped(), 0);
+    }
+
+    #[test]
+    fn a_new_stream_more_than_a_minute_behind_is_a_replay() {
+        // This side's clock is 60.01 s past the arm's timestamp.
+        let mut s = Signing::with_key(KEY, 123_456_789 + 6_001_000);
+        let mut r = MavReader::new(1);
+        assert_eq!(
+            read(&mut r, &mut s, &hex(ARM)).unwrap().unwrap_err(),
+            MavError::Signing(SignError::Replayed)
+        );
+        // 59.99 s behind: accepted.
+        let mut s = Signing::with_key(KEY, 123_456_789 + 5_999_000);
+        assert!(read(&mut r, &mut s, &hex(ARM)).unwrap().is_ok());
+    }
+
+    #[test]
+    fn signed_frames_are_pymavlinks_byte_for_byte() {
+        // pymavlink signs with its timestamp, then adds one; ours adds one,
+        // then signs.
+        let mut s = Signing::with_key(KEY, 999);
+        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            base_mode: MavModeFlag::from_bits_truncate(0x81),
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        });
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: 7,
+        };
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode_signed(header, &hb, &mut out, &mut s).unwrap();
+        assert_eq!(out[..n], hex(VEHICLE_HEARTBEAT)[..]);
+        // Without a key: the plain frame.
+        let mut open = Signing::new();
+        let m = encode_signed(header, &hb, &mut out, &mut open).unwrap();
+        assert_eq!(m, n - 13);
+        assert_eq!(out[2], 0);
+    }
+
+    #[test]
+    fn setup_provisions_then_needs_the_key_and_never_while_armed() {
+        let mut s = Signing::new();
+        assert_eq!(s.setup(&KEY, 5, false, true), Err(SetupRefusal::Armed));
+        assert!(!s.is_on());
+        assert_eq!(s.setup(&KEY, 5, false, false), Ok(SetupOutcome::KeySet));
+        assert_eq!((s.is_on(), s.timestamp()), (true, 5));
+        // Changing or clearing it unsigned: refused.
+        assert_eq!(
+            s.setup(&[7; 32], 9, false, false),
+            Err(SetupRefusal::NotSignedWithCurrentKey)
+        );
+        assert_eq!(
+            s.setup(&[0; 32], 0, false, false),
+            Err(SetupRefusal::NotSignedWithCurrentKey)
+        );
+        assert_eq!(s.key(), Some(&KEY));
+        // Signed with it: changed, the clock never goes back.
+        assert_eq!(s.setup(&[7; 32], 2, true, false), Ok(SetupOutcome::KeySet));
+        assert_eq!((s.key(), s.timestamp()), (Some(&[7; 32]), 5));
+        assert_eq!(s.setup(&[7; 32], 0, true, true), Err(SetupRefusal::Armed));
+        assert_eq!(s.setup(&[0; 32], 0, true, false), Ok(SetupOutcome::Cleared));
+        assert!(!s.is_on());
+        assert_eq!(s.counters().setups_refused, 4);
+        // A blank stored key is no key (PX4's rule).
+        assert!(!Signing::with_key([0; 32], 0).is_on());
+    }
+
+    #[test]
+    fn radio_status_passes_unsigned_as_px4_lets_it() {
+        let mut s = Signing::with_key(KEY, 0);
+        let mut f = [0u8; 12];
+        f[0] = 0xFD;
+        for id in UNSIGNED_ALLOWED {
+            assert_eq!(s.check(&f, id), Ok(false));
+        }
+        assert_eq!(s.check(&f, 0), Err(SignError::Unsigned(0)));
+        assert_eq!(s.counters().unsigned_allowed, 3);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        /// Whatever bytes arrive, with or without a key: no panic, and with
+        /// a key nothing is delivered that was not signed with it.
+        #[test]
+        fn no_forged_frame_is_delivered(bytes in proptest::collection::vec(any::<u8>(), 0..600), keyed in any::<bool>()) {
+            let mut s = if keyed { Signing::with_key(KEY, 0) } else { Signing::new() };
+            let mut r = MavReader::new(1);
+            for b in bytes {
+                if let Some(Ok(_)) = r.push_signed(b, &mut s) {
+                    prop_assert!(!keyed || s.last_authenticated(), "an unsigned frame delivered with a key set");
+                }
+            }
+        }
+    }
 }

@@ -68,6 +68,11 @@ pub trait MavSink {
     type Error;
     /// Sends `msg` to `to`.
     fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<(), Self::Error>;
+    /// The ground station link's signing state, if this link signs (a
+    /// `SETUP_SIGNING` changes it; `None`: the request is ignored).
+    fn signing(&mut self) -> Option<&mut crate::signing::Signing> {
+        None
+    }
 }
 
 /// What the vehicle did with what it got.
@@ -398,6 +403,17 @@ impl MavVehicle {
                 self.on_command(&c, out)
             }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
+            MavMessage::SETUP_SIGNING(m) if self.for_me(m.target_system) => {
+                let armed = self.armed;
+                let Some(s) = out.signing() else {
+                    return Ok(());
+                };
+                let authenticated = s.last_authenticated();
+                match s.setup(&m.secret_key, m.initial_timestamp, authenticated, armed) {
+                    Ok(done) => self.say(out, MavSeverity::MAV_SEVERITY_NOTICE, format_args!("{done}")),
+                    Err(why) => self.say(out, MavSeverity::MAV_SEVERITY_WARNING, format_args!("{why}")),
+                }
+            }
             MavMessage::MANUAL_CONTROL(m) if self.for_me(m.target) => {
                 self.manual = Some(([m.x, m.y, m.z, m.r], self.last_sensor_us.unwrap_or(0)));
                 Ok(())

@@ -1395,3 +1395,166 @@ fn the_jerk_of_a_streamed_eight_is_its_analytic_jerk() {
         last = Some((acc(t), k * 10));
     }
 }
+
+/// A sink whose link signs (the host's and the image's are alike).
+#[derive(Default)]
+struct SignedSink {
+    sent: Sent,
+    signing: crate::signing::Signing,
+}
+
+impl MavSink for SignedSink {
+    type Error = Infallible;
+    fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<(), Infallible> {
+        self.sent.send(to, msg)
+    }
+    fn signing(&mut self) -> Option<&mut crate::signing::Signing> {
+        Some(&mut self.signing)
+    }
+}
+
+/// What a fuzzed frame was, to know what the vehicle may act on.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Kind {
+    /// Signed with the key the vehicle holds, newer than the stream's last.
+    Owner,
+    /// Unsigned.
+    Unsigned,
+    /// Signed with another key.
+    Forged,
+    /// An owner's frame sent again.
+    Replayed,
+}
+
+#[test]
+fn signed_forged_replayed_frames_and_setup_signing_in_every_state() {
+    use crate::encode_signed;
+    use crate::signing::{Key, Signing};
+    let frames: u64 = fuzz_frames();
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut reader = MavReader::new(1);
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+    let mut sink = SignedSink::default();
+    let mut t_us = rest(&mut v, &mut sink.sent, 0, 2000);
+    // The owner provisions a key (unsigned: none is set) and signs from then on.
+    let mut key: Key = [0x5a; 32];
+    let mut owner = Signing::with_key(key, 1_000);
+    let mut forger = Signing::with_key([0xa5; 32], 1_000_000_000);
+    let header = |sys| MavHeader {
+        system_id: sys,
+        component_id: 190,
+        sequence: 0,
+    };
+    let mut buf = [0u8; MAX_FRAME];
+    let setup = |k: Key, ts: u64| {
+        MavMessage::SETUP_SIGNING(SETUP_SIGNING_DATA {
+            target_system: 1,
+            target_component: 1,
+            secret_key: k,
+            initial_timestamp: ts,
+        })
+    };
+    let n = encode(header(255), &setup(key, 1_000), &mut buf).unwrap();
+    for &b in &buf[..n] {
+        if let Some(Ok((_, m))) = reader.push_signed(b, &mut sink.signing) {
+            v.handle(&m, &mut sink, &Still, 0).unwrap();
+        }
+    }
+    assert!(sink.signing.is_on());
+    let mut last_owner = Vec::new();
+    let (mut delivered, mut by_kind) = (0u64, [0u64; 4]);
+    for _ in 0..frames {
+        t_us += 1000;
+        let msg = match rng.next() % 6 {
+            0 => at_rest(t_us)[1].clone(),
+            1 => command(if rng.next().is_multiple_of(2) { 1.0 } else { 0.0 }, FORCE),
+            2 => param_set(param_id((rng.next() % PARAM_COUNT as u64) as usize), rng.f32()),
+            3 => mission_count((rng.next() % 4) as u16),
+            // A key change: a new key, the same, or a blank (clear) one.
+            4 => {
+                let k = match rng.next() % 3 {
+                    0 => [rng.next() as u8 & 0x7f; 32], // never the forger's (0xa5)
+                    1 => key,
+                    _ => [0; 32],
+                };
+                setup(k, rng.next() % 3 * 500)
+            }
+            _ => command_of(MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0; 7]),
+        };
+        let kind = match rng.next() % 4 {
+            0 => Kind::Owner,
+            1 => Kind::Unsigned,
+            2 => Kind::Forged,
+            _ => Kind::Replayed,
+        };
+        let frame: Vec<u8> = match kind {
+            Kind::Owner => {
+                let n = encode_signed(header(255), &msg, &mut buf, &mut owner).unwrap();
+                last_owner = buf[..n].to_vec();
+                last_owner.clone()
+            }
+            Kind::Unsigned => {
+                let n = encode(header(66), &msg, &mut buf).unwrap();
+                buf[..n].to_vec()
+            }
+            Kind::Forged => {
+                let n = encode_signed(header(66), &msg, &mut buf, &mut forger).unwrap();
+                buf[..n].to_vec()
+            }
+            Kind::Replayed => last_owner.clone(),
+        };
+        let (armed_before, key_before) = (v.armed(), sink.signing.key().copied());
+        for &b in &frame {
+            if let Some(r) = reader.push_signed(b, &mut sink.signing) {
+                if let Ok((_, m)) = r {
+                    // Only the owner's fresh frames get through while a key is set.
+                    assert!(key_before.is_none() || kind == Kind::Owner, "{kind:?} delivered: {m:?}");
+                    delivered += 1;
+                    by_kind[kind as usize] += 1;
+                    v.handle(&m, &mut sink, &Still, 0).unwrap();
+                } else {
+                    assert!(
+                        kind != Kind::Owner || key_before.is_none() || key_before != Some(key),
+                        "{r:?}"
+                    );
+                }
+            }
+        }
+        // Arming and the key change only by a frame the vehicle accepted.
+        if key_before.is_some() && kind != Kind::Owner {
+            assert_eq!((v.armed(), sink.signing.key().copied()), (armed_before, key_before));
+        }
+        // The owner follows what the vehicle now holds (its SETUP_SIGNING
+        // was accepted or refused; the vehicle's state says which).
+        match sink.signing.key() {
+            Some(k) if *k != key => {
+                key = *k;
+                owner = Signing::with_key(key, owner.timestamp());
+            }
+            None => {
+                // Signing cleared: provision again (unsigned, disarmed first).
+                let n = encode(header(255), &command(0.0, FORCE), &mut buf).unwrap();
+                let n2 = encode(header(255), &setup(key, owner.timestamp()), &mut buf[n..]).unwrap();
+                for &b in &buf[..n + n2] {
+                    if let Some(Ok((_, m))) = reader.push_signed(b, &mut sink.signing) {
+                        v.handle(&m, &mut sink, &Still, 0).unwrap();
+                    }
+                }
+                if sink.signing.key() != Some(&key) {
+                    // Still armed (in the air): wait for the owner's next frames.
+                    continue;
+                }
+                owner = Signing::with_key(key, owner.timestamp());
+            }
+            _ => {}
+        }
+        sink.sent.0.clear();
+    }
+    let s = sink.signing.counters();
+    assert!(by_kind[Kind::Owner as usize] > frames / 8, "{by_kind:?}");
+    assert!(
+        s.unsigned > 0 && s.bad_signature > 0 && s.replayed > 0 && s.setups_refused > 0,
+        "{s:?}"
+    );
+    std::println!("signing fuzz: {frames} frames, {delivered} delivered {by_kind:?}, signing {s:?}");
+}
