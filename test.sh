@@ -306,6 +306,8 @@ hil --target qemu --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measur
     --json target/rotorpy-hil-qemu.json | grep "rotorpy check:" | tee -a "$log"
 stage "a pymavlink ground station (tools/mav_gcs.py) flies it against rotorpy"
 hil --gcs --duration 60 --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
+stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored"
+hil --signing --duration 120 --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
 stage "MAVSDK (pinned), unmodified, flies it as a PX4, in process"
 hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
 stage "the same MAVSDK script against firmware-mavlink in QEMU (about 5 min)"
@@ -344,7 +346,7 @@ bounded 1200 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16
 fi
 stage "measurements, and the figures the README and the book mark held to them"
 # Tests count tests: a `test result:` line's counts, and one per check line's.
-counts=$(awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|mavsdk|mavproxy|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient|sweep) check:/ { p += $3; f += $5 } END { print p, f, i }' "$log")
+counts=$(awk '/^test result:/ { p += $4; f += $6; i += $8 } /^(design|mpc-step|daqp|report|wire|rotorpy|gcs|signing|mavsdk|mavproxy|ulog|slurm|book|crtp|crtp-qemu|crtp-qemu-crazyflie|cfclient|sweep) check:/ { p += $3; f += $5 } END { print p, f, i }' "$log")
 read -r passed failed skipped <<<"$counts"
 touch "$FC_MEASUREMENTS"
 if full; then

@@ -9,7 +9,10 @@ commands fly it. Run by tools/rotorpy_hil.py --mavproxy against
 MAVProxy runs as a user runs it (`mavproxy.py --master=...`), its commands
 written to its standard input and its console read back:
 
-1. it connects and shows the mode PX4 would show (POSCTL);
+1. it connects and shows the mode PX4 would show (POSCTL); `signing setup
+   PASSPHRASE` provisions a MAVLink signing key (SHA-256 of the passphrase)
+   and MAVProxy signs from then on: every step below is a signed frame,
+   which the vehicle would otherwise drop;
 2. `param fetch` fetches every parameter (after its FTP attempts time out:
    the vehicle has no MAVLink FTP), `param show *` lists them;
    `param set` / `param show` one;
@@ -112,6 +115,9 @@ class Session:
                    "MAVProxy detects the vehicle")
         self.check(self.expect(lambda l: "POSCTL" in l, timeout=30) is not None,
                    "its console shows the mode PX4 would show: POSCTL")
+        self.send("signing setup fc-owner-passphrase")
+        self.check(self.expect(lambda l: "signing: key set" in l, timeout=30) is not None,
+                   "signing setup: the vehicle holds the key, MAVProxy signs from here on")
         self.send("param fetch")
         # MAVProxy fetches them at connection too, and says so once it has
         # them all (a line may start with its prompt).

@@ -25,6 +25,7 @@ an RMSE above --max-rmse.
 import argparse
 import importlib.metadata
 import json
+import re
 import platform
 import tempfile
 import os
@@ -192,6 +193,10 @@ def main():
     ap.add_argument("--gcs", action="store_true",
                     help="no mission: tools/mav_gcs.py (a pymavlink ground station on UDP 14550) "
                          "sets parameters, arms and flies the vehicle; the flight ends when it is done")
+    ap.add_argument("--signing", action="store_true",
+                    help="like --gcs, with tools/mav_signing.py: an owner provisions a MAVLink signing key "
+                         "and flies signed while an intruder's unsigned, wrongly signed and replayed frames "
+                         "must be ignored")
     ap.add_argument("--gcs-port", type=int, default=14550)
     ap.add_argument("--mavsdk", action="store_true",
                     help="like --gcs, with tools/mavsdk_flight.py (MAVSDK, PyPI) as the ground station; "
@@ -212,12 +217,12 @@ def main():
            "--vehicle", VEHICLES[a.vehicle][1], "--airframe", LAYOUTS[a.layout][0],
            "--hub-m", str(VEHICLES[a.vehicle][0]["rotor_pos"]["r1"][0] * 2 ** 0.5),
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
-    if (bool(a.waypoint) + bool(a.scenario) + a.gcs + a.mavsdk + a.mavproxy) != 1:
-        ap.error("give --waypoint(s), --scenario, --gcs, --mavsdk or --mavproxy")
+    if (bool(a.waypoint) + bool(a.scenario) + a.gcs + a.signing + a.mavsdk + a.mavproxy) != 1:
+        ap.error("give --waypoint(s), --scenario, --gcs, --signing, --mavsdk or --mavproxy")
     gcs = None
     truth_sock = None
     here = os.path.dirname(__file__)
-    if a.gcs or a.mavsdk or a.mavproxy:
+    if a.gcs or a.signing or a.mavsdk or a.mavproxy:
         # The ground station listens first, as QGroundControl does.
         if a.mavsdk or a.mavproxy:
             # MAVSDK's URL and MAVProxy's (pymavlink's) spell UDP differently.
@@ -229,7 +234,8 @@ def main():
                 script += ["--timeout", "180"]
             truth_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         else:
-            script = [os.path.join(here, "mav_gcs.py"), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
+            name = "mav_signing.py" if a.signing else "mav_gcs.py"
+            script = [os.path.join(here, name), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
         gcs = subprocess.Popen([sys.executable] + script, stdout=subprocess.PIPE, text=True)
         cmd += ["--gcs", f"127.0.0.1:{a.gcs_port}", "--gcs-only"]
     for w in a.waypoint or []:
@@ -299,9 +305,19 @@ def main():
             gcs.kill()
         gcs_out, _ = gcs.communicate(timeout=60)
         sys.stderr.write(gcs_out)
-        prefix = "mavsdk check:" if a.mavsdk else "mavproxy check:" if a.mavproxy else "gcs check:"
+        prefix = ("mavsdk check:" if a.mavsdk else "mavproxy check:" if a.mavproxy
+                  else "signing check:" if a.signing else "gcs check:")
         line = [ln for ln in gcs_out.splitlines() if ln.startswith(prefix)]
         res["gcs"] = line[-1] if line else f"{prefix} 0 passed, 1 failed (the ground station did not finish)"
+        if a.mavproxy and line:
+            # MAVProxy set a key: the flight controller's own count says its
+            # frames then came signed, and none were dropped.
+            ok = res.get("signing_on") and res.get("signing_accepted", 0) > 0 and not any(res["signing_dropped"])
+            print(("ok   " if ok else "FAIL ") + f"the vehicle accepted {res.get('signing_accepted')} signed "
+                  f"frames from MAVProxy, dropped {res.get('signing_dropped')}", file=sys.stderr)
+            p, f = (int(v) for v in re.match(r".*: (\d+) passed, (\d+) failed", res["gcs"]).groups())
+            res["gcs"] = f"{prefix} {p + bool(ok)} passed, {f + (not ok)} failed" + res["gcs"].split(" failed", 1)[1]
+            line = line if ok else []
         text = json.dumps(res, indent=2)
         print(text)
         if a.json:

@@ -18,8 +18,9 @@
 use anyhow::{bail, Context, Result};
 use fc_core::control::Setpoint;
 use fc_mavlink::params::Settings;
+use fc_mavlink::signing::Signing;
 use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer};
-use fc_mavlink::{common, encode, MavHeader, MavMessage, MavReader, MAX_FRAME};
+use fc_mavlink::{common, encode, encode_signed, MavHeader, MavMessage, MavReader, MAX_FRAME};
 use nalgebra::Vector3;
 use serde::Serialize;
 use std::io::{Read, Write};
@@ -154,6 +155,16 @@ pub struct HilResult {
     /// The vehicle's last `SYS_STATUS`: `errors_count1..4` (refused
     /// sensor samples, parameter writes, commands, invalid values).
     pub vehicle_errors: [u16; 4],
+    /// Whether the ground station's link ended the flight signing (a key
+    /// set by `SETUP_SIGNING`).
+    pub signing_on: bool,
+    /// The ground station's frames the signing check dropped: unsigned,
+    /// badly signed, replayed, too many streams.
+    pub signing_dropped: [u32; 4],
+    /// Signed frames the signing check accepted.
+    pub signing_accepted: u32,
+    /// `SETUP_SIGNING` requests refused (armed, or not signed with the key).
+    pub signing_setups_refused: u32,
     /// The vehicle's `STATUSTEXT`s, in order.
     pub status_texts: Vec<String>,
     /// The image's defmt log (QEMU).
@@ -193,6 +204,13 @@ trait Vehicle {
     /// Hands `msg` to the vehicle; what it sent in answer is appended to
     /// `out`. A `HIL_SENSOR` returns with its `HIL_ACTUATOR_CONTROLS`.
     fn deliver(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>) -> Result<()>;
+    /// [`Vehicle::deliver`] for the ground station's messages, whose link
+    /// signs with `signing` (a `SETUP_SIGNING` sets it). The image in QEMU
+    /// keeps no signing state yet: there it is [`Vehicle::deliver`].
+    fn deliver_from_gcs(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>, signing: &mut Signing) -> Result<()> {
+        let _ = signing;
+        self.deliver(msg, out)
+    }
     /// Frames its readers refused.
     fn refused(&self) -> u32;
     /// Ends it; the image's log.
@@ -206,7 +224,7 @@ struct InProcess {
     wall: Instant,
 }
 
-struct Collect<'a>(&'a mut Vec<MavMessage>);
+struct Collect<'a>(&'a mut Vec<MavMessage>, Option<&'a mut Signing>);
 
 impl MavSink for Collect<'_> {
     type Error = std::convert::Infallible;
@@ -217,12 +235,22 @@ impl MavSink for Collect<'_> {
         }
         Ok(())
     }
+    fn signing(&mut self) -> Option<&mut Signing> {
+        self.1.as_deref_mut()
+    }
 }
 
 impl Vehicle for InProcess {
     fn deliver(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>) -> Result<()> {
         let now_us = self.wall.elapsed().as_micros() as u64;
-        let Ok(()) = self.v.handle(msg, &mut Collect(out), &self.clock, now_us);
+        let Ok(()) = self.v.handle(msg, &mut Collect(out, None), &self.clock, now_us);
+        Ok(())
+    }
+    fn deliver_from_gcs(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>, signing: &mut Signing) -> Result<()> {
+        let now_us = self.wall.elapsed().as_micros() as u64;
+        let Ok(()) = self
+            .v
+            .handle(msg, &mut Collect(out, Some(signing)), &self.clock, now_us);
         Ok(())
     }
     fn refused(&self) -> u32 {
@@ -467,7 +495,12 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         None => None,
     };
     let (mut sim_seq, mut gcs_seq) = (0u8, 0u8);
-    let mut send = |to_sim: bool, msg: &MavMessage, sim: &mut TcpStream| -> Result<()> {
+    // The ground station's link: signed once a SETUP_SIGNING sets a key
+    // (PX4's rules, fc_mavlink::signing); the simulator's is never signed
+    // (PX4's simulator interface is not its MAVLink module).
+    let mut gcs_signing = Signing::new();
+    let mut signing_clock = Instant::now();
+    let mut send = |to_sim: bool, msg: &MavMessage, sim: &mut TcpStream, signing: &mut Signing| -> Result<()> {
         let seq = if to_sim { &mut sim_seq } else { &mut gcs_seq };
         let header = MavHeader {
             system_id: u32::from(SYSTEM_ID),
@@ -476,7 +509,12 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         };
         *seq = seq.wrapping_add(1);
         let mut out = [0u8; MAX_FRAME];
-        let n = encode(header, msg, &mut out).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let n = if to_sim {
+            encode(header, msg, &mut out)
+        } else {
+            encode_signed(header, msg, &mut out, signing)
+        }
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
         if to_sim {
             sim.write_all(&out[..n]).context("writing to the simulator")
         } else {
@@ -494,6 +532,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             fc_mavlink::modes::FlightMode::Position.custom_mode(),
         )),
         &mut sim,
+        &mut gcs_signing,
     )?;
     let mut input = stream;
     let mut sim_reader = MavReader::new(SYSTEM_ID);
@@ -516,10 +555,13 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     'flight: loop {
         // The ground station's datagrams first (never blocks).
         if let Some(sock) = &gcs_sock {
+            let now = Instant::now();
+            gcs_signing.advance_us((now - signing_clock).as_micros() as u64);
+            signing_clock = now;
             while let Ok(n) = sock.recv(&mut dgram) {
                 for &b in &dgram[..n] {
-                    if let Some(Ok((_, msg))) = gcs_reader.push(b) {
-                        v.deliver(&msg, &mut out)?;
+                    if let Some(Ok((_, msg))) = gcs_reader.push_signed(b, &mut gcs_signing) {
+                        v.deliver_from_gcs(&msg, &mut out, &mut gcs_signing)?;
                     }
                 }
             }
@@ -667,10 +709,10 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 }
                 let (to_sim, to_gcs) = route(&m);
                 if to_sim {
-                    send(true, &m, &mut sim)?;
+                    send(true, &m, &mut sim, &mut gcs_signing)?;
                 }
                 if to_gcs {
-                    send(false, &m, &mut sim)?;
+                    send(false, &m, &mut sim, &mut gcs_signing)?;
                 }
             }
             if t >= cfg.duration_s {
@@ -679,6 +721,11 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         }
     }
     res.refused_frames = sim_reader.counters().refused() + gcs_reader.counters().refused() + v.refused();
+    let sc = gcs_signing.counters();
+    res.signing_on = gcs_signing.is_on();
+    res.signing_dropped = [sc.unsigned, sc.bad_signature, sc.replayed, sc.too_many_streams];
+    res.signing_accepted = sc.accepted;
+    res.signing_setups_refused = sc.setups_refused;
     res.firmware_log = v.finish()?;
     if let Some(log) = ulog {
         log.finish()?;

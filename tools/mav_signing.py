@@ -1,0 +1,255 @@
+#!/usr/bin/env python3
+"""MAVLink 2 signing, tried with pymavlink as an owner and an intruder
+would, against the vehicle flying in rotorpy (tools/rotorpy_hil.py
+--signing). Written from mavlink.io's "Message Signing" and PX4's "MAVLink
+Message Signing" pages, not from this project's code.
+
+The owner listens on UDP (as QGroundControl does) for the vehicle's
+heartbeat, then:
+
+1. provisions a key with SETUP_SIGNING (unsigned: no key is set yet) and
+   signs from then on; the vehicle's frames must now verify with the key
+   (pymavlink drops any that do not);
+2. an intruder on another UDP port, unsigned, then one signing with a wrong
+   key, tries to arm, to switch mode, to set a parameter, to upload a
+   mission and to replace the key: the vehicle's state (read by the owner)
+   must show that nothing happened;
+3. the owner arms, takes off and, while it flies, the intruder sends a
+   forced disarm (PX4's 21196): the vehicle must stay armed and in the air;
+4. the owner lands; the vehicle disarms itself on the ground; the
+   intruder replays the owner's signed arm frame, byte for byte: ignored;
+5. the owner clears the key with a signed all-zero SETUP_SIGNING.
+
+Prints one line `signing check: P passed, F failed` (and what failed) and
+exits non-zero if anything failed.
+"""
+import argparse
+import os
+import sys
+import time
+
+os.environ["MAVLINK20"] = "1"
+from pymavlink import mavutil  # noqa: E402
+
+ARM_DISARM = 400
+DO_SET_MODE = 176
+NAV_TAKEOFF = 22
+NAV_LAND = 21
+FORCE = 21196.0
+ACCEPTED, TEMPORARILY_REJECTED = 0, 1
+ARMED = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+REAL32 = 9
+# PX4's Hold (main mode AUTO, sub mode LOITER), as DO_SET_MODE's param2, param3.
+HOLD = (4.0, 3.0)
+KEY = bytes(range(0x40, 0x60))
+WRONG_KEY = bytes(range(0x41, 0x61))
+
+
+def now_2015():
+    """A signing timestamp: 10 µs units since 2015-01-01 00:00 UTC."""
+    return int((time.time() - 1420070400) * 100000)
+
+
+class Session:
+    def __init__(self, url, timeout):
+        self.m = mavutil.mavlink_connection(url, source_system=254, source_component=190)
+        self.timeout = timeout
+        self.results = []
+        self.texts = []
+        self.hb = None
+        self.z = None
+        self.last_beat = 0.0
+
+    def check(self, ok, what):
+        self.results.append((bool(ok), what))
+        print(("ok   " if ok else "FAIL ") + what, flush=True)
+        return ok
+
+    def recv(self, types, timeout=None):
+        """The next message of one of `types` (verified, once signing is on)."""
+        end = time.time() + (timeout or self.timeout)
+        while time.time() < end:
+            if time.time() - self.last_beat > 0.5:
+                self.m.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                self.last_beat = time.time()
+            msg = self.m.recv_match(blocking=True, timeout=0.2)
+            if msg is None:
+                continue
+            t = msg.get_type()
+            if t == "STATUSTEXT":
+                self.texts.append(msg.text)
+            elif t == "HEARTBEAT":
+                self.hb = msg
+            elif t == "LOCAL_POSITION_NED":
+                self.z = msg.z
+            if t in types:
+                return msg
+        return None
+
+    def settle(self, seconds):
+        """Reads for `seconds` (wall), keeping the latest state."""
+        end = time.time() + seconds
+        while time.time() < end:
+            self.recv([], timeout=max(0.05, end - time.time()))
+
+    def armed(self):
+        self.recv(["HEARTBEAT"], timeout=5.0)
+        return self.hb is not None and bool(self.hb.base_mode & ARMED)
+
+    def command(self, cmd, *params):
+        p = list(params) + [0.0] * (7 - len(params))
+        self.m.mav.command_long_send(self.sys, self.comp, cmd, 0, *p)
+        end = time.time() + self.timeout
+        while time.time() < end:
+            ack = self.recv(["COMMAND_ACK"], timeout=2.0)
+            if ack is not None and ack.command == cmd:
+                return ack.result
+        return None
+
+    def param(self, name):
+        self.m.mav.param_request_read_send(self.sys, self.comp, name.encode(), -1)
+        for _ in range(50):
+            msg = self.recv(["PARAM_VALUE"], timeout=2.0)
+            if msg is None:
+                return None
+            pid = msg.param_id.decode() if isinstance(msg.param_id, bytes) else msg.param_id
+            if pid == name:
+                return msg.param_value
+        return None
+
+    def mission_count(self):
+        self.m.mav.mission_request_list_send(self.sys, self.comp, 0)
+        msg = self.recv(["MISSION_COUNT"], timeout=5.0)
+        return None if msg is None else msg.count
+
+    def intruder(self, key):
+        """A second ground station on its own UDP port, at the vehicle's
+        address (where the owner hears it from); signing with `key` if given."""
+        host, port = next(iter(self.m.clients))
+        i = mavutil.mavlink_connection(f"udpout:{host}:{port}", source_system=66, source_component=190)
+        if key is not None:
+            i.setup_signing(key, sign_outgoing=True, initial_timestamp=now_2015(), link_id=7)
+        return i
+
+    def attempts(self, i, who):
+        """Everything an intruder tries while the vehicle is on the ground."""
+        fs = self.param("FS_TIMEOUT_MS")
+        missions = self.mission_count()
+        mode = self.hb.custom_mode
+        n_requests = 0
+        i.mav.command_long_send(self.sys, self.comp, ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        i.mav.command_long_send(self.sys, self.comp, DO_SET_MODE, 0, 1, *HOLD, 0, 0, 0, 0)
+        i.mav.param_set_send(self.sys, self.comp, b"FS_TIMEOUT_MS", fs + 100.0, REAL32)
+        i.mav.mission_count_send(self.sys, self.comp, 1, 0)
+        i.mav.setup_signing_send(self.sys, self.comp, list(WRONG_KEY), now_2015())
+        end = time.time() + 2.0
+        while time.time() < end:
+            if self.recv(["MISSION_REQUEST_INT", "MISSION_REQUEST"], timeout=0.3) is not None:
+                n_requests += 1
+        self.check(not self.armed(), f"{who}: arm ignored (still disarmed)")
+        self.check(self.hb.custom_mode == mode, f"{who}: mode change ignored (custom mode {mode:#x})")
+        after = self.param("FS_TIMEOUT_MS")
+        self.check(after == fs, f"{who}: FS_TIMEOUT_MS write ignored ({after}, was {fs})")
+        self.check(n_requests == 0 and self.mission_count() == missions,
+                   f"{who}: mission upload ignored (no MISSION_REQUEST, {missions} items)")
+        # The owner still hears verified frames: the key was not replaced.
+        self.check(self.recv(["HEARTBEAT"], timeout=5.0) is not None, f"{who}: SETUP_SIGNING ignored (key kept)")
+
+    def run(self):
+        hb = self.recv(["HEARTBEAT"])
+        if not self.check(hb is not None, "the vehicle's HEARTBEAT arrives (unsigned: no key yet)"):
+            return
+        self.sys, self.comp = hb.get_srcSystem(), hb.get_srcComponent()
+        self.check(not getattr(hb, "_signed", False), "its frames are unsigned before a key is set")
+
+        ts = now_2015()
+        self.m.mav.setup_signing_send(self.sys, self.comp, list(KEY), ts)
+        self.m.setup_signing(KEY, sign_outgoing=True, initial_timestamp=ts, link_id=0)
+        n = len(self.texts)
+        hb = self.recv(["HEARTBEAT"], timeout=10.0)
+        self.check(hb is not None and getattr(hb, "_signed", False),
+                   "after SETUP_SIGNING the vehicle's frames verify with the key")
+        self.settle(0.5)
+        self.check(any("key set" in t for t in self.texts[n:]), f"it says so: {self.texts[n:][:1]}")
+
+        for key, who in ((None, "unsigned intruder"), (WRONG_KEY, "intruder with a wrong key")):
+            i = self.intruder(key)
+            self.attempts(i, who)
+            i.close()
+        # The same requests from the owner, signed, are obeyed: the checks
+        # above could fail.
+        self.check(self.command(DO_SET_MODE, 1, *HOLD) == ACCEPTED and self.armed() is False
+                   and self.hb.custom_mode >> 16 == 0x0304,
+                   f"owner (signed): Hold accepted (custom mode {self.hb.custom_mode:#x})")
+        fs = self.param("FS_TIMEOUT_MS")
+        self.m.mav.param_set_send(self.sys, self.comp, b"FS_TIMEOUT_MS", fs + 100.0, REAL32)
+        self.settle(0.5)
+        self.check(self.param("FS_TIMEOUT_MS") == fs + 100.0, "owner (signed): FS_TIMEOUT_MS write accepted")
+
+        result = None
+        end = time.time() + self.timeout
+        while time.time() < end:
+            # Packed by hand to keep its bytes: the intruder replays them later.
+            msg = self.m.mav.command_long_encode(self.sys, self.comp, ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            arm_frame = msg.pack(self.m.mav)
+            self.m.mav.seq = (self.m.mav.seq + 1) % 256
+            self.m.write(arm_frame)
+            ack = None
+            while ack is None or ack.command != ARM_DISARM:
+                ack = self.recv(["COMMAND_ACK"], timeout=3.0)
+                if ack is None:
+                    break
+            result = None if ack is None else ack.result
+            if result != TEMPORARILY_REJECTED:
+                break
+            time.sleep(0.2)
+        self.check(result == ACCEPTED and self.armed(), f"owner (signed): arm accepted (result {result})")
+        self.check(self.command(NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 1.0) == ACCEPTED,
+                   "owner: take-off accepted")
+        end = time.time() + self.timeout
+        while time.time() < end and (self.z is None or self.z > -0.8):
+            self.recv(["LOCAL_POSITION_NED"], timeout=2.0)
+        self.check(self.z is not None and self.z <= -0.8, f"climbing: {self.z} m down")
+
+        i = self.intruder(None)
+        i.mav.command_long_send(self.sys, self.comp, ARM_DISARM, 0, 0, FORCE, 0, 0, 0, 0, 0)
+        i.mav.command_long_send(self.sys, self.comp, NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0)
+        self.settle(1.5)
+        self.check(self.armed() and self.z is not None and self.z < -0.5,
+                   f"intruder's forced disarm and land in flight ignored: armed, {self.z} m down")
+
+        self.check(self.command(NAV_LAND) == ACCEPTED, "owner: land accepted")
+        n = len(self.texts)
+        end = time.time() + 4 * self.timeout
+        while time.time() < end and self.armed():
+            pass
+        self.check(not self.armed(), f"landed and disarmed ({self.texts[n:]})")
+        i.write(arm_frame)
+        self.settle(1.5)
+        self.check(not self.armed(), "the owner's signed arm, replayed by the intruder: ignored")
+        i.close()
+
+        n = len(self.texts)
+        self.m.mav.setup_signing_send(self.sys, self.comp, [0] * 32, 0)
+        # Its answer comes unsigned: the key is gone.
+        self.m.mav.signing.allow_unsigned_callback = lambda mav, msg_id: True
+        self.settle(1.0)
+        self.check(any("key cleared" in t for t in self.texts[n:]),
+                   f"owner: a signed blank SETUP_SIGNING clears the key ({self.texts[n:][:1]})")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--url", default="udpin:127.0.0.1:14550")
+    ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per exchange")
+    a = ap.parse_args()
+    s = Session(a.url, a.timeout)
+    s.run()
+    failed = [w for ok, w in s.results if not ok]
+    passed = len(s.results) - len(failed)
+    print(f"signing check: {passed} passed, {len(failed)} failed" + (f" ({'; '.join(failed)})" if failed else ""))
+    return 1 if failed or not s.results else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
