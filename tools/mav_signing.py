@@ -20,6 +20,10 @@ heartbeat, then:
    intruder replays the owner's signed arm frame, byte for byte: ignored;
 5. the owner clears the key with a signed all-zero SETUP_SIGNING.
 
+In process (`sil-host px4-hil`) the host's link checks and signs; with
+`--target qemu` the host forwards the ground station's frames whole and
+`firmware-mavlink` checks and signs them itself.
+
 Prints one line `signing check: P passed, F failed` (and what failed) and
 exits non-zero if anything failed.
 """
@@ -92,9 +96,21 @@ class Session:
         while time.time() < end:
             self.recv([], timeout=max(0.05, end - time.time()))
 
-    def armed(self):
-        self.recv(["HEARTBEAT"], timeout=5.0)
+    def armed(self, beats=2):
+        """Armed, by the `beats`-th heartbeat from now: the first may have
+        left before what was just sent arrived (1 Hz of vehicle time)."""
+        for _ in range(beats):
+            self.recv(["HEARTBEAT"], timeout=30.0)
         return self.hb is not None and bool(self.hb.base_mode & ARMED)
+
+    def until(self, pred, timeout=None):
+        """Heartbeats until `pred(heartbeat)` holds (True) or `timeout`."""
+        end = time.time() + (timeout or self.timeout)
+        while time.time() < end:
+            hb = self.recv(["HEARTBEAT"], timeout=5.0)
+            if hb is not None and pred(hb):
+                return True
+        return False
 
     def command(self, cmd, *params):
         p = list(params) + [0.0] * (7 - len(params))
@@ -153,7 +169,7 @@ class Session:
         self.check(n_requests == 0 and self.mission_count() == missions,
                    f"{who}: mission upload ignored (no MISSION_REQUEST, {missions} items)")
         # The owner still hears verified frames: the key was not replaced.
-        self.check(self.recv(["HEARTBEAT"], timeout=5.0) is not None, f"{who}: SETUP_SIGNING ignored (key kept)")
+        self.check(self.recv(["HEARTBEAT"], timeout=30.0) is not None, f"{who}: SETUP_SIGNING ignored (key kept)")
 
     def run(self):
         hb = self.recv(["HEARTBEAT"])
@@ -178,8 +194,8 @@ class Session:
             i.close()
         # The same requests from the owner, signed, are obeyed: the checks
         # above could fail.
-        self.check(self.command(DO_SET_MODE, 1, *HOLD) == ACCEPTED and self.armed() is False
-                   and self.hb.custom_mode >> 16 == 0x0304,
+        self.check(self.command(DO_SET_MODE, 1, *HOLD) == ACCEPTED
+                   and self.until(lambda hb: hb.custom_mode >> 16 == 0x0304),
                    f"owner (signed): Hold accepted (custom mode {self.hb.custom_mode:#x})")
         fs = self.param("FS_TIMEOUT_MS")
         self.m.mav.param_set_send(self.sys, self.comp, b"FS_TIMEOUT_MS", fs + 100.0, REAL32)
@@ -203,7 +219,8 @@ class Session:
             if result != TEMPORARILY_REJECTED:
                 break
             time.sleep(0.2)
-        self.check(result == ACCEPTED and self.armed(), f"owner (signed): arm accepted (result {result})")
+        self.check(result == ACCEPTED and self.until(lambda hb: hb.base_mode & ARMED),
+                   f"owner (signed): arm accepted (result {result})")
         self.check(self.command(NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 1.0) == ACCEPTED,
                    "owner: take-off accepted")
         end = time.time() + self.timeout
@@ -221,7 +238,7 @@ class Session:
         self.check(self.command(NAV_LAND) == ACCEPTED, "owner: land accepted")
         n = len(self.texts)
         end = time.time() + 4 * self.timeout
-        while time.time() < end and self.armed():
+        while time.time() < end and self.armed(beats=1):
             pass
         self.check(not self.armed(), f"landed and disarmed ({self.texts[n:]})")
         i.write(arm_frame)

@@ -156,7 +156,9 @@ pub struct HilResult {
     /// sensor samples, parameter writes, commands, invalid values).
     pub vehicle_errors: [u16; 4],
     /// Whether the ground station's link ended the flight signing (a key
-    /// set by `SETUP_SIGNING`).
+    /// set by `SETUP_SIGNING`). These four figures are this process's
+    /// link's (in process); the image in QEMU checks signatures itself and
+    /// logs what it dropped (`firmware_log`), so there they stay zero.
     pub signing_on: bool,
     /// The ground station's frames the signing check dropped: unsigned,
     /// badly signed, replayed, too many streams.
@@ -204,12 +206,25 @@ trait Vehicle {
     /// Hands `msg` to the vehicle; what it sent in answer is appended to
     /// `out`. A `HIL_SENSOR` returns with its `HIL_ACTUATOR_CONTROLS`.
     fn deliver(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>) -> Result<()>;
-    /// [`Vehicle::deliver`] for the ground station's messages, whose link
-    /// signs with `signing` (a `SETUP_SIGNING` sets it). The image in QEMU
-    /// keeps no signing state yet: there it is [`Vehicle::deliver`].
-    fn deliver_from_gcs(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>, signing: &mut Signing) -> Result<()> {
-        let _ = signing;
+    /// [`Vehicle::deliver`] for the ground station's messages (`frame`: as
+    /// the ground station sent it, signature included). In process the
+    /// link signs with `signing` (a `SETUP_SIGNING` sets it); the image in
+    /// QEMU gets `frame` unchanged and checks it itself.
+    fn deliver_from_gcs(
+        &mut self,
+        msg: &MavMessage,
+        frame: &[u8],
+        out: &mut Vec<MavMessage>,
+        signing: &mut Signing,
+    ) -> Result<()> {
+        let _ = (frame, signing);
         self.deliver(msg, out)
+    }
+    /// Whether it sends the ground station's messages itself, as it wrote
+    /// them (the image in QEMU: signed by the image), rather than the host
+    /// encoding them.
+    fn relays_gcs(&self) -> bool {
+        false
     }
     /// Frames its readers refused.
     fn refused(&self) -> u32;
@@ -246,7 +261,13 @@ impl Vehicle for InProcess {
         let Ok(()) = self.v.handle(msg, &mut Collect(out, None), &self.clock, now_us);
         Ok(())
     }
-    fn deliver_from_gcs(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>, signing: &mut Signing) -> Result<()> {
+    fn deliver_from_gcs(
+        &mut self,
+        msg: &MavMessage,
+        _frame: &[u8],
+        out: &mut Vec<MavMessage>,
+        signing: &mut Signing,
+    ) -> Result<()> {
         let now_us = self.wall.elapsed().as_micros() as u64;
         let Ok(()) = self
             .v
@@ -268,6 +289,9 @@ struct InQemu {
     reader: MavReader,
     seq: u8,
     buf: Vec<u8>,
+    /// The ground station's socket and address: the image's frames for it
+    /// go there as the image wrote them.
+    gcs: Option<(UdpSocket, SocketAddr)>,
 }
 
 impl InQemu {
@@ -280,7 +304,35 @@ impl InQemu {
             reader: MavReader::new(MISSION_GCS_ID),
             seq: 0,
             buf: vec![0u8; 4096],
+            gcs: None,
         })
+    }
+
+    /// Reads what the image sends: up to its motor commands if `lockstep`
+    /// (a sample was sent), else what has arrived, without waiting.
+    fn answer(&mut self, lockstep: bool, out: &mut Vec<MavMessage>) -> Result<()> {
+        self.usart.set_nonblocking(!lockstep)?;
+        let mut waiting = true;
+        while waiting {
+            let n = match self.usart.read(&mut self.buf) {
+                Ok(0) => bail!("the image closed its USART1"),
+                Ok(n) => n,
+                Err(e) if !lockstep && e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Err(e) => return Err(e).context("reading the image's USART1"),
+            };
+            waiting = lockstep;
+            for &b in &self.buf[..n] {
+                if let Some(Ok((_, m))) = self.reader.push(b) {
+                    waiting &= !matches!(m, MavMessage::HIL_ACTUATOR_CONTROLS(_));
+                    if let (Some((sock, addr)), (_, true)) = (&self.gcs, route(&m)) {
+                        // A ground station that has gone away is not an error of the flight.
+                        let _ = sock.send_to(self.reader.frame(), addr);
+                    }
+                    out.push(m);
+                }
+            }
+        }
+        Ok(())
     }
 }
 
@@ -300,25 +352,21 @@ impl Vehicle for InQemu {
         // In lockstep a sample is answered by its motor commands: read up
         // to them (whatever else the image sent comes first). After any
         // other message, take what has arrived without waiting.
-        let lockstep = matches!(msg, MavMessage::HIL_SENSOR(_));
-        self.usart.set_nonblocking(!lockstep)?;
-        let mut waiting = true;
-        while waiting {
-            let n = match self.usart.read(&mut self.buf) {
-                Ok(0) => bail!("the image closed its USART1"),
-                Ok(n) => n,
-                Err(e) if !lockstep && e.kind() == std::io::ErrorKind::WouldBlock => break,
-                Err(e) => return Err(e).context("reading the image's USART1"),
-            };
-            waiting = lockstep;
-            for &b in &self.buf[..n] {
-                if let Some(Ok((_, m))) = self.reader.push(b) {
-                    waiting &= !matches!(m, MavMessage::HIL_ACTUATOR_CONTROLS(_));
-                    out.push(m);
-                }
-            }
-        }
-        Ok(())
+        self.answer(matches!(msg, MavMessage::HIL_SENSOR(_)), out)
+    }
+    fn deliver_from_gcs(
+        &mut self,
+        _msg: &MavMessage,
+        frame: &[u8],
+        out: &mut Vec<MavMessage>,
+        _signing: &mut Signing,
+    ) -> Result<()> {
+        // Forwarded whole: the image checks its signature.
+        self.usart.write_all(frame).context("writing to the image's USART1")?;
+        self.answer(false, out)
+    }
+    fn relays_gcs(&self) -> bool {
+        self.gcs.is_some()
     }
     fn refused(&self) -> u32 {
         self.reader.counters().refused()
@@ -461,6 +509,14 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         .check()
         .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?;
     let mut res = HilResult::default();
+    let gcs = match cfg.gcs {
+        Some(addr) => {
+            let sock = UdpSocket::bind("0.0.0.0:0").context("opening the ground station's UDP socket")?;
+            sock.set_nonblocking(true)?;
+            Some((sock, addr))
+        }
+        None => None,
+    };
     let mut v: Box<dyn Vehicle> = match &cfg.target {
         Target::InProcess => {
             res.target = "in-process".into();
@@ -475,6 +531,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             res.target = "qemu".into();
             let mut q = InQemu::start(elf)?;
             write_parameters(&mut q, &cfg.settings)?;
+            if let Some((sock, addr)) = &gcs {
+                q.gcs = Some((sock.try_clone()?, *addr));
+            }
             Box::new(q)
         }
     };
@@ -486,14 +545,6 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     stream.set_nodelay(true)?;
     stream.set_read_timeout(Some(Duration::from_secs(60)))?;
     let mut sim = stream.try_clone()?;
-    let gcs = match cfg.gcs {
-        Some(addr) => {
-            let sock = UdpSocket::bind("0.0.0.0:0").context("opening the ground station's UDP socket")?;
-            sock.set_nonblocking(true)?;
-            Some((sock, addr))
-        }
-        None => None,
-    };
     let (mut sim_seq, mut gcs_seq) = (0u8, 0u8);
     // The ground station's link: signed once a SETUP_SIGNING sets a key
     // (PX4's rules, fc_mavlink::signing); the simulator's is never signed
@@ -561,7 +612,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             while let Ok(n) = sock.recv(&mut dgram) {
                 for &b in &dgram[..n] {
                     if let Some(Ok((_, msg))) = gcs_reader.push_signed(b, &mut gcs_signing) {
-                        v.deliver_from_gcs(&msg, &mut out, &mut gcs_signing)?;
+                        v.deliver_from_gcs(&msg, gcs_reader.frame(), &mut out, &mut gcs_signing)?;
                     }
                 }
             }
@@ -711,7 +762,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 if to_sim {
                     send(true, &m, &mut sim, &mut gcs_signing)?;
                 }
-                if to_gcs {
+                if to_gcs && !v.relays_gcs() {
                     send(false, &m, &mut sim, &mut gcs_signing)?;
                 }
             }

@@ -147,6 +147,12 @@ impl MavReader {
         }
     }
 
+    /// The bytes of the frame the last `Some` completed (signature included),
+    /// to forward it whole; valid until the next byte is pushed.
+    pub fn frame(&self) -> &[u8] {
+        self.raw.raw_bytes()
+    }
+
     /// What was delivered and refused so far.
     pub fn counters(&self) -> MavCounters {
         self.counters

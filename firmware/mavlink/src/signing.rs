@@ -42,6 +42,12 @@ const TIMESTAMP_MAX: u64 = (1 << 48) - 1;
 /// sign).
 pub const UNSIGNED_ALLOWED: [u32; 3] = [109, 246, 247];
 
+/// The simulator's messages, which the `firmware-mavlink` image hears on the
+/// ground station's link (one USART for both peers) and accepts unsigned:
+/// `HIL_SENSOR`, `HIL_STATE_QUATERNION`. PX4 hears its simulator apart from
+/// its MAVLink module; a vehicle flying its own sensors has no such link.
+pub const SIMULATOR_UNSIGNED: [u32; 2] = [107, 115];
+
 /// Streams a vehicle tracks at once (mavlink.io's C library keeps 16).
 pub const STREAMS: usize = 16;
 
@@ -155,6 +161,9 @@ pub struct Signing {
     streams: heapless::Vec<Stream, STREAMS>,
     counters: SigningCounters,
     last_authenticated: bool,
+    also_unsigned: &'static [u32],
+    /// Microseconds not yet a whole timestamp unit (10 µs).
+    rem_us: u64,
 }
 
 impl core::fmt::Debug for Signing {
@@ -193,6 +202,8 @@ impl Signing {
                 setups_refused: 0,
             },
             last_authenticated: false,
+            also_unsigned: &[],
+            rem_us: 0,
         }
     }
 
@@ -234,6 +245,12 @@ impl Signing {
         self.last_authenticated
     }
 
+    /// Accepts these message ids unsigned too (beside [`UNSIGNED_ALLOWED`]):
+    /// [`SIMULATOR_UNSIGNED`] where the simulator shares the link.
+    pub fn also_accept_unsigned(&mut self, ids: &'static [u32]) {
+        self.also_unsigned = ids;
+    }
+
     /// The link id this side signs with (0 unless set).
     pub fn set_link_id(&mut self, link_id: u8) {
         self.link_id = link_id;
@@ -243,6 +260,8 @@ impl Signing {
     /// follow time, never go back; a vehicle without a calendar clock keeps
     /// the stored one and adds the time it has been up).
     pub fn advance_us(&mut self, us: u64) {
+        let us = self.rem_us.saturating_add(us);
+        self.rem_us = us % 10;
         self.timestamp = self.timestamp.saturating_add(us / 10).min(TIMESTAMP_MAX);
     }
 
@@ -273,7 +292,7 @@ impl Signing {
             return Ok(false);
         };
         if !signed {
-            return if UNSIGNED_ALLOWED.contains(&id) {
+            return if UNSIGNED_ALLOWED.contains(&id) || self.also_unsigned.contains(&id) {
                 Ok(false)
             } else {
                 Err(SignError::Unsigned(id))

@@ -436,6 +436,15 @@ mod signing {
     }
 
     #[test]
+    fn the_clock_adds_up_microseconds_however_finely_it_is_fed() {
+        let mut s = Signing::with_key(KEY, 1);
+        for _ in 0..1000 {
+            s.advance_us(3);
+        }
+        assert_eq!(s.timestamp(), 1 + 300);
+    }
+
+    #[test]
     fn radio_status_passes_unsigned_as_px4_lets_it() {
         let mut s = Signing::with_key(KEY, 0);
         let mut f = [0u8; 12];

@@ -26,18 +26,21 @@ mod target {
     use crate::board;
     use cortex_m_rt::entry;
     use fc_mavlink::params::Settings;
+    use fc_mavlink::signing::{Signing, SIMULATOR_UNSIGNED};
     use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer, VehicleCounters};
-    use fc_mavlink::{encode, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
+    use fc_mavlink::{encode_signed, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
     use hal_shim::stm32f405::{TxTimeout, Usart};
     use hal_shim::ByteLink;
 
     /// This vehicle's MAVLink system id (component: MAV_COMP_ID_AUTOPILOT1).
     const SYSTEM_ID: u8 = 1;
 
-    /// Both peers on USART1.
+    /// Both peers on USART1, signed once a `SETUP_SIGNING` set a key (the
+    /// key lives in RAM: a reset clears it).
     struct Link<'a> {
         usart: &'a mut Usart,
         seq: u8,
+        signing: Signing,
     }
 
     impl MavSink for Link<'_> {
@@ -50,11 +53,14 @@ mod target {
             };
             self.seq = self.seq.wrapping_add(1);
             let mut out = [0u8; MAX_FRAME];
-            match encode(header, msg, &mut out) {
+            match encode_signed(header, msg, &mut out, &mut self.signing) {
                 Ok(n) => self.usart.write_all(&out[..n]),
                 // Every message fits MAX_FRAME; nothing to send otherwise.
                 Err(_) => Ok(()),
             }
+        }
+        fn signing(&mut self) -> Option<&mut Signing> {
+            Some(&mut self.signing)
         }
     }
 
@@ -77,10 +83,11 @@ mod target {
         }
         if reader.refused() != last.2 {
             defmt::warn!(
-                "MAVLink frames refused: crc {=u32} unknown {=u32} unsupported {=u32} malformed {=u32} other system {=u32}",
+                "MAVLink frames refused: crc {=u32} unknown {=u32} unsupported {=u32} signing {=u32} malformed {=u32} other system {=u32}",
                 reader.bad_crc,
                 reader.unknown,
                 reader.unsupported,
+                reader.signing,
                 reader.malformed,
                 reader.other_system
             );
@@ -111,15 +118,23 @@ mod target {
             fc_stm32f405::stack::static_ram()
         );
         let mut reader = MavReader::new(SYSTEM_ID);
+        // The simulator's samples share USART1 with the ground station:
+        // they pass unsigned (fc_mavlink::signing::SIMULATOR_UNSIGNED).
+        let mut signing = Signing::new();
+        signing.also_accept_unsigned(&SIMULATOR_UNSIGNED);
         let mut link = Link {
             usart: &mut usart,
             seq: 0,
+            signing,
         };
+        let mut signing_us = board::now_us(&clock);
         let mut buf = [0u8; 64];
         let mut last = (false, VehicleCounters::default(), 0u32, 0usize);
         let mut tx_errors: u32 = 0;
         loop {
             let now_us = board::now_us(&clock);
+            link.signing.advance_us(now_us.saturating_sub(signing_us));
+            signing_us = now_us;
             // Bounded work per pass: at most 16 reads of 64 bytes.
             for _ in 0..16 {
                 let Ok(n) = link.usart.read(&mut buf) else { break };
@@ -127,7 +142,7 @@ mod target {
                     break;
                 }
                 for &b in &buf[..n.min(buf.len())] {
-                    if let Some(Ok((_, msg))) = reader.push(b) {
+                    if let Some(Ok((_, msg))) = reader.push_signed(b, &mut link.signing) {
                         if v.handle(&msg, &mut link, &clock, now_us).is_err() {
                             tx_errors = tx_errors.wrapping_add(1);
                             defmt::warn!("USART1 transmit timed out ({=u32} so far)", tx_errors);
