@@ -169,12 +169,25 @@ pub struct HilResult {
     pub signing_setups_refused: u32,
     /// The vehicle's `STATUSTEXT`s, in order.
     pub status_texts: Vec<String>,
+    /// What ended the flight: its duration, or the simulator hanging up
+    /// (closed or reset), with the steps flown.
+    pub end: String,
     /// The image's defmt log (QEMU).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub firmware_log: Vec<String>,
     /// Rows `[t, north, east, down (reported), north, east, down (estimate), setpoint n, e, d]`.
     #[serde(skip)]
     pub trace: Vec<[f64; 10]>,
+}
+
+/// Whether `e` is a peer that went away (closed, reset, aborted), which
+/// ends a flight with its summary rather than failing it.
+fn hung_up(e: &std::io::Error) -> bool {
+    use std::io::ErrorKind::*;
+    matches!(
+        e.kind(),
+        ConnectionReset | ConnectionAborted | BrokenPipe | UnexpectedEof
+    )
 }
 
 fn connect(addr: &str, timeout_s: f64) -> Result<TcpStream> {
@@ -567,7 +580,11 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         }
         .map_err(|e| anyhow::anyhow!("{e}"))?;
         if to_sim {
-            sim.write_all(&out[..n]).context("writing to the simulator")
+            match sim.write_all(&out[..n]) {
+                // Its hang-up ends the flight where the reader sees it.
+                Err(e) if hung_up(&e) => Ok(()),
+                r => r.context("writing to the simulator"),
+            }
         } else {
             if let Some((sock, addr)) = &gcs {
                 // A ground station that has gone away is not an error of the flight.
@@ -618,8 +635,15 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             }
         }
         let n = match input.read(&mut buf) {
-            Ok(0) => break,
+            Ok(0) => {
+                res.end = format!("the simulator closed the connection after {} steps", res.steps);
+                break;
+            }
             Ok(n) => n,
+            Err(e) if hung_up(&e) => {
+                res.end = format!("the simulator hung up after {} steps ({e})", res.steps);
+                break;
+            }
             Err(e) => {
                 return Err(e).with_context(|| {
                     format!(
@@ -767,6 +791,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 }
             }
             if t >= cfg.duration_s {
+                res.end = format!("the flight's duration, {} s", cfg.duration_s);
                 break 'flight;
             }
         }

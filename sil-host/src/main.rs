@@ -1277,6 +1277,7 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
         }
         w.flush()?;
     }
+    eprintln!("px4-hil: the flight ended: {}", res.end);
     println!("{}", serde_json::to_string_pretty(&res)?);
     Ok(())
 }

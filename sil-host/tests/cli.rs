@@ -328,3 +328,76 @@ fn the_json_reports_the_rate_flown_and_the_mpc_refuses_a_rate() {
         "{err}"
     );
 }
+
+/// A simulator that hangs up mid-flight ends `px4-hil` with exit 0, a
+/// line saying so and the summary (it failed with a backtrace before).
+#[test]
+fn px4_hil_ends_with_its_summary_when_the_simulator_hangs_up() {
+    use fc_mavlink::common::{HilSensorUpdatedFlags, HIL_SENSOR_DATA};
+    use fc_mavlink::{encode, MavHeader, MavMessage, MAX_FRAME};
+    use std::io::Write;
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let vehicle = concat!(env!("CARGO_MANIFEST_DIR"), "/../vehicles/crazyflie-rotorpy.toml");
+    let mut child = sil_host()
+        .args([
+            "px4-hil",
+            "--vehicle",
+            vehicle,
+            "--connect",
+            &format!("127.0.0.1:{port}"),
+        ])
+        .args(["--waypoint", "0,0,0,-1", "--duration", "30"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Bounded: a px4-hil that exits before connecting fails the test.
+    listener.set_nonblocking(true).unwrap();
+    let start = std::time::Instant::now();
+    let mut sim = loop {
+        match listener.accept() {
+            Ok((s, _)) => break s,
+            Err(_) if start.elapsed().as_secs() < 30 && child.try_wait().unwrap().is_none() => {
+                std::thread::sleep(std::time::Duration::from_millis(20))
+            }
+            Err(e) => {
+                let _ = child.kill();
+                panic!("px4-hil never connected: {e}; {:?}", child.wait_with_output().unwrap());
+            }
+        }
+    };
+    sim.set_nonblocking(false).unwrap();
+    let mut buf = [0u8; MAX_FRAME];
+    for k in 0..50u64 {
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 51,
+            sequence: k as u8,
+        };
+        let sample = MavMessage::HIL_SENSOR(HIL_SENSOR_DATA {
+            time_usec: 1_000_000 + k * 1000,
+            zacc: -9.81,
+            abs_pressure: 1013.25,
+            fields_updated: HilSensorUpdatedFlags::all(),
+            ..Default::default()
+        });
+        let n = encode(header, &sample, &mut buf).unwrap();
+        sim.write_all(&buf[..n]).unwrap();
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    drop(sim);
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let res: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let end = res["end"].as_str().unwrap();
+    // Closed with the vehicle's answers unread: the kernel resets the
+    // connection (either way it ends the flight).
+    assert!(
+        end.starts_with("the simulator ") && end.contains(" after 50 steps"),
+        "{end}"
+    );
+    assert_eq!(res["steps"], 50);
+    assert!(stderr.contains("the flight ended: the simulator "), "{stderr}");
+}

@@ -330,6 +330,7 @@ subset! {
     MANUAL_CONTROL: MANUAL_CONTROL_DATA,
     ESTIMATOR_STATUS: ESTIMATOR_STATUS_DATA,
     SETUP_SIGNING: SETUP_SIGNING_DATA,
+    SET_MODE: SET_MODE_DATA,
 }
 
 /// Writes `msg` as one MAVLink 2 frame (unsigned) into `out`; returns its

@@ -403,6 +403,23 @@ impl MavVehicle {
                 self.on_command(&c, out)
             }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
+            // PX4's receiver turns SET_MODE into DO_SET_MODE (base mode,
+            // main and sub mode from the custom mode), answered alike.
+            MavMessage::SET_MODE(m) if self.for_me(m.target_system) => {
+                let c = Command {
+                    command: MavCmd::MAV_CMD_DO_SET_MODE,
+                    params: [
+                        f32::from(m.base_mode.bits()),
+                        ((m.custom_mode >> 16) & 0xff) as f32,
+                        (m.custom_mode >> 24) as f32,
+                        0.0,
+                        0.0,
+                        0.0,
+                        0.0,
+                    ],
+                };
+                self.on_command(&c, out)
+            }
             MavMessage::SETUP_SIGNING(m) if self.for_me(m.target_system) => {
                 let armed = self.armed;
                 let Some(s) = out.signing() else {

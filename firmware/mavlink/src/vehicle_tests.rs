@@ -977,6 +977,24 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     );
     assert_eq!(v.mode(), FlightMode::Position);
 
+    // SET_MODE (id 11), which ground stations still send: PX4 turns it into
+    // DO_SET_MODE and acknowledges that command.
+    let mut out = Sent::default();
+    let (main, sub) = FlightMode::Hold.px4();
+    let set = MavMessage::SET_MODE(SET_MODE_DATA {
+        custom_mode: (u32::from(main) << 16) | (u32::from(sub) << 24),
+        target_system: 1,
+        base_mode: MavModeFlag::from_bits_truncate(1),
+    });
+    v.handle(&set, &mut out, &Still, 0).unwrap();
+    assert_eq!(v.mode(), FlightMode::Hold);
+    assert!(matches!(
+        &out.0[..],
+        [(_, MavMessage::COMMAND_ACK(a))] if a.command == MavCmd::MAV_CMD_DO_SET_MODE && a.result == ok
+    ));
+    v.handle(&set_mode(FlightMode::Position), &mut out, &Still, 0).unwrap();
+    assert_eq!(v.mode(), FlightMode::Position);
+
     // Hold, arm, take off to MIS_TAKEOFF_ALT: Takeoff, then Hold at 1.5 m.
     let mut out = Sent::default();
     v.handle(&set_mode(FlightMode::Hold), &mut out, &Still, 0).unwrap();
