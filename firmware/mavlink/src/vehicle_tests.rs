@@ -981,6 +981,7 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     // DO_SET_MODE and acknowledges that command.
     let mut out = Sent::default();
     let (main, sub) = FlightMode::Hold.px4();
+    #[allow(deprecated)]
     let set = MavMessage::SET_MODE(SET_MODE_DATA {
         custom_mode: (u32::from(main) << 16) | (u32::from(sub) << 24),
         target_system: 1,
