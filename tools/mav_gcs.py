@@ -60,6 +60,7 @@ class Gcs:
         self.seen = {}
         self.boot_ms = 0
         self.position = None
+        self.hb = None
         self.beating = True
         self.last_beat = 0.0
 
@@ -86,6 +87,8 @@ class Gcs:
                 self.boot_ms = max(self.boot_ms, msg.time_boot_ms)
             if t == "LOCAL_POSITION_NED":
                 self.position = (msg.x, msg.y, msg.z)
+            if t == "HEARTBEAT":
+                self.hb = msg
             if t in types:
                 return msg
         return None

@@ -35,6 +35,8 @@ import time
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
 
+from mav_gcs import Gcs  # noqa: E402
+
 ARM_DISARM = 400
 DO_SET_MODE = 176
 NAV_TAKEOFF = 22
@@ -54,41 +56,13 @@ def now_2015():
     return int((time.time() - 1420070400) * 100000)
 
 
-class Session:
-    def __init__(self, url, timeout):
-        self.m = mavutil.mavlink_connection(url, source_system=254, source_component=190)
-        self.timeout = timeout
-        self.results = []
-        self.texts = []
-        self.hb = None
-        self.z = None
-        self.last_beat = 0.0
+class Session(Gcs):
+    """mav_gcs.py's ground station, as the owner; its `recv` keeps the last
+    HEARTBEAT and LOCAL_POSITION_NED (verified, once signing is on)."""
 
-    def check(self, ok, what):
-        self.results.append((bool(ok), what))
-        print(("ok   " if ok else "FAIL ") + what, flush=True)
-        return ok
-
-    def recv(self, types, timeout=None):
-        """The next message of one of `types` (verified, once signing is on)."""
-        end = time.time() + (timeout or self.timeout)
-        while time.time() < end:
-            if time.time() - self.last_beat > 0.5:
-                self.m.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-                self.last_beat = time.time()
-            msg = self.m.recv_match(blocking=True, timeout=0.2)
-            if msg is None:
-                continue
-            t = msg.get_type()
-            if t == "STATUSTEXT":
-                self.texts.append(msg.text)
-            elif t == "HEARTBEAT":
-                self.hb = msg
-            elif t == "LOCAL_POSITION_NED":
-                self.z = msg.z
-            if t in types:
-                return msg
-        return None
+    @property
+    def z(self):
+        return None if self.position is None else self.position[2]
 
     def settle(self, seconds):
         """Reads for `seconds` (wall), keeping the latest state."""
@@ -111,16 +85,6 @@ class Session:
             if hb is not None and pred(hb):
                 return True
         return False
-
-    def command(self, cmd, *params):
-        p = list(params) + [0.0] * (7 - len(params))
-        self.m.mav.command_long_send(self.sys, self.comp, cmd, 0, *p)
-        end = time.time() + self.timeout
-        while time.time() < end:
-            ack = self.recv(["COMMAND_ACK"], timeout=2.0)
-            if ack is not None and ack.command == cmd:
-                return ack.result
-        return None
 
     def param(self, name):
         self.m.mav.param_request_read_send(self.sys, self.comp, name.encode(), -1)
