@@ -268,11 +268,18 @@ impl MavSink for Collect<'_> {
     }
 }
 
+impl InProcess {
+    /// The vehicle handles `msg`; its link signs with `signing`, if given.
+    fn handle(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>, signing: Option<&mut Signing>) -> Result<()> {
+        let now_us = self.wall.elapsed().as_micros() as u64;
+        let Ok(()) = self.v.handle(msg, &mut Collect(out, signing), &self.clock, now_us);
+        Ok(())
+    }
+}
+
 impl Vehicle for InProcess {
     fn deliver(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>) -> Result<()> {
-        let now_us = self.wall.elapsed().as_micros() as u64;
-        let Ok(()) = self.v.handle(msg, &mut Collect(out, None), &self.clock, now_us);
-        Ok(())
+        self.handle(msg, out, None)
     }
     fn deliver_from_gcs(
         &mut self,
@@ -281,11 +288,7 @@ impl Vehicle for InProcess {
         out: &mut Vec<MavMessage>,
         signing: &mut Signing,
     ) -> Result<()> {
-        let now_us = self.wall.elapsed().as_micros() as u64;
-        let Ok(()) = self
-            .v
-            .handle(msg, &mut Collect(out, Some(signing)), &self.clock, now_us);
-        Ok(())
+        self.handle(msg, out, Some(signing))
     }
     fn refused(&self) -> u32 {
         0
