@@ -64,6 +64,14 @@ class Gcs:
         self.beating = True
         self.last_beat = 0.0
 
+    def summary(self, prefix):
+        """Prints `PREFIX P passed, F failed` (and what failed); the exit
+        status: 1 if anything failed or nothing was checked."""
+        failed = [w for ok, w in self.results if not ok]
+        passed = len(self.results) - len(failed)
+        print(f"{prefix} {passed} passed, {len(failed)} failed" + (f" ({'; '.join(failed)})" if failed else ""))
+        return 1 if failed or not self.results else 0
+
     def check(self, ok, what):
         self.results.append((bool(ok), what))
         print(("ok   " if ok else "FAIL ") + what, flush=True)
@@ -253,10 +261,7 @@ def main():
     a = ap.parse_args()
     g = Gcs(a.url, a.timeout)
     g.run(a.step, a.tolerance)
-    failed = [w for ok, w in g.results if not ok]
-    passed = len(g.results) - len(failed)
-    print(f"gcs check: {passed} passed, {len(failed)} failed" + (f" ({'; '.join(failed)})" if failed else ""))
-    return 1 if failed or not g.results else 0
+    return g.summary("gcs check:")
 
 
 if __name__ == "__main__":

@@ -226,10 +226,7 @@ def main():
     a = ap.parse_args()
     s = Session(a.url, a.timeout)
     s.run()
-    failed = [w for ok, w in s.results if not ok]
-    passed = len(s.results) - len(failed)
-    print(f"signing check: {passed} passed, {len(failed)} failed" + (f" ({'; '.join(failed)})" if failed else ""))
-    return 1 if failed or not s.results else 0
+    return s.summary("signing check:")
 
 
 if __name__ == "__main__":

@@ -229,10 +229,7 @@ trait Vehicle {
         frame: &[u8],
         out: &mut Vec<MavMessage>,
         signing: &mut Signing,
-    ) -> Result<()> {
-        let _ = (frame, signing);
-        self.deliver(msg, out)
-    }
+    ) -> Result<()>;
     /// Whether it sends the ground station's messages itself, as it wrote
     /// them (the image in QEMU: signed by the image), rather than the host
     /// encoding them.
