@@ -8,6 +8,9 @@ use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
+mod ram;
+pub use ram::{RamFlash, RamFlashError};
+
 /// Largest record: a key (2 bytes) and the signing record (40), with the
 /// crate's item header and word alignment (up to 32-byte words).
 const BUFFER: usize = 128;
@@ -18,6 +21,10 @@ const SIGNING_KEY: u16 = 0x8000;
 
 /// The key of the store's own mark: [`MARK`], written when a store is made.
 const MARK_KEY: u16 = 0xFFFF;
+
+/// A parameter's value that says "none stored" (a NaN: no parameter takes
+/// one).
+const REMOVED: u32 = 0x7FC0_0DE1;
 
 /// "fc-storage, layout 1": a range without it holds something else.
 const MARK: u32 = 0xFC57_0001;
@@ -86,6 +93,28 @@ impl<E> From<sequential_storage::Error<E>> for StoreError {
     }
 }
 
+/// What a flight controller keeps across a reboot, whatever keeps it: the
+/// protocols ask this (a link's owner hands it over), so that they need not
+/// know the flash. [`Store`] is the one over NOR flash.
+pub trait Persist {
+    /// The value stored for parameter `index` (its place in the parameter
+    /// table), if any.
+    fn param(&mut self, index: u16) -> Result<Option<f32>, StoreError>;
+    /// Stores `value` for parameter `index`, replacing the last.
+    fn set_param(&mut self, index: u16, value: f32) -> Result<(), StoreError>;
+    /// Forgets the value stored for parameter `index` (its default rules
+    /// at the next boot).
+    fn remove_param(&mut self, index: u16) -> Result<(), StoreError>;
+    /// The MAVLink signing key and its timestamp (10 µs since 2015), if stored.
+    fn signing(&mut self) -> Result<Option<([u8; 32], u64)>, StoreError>;
+    /// Stores the signing key and its timestamp.
+    fn set_signing(&mut self, key: &[u8; 32], timestamp: u64) -> Result<(), StoreError>;
+}
+
+/// The largest parameter index a store keeps (the signing key's and the
+/// store's own keys are above).
+pub const MAX_PARAMS: u16 = SIGNING_KEY;
+
 /// The persistent settings, in `range` of the flash `F`.
 pub struct Store<F: NorFlash> {
     map: MapStorage<u16, F, Cache<Uncached, Uncached, Uncached, u16>>,
@@ -138,22 +167,35 @@ impl<F: NorFlash> Store<F> {
         if index >= SIGNING_KEY {
             return Err(StoreError::Value);
         }
-        Ok(embassy_futures::block_on(
-            self.map.fetch_item::<f32>(&mut self.buf, &index),
-        )?)
+        let v = embassy_futures::block_on(self.map.fetch_item::<f32>(&mut self.buf, &index))?;
+        Ok(v.filter(|v| v.to_bits() != REMOVED))
     }
 
     /// Stores `value` for parameter `index` (it replaces the last), then
     /// reads it back: [`StoreError::Corrupted`] if the store gives another
     /// value (damage in its bookkeeping; [`Store::clear`] starts afresh).
     pub fn set_param(&mut self, index: u16, value: f32) -> Result<(), StoreError> {
-        if index >= SIGNING_KEY {
+        if index >= SIGNING_KEY || value.to_bits() == REMOVED {
             return Err(StoreError::Value);
         }
         embassy_futures::block_on(self.map.store_item(&mut self.buf, &index, &value))?;
         match self.param(index)? {
             Some(v) if v.to_bits() == value.to_bits() => Ok(()),
             _ => Err(StoreError::Corrupted),
+        }
+    }
+
+    /// Forgets parameter `index`'s stored value (nothing if none).
+    pub fn remove_param(&mut self, index: u16) -> Result<(), StoreError> {
+        if index >= SIGNING_KEY {
+            return Err(StoreError::Value);
+        }
+        // Stored as "none" rather than removed: removal needs a flash that
+        // takes a second write over a word, which not every NOR does.
+        embassy_futures::block_on(self.map.store_item(&mut self.buf, &index, &f32::from_bits(REMOVED)))?;
+        match self.param(index)? {
+            None => Ok(()),
+            Some(_) => Err(StoreError::Corrupted),
         }
     }
 
@@ -193,6 +235,65 @@ impl<F: NorFlash> Store<F> {
     pub fn into_flash(self) -> F {
         self.map.destroy().0
     }
+}
+
+impl<F: NorFlash> Persist for Store<F> {
+    fn param(&mut self, index: u16) -> Result<Option<f32>, StoreError> {
+        Store::param(self, index)
+    }
+    fn set_param(&mut self, index: u16, value: f32) -> Result<(), StoreError> {
+        Store::set_param(self, index, value)
+    }
+    fn remove_param(&mut self, index: u16) -> Result<(), StoreError> {
+        Store::remove_param(self, index)
+    }
+    fn signing(&mut self) -> Result<Option<([u8; 32], u64)>, StoreError> {
+        Store::signing(self)
+    }
+    fn set_signing(&mut self, key: &[u8; 32], timestamp: u64) -> Result<(), StoreError> {
+        Store::set_signing(self, key, timestamp)
+    }
+}
+
+/// What [`load_settings`] did.
+#[derive(Debug, Clone, Copy)]
+pub struct Loaded {
+    /// The settings to boot with: `base` with every stored value that
+    /// passed its parameter's checks.
+    pub settings: fc_loop::params::Settings,
+    /// Stored values taken.
+    pub taken: u16,
+    /// Stored values refused (out of range now, or the settings as a whole
+    /// refuse them): left out, their defaults kept; the first refused index.
+    pub refused: (u16, Option<u16>),
+}
+
+/// `base` with the parameter values stored in `p` ([`fc_loop::params::PARAMS`],
+/// by index), each through the same check as a write from a ground station
+/// (a stored value the settings refuse is left out and counted). Err only if
+/// the store cannot be read.
+pub fn load_settings(p: &mut dyn Persist, base: fc_loop::params::Settings) -> Result<Loaded, StoreError> {
+    let mut out = Loaded {
+        settings: base,
+        taken: 0,
+        refused: (0, None),
+    };
+    for i in 0..fc_loop::params::PARAMS.len() {
+        let Some(v) = p.param(i as u16)? else {
+            continue;
+        };
+        match fc_loop::params::write(&out.settings, i, v) {
+            Ok(next) => {
+                out.settings = next;
+                out.taken += 1;
+            }
+            Err(_) => {
+                out.refused.0 += 1;
+                out.refused.1 = out.refused.1.or(Some(i as u16));
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Whether every byte of `range` reads erased (0xFF).

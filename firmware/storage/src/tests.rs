@@ -304,3 +304,73 @@ fn a_blank_store_is_empty_and_bad_ranges_are_refused() {
     );
     assert!(StoreError::Corrupted.to_string().contains("corrupt"));
 }
+
+#[test]
+fn a_removed_parameter_reads_none_and_its_neighbours_stay() {
+    let mut s = store(CutFlash::blank());
+    s.set_param(3, 1.5).unwrap();
+    s.set_param(4, -2.0).unwrap();
+    s.remove_param(3).unwrap();
+    assert_eq!((s.param(3), s.param(4)), (Ok(None), Ok(Some(-2.0))));
+    // The marker is not a value anyone can store.
+    assert_eq!(s.set_param(5, f32::from_bits(REMOVED)), Err(StoreError::Value));
+    s.set_param(3, 0.25).unwrap();
+    let mut s = store(s.into_flash());
+    assert_eq!(s.param(3), Ok(Some(0.25)));
+    // Through the trait the protocols use.
+    let p: &mut dyn Persist = &mut s;
+    p.remove_param(3).unwrap();
+    assert_eq!(p.param(3), Ok(None));
+}
+
+#[test]
+fn stored_parameters_load_through_their_checks() {
+    use fc_loop::params::{index_of, Settings, PARAMS};
+    let mut s = store(CutFlash::blank());
+    let gain = index_of(b"PD_ROLL_P").unwrap();
+    let id = index_of(b"CTL_ID").unwrap();
+    let base = Settings::os4();
+    let v = (PARAMS[gain].get)(&base) * 2.0;
+    s.set_param(gain as u16, v).unwrap();
+    // An id no controller has: refused as a write would be, the default kept.
+    s.set_param(id as u16, 99.0).unwrap();
+    let l = load_settings(&mut s, base).unwrap();
+    assert_eq!((l.taken, l.refused), (1, (1, Some(id as u16))));
+    assert_eq!((PARAMS[gain].get)(&l.settings), v);
+    assert_eq!((PARAMS[id].get)(&l.settings), (PARAMS[id].get)(&base));
+}
+
+#[test]
+fn the_ram_stand_in_keeps_nor_rules_and_a_store() {
+    let mut f = RamFlash::<2048>::blank();
+    let b = |f: &mut RamFlash<2048>, at: u32, n: usize| {
+        let mut v = vec![0u8; n];
+        embassy_futures::block_on(f.read(at, &mut v)).map(|()| v)
+    };
+    embassy_futures::block_on(f.write(4, &[0x0F, 0xF0, 0xAA, 0x55])).unwrap();
+    // A second write only clears bits.
+    embassy_futures::block_on(f.write(4, &[0xFF, 0x0F, 0xFF, 0xFF])).unwrap();
+    assert_eq!(b(&mut f, 4, 4).unwrap(), [0x0F, 0x00, 0xAA, 0x55]);
+    assert_eq!(
+        embassy_futures::block_on(f.write(2, &[0; 4])),
+        Err(RamFlashError::NotAligned)
+    );
+    assert_eq!(
+        embassy_futures::block_on(f.write(2046, &[0; 4])),
+        Err(RamFlashError::OutOfBounds)
+    );
+    assert_eq!(
+        embassy_futures::block_on(f.erase(0, 1000)),
+        Err(RamFlashError::NotAligned)
+    );
+    assert_eq!(b(&mut f, 2047, 2), Err(RamFlashError::OutOfBounds));
+    embassy_futures::block_on(f.erase(0, 1024)).unwrap();
+    assert_eq!(b(&mut f, 4, 4).unwrap(), [0xFF; 4]);
+    // The store over it, and a reboot from its bytes.
+    let (mut s, boot) = Store::open(RamFlash::<2048>::blank(), 0..2048).unwrap();
+    assert_eq!(boot, Boot::Created);
+    s.set_param(1, 2.5).unwrap();
+    let bytes = *s.into_flash().bytes();
+    let (mut s, boot) = Store::open(RamFlash::<2048>::holding(&bytes), 0..2048).unwrap();
+    assert_eq!((boot, s.param(1)), (Boot::Found, Ok(Some(2.5))));
+}
