@@ -814,3 +814,111 @@ fn the_tumble_cosine_is_the_tumble_angles() {
     let exact = f64::from(TUMBLE_TILT_RAD).cos();
     assert!((f64::from(COS_TUMBLE_TILT) - exact).abs() < 1e-7, "{exact}");
 }
+
+/// A sink whose owner keeps parameters (the RAM stand-in store).
+struct Kept {
+    sent: Sent,
+    store: fc_storage::Store<fc_storage::RamFlash<4096>>,
+}
+
+impl CrtpSink for Kept {
+    type Error = core::convert::Infallible;
+    fn send(&mut self, p: &Packet) -> Result<(), Self::Error> {
+        self.sent.send(p)
+    }
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        Some(&mut self.store)
+    }
+}
+
+/// cflib's persistent parameters, byte for byte as its `param.py` sends
+/// and reads them (`MISC_GET_EXTENDED_TYPE_V2`, `MISC_PERSISTENT_STORE`,
+/// `_GET_STATE`, `_CLEAR`), and a value stored surviving a reboot.
+#[test]
+fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
+    use fc_storage::{load_settings, RamFlash, Store};
+    let (store, _) = Store::open(RamFlash::blank(), 0..4096).unwrap();
+    let mut kept = Kept {
+        sent: Sent::default(),
+        store,
+    };
+    let mut v = at_rest(3000);
+    let w_pos = (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
+        .unwrap();
+    let (_, t, _) = param_entry(w_pos).unwrap();
+    assert_eq!(t, 0x16, "float, extended: cflib asks for the extended type");
+    let id = (w_pos as u16).to_le_bytes();
+    let mut ask_kept = |v: &mut CrtpVehicle, p: Packet| {
+        kept.sent.0.clear();
+        v.handle(&p, &mut kept).unwrap();
+        *kept
+            .sent
+            .0
+            .iter()
+            .rev()
+            .find(|a| a.port() == p.port())
+            .expect("an answer")
+    };
+    let misc = |cmd: u8| pk(Port::Param, 3, &[cmd, id[0], id[1]]);
+    assert_eq!(ask_kept(&mut v, misc(7)).payload(), &[7, id[0], id[1], 0, 1]);
+    let default = {
+        let r = ask_kept(&mut v, misc(8));
+        f32::from_le_bytes(r.payload()[4..8].try_into().unwrap())
+    };
+    let state = |r: Packet| r.payload()[3..].to_vec();
+    let mut not_stored = vec![0];
+    not_stored.extend(default.to_le_bytes());
+    assert_eq!(state(ask_kept(&mut v, misc(4))), not_stored);
+    let mut w = id.to_vec();
+    w.extend(3.0f32.to_le_bytes());
+    ask_kept(&mut v, pk(Port::Param, 2, &w));
+    assert_eq!(ask_kept(&mut v, misc(3)).payload(), &[3, id[0], id[1], 0]);
+    let mut stored = vec![1];
+    stored.extend(default.to_le_bytes());
+    stored.extend(3.0f32.to_le_bytes());
+    assert_eq!(state(ask_kept(&mut v, misc(4))), stored);
+    // Not persistent (a Crazyflie name of ours): ENOENT, as the firmware.
+    let deck = (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.group == "deck"))
+        .unwrap() as u16;
+    let d = deck.to_le_bytes();
+    assert_eq!(
+        ask_kept(&mut v, pk(Port::Param, 3, &[7, d[0], d[1]])).payload()[3..],
+        [0, 0]
+    );
+    assert_eq!(
+        ask_kept(&mut v, pk(Port::Param, 3, &[3, d[0], d[1]])).payload()[3..],
+        [log::ENOENT]
+    );
+    // Without storage: the store fails (EIO), the state is "not stored".
+    let r = ask(&mut v, misc(3));
+    assert_eq!(r.payload()[3..], [5]);
+    // Power off: the flash's bytes are all that is left.
+    let bytes = *kept.store.into_flash().bytes();
+    let (mut st, boot) = Store::open(RamFlash::<4096>::holding(&bytes), 0..4096).unwrap();
+    assert_eq!(boot, fc_storage::Boot::Found);
+    let loaded = load_settings(&mut st, Settings::os4()).unwrap();
+    let mut v = CrtpVehicle::new(loaded.settings).unwrap();
+    v.set_defaults(Settings::os4());
+    let mut kept = Kept {
+        sent: Sent::default(),
+        store: st,
+    };
+    let mut ask_kept = |v: &mut CrtpVehicle, p: Packet| {
+        kept.sent.0.clear();
+        v.handle(&p, &mut kept).unwrap();
+        *kept
+            .sent
+            .0
+            .iter()
+            .rev()
+            .find(|a| a.port() == p.port())
+            .expect("an answer")
+    };
+    let read = ask_kept(&mut v, pk(Port::Param, 1, &id));
+    assert_eq!(read.payload()[3..], 3.0f32.to_le_bytes(), "the stored value in force");
+    assert_eq!(state(ask_kept(&mut v, misc(4))), stored);
+    assert_eq!(ask_kept(&mut v, misc(5)).payload(), &[5, id[0], id[1], 0]);
+    assert_eq!(state(ask_kept(&mut v, misc(4))), not_stored);
+}

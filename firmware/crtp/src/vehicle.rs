@@ -101,6 +101,12 @@ pub trait CrtpSink {
     type Error;
     /// Sends `p`.
     fn send(&mut self, p: &Packet) -> Result<(), Self::Error>;
+    /// Where persistent parameters are kept, if anywhere (cflib's
+    /// `param.persistent_store`); `None`: nothing persists, and a request
+    /// to store is answered with an error.
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        None
+    }
 }
 
 /// One log variable: its name, its log type, and how it is read.
@@ -147,6 +153,9 @@ pub mod param_types {
     pub const FLOAT: u8 = 0x06;
     /// Flag: read-only (`PARAM_RONLY`); cflib refuses to write it.
     pub const RONLY: u8 = 0x40;
+    /// Flag: extended type information (`PARAM_EXTENDED`); cflib asks for
+    /// it, and ours says "persistent".
+    pub const EXTENDED: u8 = 0x10;
     /// The type's bits (size, integer or float, signedness) under the flags.
     pub const TYPE: u8 = 0x0F;
 }
@@ -188,6 +197,10 @@ const fn param_index(id: &str) -> usize {
     }
     panic!("no such parameter")
 }
+
+/// `EIO`: the storage is missing or failed (a persistent parameter's
+/// store, state or clear).
+const EIO: u8 = 5;
 
 /// `CTL_ID`'s index.
 const CTL_ID: usize = param_index("CTL_ID");
@@ -260,7 +273,8 @@ pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
                 name,
                 lower_group: true,
             },
-            param_types::FLOAT,
+            // Every flight parameter persists, as the Crazyflie's tuning does.
+            param_types::FLOAT | param_types::EXTENDED,
             None,
         ));
     }
@@ -519,6 +533,13 @@ impl CrtpVehicle {
             core: CrtpCore::unstarted(settings),
             ctrl: fc_loop::fallback_controller(settings.vehicle),
         }
+    }
+
+    /// The values `MISC_GET_DEFAULT_VALUE` and `persistent_get_state`
+    /// report as defaults: the built-in ones, where the vehicle booted with
+    /// stored values (by default, the settings it was made with).
+    pub fn set_defaults(&mut self, defaults: Settings) {
+        self.core.defaults = defaults;
     }
 
     /// Checks the settings and designs the controller in place.
@@ -1572,18 +1593,29 @@ impl CrtpCore {
         };
         let idb = id.to_le_bytes();
         let mut r = reply(Port::Param, 3, &[cmd, idb[0], idb[1]]);
-        let known = param_entry(usize::from(id)).is_some();
+        let index = usize::from(id);
+        let known = param_entry(index).is_some();
+        // Persistent: the flight parameters (the TOC's extended flag).
+        let persistent = index < PARAMS.len();
         match cmd {
-            // Extended type: none of ours is extended (status 0, type 0).
+            // Extended type: 1, persistent (status 0 first, protocol 11+).
             7 if known => {
-                let _ = r.extend(&[0, 0]);
+                let _ = r.extend(&[0, u8::from(persistent)]);
             }
             8 if known => {
                 let _ = r.extend(&[0]);
-                let v = self.param_default(usize::from(id)).unwrap_or(0.0);
-                self.put_value(&mut r, usize::from(id), v);
+                let v = self.param_default(index).unwrap_or(0.0);
+                self.put_value(&mut r, index, v);
             }
-            // Persistent storage: there is none (ENOENT), and unknown ids.
+            // Store the value in force, get the state, clear: as the
+            // Crazyflie's persistent parameters (status 0: done).
+            3..=5 if persistent => {
+                let code = self.on_persistent(cmd, index, &mut r, out);
+                if code != 0 {
+                    let _ = r.extend(&[code]);
+                }
+            }
+            // Not persistent, and unknown ids.
             3..=5 | 7 | 8 => {
                 let _ = r.extend(&[log::ENOENT]);
             }
@@ -1591,6 +1623,44 @@ impl CrtpCore {
         }
         out.send(&r)?;
         Ok(Ok(()))
+    }
+
+    /// `MISC_PERSISTENT_STORE` (3), `_GET_STATE` (4) or `_CLEAR` (5) of
+    /// flight parameter `index` in `out`'s storage: what follows the id is
+    /// appended to `r` and 0 returned, or the error code to append (`EIO`
+    /// without storage or when it fails, said on the console).
+    fn on_persistent<S: CrtpSink>(&mut self, cmd: u8, index: usize, r: &mut Packet, out: &mut S) -> u8 {
+        let now = self.param_value(index).unwrap_or(0.0);
+        let default = self.param_default(index).unwrap_or(0.0);
+        let key = index as u16;
+        let done = match (cmd, out.storage()) {
+            (4, None) => Ok(None),
+            (_, None) => {
+                self.say(format_args!("no storage: parameters are not kept"));
+                return EIO;
+            }
+            (3, Some(st)) => st.set_param(key, now).map(|()| None),
+            (4, Some(st)) => st.param(key),
+            (_, Some(st)) => st.remove_param(key).map(|()| None),
+        };
+        match (cmd, done) {
+            (_, Err(e)) => {
+                self.say(format_args!("storage: {e}"));
+                EIO
+            }
+            (4, Ok(stored)) => {
+                let _ = r.extend(&[u8::from(stored.is_some())]);
+                self.put_value(r, index, default);
+                if let Some(v) = stored {
+                    self.put_value(r, index, v);
+                }
+                0
+            }
+            (_, Ok(_)) => {
+                let _ = r.extend(&[0]);
+                0
+            }
+        }
     }
 
     /// `MISC_SETBYNAME`: `[0, group\0, name\0, type, value]`, answered
@@ -1611,7 +1681,8 @@ impl CrtpCore {
         }
         let code = match (id, read_value(t, value)) {
             (None, _) => log::ENOENT,
-            (Some(i), Some(v)) if param_entry(i).is_some_and(|(_, pt, _)| pt == t) => {
+            // The type as the firmware compares it: without its flags.
+            (Some(i), Some(v)) if param_entry(i).is_some_and(|(_, pt, _)| same_type(pt, t)) => {
                 match self.param_write(i, v, Reply::Crtp(*p)) {
                     Ok(Written::Later) => return Ok(Ok(())),
                     Ok(Written::Now) => 0,
@@ -1881,6 +1952,11 @@ fn log_name(v: &LogVar) -> Name<'static> {
 }
 
 /// A parameter value of param type `t` in `b`, as f32.
+fn same_type(a: u8, b: u8) -> bool {
+    a & param_types::TYPE == b & param_types::TYPE
+}
+
+/// `[f32]` from the start of `b` as parameter type `t`.
 fn read_value(t: u8, b: &[u8]) -> Option<f32> {
     match t & param_types::TYPE {
         param_types::U8 => b.first().map(|&v| f32::from(v)),

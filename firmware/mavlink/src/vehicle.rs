@@ -73,6 +73,13 @@ pub trait MavSink {
     fn signing(&mut self) -> Option<&mut crate::signing::Signing> {
         None
     }
+    /// Where settings persist across a reboot, if anywhere: a parameter a
+    /// ground station sets is stored there at once (as PX4 saves its
+    /// parameters), and a signing key when `SETUP_SIGNING` sets it.
+    /// `None`: they live until power-off.
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        None
+    }
 }
 
 /// What the vehicle did with what it got.
@@ -427,7 +434,19 @@ impl MavVehicle {
                 };
                 let authenticated = s.last_authenticated();
                 match s.setup(&m.secret_key, m.initial_timestamp, authenticated, armed) {
-                    Ok(done) => self.say(out, MavSeverity::MAV_SEVERITY_NOTICE, format_args!("{done}")),
+                    Ok(done) => {
+                        let kept = (s.key().copied().unwrap_or([0; 32]), s.timestamp());
+                        self.say(out, MavSeverity::MAV_SEVERITY_NOTICE, format_args!("{done}"))?;
+                        // No key is kept as the all-zero key (PX4's blank key file).
+                        match out.storage().map(|st| st.set_signing(&kept.0, kept.1)) {
+                            Some(Err(e)) => self.say(
+                                out,
+                                MavSeverity::MAV_SEVERITY_ERROR,
+                                format_args!("signing key not stored: {e}"),
+                            ),
+                            _ => Ok(()),
+                        }
+                    }
                     Err(why) => self.say(out, MavSeverity::MAV_SEVERITY_WARNING, format_args!("{why}")),
                 }
             }
@@ -1218,9 +1237,34 @@ impl MavVehicle {
                 MavSeverity::MAV_SEVERITY_WARNING,
                 format_args!("{id}={} refused: {why}", params::Num(m.param_value)),
             )?;
+        } else if let Some(Err(e)) = out.storage().map(|st| st.set_param(i as u16, m.param_value)) {
+            // Taken for this flight, but not kept: say so.
+            let id = param_id(i);
+            self.say(
+                out,
+                MavSeverity::MAV_SEVERITY_ERROR,
+                format_args!("{id} not stored: {e}"),
+            )?;
         }
         // The value in force, changed or not, as the protocol asks.
         self.send_param(i, out)
+    }
+
+    /// Takes the automatic modes' parameters ([`NAV_PARAMS`]) stored in `p`
+    /// (the flight parameters are loaded into the boot settings with
+    /// [`fc_storage::load_settings`]); a stored value out of range is left
+    /// out. The values taken and refused, or why the store could not be read.
+    pub fn restore_nav(&mut self, p: &mut dyn fc_storage::Persist) -> Result<(u16, u16), fc_storage::StoreError> {
+        let (mut taken, mut refused) = (0, 0);
+        for k in 0..NAV_PARAMS.len() {
+            if let Some(v) = p.param((PARAMS.len() + k) as u16)? {
+                match self.nav.set(k, v) {
+                    Ok(()) => taken += 1,
+                    Err(_) => refused += 1,
+                }
+            }
+        }
+        Ok((taken, refused))
     }
 
     /// Sets parameter `index` to `value`: checked, and applied to the

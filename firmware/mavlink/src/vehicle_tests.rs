@@ -1577,3 +1577,84 @@ fn signed_forged_replayed_frames_and_setup_signing_in_every_state() {
     );
     std::println!("signing fuzz: {frames} frames, {delivered} delivered {by_kind:?}, signing {s:?}");
 }
+
+/// A signing sink whose owner keeps settings (a RAM stand-in store).
+struct KeptSink {
+    signed: SignedSink,
+    store: fc_storage::Store<fc_storage::RamFlash<4096>>,
+}
+
+impl MavSink for KeptSink {
+    type Error = Infallible;
+    fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<(), Infallible> {
+        self.signed.send(to, msg)
+    }
+    fn signing(&mut self) -> Option<&mut crate::signing::Signing> {
+        Some(&mut self.signed.signing)
+    }
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        Some(&mut self.store)
+    }
+}
+
+#[test]
+fn parameters_and_the_signing_key_are_stored_and_boot_again() {
+    use fc_storage::{load_settings, Persist, RamFlash, Store};
+    let (store, _) = Store::open(RamFlash::blank(), 0..4096).unwrap();
+    let mut sink = KeptSink {
+        signed: SignedSink::default(),
+        store,
+    };
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let gain = params::index_of(b"PD_ROLL_P").unwrap();
+    let want = (PARAMS[gain].get)(&Settings::os4()) * 1.5;
+    v.handle(&param_set("PD_ROLL_P", want), &mut sink, &Still, 0).unwrap();
+    // Refused: not stored.
+    v.handle(&param_set("CTL_ID", 99.0), &mut sink, &Still, 0).unwrap();
+    let nav = NAV_PARAMS[0];
+    let nav_value = (nav.get)(&NavSettings::default()) * 0.5;
+    v.handle(&param_set(nav.id, nav_value), &mut sink, &Still, 0).unwrap();
+    let setup = MavMessage::SETUP_SIGNING(SETUP_SIGNING_DATA {
+        target_system: 1,
+        target_component: 1,
+        secret_key: [7; 32],
+        initial_timestamp: 5_000,
+    });
+    v.handle(&setup, &mut sink, &Still, 0).unwrap();
+    assert!(sink.signed.signing.is_on());
+    let texts = sink.signed.sent.texts();
+    assert!(!texts.iter().any(|t| t.contains("not stored")), "{texts:?}");
+    let st = &mut sink.store;
+    assert_eq!(st.param(gain as u16), Ok(Some(want)));
+    let ctl = params::index_of(b"CTL_ID").unwrap() as u16;
+    assert_eq!(Persist::param(st, ctl), Ok(None));
+    assert_eq!(st.param((PARAMS.len()) as u16), Ok(Some(nav_value)));
+    assert_eq!(st.signing(), Ok(Some(([7; 32], 5_000))));
+    // Power off and on: the bytes are all that is left.
+    let bytes = *sink.store.into_flash().bytes();
+    let (mut st, boot) = Store::open(RamFlash::<4096>::holding(&bytes), 0..4096).unwrap();
+    assert_eq!(boot, fc_storage::Boot::Found);
+    let loaded = load_settings(&mut st, Settings::os4()).unwrap();
+    assert_eq!((loaded.taken, loaded.refused.0), (1, 0));
+    let mut v = MavVehicle::new(loaded.settings, 1).unwrap();
+    assert_eq!(v.restore_nav(&mut st), Ok((1, 0)));
+    let mut sent = Sent::default();
+    v.handle(
+        &MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 1,
+        }),
+        &mut sent,
+        &Still,
+        0,
+    )
+    .unwrap();
+    let values = sent.pick(|m| match m {
+        MavMessage::PARAM_VALUE(p) => Some((usize::from(p.param_index), p.param_value)),
+        _ => None,
+    });
+    assert!(
+        values.contains(&(gain, want)) && values.contains(&(PARAMS.len(), nav_value)),
+        "{values:?}"
+    );
+}
