@@ -67,6 +67,9 @@ pub struct CrtpConfig {
     /// Set from elsewhere (a signal handler) to end the flight at the next
     /// step, with the summary written and QEMU stopped.
     pub stop: Arc<AtomicBool>,
+    /// Keep persistent parameters (cflib's `param.persistent_store`) in
+    /// this file, standing for the flash (in process): read at boot.
+    pub storage: Option<std::path::PathBuf>,
 }
 
 /// Where `sil-host crtp`'s vehicle runs.
@@ -110,6 +113,10 @@ pub struct CrtpSummary {
     pub imu: Option<[u32; 4]>,
     /// The image's log (QEMU).
     pub firmware_log: Vec<String>,
+    /// `--storage`: what the store was at boot, and the stored values
+    /// taken and refused.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub storage: Option<(String, u16, u16)>,
     /// The plant's final position, Crazyflie frame, m.
     pub final_position_m: [f64; 3],
 }
@@ -148,6 +155,7 @@ struct Udp<'a> {
     socket: &'a UdpSocket,
     to: Option<SocketAddr>,
     sent: u64,
+    store: Option<fc_storage::Store<crate::storage::FileFlash>>,
 }
 
 impl CrtpSink for Udp<'_> {
@@ -173,6 +181,12 @@ impl CrtpSink for Udp<'_> {
                 Ok(())
             }
             Err(e) => Err(e),
+        }
+    }
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        match &mut self.store {
+            Some(s) => Some(s),
+            None => None,
         }
     }
 }
@@ -319,6 +333,10 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
         }
         None => None,
     };
+    let mut stored = None;
+    if cfg.storage.is_some() && !matches!(cfg.target, CrtpTarget::InProcess) {
+        anyhow::bail!("--storage is for the in-process vehicle: the images in QEMU keep their own (a RAM stand-in)");
+    }
     let mut fc = match (&cfg.target, &socket) {
         (
             CrtpTarget::Qemu {
@@ -348,19 +366,38 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
             eprintln!("crtp: the image is up, the vehicle's parameters written");
             Fc::Image { qemu, link }
         }
-        (CrtpTarget::InProcess, Some(socket)) => Fc::Local {
-            vehicle: Box::new(
-                CrtpVehicle::new(cfg.settings)
+        (CrtpTarget::InProcess, Some(socket)) => {
+            let (mut settings, mut store) = (cfg.settings, None);
+            if let Some(path) = &cfg.storage {
+                let (mut st, boot) = crate::storage::open(path, "crtp")?;
+                let l = fc_storage::load_settings(&mut st, settings)
+                    .map_err(|e| anyhow::anyhow!("--storage {}: {e}", path.display()))?;
+                eprintln!(
+                    "crtp: storage: {} persistent parameter(s) taken, {} refused",
+                    l.taken, l.refused.0
+                );
+                settings = l.settings;
+                stored = Some((boot.to_string(), l.taken, l.refused.0));
+                store = Some(st);
+            }
+            let mut vehicle = Box::new(
+                CrtpVehicle::new(settings)
                     .map_err(|e| anyhow::anyhow!("the flight controller's settings are refused: {e}"))?,
-            ),
-            socket,
-            out: Udp {
+            );
+            // cflib's "default value": the command line's, not the stored.
+            vehicle.set_defaults(cfg.settings);
+            Fc::Local {
+                vehicle,
                 socket,
-                to: None,
-                sent: 0,
-            },
-            clock: MonotonicClock::default(),
-        },
+                out: Udp {
+                    socket,
+                    to: None,
+                    sent: 0,
+                    store,
+                },
+                clock: MonotonicClock::default(),
+            }
+        }
         (CrtpTarget::InProcess, None) => anyhow::bail!("no UDP socket"),
     };
     let pc = PlantConfig {
@@ -438,6 +475,7 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
                 [c.missing, c.bad, c.held, c.timeouts]
             }),
             firmware_log: Vec::new(),
+            storage: stored,
             final_position_m,
         },
         Fc::Image { qemu, link } => {
@@ -451,6 +489,7 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
                 sent: None,
                 imu: None,
                 firmware_log: qemu.finish()?,
+                storage: None,
                 final_position_m,
             }
         }

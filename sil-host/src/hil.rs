@@ -124,6 +124,28 @@ pub struct HilConfig {
     pub target: Target,
     /// Write the flight as a ULog here (PX4's log format), as it flies.
     pub ulog: Option<std::path::PathBuf>,
+    /// Keep the vehicle's settings in this file (its flash, in process):
+    /// parameters set and the signing key are read at boot and written
+    /// when they change; the key's timestamp at the end.
+    pub storage: Option<std::path::PathBuf>,
+}
+
+/// What `--storage` did.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct StorageSummary {
+    /// What the store was at boot (the `storage:` line on stderr).
+    pub boot: String,
+    /// Stored parameter values taken at boot.
+    pub params_loaded: u16,
+    /// Stored values the parameters' checks refused at boot (defaults kept).
+    pub params_refused: u16,
+    /// Whether a signing key was read at boot (signing on from the start).
+    pub key_loaded: bool,
+    /// The signing timestamp read at boot, and the one stored at the end
+    /// (10 µs since 2015-01-01; 0: none).
+    pub timestamps: [u64; 2],
+    /// Why something could not be stored, if it could not.
+    pub error: Option<String>,
 }
 
 /// What a HIL flight did, measured from the messages that crossed the
@@ -169,6 +191,9 @@ pub struct HilResult {
     pub signing_setups_refused: u32,
     /// The vehicle's `STATUSTEXT`s, in order.
     pub status_texts: Vec<String>,
+    /// The settings store (`--storage`), if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub storage: Option<StorageSummary>,
     /// What ended the flight: its duration, or the simulator hanging up
     /// (closed or reset), with the steps flown.
     pub end: String,
@@ -238,6 +263,11 @@ trait Vehicle {
     }
     /// Frames its readers refused.
     fn refused(&self) -> u32;
+    /// Stores the ground station link's signing key and timestamp where
+    /// the vehicle keeps its settings (in process, with `--storage`).
+    fn keep_signing(&mut self, _signing: &Signing) -> Result<(), fc_storage::StoreError> {
+        Ok(())
+    }
     /// Ends it; the image's log.
     fn finish(self: Box<Self>) -> Result<Vec<String>>;
 }
@@ -247,9 +277,14 @@ struct InProcess {
     v: MavVehicle,
     clock: hal_shim::host::MonotonicClock,
     wall: Instant,
+    store: Option<fc_storage::Store<crate::storage::FileFlash>>,
 }
 
-struct Collect<'a>(&'a mut Vec<MavMessage>, Option<&'a mut Signing>);
+struct Collect<'a>(
+    &'a mut Vec<MavMessage>,
+    Option<&'a mut Signing>,
+    Option<&'a mut dyn fc_storage::Persist>,
+);
 
 impl MavSink for Collect<'_> {
     type Error = std::convert::Infallible;
@@ -263,13 +298,22 @@ impl MavSink for Collect<'_> {
     fn signing(&mut self) -> Option<&mut Signing> {
         self.1.as_deref_mut()
     }
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        match &mut self.2 {
+            Some(s) => Some(&mut **s),
+            None => None,
+        }
+    }
 }
 
 impl InProcess {
     /// The vehicle handles `msg`; its link signs with `signing`, if given.
     fn handle(&mut self, msg: &MavMessage, out: &mut Vec<MavMessage>, signing: Option<&mut Signing>) -> Result<()> {
         let now_us = self.wall.elapsed().as_micros() as u64;
-        let Ok(()) = self.v.handle(msg, &mut Collect(out, signing), &self.clock, now_us);
+        let store = self.store.as_mut().map(|s| s as &mut dyn fc_storage::Persist);
+        let Ok(()) = self
+            .v
+            .handle(msg, &mut Collect(out, signing, store), &self.clock, now_us);
         Ok(())
     }
 }
@@ -289,6 +333,12 @@ impl Vehicle for InProcess {
     }
     fn refused(&self) -> u32 {
         0
+    }
+    fn keep_signing(&mut self, signing: &Signing) -> Result<(), fc_storage::StoreError> {
+        match (&mut self.store, signing.key()) {
+            (Some(st), Some(key)) => st.set_signing(key, signing.timestamp()),
+            _ => Ok(()),
+        }
     }
     fn finish(self: Box<Self>) -> Result<Vec<String>> {
         Ok(Vec::new())
@@ -530,15 +580,65 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         }
         None => None,
     };
+    // The ground station's link: signed once a SETUP_SIGNING sets a key
+    // (PX4's rules, fc_mavlink::signing), or from the start with a key
+    // kept in --storage; the simulator's is never signed (PX4's simulator
+    // interface is not its MAVLink module).
+    let mut gcs_signing = Signing::new();
     let mut v: Box<dyn Vehicle> = match &cfg.target {
         Target::InProcess => {
             res.target = "in-process".into();
+            let (mut store, mut settings) = (None, cfg.settings);
+            if let Some(path) = &cfg.storage {
+                let (mut st, boot) = crate::storage::open(path, "px4-hil")?;
+                let loaded = fc_storage::load_settings(&mut st, settings)
+                    .map_err(|e| anyhow::anyhow!("--storage {}: {e}", path.display()))?;
+                settings = loaded.settings;
+                let mut sum = StorageSummary {
+                    boot: boot.to_string(),
+                    params_loaded: loaded.taken,
+                    params_refused: loaded.refused.0,
+                    ..Default::default()
+                };
+                if let Some(i) = loaded.refused.1 {
+                    eprintln!(
+                        "px4-hil: storage: {} stored value(s) refused, defaults kept (first: {})",
+                        loaded.refused.0,
+                        fc_mavlink::params::PARAMS[usize::from(i)].id
+                    );
+                }
+                if let Some((key, ts)) = st.signing().map_err(|e| anyhow::anyhow!("--storage: {e}"))? {
+                    if key != [0; 32] {
+                        gcs_signing = Signing::with_key(key, ts);
+                        sum.key_loaded = true;
+                        sum.timestamps[0] = ts;
+                    }
+                }
+                res.storage = Some(sum);
+                store = Some(st);
+            }
+            let mut v = MavVehicle::new(settings, SYSTEM_ID)
+                .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?;
+            if let (Some(st), Some(sum)) = (store.as_mut(), res.storage.as_mut()) {
+                let (taken, refused) = v.restore_nav(st).map_err(|e| anyhow::anyhow!("--storage: {e}"))?;
+                sum.params_loaded += taken;
+                sum.params_refused += refused;
+                eprintln!(
+                    "px4-hil: storage: {} parameter(s) taken, {} refused; signing key: {}",
+                    sum.params_loaded,
+                    sum.params_refused,
+                    if sum.key_loaded { "kept, signing on" } else { "none" }
+                );
+            }
             Box::new(InProcess {
-                v: MavVehicle::new(cfg.settings, SYSTEM_ID)
-                    .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?,
+                v,
                 clock: hal_shim::host::MonotonicClock::default(),
                 wall: Instant::now(),
+                store,
             })
+        }
+        Target::Qemu(_) if cfg.storage.is_some() => {
+            bail!("--storage is for the in-process vehicle: the image in QEMU keeps its own (a RAM stand-in)")
         }
         Target::Qemu(elf) => {
             res.target = "qemu".into();
@@ -559,10 +659,6 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     stream.set_read_timeout(Some(Duration::from_secs(60)))?;
     let mut sim = stream.try_clone()?;
     let (mut sim_seq, mut gcs_seq) = (0u8, 0u8);
-    // The ground station's link: signed once a SETUP_SIGNING sets a key
-    // (PX4's rules, fc_mavlink::signing); the simulator's is never signed
-    // (PX4's simulator interface is not its MAVLink module).
-    let mut gcs_signing = Signing::new();
     let mut signing_clock = Instant::now();
     let mut send = |to_sim: bool, msg: &MavMessage, sim: &mut TcpStream, signing: &mut Signing| -> Result<()> {
         let seq = if to_sim { &mut sim_seq } else { &mut gcs_seq };
@@ -802,6 +898,17 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     res.signing_dropped = [sc.unsigned, sc.bad_signature, sc.replayed, sc.too_many_streams];
     res.signing_accepted = sc.accepted;
     res.signing_setups_refused = sc.setups_refused;
+    // The timestamp goes on from here at the next boot.
+    let kept = v.keep_signing(&gcs_signing);
+    if let Some(sum) = res.storage.as_mut() {
+        match kept {
+            Ok(()) => sum.timestamps[1] = gcs_signing.key().map_or(0, |_| gcs_signing.timestamp()),
+            Err(e) => {
+                eprintln!("px4-hil: storage: the signing timestamp is not stored: {e}");
+                sum.error = Some(e.to_string());
+            }
+        }
+    }
     res.firmware_log = v.finish()?;
     if let Some(log) = ulog {
         log.finish()?;

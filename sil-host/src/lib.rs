@@ -26,6 +26,7 @@ pub mod record;
 pub mod report;
 pub mod scenario;
 pub mod sensors;
+pub mod storage;
 pub mod study;
 pub mod study_plots;
 pub mod sweep;

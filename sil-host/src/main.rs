@@ -142,6 +142,11 @@ struct CrtpArgs {
     /// the last good one for 10 ms, then descends (its failsafe).
     #[arg(long, value_name = "START,LENGTH", value_parser = parse_window)]
     imu_dead: Option<(f64, f64)>,
+    /// Keep persistent parameters in this file, as the vehicle's flash (made if missing; in
+    /// process only): cflib's `param.persistent_store` writes the value in force there,
+    /// `persistent_clear` forgets it, and the next start flies with what is stored.
+    #[arg(long, value_name = "FILE")]
+    storage: Option<PathBuf>,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -213,6 +218,12 @@ struct Px4HilArgs {
     /// and the parameters, under PX4's topic names.
     #[arg(long, value_name = "PATH")]
     ulog: Option<PathBuf>,
+    /// Keep the vehicle's settings in this file, as its flash (made if missing; in process only):
+    /// parameters a ground station sets and the MAVLink signing key are read at the next start
+    /// (after --param, which gives the defaults), and the key's timestamp goes on from where it
+    /// ended.
+    #[arg(long, value_name = "FILE")]
+    storage: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -1143,6 +1154,7 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
         duration_s: a.duration,
         seed: a.seed,
         imu_dead: a.imu_dead,
+        storage: a.storage.clone(),
         target: match a.target.as_str() {
             "qemu" | "qemu-crazyflie" => sil_host::crtp::CrtpTarget::Qemu {
                 syslink: a.syslink.clone(),
@@ -1251,6 +1263,7 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
         gcs: a.gcs,
         duration_s: a.duration,
         ulog: a.ulog.clone(),
+        storage: a.storage.clone(),
         target: match a.target.as_str() {
             "in-process" => sil_host::hil::Target::InProcess,
             "qemu" => sil_host::hil::Target::Qemu(sil_host::link::firmware_mavlink_elf()?),
