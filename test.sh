@@ -306,8 +306,14 @@ hil --target qemu --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measur
     --json target/rotorpy-hil-qemu.json | grep "rotorpy check:" | tee -a "$log"
 stage "a pymavlink ground station (tools/mav_gcs.py) flies it against rotorpy"
 hil --gcs --duration 60 --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
-stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, then firmware-mavlink in QEMU"
-hil --signing --duration 120 --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
+stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage, then firmware-mavlink in QEMU"
+# In process with --storage: the owner then sets a second key and a parameter; the vehicle,
+# started again on the same file, must demand signatures at once and keep both.
+rm -f target/px4-storage.bin target/px4-storage.bin.json
+hil --signing --storage target/px4-storage.bin --duration 120 --json target/rotorpy-hil-signing.json \
+    | grep "^signing check:" | tee -a "$log"
+hil --signing --restart --storage target/px4-storage.bin --duration 30 --json target/rotorpy-hil-restart.json \
+    | grep "^signing check:" | tee -a "$log"
 hil --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json | grep "^signing check:" | tee -a "$log"
 stage "MAVSDK (pinned), unmodified, flies it as a PX4, in process"
 hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"

@@ -494,6 +494,69 @@ def session_examples(sil_host):
             sil.stop()
 
 
+def persistent(cf, call, name):
+    """cflib's `param.persistent_*` `call` on `name`, waited for: its result."""
+    done = threading.Event()
+    got = []
+    getattr(cf.param, f'persistent_{call}')(name, lambda _, r: (got.append(r), done.set()))
+    return got[0] if done.wait(5) else 'no answer'
+
+
+def session_persistent(sil_host):
+    """cflib's persistent parameters against `sil-host crtp --storage FILE`:
+    stored, read back after a restart with the same file, cleared."""
+    print('session 5: persistent parameters (cflib persistent_store / get_state / clear, sil-host --storage)')
+    if QEMU:
+        # The images keep no storage yet (QEMU models no flash controller).
+        print('  (not on the images: they have no settings store yet)')
+        return
+    store = pathlib.Path('target/cflib-persistent.bin').resolve()
+    store.unlink(missing_ok=True)
+    failed_before = failed
+    sil = Sil(sil_host, '--storage', str(store))
+    try:
+        cf = connect().cf
+        default = float(cf.param.get_value('mpc.W_POS'))
+        kept, unkept = 2.5 * default, float(cf.param.get_value('pd.ROLL_P')) * 1.5
+        elem = cf.param.toc.get_element_by_complete_name
+        check(elem('mpc.W_POS').is_persistent() and not elem('stabilizer.estimator').is_persistent(),
+              'the TOC marks the flight parameters persistent (extended type), not the Crazyflie aliases')
+        cf.param.set_value('mpc.W_POS', kept)
+        cf.param.set_value('pd.ROLL_P', unkept)
+        time.sleep(0.3)
+        ok = persistent(cf, 'store', 'mpc.W_POS')
+        state = persistent(cf, 'get_state', 'mpc.W_POS')
+        check(ok is True and state and state.is_stored and abs(state.stored_value - kept) < 1e-6
+              and abs(state.default_value - default) < 1e-6,
+              f'mpc.W_POS = {kept:g} stored ({ok}); its state: {state}')
+        cf.close_link()
+    finally:
+        report(sil, failed_before)
+    sil = Sil(sil_host, '--storage', str(store))
+    try:
+        cf = connect().cf
+        w_pos, roll = float(cf.param.get_value('mpc.W_POS')), float(cf.param.get_value('pd.ROLL_P'))
+        check(abs(w_pos - kept) < 1e-6 and abs(roll - unkept) > 1e-6,
+              f'after a restart with the same file mpc.W_POS is {w_pos:g} (stored), pd.ROLL_P {roll:g} '
+              f'(set, not stored: its default)')
+        ok = persistent(cf, 'clear', 'mpc.W_POS')
+        state = persistent(cf, 'get_state', 'mpc.W_POS')
+        check(ok is True and state and not state.is_stored, f'cleared ({ok}); its state: {state}')
+        cf.close_link()
+    finally:
+        out = report(sil, failed_before)
+    check('storage' in out and 'settings found in flash' in out,
+          'sil-host said at boot what it found: ' + next((ln for ln in out.splitlines() if 'storage ' in ln), '?'))
+    sil = Sil(sil_host, '--storage', str(store))
+    try:
+        cf = connect().cf
+        w_pos = float(cf.param.get_value('mpc.W_POS'))
+        check(abs(w_pos - default) < 1e-6, f'after the clear and a restart mpc.W_POS is its default, {w_pos:g}')
+        cf.close_link()
+    finally:
+        report(sil, failed_before)
+
+
 def main():
     sil_host = sys.argv[1]
     cflib.crtp.init_drivers()
@@ -503,6 +566,7 @@ def main():
     session_extpos(sil_host, truth)
     session_dead_imu(sil_host, truth)
     session_examples(sil_host)
+    session_persistent(sil_host)
     truth.stop = True
     plant = sum(p for p, _ in truth.walls)
     wall = sum(w for _, w in truth.walls)

@@ -20,6 +20,15 @@ heartbeat, then:
    intruder replays the owner's signed arm frame, byte for byte: ignored;
 5. the owner clears the key with a signed all-zero SETUP_SIGNING.
 
+With `--keep FILE` (the vehicle runs with `sil-host px4-hil --storage`) the
+owner then provisions a second key and sets a parameter, and writes both,
+with the last signature timestamp it saw from the vehicle, to FILE. With
+`--after-restart FILE`, against the vehicle started again on the same
+storage, it checks that the vehicle demands signatures from its first frame
+(an unsigned parameter read and arm are ignored), that its frames verify
+with the kept key and their timestamps go on from the last session's, and
+that the parameter kept its value.
+
 In process (`sil-host px4-hil`) the host's link checks and signs; with
 `--target qemu` the host forwards the ground station's frames whole and
 `firmware-mavlink` checks and signs them itself.
@@ -28,6 +37,7 @@ Prints one line `signing check: P passed, F failed` (and what failed) and
 exits non-zero if anything failed.
 """
 import argparse
+import json
 import os
 import sys
 import time
@@ -49,6 +59,8 @@ REAL32 = 9
 HOLD = (4.0, 3.0)
 KEY = bytes(range(0x40, 0x60))
 WRONG_KEY = bytes(range(0x41, 0x61))
+# The key kept across a restart (--keep, --after-restart).
+KEPT_KEY = bytes(range(0x80, 0xA0))
 
 
 def now_2015():
@@ -218,14 +230,69 @@ class Session(Gcs):
         self.check(any("key cleared" in t for t in self.texts[n:]),
                    f"owner: a signed blank SETUP_SIGNING clears the key ({self.texts[n:][:1]})")
 
+    def vehicle_timestamp(self):
+        """The last signature timestamp verified on the vehicle's frames."""
+        ts = [t for (_, sysid, _), t in self.m.mav.signing.stream_timestamps.items() if sysid == self.sys]
+        return max(ts) if ts else None
+
+    def keep(self, path):
+        """A second key and a parameter, for the vehicle to keep (--storage)."""
+        self.m.mav.signing.allow_unsigned_callback = None
+        ts = now_2015()
+        self.m.mav.setup_signing_send(self.sys, self.comp, list(KEPT_KEY), ts)
+        self.m.setup_signing(KEPT_KEY, sign_outgoing=True, initial_timestamp=ts, link_id=0)
+        hb = self.recv(["HEARTBEAT"], timeout=10.0)
+        self.check(hb is not None and getattr(hb, "_signed", False), "a second key set: frames verify with it")
+        fs = self.param("FS_TIMEOUT_MS")
+        self.m.mav.param_set_send(self.sys, self.comp, b"FS_TIMEOUT_MS", fs + 200.0, REAL32)
+        self.settle(0.5)
+        kept = self.param("FS_TIMEOUT_MS")
+        self.check(kept == fs + 200.0, f"FS_TIMEOUT_MS set to {kept}, to be kept")
+        self.settle(1.0)
+        with open(path, "w") as f:
+            json.dump({"FS_TIMEOUT_MS": kept, "default": fs, "timestamp": self.vehicle_timestamp()}, f)
+
+    def after_restart(self, path):
+        """The vehicle started again on the storage `keep` wrote to."""
+        with open(path) as f:
+            kept = json.load(f)
+        hb = self.recv(["HEARTBEAT"])
+        if not self.check(hb is not None, "after a restart the vehicle's HEARTBEAT arrives"):
+            return
+        self.sys, self.comp = hb.get_srcSystem(), hb.get_srcComponent()
+        # Not signing: the vehicle's frames are read unverified; ours go unsigned.
+        self.check(self.param("FS_TIMEOUT_MS") is None, "unsigned: a parameter read is ignored (signing on from boot)")
+        self.m.mav.command_long_send(self.sys, self.comp, ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        self.settle(1.5)
+        self.check(not self.armed(), "unsigned: arm ignored")
+        ts = now_2015()
+        self.m.setup_signing(KEPT_KEY, sign_outgoing=True, initial_timestamp=ts, link_id=0)
+        hb = self.recv(["HEARTBEAT"], timeout=10.0)
+        first = self.vehicle_timestamp()
+        self.check(hb is not None and getattr(hb, "_signed", False) and first is not None
+                   and kept["timestamp"] is not None and first > kept["timestamp"],
+                   f"its frames verify with the kept key, timestamps going on: {first} after {kept['timestamp']}")
+        value = self.param("FS_TIMEOUT_MS")
+        self.check(value == kept["FS_TIMEOUT_MS"] and value != kept["default"],
+                   f"FS_TIMEOUT_MS kept: {value} (default {kept['default']})")
+        self.check(self.command(ARM_DISARM, 1) == ACCEPTED and self.armed(), "owner (signed): arm accepted")
+        self.check(self.command(ARM_DISARM, 0) == ACCEPTED and not self.armed(), "owner: disarm accepted")
+
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--url", default="udpin:127.0.0.1:14550")
     ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per exchange")
+    ap.add_argument("--keep", metavar="FILE", help="then set a key and a parameter to keep; note them in FILE")
+    ap.add_argument("--after-restart", metavar="FILE", help="only check what --keep left in FILE")
     a = ap.parse_args()
     s = Session(a.url, a.timeout)
-    s.run()
+    if a.after_restart:
+        s.after_restart(a.after_restart)
+    else:
+        s.run()
+        if a.keep:
+            s.keep(a.keep)
     return s.summary("signing check:")
 
 

@@ -197,6 +197,12 @@ def main():
                     help="like --gcs, with tools/mav_signing.py: an owner provisions a MAVLink signing key "
                          "and flies signed while an intruder's unsigned, wrongly signed and replayed frames "
                          "must be ignored")
+    ap.add_argument("--storage", metavar="FILE",
+                    help="sil-host px4-hil --storage FILE; with --signing the owner then sets a key and a "
+                         "parameter to keep (noted in FILE.json)")
+    ap.add_argument("--restart", action="store_true",
+                    help="with --signing and --storage: only check that the key, its timestamps and the "
+                         "parameter survived the restart")
     ap.add_argument("--gcs-port", type=int, default=14550)
     ap.add_argument("--mavsdk", action="store_true",
                     help="like --gcs, with tools/mavsdk_flight.py (MAVSDK, PyPI) as the ground station; "
@@ -236,6 +242,8 @@ def main():
         else:
             name = "mav_signing.py" if a.signing else "mav_gcs.py"
             script = [os.path.join(here, name), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
+            if a.signing and a.storage:
+                script += ["--after-restart" if a.restart else "--keep", a.storage + ".json"]
         gcs = subprocess.Popen([sys.executable] + script, stdout=subprocess.PIPE, text=True)
         cmd += ["--gcs", f"127.0.0.1:{a.gcs_port}", "--gcs-only"]
     for w in a.waypoint or []:
@@ -250,6 +258,8 @@ def main():
     cmd += ["--csv", csv_path]
     if a.ulog:
         cmd += ["--ulog", a.ulog]
+    if a.storage:
+        cmd += ["--storage", a.storage]
     np.random.seed(a.seed)
     waypoints = [tuple(float(v) for v in w.split(",")) for w in a.waypoint or []]
     reference = None
