@@ -12,6 +12,7 @@ pub mod clocks;
 #[cfg(target_os = "none")]
 pub mod crtp_image;
 pub mod equivalence;
+pub mod flash;
 #[cfg(target_os = "none")]
 pub mod stack;
 pub mod timing;
