@@ -35,14 +35,16 @@
 //! held previews; 19 KiB until the mission store came).
 //!
 //! `firmware-crtp` (the same loop behind CRTP over syslink, the Crazyflie's
-//! radio link, on the CRTP images' RTIC tasks): flash ≤ 368 KiB — the CRTP
+//! radio link, on the CRTP images' RTIC tasks): flash ≤ 392 KiB — the CRTP
 //! services (TOCs of 70 parameters and 28 log variables, log blocks, the
 //! high-level commander's polynomial planner, syslink) and the four tasks
-//! add ≈ 77 KiB to the plain image (360 492 B against 283 256 B) —, static
-//! RAM ≤ 26 KiB (25 568 B: the vehicle's log blocks, downlink queue of 16
+//! add ≈ 77 KiB to the plain image (360 492 B against 283 256 B), the
+//! settings store for cflib's persistent parameters ≈ 20 KiB —, static
+//! RAM ≤ 28 KiB (the vehicle's log blocks, downlink queue of 16
 //! packets and USART6's receive queue on top of the loop, and the tasks'
 //! queues: 8 steps or designs for the controller, 2 designs from the link,
-//! 8 answers for the simulator).
+//! 8 answers for the simulator; 25 568 B before the settings' 2 KiB RAM
+//! stand-in).
 
 use fc_stm32f405::budgets::*;
 use std::process::Command;
@@ -146,8 +148,8 @@ fn load_segments(elf: &std::path::Path) -> Vec<(u64, u64)> {
 }
 
 /// The Crazyflie 2.1 image (the CRTP images' RTIC application and the
-/// Crazyflie's motors, in the bootloader's layout): flash ≤ 368 KiB and
-/// static RAM ≤ 26 KiB, as `firmware-crtp` (the motors, their thrust
+/// Crazyflie's motors, in the bootloader's layout): flash ≤ 392 KiB and
+/// static RAM ≤ 28 KiB, as `firmware-crtp` (the motors, their thrust
 /// curve, the fault hook and the LEDs add ≈ 5 KiB of flash); everything it
 /// puts in flash is at or above 0x08004000, so flashing it (`cfloader`, `dfu-util -s 0x08004000`)
 /// leaves Bitcraze's bootloader in sector 0 untouched, and its vector table

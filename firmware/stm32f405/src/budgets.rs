@@ -26,23 +26,26 @@ pub const MAVLINK_FLASH_BYTES: u32 = 368 * 1024;
 /// `firmware-mavlink`, static RAM: 20 KiB, as `firmware`'s, less the
 /// RTIC queues it does without.
 pub const MAVLINK_STATIC_RAM_BYTES: u32 = 20 * 1024;
-/// `firmware-crtp`, flash: 368 KiB, as `firmware-mavlink`'s.
-pub const CRTP_FLASH_BYTES: u32 = 368 * 1024;
-/// `firmware-crtp`, static RAM: 26 KiB (the CRTP TOCs, the planner and the
-/// syslink queues over `firmware`'s).
-pub const CRTP_STATIC_RAM_BYTES: u32 = 26 * 1024;
-/// `firmware-crazyflie` built for QEMU, flash: 368 KiB, as `firmware-crtp`'s.
-pub const CRAZYFLIE_FLASH_BYTES: u32 = 368 * 1024;
-/// `firmware-crazyflie` built for QEMU, static RAM: 26 KiB, as `firmware-crtp`'s.
-pub const CRAZYFLIE_STATIC_RAM_BYTES: u32 = 26 * 1024;
+/// `firmware-crtp`, flash: 392 KiB, `firmware-mavlink`'s 368 KiB and
+/// 24 KiB for cflib's persistent parameters (the settings store,
+/// `sequential-storage`'s map, ≈ 20 KiB of code), well below the settings'
+/// own sectors 10–11 (`flash::STORAGE`, from 768 KiB).
+pub const CRTP_FLASH_BYTES: u32 = 392 * 1024;
+/// `firmware-crtp`, static RAM: 28 KiB (the CRTP TOCs, the planner and the
+/// syslink queues over `firmware`'s, 26 KiB, and the settings' 2 KiB RAM
+/// stand-in, `flash::STAND_IN_BYTES`).
+pub const CRTP_STATIC_RAM_BYTES: u32 = 28 * 1024;
+/// `firmware-crazyflie` built for QEMU, flash: 392 KiB, as `firmware-crtp`'s.
+pub const CRAZYFLIE_FLASH_BYTES: u32 = 392 * 1024;
+/// `firmware-crazyflie` built for QEMU, static RAM: 28 KiB, as `firmware-crtp`'s.
+pub const CRAZYFLIE_STATIC_RAM_BYTES: u32 = 28 * 1024;
 /// `firmware-crazyflie` as flashed (its own sensors, defmt over RTT),
-/// flash: 384 KiB of the 1008 KiB above Bitcraze's 16 KiB bootloader, so
-/// that it ends below the sectors the Crazyflie firmware keeps its
-/// parameters in.
-pub const CRAZYFLIE_AS_FLASHED_FLASH_BYTES: u32 = 384 * 1024;
-/// `firmware-crazyflie` as flashed, static RAM: 28 KiB (RTT's buffers,
+/// flash: 408 KiB of the 1008 KiB above Bitcraze's 16 KiB bootloader (the
+/// QEMU build's and its drivers), well below the settings' sectors 10–11.
+pub const CRAZYFLIE_AS_FLASHED_FLASH_BYTES: u32 = 408 * 1024;
+/// `firmware-crazyflie` as flashed, static RAM: 30 KiB (RTT's buffers,
 /// 2.5 KiB, over the QEMU build's).
-pub const CRAZYFLIE_AS_FLASHED_STATIC_RAM_BYTES: u32 = 28 * 1024;
+pub const CRAZYFLIE_AS_FLASHED_STATIC_RAM_BYTES: u32 = 30 * 1024;
 
 /// The whole image step of the fast MPC at 1 kHz (the IMU sample and a
 /// fix in, the estimator, the MPC, the output), instructions: one 1 kHz
