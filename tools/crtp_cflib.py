@@ -220,6 +220,9 @@ def report(sil, failed_before):
               f'{lent} steps passed with the motors off during a design')
         TIMINGS.append((ans, late, lent))
     if QEMU:
+        check('storage: a 2 KiB RAM stand-in' in out,
+              'the image names what keeps its settings: a RAM stand-in (QEMU models no flash controller)')
+    if QEMU:
         # QEMU models no IWDG (its registers read 0): what can be seen here is
         # that each image started it once both tasks ran, and that no update
         # of its timeout (widened for a re-design) failed.
@@ -309,6 +312,16 @@ def session_high_level(sil_host, truth):
         time.sleep(0.3)
         mass = float(cf.param.get_value('veh.MASS'))
         check(abs(mass - 0.03) < 1e-6, f'a refused write (veh.MASS = -1) reads back the value in force, {mass}')
+        # cflib's persistent parameters: stored where the vehicle keeps them
+        # (in QEMU a RAM stand-in, which its boot log names), then cleared.
+        ok = persistent(cf, 'store', 'mpc.W_POS')
+        state = persistent(cf, 'get_state', 'mpc.W_POS')
+        cleared = persistent(cf, 'clear', 'mpc.W_POS')
+        state2 = persistent(cf, 'get_state', 'mpc.W_POS')
+        check(ok is True and state and state.is_stored and abs(state.stored_value - after) < 1e-6
+              # (the image's default is its boot value, before sil-host writes the vehicle's)
+              and (QEMU or abs(state.default_value - before) < 1e-6) and cleared is True and state2 and not state2.is_stored,
+              f'persistent_store of mpc.W_POS ({ok}): {state}; persistent_clear ({cleared}): {state2}')
 
         lg = LogConfig('position', 10)
         for v in 'xyz':

@@ -328,10 +328,22 @@ impl SyslinkCounters {
 
 /// The STM32's downlink queue: packets wait here for an uplink packet to
 /// answer ([`CrtpSink`]; a full queue drops and counts).
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct Downlink<const Q: usize> {
     queue: heapless::Deque<Packet, Q>,
     dropped: u32,
+    /// Where persistent parameters are kept ([`Syslink::keep_in`]).
+    storage: Option<&'static mut (dyn fc_storage::Persist + Send)>,
+}
+
+impl<const Q: usize> core::fmt::Debug for Downlink<Q> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Downlink")
+            .field("queued", &self.queue.len())
+            .field("dropped", &self.dropped)
+            .field("storage", &self.storage.is_some())
+            .finish()
+    }
 }
 
 /// The downlink queue was full.
@@ -351,6 +363,12 @@ impl<const Q: usize> CrtpSink for Downlink<Q> {
             self.dropped = self.dropped.wrapping_add(1);
             QueueFull
         })
+    }
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        match &mut self.storage {
+            Some(s) => Some(&mut **s),
+            None => None,
+        }
     }
 }
 
@@ -383,9 +401,17 @@ impl<const Q: usize> Syslink<Q> {
             down: Downlink {
                 queue: heapless::Deque::new(),
                 dropped: 0,
+                storage: None,
             },
             counters: SyslinkCounters::default(),
         }
+    }
+
+    /// Keeps persistent parameters in `storage` (cflib's
+    /// `param.persistent_store`): the requests are answered here, after the
+    /// vehicle's lock is let go.
+    pub fn keep_in(&mut self, storage: &'static mut (dyn fc_storage::Persist + Send)) {
+        self.down.storage = Some(storage);
     }
 
     /// What was seen so far.
@@ -457,6 +483,11 @@ impl<const Q: usize> Syslink<Q> {
                     Ok(c) => {
                         let down = &mut self.down;
                         let _ = vehicle.lock(|v| v.borrow_mut().handle(&c, down));
+                        // A persistent parameter's request, answered with
+                        // the storage outside the lock.
+                        if let Some(r) = vehicle.lock(|v| v.borrow_mut().take_persist()) {
+                            let _ = r.answer(down);
+                        }
                         // What the packet's controller work answered, if it
                         // is done already (in-process it is).
                         let _ = vehicle.lock(|v| v.borrow_mut().send_queued(down));

@@ -246,3 +246,31 @@ fn a_million_bad_frames_are_counted_and_the_link_survives() {
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].data(), &[0xD1, 0, 12, 0, 0, 0]);
 }
+
+/// cflib's persistent store through syslink: answered with the storage the
+/// link keeps (outside the vehicle's lock), EIO without one.
+#[test]
+fn persistent_parameters_are_answered_with_the_links_storage() {
+    use crate::vehicle::{param_entry, PARAM_COUNT};
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    let id = (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
+        .unwrap() as u16;
+    let [lo, hi] = id.to_le_bytes();
+    let ask = |s: &mut Syslink<8>, v: &mut CrtpVehicle, cmd: u8| {
+        let mut w = Wire::default();
+        s.receive(&frame(types::RADIO_RAW, &[0x23, cmd, lo, hi]), v, &mut w)
+            .unwrap();
+        frames(&w.0)[0].data().to_vec()
+    };
+    let mut bare: Syslink<8> = Syslink::new();
+    assert_eq!(ask(&mut bare, &mut v, 3), [0x23, 3, lo, hi, crate::persist::EIO]);
+    let (store, _) = fc_storage::Store::open(fc_storage::RamFlash::<2048>::blank(), 0..2048).unwrap();
+    let store: &'static mut _ = Box::leak(Box::new(store));
+    let mut s: Syslink<8> = Syslink::new();
+    s.keep_in(store);
+    assert_eq!(ask(&mut s, &mut v, 3), [0x23, 3, lo, hi, 0]);
+    let state = ask(&mut s, &mut v, 4);
+    assert_eq!(state[..5], [0x23, 4, lo, hi, 1], "stored");
+    assert_eq!(state[5..9], state[9..13], "the default stored: value and default alike");
+}

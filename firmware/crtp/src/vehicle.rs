@@ -45,6 +45,7 @@
 //! failsafe) apply as on every protocol.
 
 use crate::log::{self, LogBlocks};
+use crate::persist::PersistRequest;
 use crate::planner::{Reference, Segment};
 use crate::supervisor::{ImuCounters, ImuGuard, SensorDown, BATTERY_FLOOR_V, FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US};
 use crate::toc::{self, Name};
@@ -102,8 +103,9 @@ pub trait CrtpSink {
     /// Sends `p`.
     fn send(&mut self, p: &Packet) -> Result<(), Self::Error>;
     /// Where persistent parameters are kept, if anywhere (cflib's
-    /// `param.persistent_store`); `None`: nothing persists, and a request
-    /// to store is answered with an error.
+    /// `param.persistent_store`, answered by [`PersistRequest::answer`]);
+    /// `None`: nothing persists, and a request to store is answered with
+    /// an error.
     fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
         None
     }
@@ -197,10 +199,6 @@ const fn param_index(id: &str) -> usize {
     }
     panic!("no such parameter")
 }
-
-/// `EIO`: the storage is missing or failed (a persistent parameter's
-/// store, state or clear).
-const EIO: u8 = 5;
 
 /// `CTL_ID`'s index.
 const CTL_ID: usize = param_index("CTL_ID");
@@ -584,6 +582,9 @@ impl CrtpVehicle {
     pub fn handle<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Result<(), S::Error> {
         self.core.handle(p, out)?;
         self.run_pending();
+        if let Some(r) = self.core.take_persist() {
+            r.answer(out)?;
+        }
         self.core.send_queued(out)
     }
 
@@ -614,6 +615,8 @@ pub struct CrtpCore {
     work: WorkState,
     /// The answer of a re-designing parameter write, sent before the console.
     reply: Option<Packet>,
+    /// A persistent-parameter request, for the link's owner to answer.
+    persist: Option<PersistRequest>,
     defaults: Settings,
     mixer: Option<Mixer<f32>>,
     armed: bool,
@@ -655,6 +658,7 @@ impl CrtpCore {
             core: Loop::unstarted_with(FcConfig::default(), settings),
             work: WorkState::Idle,
             reply: None,
+            persist: None,
             defaults: settings,
             mixer: None,
             armed: false,
@@ -1236,6 +1240,12 @@ impl CrtpCore {
         self.send_queued(out)
     }
 
+    /// The persistent-parameter request a packet left, if any: its owner
+    /// answers it ([`PersistRequest::answer`]) with the storage it has.
+    pub fn take_persist(&mut self) -> Option<PersistRequest> {
+        self.persist.take()
+    }
+
     /// Sends a re-designing write's answer, then the console lines.
     pub fn send_queued<S: CrtpSink>(&mut self, out: &mut S) -> Result<(), S::Error> {
         if let Some(r) = self.reply.take() {
@@ -1608,12 +1618,21 @@ impl CrtpCore {
                 self.put_value(&mut r, index, v);
             }
             // Store the value in force, get the state, clear: as the
-            // Crazyflie's persistent parameters (status 0: done).
+            // Crazyflie's persistent parameters, answered by the link's
+            // owner with its storage ([`CrtpCore::take_persist`]). One at
+            // a time: another is not answered (cflib asks again).
             3..=5 if persistent => {
-                let code = self.on_persistent(cmd, index, &mut r, out);
-                if code != 0 {
-                    let _ = r.extend(&[code]);
+                if self.persist.is_some() {
+                    return Ok(Err(CrtpError::Refused { port: p.port() }));
                 }
+                self.persist = Some(PersistRequest {
+                    cmd,
+                    id,
+                    now: self.param_value(index).unwrap_or(0.0),
+                    default: self.param_default(index).unwrap_or(0.0),
+                    ty: param_entry(index).map_or(param_types::FLOAT, |(_, t, _)| t),
+                });
+                return Ok(Ok(()));
             }
             // Not persistent, and unknown ids.
             3..=5 | 7 | 8 => {
@@ -1623,44 +1642,6 @@ impl CrtpCore {
         }
         out.send(&r)?;
         Ok(Ok(()))
-    }
-
-    /// `MISC_PERSISTENT_STORE` (3), `_GET_STATE` (4) or `_CLEAR` (5) of
-    /// flight parameter `index` in `out`'s storage: what follows the id is
-    /// appended to `r` and 0 returned, or the error code to append (`EIO`
-    /// without storage or when it fails, said on the console).
-    fn on_persistent<S: CrtpSink>(&mut self, cmd: u8, index: usize, r: &mut Packet, out: &mut S) -> u8 {
-        let now = self.param_value(index).unwrap_or(0.0);
-        let default = self.param_default(index).unwrap_or(0.0);
-        let key = index as u16;
-        let done = match (cmd, out.storage()) {
-            (4, None) => Ok(None),
-            (_, None) => {
-                self.say(format_args!("no storage: parameters are not kept"));
-                return EIO;
-            }
-            (3, Some(st)) => st.set_param(key, now).map(|()| None),
-            (4, Some(st)) => st.param(key),
-            (_, Some(st)) => st.remove_param(key).map(|()| None),
-        };
-        match (cmd, done) {
-            (_, Err(e)) => {
-                self.say(format_args!("storage: {e}"));
-                EIO
-            }
-            (4, Ok(stored)) => {
-                let _ = r.extend(&[u8::from(stored.is_some())]);
-                self.put_value(r, index, default);
-                if let Some(v) = stored {
-                    self.put_value(r, index, v);
-                }
-                0
-            }
-            (_, Ok(_)) => {
-                let _ = r.extend(&[0]);
-                0
-            }
-        }
     }
 
     /// `MISC_SETBYNAME`: `[0, group\0, name\0, type, value]`, answered

@@ -105,6 +105,7 @@ mod app {
         tasks: Queue<Task, TASKS> = Queue::new(),
         works: Queue<ControllerWork, WORKS> = Queue::new(),
         answers: Queue<FromFc, ANSWERS> = Queue::new(),
+        store: Option<fc_stm32f405::flash::StandInStore> = None,
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let (clock, sim_tx) = board::bring_up();
@@ -123,6 +124,21 @@ mod app {
         let mut syslink: Syslink<DOWNLINK> = Syslink::new();
         if syslink.boot(&mut radio).is_err() {
             defmt::warn!("USART6 transmit timed out (RADIO_READY)");
+        }
+        // cflib's persistent parameters, kept in the stand-in.
+        match fc_storage::Store::open(
+            fc_storage::RamFlash::blank(),
+            0..fc_stm32f405::flash::STAND_IN_BYTES as u32,
+        ) {
+            Ok((store, boot)) => {
+                syslink.keep_in(cx.local.store.insert(store));
+                defmt::info!(
+                    "storage: {=str}; {}",
+                    fc_stm32f405::flash::STAND_IN_NOTE,
+                    defmt::Display2Format(&boot)
+                );
+            }
+            Err(e) => defmt::warn!("storage: none, parameters are not kept ({})", defmt::Display2Format(&e)),
         }
         defmt::info!(
             "up: CRTP over syslink on USART6, the simulator on USART1; tasks: radio bytes (4), data-ready (3), controller (2), link (1)"

@@ -84,6 +84,20 @@ pub const STORAGE: Range<u32> = 0x080C_0000..0x0810_0000;
 /// The Crazyflie 2.1's bootloader: sector 0, never erased.
 pub const CRAZYFLIE_BOOTLOADER: Range<u32> = 0x0800_0000..0x0800_4000;
 
+/// The stand-in the images keep their settings in: QEMU models no flash
+/// controller, and on the boards [`F4Flash`] is not wired yet (an erase
+/// stalls the 1 kHz tasks for up to 2 s, so it must wait for the ground).
+/// Bytes of RAM: two 1 KiB pages, room for every parameter.
+pub const STAND_IN_BYTES: usize = 2048;
+
+/// The settings store over the stand-in ([`STAND_IN_BYTES`] of RAM, lost
+/// at power-off).
+pub type StandInStore = fc_storage::Store<fc_storage::RamFlash<STAND_IN_BYTES>>;
+
+/// The boot log's words for the stand-in.
+pub const STAND_IN_NOTE: &str =
+    "a 2 KiB RAM stand-in (no flash driver wired; QEMU models no flash controller): settings last until power-off";
+
 /// Polls of `FLASH_SR` before a sector erase is given up: at ≥ 4 cycles a
 /// poll, ≥ 2.4 s at 168 MHz, above the 2 s a 128 KiB sector takes at most
 /// (DS8626 table 43, x32).

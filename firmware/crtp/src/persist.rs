@@ -1,0 +1,69 @@
+//! cflib's persistent parameters (`MISC_PERSISTENT_STORE`, `_GET_STATE`,
+//! `_CLEAR` on the param port's misc channel): the vehicle takes the
+//! request and notes what it needs ([`PersistRequest`]); the link's owner
+//! answers it with its storage, outside the vehicle's lock (a flash write
+//! must not hold up the estimator's task).
+
+use crate::vehicle::{param_types, CrtpSink};
+use crate::{Packet, Port};
+
+/// `ENOENT`: the parameter is not persistent (answered by the vehicle).
+pub const ENOENT: u8 = 2;
+/// `EIO`: no storage, or it failed.
+pub const EIO: u8 = 5;
+
+/// What a persistent-parameter request asks, with what its answer needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PersistRequest {
+    /// 3 store, 4 get the state, 5 clear.
+    pub cmd: u8,
+    /// The parameter's TOC id (its index in the settings store).
+    pub id: u16,
+    /// Its value in force (what a store keeps).
+    pub now: f32,
+    /// Its default (what the state reports beside the stored value).
+    pub default: f32,
+    /// Its CRTP type byte (how values are written in the answer).
+    pub ty: u8,
+}
+
+impl PersistRequest {
+    /// Does what was asked in `out`'s storage and sends the answer:
+    /// `[cmd, id, 0]` when stored or cleared; for the state `[4, id,
+    /// stored?, default, (stored value)]`; `[cmd, id, EIO]` when there is no
+    /// storage or it failed (the state then reads "not stored").
+    pub fn answer<S: CrtpSink>(&self, out: &mut S) -> Result<(), S::Error> {
+        let id = self.id.to_le_bytes();
+        let mut r = Packet::new(Port::Param, 3, &[self.cmd, id[0], id[1]]).unwrap_or(Packet::NULL);
+        let done = match (self.cmd, out.storage()) {
+            (4, None) => Ok(None),
+            (_, None) => Err(()),
+            (3, Some(st)) => st.set_param(self.id, self.now).map(|()| None).map_err(|_| ()),
+            (4, Some(st)) => st.param(self.id).map_err(|_| ()),
+            (_, Some(st)) => st.remove_param(self.id).map(|()| None).map_err(|_| ()),
+        };
+        match (self.cmd, done) {
+            (_, Err(())) => {
+                let _ = r.extend(&[EIO]);
+            }
+            (4, Ok(stored)) => {
+                let _ = r.extend(&[u8::from(stored.is_some())]);
+                self.put(&mut r, self.default);
+                if let Some(v) = stored {
+                    self.put(&mut r, v);
+                }
+            }
+            (_, Ok(_)) => {
+                let _ = r.extend(&[0]);
+            }
+        }
+        out.send(&r)
+    }
+
+    fn put(&self, r: &mut Packet, v: f32) {
+        let _ = match self.ty & param_types::TYPE {
+            param_types::U8 => r.extend(&[v as u8]),
+            _ => r.extend(&v.to_le_bytes()),
+        };
+    }
+}
