@@ -14,6 +14,21 @@ const WORD: usize = 4;
 /// programmed or erased: the byte in flight and those after it are not
 /// written or erased. After the cut every access fails, until
 /// [`CutFlash::power_on`].
+/// Writes a figure to `$FC_MEASUREMENTS` (as `e2e-tests`' `measure`,
+/// which this crate cannot depend on: it depends on this one).
+fn measure(key: &str, value: u32, unit: &str) {
+    use std::io::Write;
+    if let Some(path) = std::env::var_os("FC_MEASUREMENTS") {
+        let line = format!("{{\"key\":\"{key}\",\"value\":{value},\"unit\":\"{unit}\",\"source\":\"fc-storage tests\"}}\n");
+        std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .and_then(|mut f| f.write_all(line.as_bytes()))
+            .expect("writing a measurement");
+    }
+}
+
 #[derive(Clone)]
 struct CutFlash {
     data: Vec<u8>,
@@ -200,6 +215,8 @@ fn a_parameter_survives_a_power_cut_at_every_byte_of_every_write() {
     let s = sweep(400, |s, k| s.set_param(3, v(k)), |s| s.param(3), v);
     std::println!("parameter power-cut sweep: {s:?}");
     assert!(s.cuts > 400 * 8, "{s:?}");
+    measure("storage_param_power_cuts", s.cuts, "cuts");
+    measure("storage_param_power_cut_values", s.values, "values");
 }
 
 #[test]
@@ -208,6 +225,8 @@ fn the_signing_key_survives_a_power_cut_at_every_byte_of_every_write() {
     let s = sweep(120, |s, k| s.set_signing(&v(k).0, v(k).1), |s| s.signing(), v);
     std::println!("signing-key power-cut sweep: {s:?}");
     assert!(s.cuts > 120 * 40, "{s:?}");
+    measure("storage_key_power_cuts", s.cuts, "cuts");
+    measure("storage_key_power_cut_values", s.values, "values");
 }
 
 #[test]
@@ -278,6 +297,7 @@ fn foreign_or_truncated_contents_boot_to_an_error_or_defaults_never_a_panic() {
         boots[2]
     );
     assert!(boots.iter().all(|&n| n > 0), "{boots:?}");
+    measure("storage_foreign_contents_cases", boots.iter().sum(), "cases");
 }
 
 #[test]
