@@ -19,7 +19,8 @@ const WORD: usize = 4;
 fn measure(key: &str, value: u32, unit: &str) {
     use std::io::Write;
     if let Some(path) = std::env::var_os("FC_MEASUREMENTS") {
-        let line = format!("{{\"key\":\"{key}\",\"value\":{value},\"unit\":\"{unit}\",\"source\":\"fc-storage tests\"}}\n");
+        let line =
+            format!("{{\"key\":\"{key}\",\"value\":{value},\"unit\":\"{unit}\",\"source\":\"fc-storage tests\"}}\n");
         std::fs::OpenOptions::new()
             .create(true)
             .append(true)
