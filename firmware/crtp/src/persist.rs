@@ -1,6 +1,6 @@
 //! cflib's persistent parameters (`MISC_PERSISTENT_STORE`, `_GET_STATE`,
 //! `_CLEAR` on the param port's misc channel): the vehicle takes the
-//! request and notes what it needs ([`PersistRequest`]); the link's owner
+//! request and notes what it needs ([`PersistRequest`](crate::persist::PersistRequest)); the link's owner
 //! answers it with its storage, outside the vehicle's lock (a flash write
 //! must not hold up the estimator's task).
 
