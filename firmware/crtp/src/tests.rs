@@ -831,6 +831,21 @@ impl CrtpSink for Kept {
     }
 }
 
+impl Kept {
+    /// The answer to `p` (the last packet sent on its port).
+    fn ask(&mut self, v: &mut CrtpVehicle, p: Packet) -> Packet {
+        self.sent.0.clear();
+        v.handle(&p, self).unwrap();
+        *self
+            .sent
+            .0
+            .iter()
+            .rev()
+            .find(|a| a.port() == p.port())
+            .expect("an answer")
+    }
+}
+
 /// cflib's persistent parameters, byte for byte as its `param.py` sends
 /// and reads them (`MISC_GET_EXTENDED_TYPE_V2`, `MISC_PERSISTENT_STORE`,
 /// `_GET_STATE`, `_CLEAR`), and a value stored surviving a reboot.
@@ -849,46 +864,35 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
     let (_, t, _) = param_entry(w_pos).unwrap();
     assert_eq!(t, 0x16, "float, extended: cflib asks for the extended type");
     let id = (w_pos as u16).to_le_bytes();
-    let mut ask_kept = |v: &mut CrtpVehicle, p: Packet| {
-        kept.sent.0.clear();
-        v.handle(&p, &mut kept).unwrap();
-        *kept
-            .sent
-            .0
-            .iter()
-            .rev()
-            .find(|a| a.port() == p.port())
-            .expect("an answer")
-    };
     let misc = |cmd: u8| pk(Port::Param, 3, &[cmd, id[0], id[1]]);
-    assert_eq!(ask_kept(&mut v, misc(7)).payload(), &[7, id[0], id[1], 0, 1]);
+    assert_eq!(kept.ask(&mut v, misc(7)).payload(), &[7, id[0], id[1], 0, 1]);
     let default = {
-        let r = ask_kept(&mut v, misc(8));
+        let r = kept.ask(&mut v, misc(8));
         f32::from_le_bytes(r.payload()[4..8].try_into().unwrap())
     };
     let state = |r: Packet| r.payload()[3..].to_vec();
     let mut not_stored = vec![0];
     not_stored.extend(default.to_le_bytes());
-    assert_eq!(state(ask_kept(&mut v, misc(4))), not_stored);
+    assert_eq!(state(kept.ask(&mut v, misc(4))), not_stored);
     let mut w = id.to_vec();
     w.extend(3.0f32.to_le_bytes());
-    ask_kept(&mut v, pk(Port::Param, 2, &w));
-    assert_eq!(ask_kept(&mut v, misc(3)).payload(), &[3, id[0], id[1], 0]);
+    kept.ask(&mut v, pk(Port::Param, 2, &w));
+    assert_eq!(kept.ask(&mut v, misc(3)).payload(), &[3, id[0], id[1], 0]);
     let mut stored = vec![1];
     stored.extend(default.to_le_bytes());
     stored.extend(3.0f32.to_le_bytes());
-    assert_eq!(state(ask_kept(&mut v, misc(4))), stored);
+    assert_eq!(state(kept.ask(&mut v, misc(4))), stored);
     // Not persistent (a Crazyflie name of ours): ENOENT, as the firmware.
     let deck = (0..PARAM_COUNT)
         .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.group == "deck"))
         .unwrap() as u16;
     let d = deck.to_le_bytes();
     assert_eq!(
-        ask_kept(&mut v, pk(Port::Param, 3, &[7, d[0], d[1]])).payload()[3..],
+        kept.ask(&mut v, pk(Port::Param, 3, &[7, d[0], d[1]])).payload()[3..],
         [0, 0]
     );
     assert_eq!(
-        ask_kept(&mut v, pk(Port::Param, 3, &[3, d[0], d[1]])).payload()[3..],
+        kept.ask(&mut v, pk(Port::Param, 3, &[3, d[0], d[1]])).payload()[3..],
         [log::ENOENT]
     );
     // Without storage: the store fails (EIO), the state is "not stored".
@@ -905,20 +909,9 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
         sent: Sent::default(),
         store: st,
     };
-    let mut ask_kept = |v: &mut CrtpVehicle, p: Packet| {
-        kept.sent.0.clear();
-        v.handle(&p, &mut kept).unwrap();
-        *kept
-            .sent
-            .0
-            .iter()
-            .rev()
-            .find(|a| a.port() == p.port())
-            .expect("an answer")
-    };
-    let read = ask_kept(&mut v, pk(Port::Param, 1, &id));
+    let read = kept.ask(&mut v, pk(Port::Param, 1, &id));
     assert_eq!(read.payload()[3..], 3.0f32.to_le_bytes(), "the stored value in force");
-    assert_eq!(state(ask_kept(&mut v, misc(4))), stored);
-    assert_eq!(ask_kept(&mut v, misc(5)).payload(), &[5, id[0], id[1], 0]);
-    assert_eq!(state(ask_kept(&mut v, misc(4))), not_stored);
+    assert_eq!(state(kept.ask(&mut v, misc(4))), stored);
+    assert_eq!(kept.ask(&mut v, misc(5)).payload(), &[5, id[0], id[1], 0]);
+    assert_eq!(state(kept.ask(&mut v, misc(4))), not_stored);
 }
