@@ -26,6 +26,47 @@
 
 use fc_stm32f405::crtp_image::{ImuBus, Outputs, Watchdog};
 
+/// Where cflib's persistent parameters are kept: in QEMU a RAM stand-in (it
+/// models no flash controller), on the board the flash's sectors 10–11;
+/// either written only while disarmed, the watchdog widened meanwhile.
+#[cfg(feature = "qemu")]
+type Kept = fc_stm32f405::flash::Grounded<fc_stm32f405::flash::StandInStore>;
+#[cfg(not(feature = "qemu"))]
+type Kept = fc_stm32f405::flash::Grounded<fc_stm32f405::flash::BoardStore>;
+
+/// Whether the vehicle is armed, as the link's task last saw it: the store
+/// refuses writes then.
+static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
+/// Opens the settings store and says on the log what backs it and what it
+/// found.
+fn open_store() -> Option<Kept> {
+    #[cfg(feature = "qemu")]
+    let (opened, note) = (
+        fc_storage::Store::open(
+            fc_storage::RamFlash::blank(),
+            0..fc_stm32f405::flash::STAND_IN_BYTES as u32,
+        ),
+        fc_stm32f405::flash::STAND_IN_NOTE,
+    );
+    #[cfg(not(feature = "qemu"))]
+    let (opened, note) = (fc_stm32f405::flash::open_board_store(), fc_stm32f405::flash::BOARD_NOTE);
+    match opened {
+        Ok((store, boot)) => {
+            defmt::info!("storage: {=str}; {}", note, defmt::Display2Format(&boot));
+            Some(fc_stm32f405::flash::Grounded {
+                store,
+                armed: &ARMED,
+                widen: |on| crate::WATCHDOG.designing(on),
+            })
+        }
+        Err(e) => {
+            defmt::warn!("storage: none, parameters are not kept ({})", defmt::Display2Format(&e));
+            None
+        }
+    }
+}
+
 #[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
 mod app {
     use super::{ImuBus, Outputs, Watchdog};
@@ -105,7 +146,7 @@ mod app {
         tasks: Queue<Task, TASKS> = Queue::new(),
         works: Queue<ControllerWork, WORKS> = Queue::new(),
         answers: Queue<FromFc, ANSWERS> = Queue::new(),
-        store: Option<fc_stm32f405::flash::StandInStore> = None,
+        store: Option<super::Kept> = None,
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let (clock, sim_tx) = board::bring_up();
@@ -116,6 +157,25 @@ mod app {
         if vehicle.start().is_err() {
             board::fail("boot controller design failed");
         }
+        // cflib's persistent parameters: the stored values, each through
+        // the check a client's write goes through.
+        let mut store = super::open_store().map(|s| cx.local.store.insert(s));
+        if let Some(st) = store.as_deref_mut() {
+            let (mut taken, mut refused) = (0u16, 0u16);
+            for i in 0..fc_loop::params::PARAMS.len() {
+                if let Ok(Some(value)) = fc_storage::Persist::param(st, i as u16) {
+                    match vehicle.write_param(i, value) {
+                        Ok(_) => taken += 1,
+                        Err(_) => refused += 1,
+                    }
+                }
+            }
+            defmt::info!(
+                "storage: {=u16} stored parameters taken, {=u16} refused",
+                taken,
+                refused
+            );
+        }
         let (v, ctrl) = vehicle.split();
         // The board's sensors, started (QEMU's: the simulator's).
         let (imu, sensors) = crate::imu_bus();
@@ -125,20 +185,8 @@ mod app {
         if syslink.boot(&mut radio).is_err() {
             defmt::warn!("USART6 transmit timed out (RADIO_READY)");
         }
-        // cflib's persistent parameters, kept in the stand-in.
-        match fc_storage::Store::open(
-            fc_storage::RamFlash::blank(),
-            0..fc_stm32f405::flash::STAND_IN_BYTES as u32,
-        ) {
-            Ok((store, boot)) => {
-                syslink.keep_in(cx.local.store.insert(store));
-                defmt::info!(
-                    "storage: {=str}; {}",
-                    fc_stm32f405::flash::STAND_IN_NOTE,
-                    defmt::Display2Format(&boot)
-                );
-            }
-            Err(e) => defmt::warn!("storage: none, parameters are not kept ({})", defmt::Display2Format(&e)),
+        if let Some(st) = store {
+            syslink.keep_in(st);
         }
         defmt::info!(
             "up: CRTP over syslink on USART6, the simulator on USART1; tasks: radio bytes (4), data-ready (3), controller (2), link (1)"
@@ -431,6 +479,8 @@ mod app {
             answer: None,
         };
         let mut ok = true;
+        // The store refuses writes while armed.
+        super::ARMED.store(vehicle.v.lock(|v| v.armed()), core::sync::atomic::Ordering::Relaxed);
         // The simulator's re-designing write, if one waits.
         vehicle.lock(|_| ());
         let mut buf = [0u8; 64];

@@ -84,10 +84,9 @@ pub const STORAGE: Range<u32> = 0x080C_0000..0x0810_0000;
 /// The Crazyflie 2.1's bootloader: sector 0, never erased.
 pub const CRAZYFLIE_BOOTLOADER: Range<u32> = 0x0800_0000..0x0800_4000;
 
-/// The stand-in the images keep their settings in: QEMU models no flash
-/// controller, and on the boards [`F4Flash`] is not wired yet (an erase
-/// stalls the 1 kHz tasks for up to 2 s, so it must wait for the ground).
-/// Bytes of RAM: two 1 KiB pages, room for every parameter.
+/// The stand-in the images built for QEMU keep their settings in (QEMU
+/// models no flash controller). Bytes of RAM: two 1 KiB pages, room for
+/// every parameter.
 pub const STAND_IN_BYTES: usize = 2048;
 
 /// The settings store over the stand-in ([`STAND_IN_BYTES`] of RAM, lost
@@ -95,8 +94,75 @@ pub const STAND_IN_BYTES: usize = 2048;
 pub type StandInStore = fc_storage::Store<fc_storage::RamFlash<STAND_IN_BYTES>>;
 
 /// The boot log's words for the stand-in.
-pub const STAND_IN_NOTE: &str =
-    "a 2 KiB RAM stand-in (no flash driver wired; QEMU models no flash controller): settings last until power-off";
+pub const STAND_IN_NOTE: &str = "a 2 KiB RAM stand-in (QEMU models no flash controller): settings last until power-off";
+
+/// The boot log's words for the board's flash.
+pub const BOARD_NOTE: &str = "flash sectors 10-11 (written only while disarmed)";
+
+/// A settings store written only on the ground: a write while `armed`
+/// reads true is refused ([`fc_storage::StoreError::Armed`]), since
+/// programming and erasing stall every flash read, the control loop's
+/// code included (an erase for up to 2 s); around each write `widen(true)`
+/// and `widen(false)` widen the watchdog's timeout and set it back. Reads
+/// pass through.
+pub struct Grounded<S> {
+    /// The store.
+    pub store: S,
+    /// Whether the vehicle is armed (the image's link task keeps it).
+    pub armed: &'static core::sync::atomic::AtomicBool,
+    /// Widens the watchdog (true) or sets it back (false).
+    pub widen: fn(bool),
+}
+
+impl<S: fc_storage::Persist> Grounded<S> {
+    fn write<T>(
+        &mut self,
+        f: impl FnOnce(&mut S) -> Result<T, fc_storage::StoreError>,
+    ) -> Result<T, fc_storage::StoreError> {
+        if self.armed.load(core::sync::atomic::Ordering::Relaxed) {
+            return Err(fc_storage::StoreError::Armed);
+        }
+        (self.widen)(true);
+        let r = f(&mut self.store);
+        (self.widen)(false);
+        r
+    }
+}
+
+impl<S: fc_storage::Persist> fc_storage::Persist for Grounded<S> {
+    fn param(&mut self, index: u16) -> Result<Option<f32>, fc_storage::StoreError> {
+        self.store.param(index)
+    }
+    fn set_param(&mut self, index: u16, value: f32) -> Result<(), fc_storage::StoreError> {
+        self.write(|s| s.set_param(index, value))
+    }
+    fn remove_param(&mut self, index: u16) -> Result<(), fc_storage::StoreError> {
+        self.write(|s| s.remove_param(index))
+    }
+    fn signing(&mut self) -> Result<Option<([u8; 32], u64)>, fc_storage::StoreError> {
+        self.store.signing()
+    }
+    fn set_signing(&mut self, key: &[u8; 32], timestamp: u64) -> Result<(), fc_storage::StoreError> {
+        self.write(|s| s.set_signing(key, timestamp))
+    }
+}
+
+/// The board's flash below the settings' sectors: where the images are
+/// linked (`memory.x`), the Crazyflie's bootloader included.
+pub const IMAGES: Range<u32> = 0x0800_0000..STORAGE.start;
+
+/// The settings store in the board's flash, sectors 10–11 (128 KiB each).
+#[cfg(target_os = "none")]
+pub type BoardStore = fc_storage::Store<F4Flash<Registers, { 128 << 10 }>>;
+
+/// Opens the settings store in the board's flash ([`STORAGE`]), saying
+/// what it found. At boot: an erase here (foreign contents) runs before
+/// the watchdog starts.
+#[cfg(target_os = "none")]
+pub fn open_board_store() -> Result<(BoardStore, fc_storage::Boot), fc_storage::StoreError> {
+    let flash = F4Flash::new(Registers, STORAGE, IMAGES).map_err(|_| fc_storage::StoreError::BadRange)?;
+    fc_storage::Store::open(flash, 0..STORAGE.end - STORAGE.start)
+}
 
 /// Polls of `FLASH_SR` before a sector erase is given up: at ≥ 4 cycles a
 /// poll, ≥ 2.4 s at 168 MHz, above the 2 s a 128 KiB sector takes at most
@@ -334,29 +400,39 @@ impl<R: FlashRegs, const SECTOR: usize> NorFlash for F4Flash<R, SECTOR> {
     }
 }
 
-/// The chip's flash interface (`FLASH` of the PAC) and its memory.
+/// The chip's flash interface (`FLASH` of the PAC) and its memory. One
+/// owner: the settings store (the clock bring-up wrote `FLASH_ACR` before).
 #[cfg(target_os = "none")]
-pub struct Registers(pub &'static stm32f4::stm32f405::flash::RegisterBlock);
+pub struct Registers;
+
+#[cfg(target_os = "none")]
+impl Registers {
+    fn block(&self) -> &'static stm32f4::stm32f405::flash::RegisterBlock {
+        // SAFETY: a fixed MMIO address; `Registers` is its only user after
+        // the clock bring-up.
+        unsafe { &*stm32f4::stm32f405::FLASH::ptr() }
+    }
+}
 
 #[cfg(target_os = "none")]
 impl FlashRegs for Registers {
     fn sr(&mut self) -> u32 {
-        self.0.sr().read().bits()
+        self.block().sr().read().bits()
     }
     fn write_sr(&mut self, v: u32) {
         // SAFETY: every SR bit written is a write-1-to-clear flag.
-        self.0.sr().write(|w| unsafe { w.bits(v) });
+        self.block().sr().write(|w| unsafe { w.bits(v) });
     }
     fn cr(&mut self) -> u32 {
-        self.0.cr().read().bits()
+        self.block().cr().read().bits()
     }
     fn write_cr(&mut self, v: u32) {
         // SAFETY: the values are RM0090's encodings (module `cr`).
-        self.0.cr().write(|w| unsafe { w.bits(v) });
+        self.block().cr().write(|w| unsafe { w.bits(v) });
     }
     fn write_keyr(&mut self, v: u32) {
         // SAFETY: KEYR takes any value; a wrong key locks CR until reset.
-        self.0.keyr().write(|w| unsafe { w.bits(v) });
+        self.block().keyr().write(|w| unsafe { w.bits(v) });
     }
     fn write_word(&mut self, addr: u32, word: u32) {
         // SAFETY: `addr` is inside the storage range (F4Flash::span), word

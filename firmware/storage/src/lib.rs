@@ -67,6 +67,9 @@ pub enum StoreError {
     /// A stored value does not decode as its kind (a store of another
     /// version).
     Value,
+    /// Refused while the vehicle is armed: writing the flash stalls every
+    /// flash read, the control loop's included.
+    Armed,
 }
 
 impl core::fmt::Display for StoreError {
@@ -77,6 +80,7 @@ impl core::fmt::Display for StoreError {
             StoreError::Full => "the storage is full",
             StoreError::Corrupted => "the storage holds corrupt or foreign data",
             StoreError::Value => "a stored value does not decode as its kind",
+            StoreError::Armed => "not while armed: writing the flash stalls the control loop",
         })
     }
 }

@@ -311,3 +311,35 @@ fn a_controller_that_fails_is_an_error_never_a_hang() {
     assert!(Store::open(storage(m), 0..(256 << 10)).is_err());
     assert!(FlashError::Controller(sr::WRPERR).to_string().contains("SR 0x10"));
 }
+
+static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+static WIDENED: std::sync::Mutex<Vec<bool>> = std::sync::Mutex::new(Vec::new());
+
+#[test]
+fn the_board_store_writes_only_disarmed_with_the_watchdog_widened() {
+    use core::sync::atomic::Ordering;
+    use fc_storage::{Persist, StoreError};
+    let (store, _) = Store::open(storage(Model::new()), 0..(256 << 10)).unwrap();
+    let mut g = Grounded {
+        store,
+        armed: &ARMED,
+        widen: |on| WIDENED.lock().unwrap().push(on),
+    };
+    g.set_param(2, 1.5).unwrap();
+    assert_eq!(
+        *WIDENED.lock().unwrap(),
+        [true, false],
+        "widened around the write, then set back"
+    );
+    ARMED.store(true, Ordering::Relaxed);
+    assert_eq!(g.set_param(2, 9.0), Err(StoreError::Armed));
+    assert_eq!(g.set_signing(&[1; 32], 5), Err(StoreError::Armed));
+    assert_eq!(g.remove_param(2), Err(StoreError::Armed));
+    // Reads go on while armed; nothing was written.
+    assert_eq!((g.param(2), g.signing()), (Ok(Some(1.5)), Ok(None)));
+    assert_eq!(WIDENED.lock().unwrap().len(), 2);
+    ARMED.store(false, Ordering::Relaxed);
+    g.remove_param(2).unwrap();
+    assert_eq!(g.param(2), Ok(None));
+    assert!(StoreError::Armed.to_string().contains("armed"));
+}
