@@ -23,16 +23,18 @@
 //!   The stack's high-water mark (≤ 32 KiB) is the QEMU budget test's; both
 //!   together leave more than half of the 128 KiB SRAM for what comes next.
 //!
-//! `firmware-mavlink` (the same loop behind MAVLink): flash ≤ 368 KiB —
+//! `firmware-mavlink` (the same loop behind MAVLink): flash ≤ 392 KiB —
 //! the MAVLink messages it reads and writes, the parameter table and the
 //! vehicle's logic add ≈ 50 KiB (only the messages used are linked: the
 //! whole common dialect would add ≈ 300 KiB); it was 320 KiB until PX4's
 //! modes, commands and ground-station telemetry came (seven messages more,
 //! the automatic modes' planner and parameters, the mission protocol, the
-//! joystick, ESTIMATOR_STATUS: ≈ 30 KiB, 326 228 B to 357 004 B) —, static
-//! RAM ≤ 20 KiB (the vehicle's parameters, mixer, modes, mission store of 16
-//! items and telemetry state on top of the loop; 19 484 B with the loop's
-//! held previews; 19 KiB until the mission store came).
+//! joystick, ESTIMATOR_STATUS: ≈ 30 KiB, 326 228 B to 357 004 B), signing
+//! and the settings store ≈ 22 KiB more —, static RAM ≤ 22 KiB (the
+//! vehicle's parameters, mixer, modes, mission store of 16 items and
+//! telemetry state on top of the loop; 19 484 B with the loop's held
+//! previews; 19 KiB until the mission store came; the settings' 2 KiB RAM
+//! stand-in since).
 //!
 //! `firmware-crtp` (the same loop behind CRTP over syslink, the Crazyflie's
 //! radio link, on the CRTP images' RTIC tasks): flash ≤ 392 KiB — the CRTP

@@ -19,17 +19,19 @@ pub const FIRMWARE_FLASH_BYTES: u32 = 288 * 1024;
 /// (≈ 7 KiB), the estimator, the queues; the stack's 32 KiB and a parameter
 /// store's page buffer (≤ 4 KiB) must still fit beside it in the SRAM.
 pub const FIRMWARE_STATIC_RAM_BYTES: u32 = 22 * 1024;
-/// `firmware-mavlink`, flash: 368 KiB, the MAVLink dialect's messages
-/// included, below sectors 6–11 with the 16 KiB left under 384 KiB for
-/// signing (SHA-256 and the signing state).
-pub const MAVLINK_FLASH_BYTES: u32 = 368 * 1024;
-/// `firmware-mavlink`, static RAM: 20 KiB, as `firmware`'s, less the
-/// RTIC queues it does without.
-pub const MAVLINK_STATIC_RAM_BYTES: u32 = 20 * 1024;
-/// `firmware-crtp`, flash: 392 KiB, `firmware-mavlink`'s 368 KiB and
-/// 24 KiB for cflib's persistent parameters (the settings store,
-/// `sequential-storage`'s map, ≈ 20 KiB of code), well below the settings'
-/// own sectors 10–11 (`flash::STORAGE`, from 768 KiB).
+/// `firmware-mavlink`, flash: 392 KiB, the MAVLink dialect's messages
+/// included, with MAVLink signing (SHA-256 and the signing state) and the
+/// settings store that keeps the parameters and the key (≈ 22 KiB), well
+/// below the settings' own sectors 10–11 (from 768 KiB).
+pub const MAVLINK_FLASH_BYTES: u32 = 392 * 1024;
+/// `firmware-mavlink`, static RAM: 22 KiB, as `firmware`'s, less the
+/// RTIC queues it does without, and the settings' 2 KiB RAM stand-in in
+/// the QEMU build.
+pub const MAVLINK_STATIC_RAM_BYTES: u32 = 22 * 1024;
+/// `firmware-crtp`, flash: 392 KiB, with cflib's persistent parameters
+/// (the settings store, `sequential-storage`'s map, ≈ 20 KiB of code),
+/// well below the settings' own sectors 10–11 (`flash::STORAGE`, from
+/// 768 KiB).
 pub const CRTP_FLASH_BYTES: u32 = 392 * 1024;
 /// `firmware-crtp`, static RAM: 28 KiB (the CRTP TOCs, the planner and the
 /// syslink queues over `firmware`'s, 26 KiB, and the settings' 2 KiB RAM
