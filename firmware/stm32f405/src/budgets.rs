@@ -42,10 +42,10 @@ pub const CRAZYFLIE_FLASH_BYTES: u32 = 392 * 1024;
 /// `firmware-crazyflie` built for QEMU, static RAM: 28 KiB, as `firmware-crtp`'s.
 pub const CRAZYFLIE_STATIC_RAM_BYTES: u32 = 28 * 1024;
 /// `firmware-crazyflie` as flashed (its own sensors, defmt over RTT),
-/// flash: 424 KiB of the 752 KiB between Bitcraze's 16 KiB bootloader and
+/// flash: 408 KiB of the 752 KiB between Bitcraze's 16 KiB bootloader and
 /// the settings' sectors 10–11: the QEMU build's, its drivers, and the
 /// flash driver that keeps the settings (the store's code built for it).
-pub const CRAZYFLIE_AS_FLASHED_FLASH_BYTES: u32 = 424 * 1024;
+pub const CRAZYFLIE_AS_FLASHED_FLASH_BYTES: u32 = 408 * 1024;
 /// `firmware-crazyflie` as flashed, static RAM: 28 KiB (RTT's buffers,
 /// 2.5 KiB, over the QEMU build's, less the RAM stand-in: the settings are
 /// in the flash).
