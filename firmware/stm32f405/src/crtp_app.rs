@@ -26,46 +26,9 @@
 
 use fc_stm32f405::crtp_image::{ImuBus, Outputs, Watchdog};
 
-/// Where cflib's persistent parameters are kept: in QEMU a RAM stand-in (it
-/// models no flash controller), on the board the flash's sectors 10–11;
-/// either written only while disarmed, the watchdog widened meanwhile.
-#[cfg(feature = "qemu")]
-type Kept = fc_stm32f405::flash::Grounded<fc_stm32f405::flash::StandInStore>;
-#[cfg(not(feature = "qemu"))]
-type Kept = fc_stm32f405::flash::Grounded<fc_stm32f405::flash::BoardStore>;
-
-/// Whether the vehicle is armed, as the link's task last saw it: the store
-/// refuses writes then.
+/// Whether the vehicle is armed, as the link's task last saw it: the
+/// settings store refuses writes then.
 static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
-
-/// Opens the settings store and says on the log what backs it and what it
-/// found.
-fn open_store() -> Option<Kept> {
-    #[cfg(feature = "qemu")]
-    let (opened, note) = (
-        fc_storage::Store::open(
-            fc_storage::RamFlash::blank(),
-            0..fc_stm32f405::flash::STAND_IN_BYTES as u32,
-        ),
-        fc_stm32f405::flash::STAND_IN_NOTE,
-    );
-    #[cfg(not(feature = "qemu"))]
-    let (opened, note) = (fc_stm32f405::flash::open_board_store(), fc_stm32f405::flash::BOARD_NOTE);
-    match opened {
-        Ok((store, boot)) => {
-            defmt::info!("storage: {=str}; {}", note, defmt::Display2Format(&boot));
-            Some(fc_stm32f405::flash::Grounded {
-                store,
-                armed: &ARMED,
-                widen: |on| crate::WATCHDOG.designing(on),
-            })
-        }
-        Err(e) => {
-            defmt::warn!("storage: none, parameters are not kept ({})", defmt::Display2Format(&e));
-            None
-        }
-    }
-}
 
 #[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
 mod app {
@@ -146,7 +109,7 @@ mod app {
         tasks: Queue<Task, TASKS> = Queue::new(),
         works: Queue<ControllerWork, WORKS> = Queue::new(),
         answers: Queue<FromFc, ANSWERS> = Queue::new(),
-        store: Option<super::Kept> = None,
+        store: Option<fc_stm32f405::flash::Kept> = None,
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let (clock, sim_tx) = board::bring_up();
@@ -159,7 +122,8 @@ mod app {
         }
         // cflib's persistent parameters: the stored values, each through
         // the check a client's write goes through.
-        let mut store = super::open_store().map(|s| cx.local.store.insert(s));
+        let mut store = fc_stm32f405::flash::open_settings(&super::ARMED, |on| crate::WATCHDOG.designing(on))
+            .map(|s| cx.local.store.insert(s));
         if let Some(st) = store.as_deref_mut() {
             let (mut taken, mut refused) = (0u16, 0u16);
             for i in 0..fc_loop::params::PARAMS.len() {

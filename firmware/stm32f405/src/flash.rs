@@ -155,10 +155,50 @@ pub const IMAGES: Range<u32> = 0x0800_0000..STORAGE.start;
 #[cfg(target_os = "none")]
 pub type BoardStore = fc_storage::Store<F4Flash<Registers, { 128 << 10 }>>;
 
+/// What an image keeps its settings in: built for QEMU (the `qemu`
+/// feature) the RAM stand-in, for a board the flash; either written only
+/// while disarmed ([`Grounded`]).
+#[cfg(all(target_os = "none", feature = "qemu"))]
+pub type Kept = Grounded<StandInStore>;
+/// What an image keeps its settings in: built for QEMU (the `qemu`
+/// feature) the RAM stand-in, for a board the flash; either written only
+/// while disarmed ([`Grounded`]).
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
+pub type Kept = Grounded<BoardStore>;
+
+/// Opens the image's settings store ([`Kept`]) at boot and says on the
+/// log what backs it and what it found; `None` (logged) if it cannot be
+/// opened. `armed` and `widen` as [`Grounded`]'s.
+///
+/// Inlined into the image, so that the store's code is built once there
+/// (a copy built here as well cost ≈ 10 KiB of flash).
+#[cfg(target_os = "none")]
+#[inline]
+pub fn open_settings(armed: &'static core::sync::atomic::AtomicBool, widen: fn(bool)) -> Option<Kept> {
+    #[cfg(feature = "qemu")]
+    let (opened, note) = (
+        fc_storage::Store::open(fc_storage::RamFlash::blank(), 0..STAND_IN_BYTES as u32),
+        STAND_IN_NOTE,
+    );
+    #[cfg(not(feature = "qemu"))]
+    let (opened, note) = (open_board_store(), BOARD_NOTE);
+    match opened {
+        Ok((store, boot)) => {
+            defmt::info!("storage: {=str}; {}", note, defmt::Display2Format(&boot));
+            Some(Grounded { store, armed, widen })
+        }
+        Err(e) => {
+            defmt::warn!("storage: none, settings are not kept ({})", defmt::Display2Format(&e));
+            None
+        }
+    }
+}
+
 /// Opens the settings store in the board's flash ([`STORAGE`]), saying
 /// what it found. At boot: an erase here (foreign contents) runs before
 /// the watchdog starts.
 #[cfg(target_os = "none")]
+#[inline]
 pub fn open_board_store() -> Result<(BoardStore, fc_storage::Boot), fc_storage::StoreError> {
     let flash = F4Flash::new(Registers, STORAGE, IMAGES).map_err(|_| fc_storage::StoreError::BadRange)?;
     fc_storage::Store::open(flash, 0..STORAGE.end - STORAGE.start)

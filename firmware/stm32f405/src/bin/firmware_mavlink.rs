@@ -6,9 +6,12 @@
 //! lockstep), a ground station's parameters, arming and set-points, and
 //! telemetry — both peers on the one link (the host routes them). It boots
 //! with the OS4's parameters; a ground station sets the vehicle's
-//! (`sil-host px4-hil --target qemu --vehicle FILE` does). Logs through
-//! defmt: boot, arming, refusals, and the stack's high-water mark as it
-//! grows (checked every 1 000 samples).
+//! (`sil-host px4-hil --target qemu --vehicle FILE` does). The parameters
+//! a ground station sets and the signing key are kept
+//! ([`fc_stm32f405::flash::open_settings`]: a RAM stand-in in QEMU, the
+//! flash on a board) and taken again at boot. Logs through defmt: boot,
+//! what the store held, arming, refusals, and the stack's high-water mark
+//! as it grows (checked every 1 000 samples).
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -29,18 +32,25 @@ mod target {
     use fc_mavlink::signing::{Signing, SIMULATOR_UNSIGNED};
     use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer, VehicleCounters};
     use fc_mavlink::{encode_signed, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
+    use fc_stm32f405::flash::Kept;
+    use fc_storage::Persist;
     use hal_shim::stm32f405::{TxTimeout, Usart};
     use hal_shim::ByteLink;
 
     /// This vehicle's MAVLink system id (component: MAV_COMP_ID_AUTOPILOT1).
     const SYSTEM_ID: u8 = 1;
 
-    /// Both peers on USART1, signed once a `SETUP_SIGNING` set a key (the
-    /// key lives in RAM: a reset clears it).
+    /// Whether the vehicle is armed, as the loop last saw it: the settings
+    /// store refuses writes then.
+    static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
+    /// Both peers on USART1, signed once a `SETUP_SIGNING` set a key; the
+    /// settings (parameters, the key) kept in `store`.
     struct Link<'a> {
         usart: &'a mut Usart,
         seq: u8,
         signing: Signing,
+        store: Option<&'static mut Kept>,
     }
 
     impl MavSink for Link<'_> {
@@ -62,6 +72,42 @@ mod target {
         fn signing(&mut self) -> Option<&mut Signing> {
             Some(&mut self.signing)
         }
+        fn storage(&mut self) -> Option<&mut dyn Persist> {
+            match &mut self.store {
+                Some(s) => Some(&mut **s),
+                None => None,
+            }
+        }
+    }
+
+    /// Takes the settings kept in `st` at boot: the parameters (each
+    /// through the write check) and the signing key with its timestamp.
+    fn restore(v: &mut MavVehicle, st: &mut Kept, signing: &mut Signing) {
+        let (mut taken, mut refused) = (0u16, 0u16);
+        for i in 0..fc_mavlink::params::PARAMS.len() {
+            if let Ok(Some(value)) = st.param(i as u16) {
+                match v.apply(i, value) {
+                    Ok(()) => taken += 1,
+                    Err(_) => refused += 1,
+                }
+            }
+        }
+        if let Ok((t, r)) = v.restore_nav(st) {
+            (taken, refused) = (taken + t, refused + r);
+        }
+        let key = match st.signing() {
+            Ok(Some((key, ts))) if key != [0; 32] => {
+                *signing = Signing::with_key(key, ts);
+                true
+            }
+            _ => false,
+        };
+        defmt::info!(
+            "storage: {=u16} stored parameters taken, {=u16} refused; signing key {=str}",
+            taken,
+            refused,
+            if key { "kept: signing on" } else { "none" }
+        );
     }
 
     /// Logs what changed since the last call.
@@ -117,19 +163,22 @@ mod target {
             SYSTEM_ID,
             fc_stm32f405::stack::static_ram()
         );
-        // The settings store is not linked here (its ≈ 20 KiB of code would
-        // not fit this image's flash budget): parameters and the signing key
-        // last until power-off, and the log says so.
-        defmt::info!("storage: none in this image: parameters and the signing key last until power-off");
         let mut reader = MavReader::new(SYSTEM_ID);
+        // The settings kept (this image has no watchdog to widen).
+        let mut store =
+            fc_stm32f405::flash::open_settings(&ARMED, |_| {}).and_then(|k| cortex_m::singleton!(: Kept = k));
+        let mut signing = Signing::new();
+        if let Some(st) = store.as_deref_mut() {
+            restore(v, st, &mut signing);
+        }
         // The simulator's samples share USART1 with the ground station:
         // they pass unsigned (fc_mavlink::signing::SIMULATOR_UNSIGNED).
-        let mut signing = Signing::new();
         signing.also_accept_unsigned(&SIMULATOR_UNSIGNED);
         let mut link = Link {
             usart: &mut usart,
             seq: 0,
             signing,
+            store,
         };
         let mut signing_us = board::now_us(&clock);
         let mut buf = [0u8; 64];
@@ -139,6 +188,19 @@ mod target {
             let now_us = board::now_us(&clock);
             link.signing.advance_us(now_us.saturating_sub(signing_us));
             signing_us = now_us;
+            let armed = v.armed();
+            if ARMED.swap(armed, core::sync::atomic::Ordering::Relaxed) && !armed {
+                // Landed: the signing timestamp is kept, so that after a
+                // reset the vehicle's signatures go on from here.
+                if let (Some(st), Some(key)) = (link.store.as_deref_mut(), link.signing.key()) {
+                    if let Err(e) = st.set_signing(key, link.signing.timestamp()) {
+                        defmt::warn!(
+                            "storage: the signing timestamp is not kept ({})",
+                            defmt::Display2Format(&e)
+                        );
+                    }
+                }
+            }
             // Bounded work per pass: at most 16 reads of 64 bytes.
             for _ in 0..16 {
                 let Ok(n) = link.usart.read(&mut buf) else { break };
