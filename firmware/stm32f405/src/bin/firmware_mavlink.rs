@@ -8,7 +8,7 @@
 //! with the OS4's parameters; a ground station sets the vehicle's
 //! (`sil-host px4-hil --target qemu --vehicle FILE` does). The parameters
 //! a ground station sets and the signing key are kept
-//! ([`fc_stm32f405::flash::open_settings`]: a RAM stand-in in QEMU, the
+//! (`fc_stm32f405::flash::open_settings`: a RAM stand-in in QEMU, the
 //! flash on a board) and taken again at boot. Logs through defmt: boot,
 //! what the store held, arming, refusals, and the stack's high-water mark
 //! as it grows (checked every 1 000 samples).
