@@ -19,6 +19,9 @@ pub const MAX_BLOCK_BYTES: usize = 26;
 pub const ENOENT: u8 = 2;
 /// `E2BIG`: the block's values would not fit one packet.
 pub const E2BIG: u8 = 7;
+/// `EIO`: the storage is missing or failed (a persistent parameter's
+/// store, state or clear).
+pub const EIO: u8 = 5;
 /// `ENOEXEC`: an unknown command (or a type cflib cannot fetch).
 pub const ENOEXEC: u8 = 8;
 /// `ENOMEM`: no free block, or no free variable.

@@ -4,13 +4,9 @@
 //! answers it with its storage, outside the vehicle's lock (a flash write
 //! must not hold up the estimator's task).
 
-use crate::vehicle::{param_types, CrtpSink};
+use crate::log::EIO;
+use crate::vehicle::{put_typed, CrtpSink};
 use crate::{Packet, Port};
-
-/// `ENOENT`: the parameter is not persistent (answered by the vehicle).
-pub const ENOENT: u8 = 2;
-/// `EIO`: no storage, or it failed.
-pub const EIO: u8 = 5;
 
 /// What a persistent-parameter request asks, with what its answer needs.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,9 +44,9 @@ impl PersistRequest {
             }
             (4, Ok(stored)) => {
                 let _ = r.extend(&[u8::from(stored.is_some())]);
-                self.put(&mut r, self.default);
+                put_typed(&mut r, self.ty, self.default);
                 if let Some(v) = stored {
-                    self.put(&mut r, v);
+                    put_typed(&mut r, self.ty, v);
                 }
             }
             (_, Ok(_)) => {
@@ -58,12 +54,5 @@ impl PersistRequest {
             }
         }
         out.send(&r)
-    }
-
-    fn put(&self, r: &mut Packet, v: f32) {
-        let _ = match self.ty & param_types::TYPE {
-            param_types::U8 => r.extend(&[v as u8]),
-            _ => r.extend(&v.to_le_bytes()),
-        };
     }
 }

@@ -264,7 +264,7 @@ fn persistent_parameters_are_answered_with_the_links_storage() {
         frames(&w.0)[0].data().to_vec()
     };
     let mut bare: Syslink<8> = Syslink::new();
-    assert_eq!(ask(&mut bare, &mut v, 3), [0x23, 3, lo, hi, crate::persist::EIO]);
+    assert_eq!(ask(&mut bare, &mut v, 3), [0x23, 3, lo, hi, crate::log::EIO]);
     let (store, _) = fc_storage::Store::open(fc_storage::RamFlash::<2048>::blank(), 0..2048).unwrap();
     let store: &'static mut _ = Box::leak(Box::new(store));
     let mut s: Syslink<8> = Syslink::new();

@@ -1583,11 +1583,7 @@ impl CrtpCore {
 
     /// Appends parameter `id`'s value `v` in its type.
     fn put_value(&self, r: &mut Packet, id: usize, v: f32) {
-        let t = param_entry(id).map_or(param_types::FLOAT, |(_, t, _)| t);
-        let _ = match t & param_types::TYPE {
-            param_types::U8 => r.extend(&[v as u8]),
-            _ => r.extend(&v.to_le_bytes()),
-        };
+        put_typed(r, param_entry(id).map_or(param_types::FLOAT, |(_, t, _)| t), v);
     }
 
     fn on_param_misc<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Result<Result<(), CrtpError>, S::Error> {
@@ -1935,6 +1931,15 @@ fn log_name(v: &LogVar) -> Name<'static> {
 /// A parameter value of param type `t` in `b`, as f32.
 fn same_type(a: u8, b: u8) -> bool {
     a & param_types::TYPE == b & param_types::TYPE
+}
+
+/// Appends `v` to `r` as parameter type `t` (its flags ignored): a byte
+/// for `uint8_t`, four little-endian bytes for `float`.
+pub(crate) fn put_typed(r: &mut Packet, t: u8, v: f32) {
+    let _ = match t & param_types::TYPE {
+        param_types::U8 => r.extend(&[v as u8]),
+        _ => r.extend(&v.to_le_bytes()),
+    };
 }
 
 /// `[f32]` from the start of `b` as parameter type `t`.

@@ -115,10 +115,6 @@ pub trait Persist {
     fn set_signing(&mut self, key: &[u8; 32], timestamp: u64) -> Result<(), StoreError>;
 }
 
-/// The largest parameter index a store keeps (the signing key's and the
-/// store's own keys are above).
-pub const MAX_PARAMS: u16 = SIGNING_KEY;
-
 /// The persistent settings, in `range` of the flash `F`.
 pub struct Store<F: NorFlash> {
     map: MapStorage<u16, F, Cache<Uncached, Uncached, Uncached, u16>>,
