@@ -16,7 +16,7 @@
 //! QGroundControl on port 14550.
 
 use anyhow::{bail, Context, Result};
-use fc_core::control::Setpoint;
+use fc_core::control::{Setpoint, StateEstimate};
 use fc_mavlink::params::Settings;
 use fc_mavlink::signing::Signing;
 use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer};
@@ -26,6 +26,9 @@ use serde::Serialize;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
+
+/// `ODOMETRY`'s message id: the simulator's true state (`--state truth`).
+const ODOMETRY_ID: u32 = 331;
 
 /// This flight controller's MAVLink system and component ids.
 pub const SYSTEM_ID: u8 = 1;
@@ -128,6 +131,10 @@ pub struct HilConfig {
     /// parameters set and the signing key are read at boot and written
     /// when they change; the key's timestamp at the end.
     pub storage: Option<std::path::PathBuf>,
+    /// Fly the simulator's true state (its `ODOMETRY`, [`truth_from_odometry`])
+    /// in place of the estimate: the controller alone, as a peer given
+    /// perfect state flies. In process only.
+    pub truth_state: bool,
 }
 
 /// What `--storage` did.
@@ -189,6 +196,11 @@ pub struct HilResult {
     pub signing_accepted: u32,
     /// `SETUP_SIGNING` requests refused (armed, or not signed with the key).
     pub signing_setups_refused: u32,
+    /// What the controllers flew: `estimate` (the estimator's, from the
+    /// simulated sensors) or `truth` (the simulator's `ODOMETRY`).
+    pub state: String,
+    /// The simulator's true states flown (`--state truth`).
+    pub truth_states: u64,
     /// The vehicle's `STATUSTEXT`s, in order.
     pub status_texts: Vec<String>,
     /// The settings store (`--storage`), if any.
@@ -268,6 +280,10 @@ trait Vehicle {
     fn keep_signing(&mut self, _signing: &Signing) -> Result<(), fc_storage::StoreError> {
         Ok(())
     }
+    /// Flies `truth` in place of its estimate (see [`HilConfig::truth_state`]).
+    fn fly_truth(&mut self, _truth: StateEstimate<f32>) -> Result<()> {
+        bail!("only the flight controller in this process can fly the true state")
+    }
     /// Ends it; the image's log.
     fn finish(self: Box<Self>) -> Result<Vec<String>>;
 }
@@ -340,9 +356,47 @@ impl Vehicle for InProcess {
             _ => Ok(()),
         }
     }
+    fn fly_truth(&mut self, truth: StateEstimate<f32>) -> Result<()> {
+        self.v.fly_truth(truth);
+        Ok(())
+    }
     fn finish(self: Box<Self>) -> Result<Vec<String>> {
         Ok(Vec::new())
     }
+}
+
+/// The simulator's true state from its `ODOMETRY` (id 331; `frame`: the
+/// whole MAVLink 2 frame): position in `MAV_FRAME_LOCAL_NED` about home,
+/// m; attitude body FRD → NED; velocity and rates in `MAV_FRAME_BODY_FRD`,
+/// m/s and rad/s (the velocity turned to NED here). `Err` names a frame
+/// of reference it does not take, or a value that is not finite.
+pub fn truth_from_odometry(frame: &[u8]) -> Result<StateEstimate<f32>> {
+    use mavlink::MessageData;
+    let len = usize::from(*frame.get(1).context("an ODOMETRY frame shorter than its header")?);
+    let payload = frame
+        .get(10..10 + len)
+        .context("an ODOMETRY frame shorter than its length")?;
+    let m = common::ODOMETRY_DATA::deser(mavlink::MavlinkVersion::V2, payload)
+        .map_err(|e| anyhow::anyhow!("ODOMETRY unreadable: {e:?}"))?;
+    if m.frame_id != common::MavFrame::MAV_FRAME_LOCAL_NED || m.child_frame_id != common::MavFrame::MAV_FRAME_BODY_FRD {
+        bail!(
+            "ODOMETRY in {:?} / {:?}: the true state is taken in MAV_FRAME_LOCAL_NED / MAV_FRAME_BODY_FRD",
+            m.frame_id,
+            m.child_frame_id
+        );
+    }
+    let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(m.q[0], m.q[1], m.q[2], m.q[3]));
+    let all = [m.x, m.y, m.z, m.vx, m.vy, m.vz, m.rollspeed, m.pitchspeed, m.yawspeed];
+    if !all.iter().chain(m.q.iter()).all(|v| v.is_finite()) {
+        bail!("ODOMETRY with a value that is not finite");
+    }
+    let vel_ned = q * Vector3::new(m.vx, m.vy, m.vz);
+    Ok(StateEstimate {
+        pos_ned_m: Vector3::new(m.x, m.y, m.z),
+        vel_ned_mps: vel_ned,
+        att: nalgebra::Vector4::new(q.w, q.i, q.j, q.k),
+        rates_frd_radps: Vector3::new(m.rollspeed, m.pitchspeed, m.yawspeed),
+    })
 }
 
 /// The `firmware-mavlink` image in QEMU.
@@ -571,7 +625,10 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     cfg.settings
         .check()
         .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?;
-    let mut res = HilResult::default();
+    let mut res = HilResult {
+        state: if cfg.truth_state { "truth" } else { "estimate" }.into(),
+        ..HilResult::default()
+    };
     let gcs = match cfg.gcs {
         Some(addr) => {
             let sock = UdpSocket::bind("0.0.0.0:0").context("opening the ground station's UDP socket")?;
@@ -751,8 +808,14 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             }
         };
         for &b in &buf[..n] {
-            let Some(Ok((_, msg))) = sim_reader.push(b) else {
-                continue;
+            let msg = match sim_reader.push(b) {
+                Some(Ok((_, msg))) => msg,
+                Some(Err(fc_mavlink::MavError::Unused(ODOMETRY_ID))) if cfg.truth_state => {
+                    v.fly_truth(truth_from_odometry(sim_reader.frame())?)?;
+                    res.truth_states += 1;
+                    continue;
+                }
+                _ => continue,
             };
             if let MavMessage::HIL_STATE_QUATERNION(m) = &msg {
                 if fc_mavlink::hil::on_earth(m) {
@@ -917,4 +980,66 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     res.tracking_rmse_m = (sq_n > 0).then(|| (sq_sum / sq_n as f64).sqrt());
     res.final_error_m = reference.map(|s| (truth - s.pos_ned_m.cast::<f64>()).norm());
     Ok(res)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavlink::MAVLinkV2MessageRaw;
+
+    /// An `ODOMETRY` frame as a simulator writes it (the `mavlink` crate's
+    /// encoder), in `frame_id`.
+    fn odometry(frame_id: common::MavFrame, x: f32) -> Vec<u8> {
+        let (c, s) = (core::f32::consts::FRAC_PI_4.cos(), core::f32::consts::FRAC_PI_4.sin());
+        let m = common::ODOMETRY_DATA {
+            time_usec: 1_000_000,
+            x,
+            y: -2.0,
+            z: -1.0,
+            // Heading 90° (east), level: body FRD → NED.
+            q: [c, 0.0, 0.0, s],
+            vx: 1.0,
+            vy: 0.0,
+            vz: 0.0,
+            rollspeed: 0.1,
+            pitchspeed: -0.2,
+            yawspeed: 0.3,
+            pose_covariance: [f32::NAN; 21],
+            velocity_covariance: [f32::NAN; 21],
+            frame_id,
+            child_frame_id: common::MavFrame::MAV_FRAME_BODY_FRD,
+        };
+        let mut raw = MAVLinkV2MessageRaw::new();
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: 0,
+        };
+        raw.serialize_message_data(header, &m);
+        raw.raw_bytes().to_vec()
+    }
+
+    #[test]
+    fn odometry_is_the_true_state_in_ned() {
+        let t = truth_from_odometry(&odometry(common::MavFrame::MAV_FRAME_LOCAL_NED, 1.5)).unwrap();
+        assert_eq!(t.pos_ned_m, Vector3::new(1.5, -2.0, -1.0));
+        // Forward in the body, facing east: east in NED.
+        assert!(
+            (t.vel_ned_mps - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-6,
+            "{:?}",
+            t.vel_ned_mps
+        );
+        assert!((t.euler()[2] - core::f32::consts::FRAC_PI_2).abs() < 1e-6);
+        assert_eq!(t.rates_frd_radps, Vector3::new(0.1, -0.2, 0.3));
+    }
+
+    #[test]
+    fn odometry_in_another_frame_or_not_finite_is_refused_by_name() {
+        let enu = truth_from_odometry(&odometry(common::MavFrame::MAV_FRAME_LOCAL_ENU, 1.5)).unwrap_err();
+        assert!(enu.to_string().contains("MAV_FRAME_LOCAL_NED"), "{enu}");
+        let nan = truth_from_odometry(&odometry(common::MavFrame::MAV_FRAME_LOCAL_NED, f32::NAN)).unwrap_err();
+        assert!(nan.to_string().contains("not finite"), "{nan}");
+        let frame = odometry(common::MavFrame::MAV_FRAME_LOCAL_NED, 1.5);
+        assert!(truth_from_odometry(&frame[..20]).is_err());
+    }
 }

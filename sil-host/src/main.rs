@@ -224,6 +224,12 @@ struct Px4HilArgs {
     /// ended.
     #[arg(long, value_name = "FILE")]
     storage: Option<PathBuf>,
+    /// What the controllers fly: `estimate` (the estimator's, from the simulated sensors: the
+    /// whole flight controller) or `truth` (the simulator's true state, from its ODOMETRY
+    /// messages, once the estimator has aligned: the controller alone, as a peer given perfect
+    /// state flies; in process only, a measurement, not a flight mode).
+    #[arg(long, default_value = "estimate", value_name = "SOURCE")]
+    state: String,
 }
 
 #[derive(Args, Debug)]
@@ -1264,6 +1270,14 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
         duration_s: a.duration,
         ulog: a.ulog.clone(),
         storage: a.storage.clone(),
+        truth_state: match (a.state.as_str(), a.target.as_str()) {
+            ("estimate", _) => false,
+            ("truth", "in-process") => true,
+            ("truth", _) => {
+                bail!("--state truth flies the flight controller in this process only (the image flies its estimate)")
+            }
+            (other, _) => bail!("unknown --state '{other}': use estimate or truth"),
+        },
         target: match a.target.as_str() {
             "in-process" => sil_host::hil::Target::InProcess,
             "qemu" => sil_host::hil::Target::Qemu(sil_host::link::firmware_mavlink_elf()?),

@@ -120,6 +120,7 @@ fn inputs_that_cannot_be_flown_are_refused_by_name_before_flying() {
     let huge_inertia = vehicle("huge.toml", "inertia_kgm2 = [1e300, 0.0075, 0.013]\n");
     let tiny_inertia = vehicle("tiny.toml", "inertia_kgm2 = [1e-300, 0.0075, 0.013]\n");
     let bad_radius = vehicle("radius.toml", "kind = \"circle\"\nradius_m = -1\n");
+    let cf_vehicle = concat!(env!("CARGO_MANIFEST_DIR"), "/../vehicles/crazyflie-rotorpy.toml");
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
             vec!["fly", "--controller", "lqr", "--duration", "1e300"],
@@ -203,6 +204,32 @@ fn inputs_that_cannot_be_flown_are_refused_by_name_before_flying() {
         (
             vec!["fly", "--controller", "lqr", "--scenario-file", &bad_radius],
             "radius_m",
+        ),
+        (
+            vec![
+                "px4-hil",
+                "--vehicle",
+                cf_vehicle,
+                "--waypoint",
+                "0,0,0,-1",
+                "--state",
+                "estimated",
+            ],
+            "unknown --state 'estimated'",
+        ),
+        (
+            vec![
+                "px4-hil",
+                "--vehicle",
+                cf_vehicle,
+                "--waypoint",
+                "0,0,0,-1",
+                "--state",
+                "truth",
+                "--target",
+                "qemu",
+            ],
+            "--state truth flies the flight controller in this process only",
         ),
     ];
     for (args, names) in cases {

@@ -792,6 +792,13 @@ impl Loop {
         &self.nav
     }
 
+    /// The estimator of sensor flights, to give it a simulator's true
+    /// state ([`Navigator::set_truth`]; host builds with `truth-state`).
+    #[cfg(feature = "truth-state")]
+    pub fn navigator_mut(&mut self) -> &mut Navigator {
+        &mut self.nav
+    }
+
     /// The inputs to apply now `[U1 N, U2 N, U3 N, U4 N·m]`.
     pub fn output(&self) -> Input<f32> {
         self.u

@@ -159,6 +159,10 @@ pub struct Navigator {
     /// Where and when the failsafe began: position (NED, m), heading, µs.
     failsafe_from: Option<(Vector3<f32>, f32, u64)>,
     entries: u32,
+    /// A state given from outside, flown in place of the estimate
+    /// ([`Navigator::set_truth`]; host builds with `truth-state` only).
+    #[cfg(feature = "truth-state")]
+    truth: Option<StateEstimate<f32>>,
 }
 
 impl Navigator {
@@ -190,6 +194,8 @@ impl Navigator {
             over_since_us: None,
             failsafe_from: None,
             entries: 0,
+            #[cfg(feature = "truth-state")]
+            truth: None,
         }
     }
 
@@ -202,6 +208,10 @@ impl Navigator {
         self.pending.clear();
         self.over_since_us = None;
         self.failsafe_from = None;
+        #[cfg(feature = "truth-state")]
+        {
+            self.truth = None;
+        }
     }
 
     /// One IMU sample taken at `now_us` (µs, increasing) and the fixes that
@@ -276,7 +286,24 @@ impl Navigator {
 
     /// The estimate the controllers fly on (`None` while aligning).
     pub fn estimate(&self) -> Option<StateEstimate<f32>> {
-        self.eskf.estimate().ok()
+        let est = self.eskf.estimate().ok();
+        #[cfg(feature = "truth-state")]
+        if est.is_some() && self.truth.is_some() {
+            return self.truth;
+        }
+        est
+    }
+
+    /// Flies `truth` (a simulator's true state, NED about the origin)
+    /// instead of the estimate from now on, once the estimator has aligned
+    /// (the same start as a flight on the estimate): the controller alone,
+    /// as a peer given perfect state is measured. The estimator keeps
+    /// running, and its alignment and failsafe still decide the mode.
+    /// `None` goes back to the estimate. Host builds only (`truth-state`):
+    /// no image has it.
+    #[cfg(feature = "truth-state")]
+    pub fn set_truth(&mut self, truth: Option<StateEstimate<f32>>) {
+        self.truth = truth;
     }
 
     /// The setpoint to fly at `now_us`: the mission's `sp`, or in the
@@ -412,5 +439,54 @@ mod tests {
         }
         assert_eq!(nav.fixes_dropped(), 2 * 40 - 40 - (PENDING_PARTS as u32 - 1));
         assert_eq!(nav.step(40_000, &rest, &[]), Err(EstimatorError::Step));
+    }
+
+    #[cfg(feature = "truth-state")]
+    #[test]
+    fn a_true_state_given_is_flown_once_aligned_and_forgotten_on_reset() {
+        let mut nav = Navigator::bmi088();
+        let rest = ImuSample {
+            gyro_frd_radps: Vector3::zeros(),
+            accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
+        };
+        let fix = Fix {
+            pos_ned_m: Some(Vector3::new(0.0, 0.0, -1.0)),
+            pos_sigma_m: Vector3::repeat(0.01),
+            yaw_rad: Some(0.0),
+            yaw_sigma_rad: 0.01,
+            ..Fix::EMPTY
+        };
+        // Somewhere else entirely, so that it cannot be the estimate.
+        let truth = StateEstimate {
+            pos_ned_m: Vector3::new(3.0, -2.0, -5.0),
+            vel_ned_mps: Vector3::new(0.5, 0.0, 0.0),
+            att: nalgebra::Vector4::new(1.0, 0.0, 0.0, 0.0),
+            rates_frd_radps: Vector3::new(0.0, 0.0, 0.1),
+        };
+        nav.set_truth(Some(truth));
+        // Aligning: nothing to fly, the truth included (the same start as a
+        // flight on the estimate).
+        nav.step(1_000, &rest, &[fix]).unwrap();
+        assert_eq!(nav.mode(), NavMode::Aligning);
+        assert_eq!(nav.estimate(), None);
+        let mut t = 1_000;
+        while nav.mode() == NavMode::Aligning && t < 5_000_000 {
+            t += 1_000;
+            let fixes = if t % 10_000 == 0 { &[fix][..] } else { &[][..] };
+            nav.step(t, &rest, fixes).unwrap();
+        }
+        assert_eq!(nav.mode(), NavMode::Navigating, "aligned at rest within 5 s");
+        assert_eq!(nav.estimate(), Some(truth));
+        // Back to the estimate: the estimator's own, at the fixes' position.
+        nav.set_truth(None);
+        let est = nav.estimate().unwrap();
+        assert!(
+            (est.pos_ned_m - Vector3::new(0.0, 0.0, -1.0)).norm() < 0.05,
+            "{:?}",
+            est.pos_ned_m
+        );
+        nav.set_truth(Some(truth));
+        nav.reset();
+        assert_eq!(nav.truth, None);
     }
 }

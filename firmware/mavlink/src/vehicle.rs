@@ -359,6 +359,16 @@ impl MavVehicle {
         self.counters
     }
 
+    /// Flies `truth` (the simulator's true state, NED about home: the
+    /// origin of `HIL_STATE_QUATERNION`'s first fix) in place of the
+    /// estimate, from the estimator's alignment on: the controller alone,
+    /// for measuring it against a peer given perfect state. Host builds
+    /// only (`truth-state`); the images fly their estimate.
+    #[cfg(feature = "truth-state")]
+    pub fn fly_truth(&mut self, truth: fc_core::control::StateEstimate<f32>) {
+        self.core.navigator_mut().set_truth(Some(truth));
+    }
+
     /// The motor commands of the last step (zero while disarmed).
     pub fn motors(&self) -> [f32; 4] {
         self.motors
