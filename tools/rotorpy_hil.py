@@ -90,6 +90,14 @@ class Lockstep(PX4Multirotor):
     with the motors off: a flight controller in an emulator is slower)."""
 
     commanded = np.zeros(4)
+    # --state truth: rotorpy's true state as an ODOMETRY before each step's
+    # HIL messages, which the flight controller flies instead of its estimate.
+    send_truth = False
+
+    def _send_hil_state_quaternion(self, state, statedot):
+        if self.send_truth:
+            self.conn.mav.odometry_send(*odometry(state, self.t))
+        super()._send_hil_state_quaternion(state, statedot)
 
     def _fetch_latest_px4_control(self, blocking=True):
         msg = self.conn.recv_match(type="HIL_ACTUATOR_CONTROLS", blocking=True, timeout=30.0)
@@ -131,6 +139,25 @@ class Peer:
         control = self.controller.update(t, state, flat)
         self.commanded = np.asarray(control["cmd_motor_speeds"], dtype=float) / self.rotor_speed_max
         return self.vehicle.step(state, control, dt)
+
+
+def odometry(state, t):
+    """rotorpy's true state (ENU world, FLU body, its quaternion x, y, z, w)
+    as MAVLink ODOMETRY's arguments: position in MAV_FRAME_LOCAL_NED about
+    the start (rotorpy's origin, where PX4Multirotor starts: home), the
+    attitude body FRD -> NED (w, x, y, z), velocity and rates in
+    MAV_FRAME_BODY_FRD; covariances unknown (NaN)."""
+    from scipy.spatial.transform import Rotation
+    ned_of_enu = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    flu_of_frd = np.diag([1.0, -1.0, -1.0])
+    r = ned_of_enu @ Rotation.from_quat(state["q"]).as_matrix() @ flu_of_frd  # FRD -> NED
+    x, y, z, w = Rotation.from_matrix(r).as_quat()
+    pos = ned_of_enu @ np.asarray(state["x"], dtype=float)
+    vel = r.T @ (ned_of_enu @ np.asarray(state["v"], dtype=float))
+    rates = flu_of_frd @ np.asarray(state["w"], dtype=float)
+    nan = [float("nan")] * 21
+    return (int(round(t * 1e6)), 1, 12, *map(float, pos), [float(w), float(x), float(y), float(z)],
+            *map(float, vel), *map(float, rates), nan, nan, 0, 0, 100)
 
 
 def PX4Multirotor_initial(quad_params):
@@ -182,6 +209,9 @@ def main():
     ap.add_argument("--beat", metavar="JSON",
                     help="another flight's summary (--json): this flight's RMSE over the steady window "
                          "must not exceed that flight's")
+    ap.add_argument("--state", choices=("estimate", "truth"), default="estimate",
+                    help="what our controller flies: its estimator's state (the whole flight controller) "
+                         "or rotorpy's true state, sent as ODOMETRY (the controller alone, as SE3 flies)")
     ap.add_argument("--csv", help="the flight controller's trace")
     ap.add_argument("--ulog", help="the flight as a ULog (sil-host px4-hil --ulog)")
     ap.add_argument("--json", help="write the summary here too")
@@ -260,6 +290,8 @@ def main():
         cmd += ["--ulog", a.ulog]
     if a.storage:
         cmd += ["--storage", a.storage]
+    if a.state == "truth":
+        cmd += ["--state", "truth"]
     np.random.seed(a.seed)
     waypoints = [tuple(float(v) for v in w.split(",")) for w in a.waypoint or []]
     reference = None
@@ -274,6 +306,7 @@ def main():
         fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
         fc_watch = EndsWithFlight(fc, "sil-host px4-hil", others=[gcs])
         vehicle = Lockstep(params_for(a.vehicle, a.layout), mavlink_url=f"tcpin:localhost:{a.port}")
+        vehicle.send_truth = a.state == "truth"
     state = dict(vehicle.initial_state)
     wind = None
     if a.wind:
