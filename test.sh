@@ -262,24 +262,29 @@ hil_start --vehicle hummingbird --scenario circle --duration 25 --measure lqr_hu
     --json target/rotorpy-hil-hummingbird-circle.json
 # The peer: rotorpy's own SE3 geometric controller (Lee/Mellinger), from its
 # true state, on the same vehicles, references, windows and figures
-# (docs/book/src/peers.md); and the rest of ours on the circle and the
-# figure-8 (a 1 m lemniscate, 6 s lap, counted from the end of its first lap).
+# (docs/book/src/peers.md); and the rest of ours on the Crazyflie's circle
+# and figure-8 (a 1 m lemniscate, 6 s lap, counted from the end of its first
+# lap). The whole table (the Hummingbird's too, and ours on the true state)
+# is `python3 tools/peer_table.py fly docs/peers`, about 20 minutes.
+hil_start --vehicle crazyflie --controller se3 $(step) --max-hold-error 0.02 \
+    --measure se3_crazyflie_step --json target/rotorpy-hil-crazyflie-se3-step.json
 for vehicle in crazyflie hummingbird; do
-    hil_start --vehicle "$vehicle" --controller se3 $(step) --max-hold-error 0.02 \
-        --measure "se3_${vehicle}_step" --json "target/rotorpy-hil-$vehicle-se3-step.json"
     for ref in circle eight; do
+        [ "$vehicle/$ref" != hummingbird/eight ] || continue
         hil_start --vehicle "$vehicle" --controller se3 --scenario "$ref" --duration "$(ref_s "$ref")" \
             --measure "se3_${vehicle}_$ref" --json "target/rotorpy-hil-$vehicle-se3-$ref.json"
     done
-    hil_start --vehicle "$vehicle" --controller pd --scenario circle --duration 25 \
-        --measure "pd_${vehicle}_circle" --json "target/rotorpy-hil-$vehicle-pd-circle.json"
-    for controller in pd lqr; do
-        hil_start --vehicle "$vehicle" --controller "$controller" --scenario eight --duration 23 \
-            --measure "${controller}_${vehicle}_eight" --json "target/rotorpy-hil-$vehicle-$controller-eight.json"
-    done
+done
+hil_start --vehicle crazyflie --controller pd --scenario circle --duration 25 \
+    --measure pd_crazyflie_circle --json target/rotorpy-hil-crazyflie-pd-circle.json
+for controller in pd lqr; do
+    hil_start --vehicle crazyflie --controller "$controller" --scenario eight --duration 23 \
+        --measure "${controller}_crazyflie_eight" --json "target/rotorpy-hil-crazyflie-$controller-eight.json"
 done
 # The fast MPC's circles held to the LQR's RMSE on the same vehicle, and its
-# circle and figure-8 in their steady part to SE3's (those flights done first).
+# circle and figure-8 in their steady part to SE3's (those flights done
+# first), through its own estimator and on rotorpy's true state (the
+# controller alone, as SE3 flies: --state truth).
 hil_wait
 hil_start --vehicle crazyflie --controller mpc --scenario circle --duration 25 --measure mpc_crazyflie_circle \
     --max-rmse "$(lqr_rmse target/rotorpy-hil-circle.json)" --beat target/rotorpy-hil-crazyflie-se3-circle.json \
@@ -288,10 +293,13 @@ hil_start --vehicle hummingbird --controller mpc --scenario circle --duration 25
     --max-rmse "$(lqr_rmse target/rotorpy-hil-hummingbird-circle.json)" \
     --beat target/rotorpy-hil-hummingbird-se3-circle.json \
     --json target/rotorpy-hil-hummingbird-mpc-circle.json
-for vehicle in crazyflie hummingbird; do
-    hil_start --vehicle "$vehicle" --controller mpc --scenario eight --duration 23 \
-        --measure "mpc_${vehicle}_eight" --beat "target/rotorpy-hil-$vehicle-se3-eight.json" \
-        --json "target/rotorpy-hil-$vehicle-mpc-eight.json"
+hil_start --vehicle crazyflie --controller mpc --scenario eight --duration 23 \
+    --measure mpc_crazyflie_eight --beat target/rotorpy-hil-crazyflie-se3-eight.json \
+    --json target/rotorpy-hil-crazyflie-mpc-eight.json
+for ref in circle eight; do
+    hil_start --vehicle crazyflie --controller mpc --state truth --scenario "$ref" --duration "$(ref_s "$ref")" \
+        --measure "mpc_truth_crazyflie_$ref" --beat "target/rotorpy-hil-crazyflie-se3-$ref.json" \
+        --json "target/rotorpy-hil-crazyflie-mpc-truth-$ref.json"
 done
 fi
 hil_wait
