@@ -409,6 +409,39 @@ fn read_on(out: &Path) -> String {
     s
 }
 
+/// The peer table (`docs/peers/index.md`: ours and rotorpy's SE3 on
+/// rotorpy's vehicles, from rotorpy's truth), copied in as it was flown by
+/// `tools/peer_table.py fly`: rotorpy is Python, so this command does not
+/// fly it; the table says when and with which packages it was.
+fn peers_markdown() -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/peers/index.md");
+    let mut s = String::from("\n## Against the controllers users fly (rotorpy)\n\n");
+    match std::fs::read_to_string(&path) {
+        Ok(text) => {
+            let flown = text.lines().find(|l| l.contains(" flown on ")).unwrap_or("");
+            let _ = writeln!(
+                s,
+                "Our controllers, through their own estimator and on rotorpy's true state, beside rotorpy's \
+                 SE3 geometric controller (true state), on rotorpy's Crazyflie and Hummingbird; every figure is \
+                 rotorpy's true state against the reference. Not flown by this command: copied from \
+                 `docs/peers/index.md`, which `python3 tools/peer_table.py fly docs/peers` writes{}.\n",
+                flown
+                    .split(" flown on ")
+                    .nth(1)
+                    .map(|f| format!(" (flown on {}", f.trim_end_matches('.')) + ")")
+                    .unwrap_or_default()
+            );
+            let tables = text.find("\n**").map_or("", |i| &text[i + 1..]);
+            s.push_str(tables);
+        }
+        Err(_) => s.push_str(
+            "Not flown yet: `python3 tools/peer_table.py fly docs/peers` flies it (rotorpy, Python) and writes \
+             `docs/peers/index.md`, which this report then copies.\n",
+        ),
+    }
+    s
+}
+
 /// Flies the study and writes the report.
 pub fn write_report(o: &ReportOptions) -> Result<Written> {
     let t0 = Instant::now();
@@ -562,6 +595,7 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
             let _ = writeln!(md, "{why}.");
         }
     }
+    md.push_str(&peers_markdown());
     md.push('\n');
     md.push_str(study::EXPLANATIONS);
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
