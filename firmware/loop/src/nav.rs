@@ -418,20 +418,30 @@ mod tests {
         assert_eq!(parts_of(&baro), [Some(baro), None, None]);
     }
 
-    #[test]
-    fn a_flood_of_fixes_is_bounded_dropped_and_counted() {
-        let mut nav = Navigator::bmi088();
-        let rest = ImuSample {
+    /// An IMU sample of a vehicle at rest, level (body FRD: gravity read as -g on z).
+    fn at_rest() -> ImuSample {
+        ImuSample {
             gyro_frd_radps: Vector3::zeros(),
             accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
-        };
-        let fix = Fix {
+        }
+    }
+
+    /// A fix of position and velocity, 1 m above the origin, at rest.
+    fn flood_fix() -> Fix {
+        Fix {
             pos_ned_m: Some(Vector3::new(0.0, 0.0, -1.0)),
             pos_sigma_m: Vector3::repeat(0.01),
             vel_ned_mps: Some(Vector3::zeros()),
             vel_sigma_mps: 0.05,
             ..Fix::EMPTY
-        };
+        }
+    }
+
+    #[test]
+    fn a_flood_of_fixes_is_bounded_dropped_and_counted() {
+        let mut nav = Navigator::bmi088();
+        let rest = at_rest();
+        let fix = flood_fix();
         // Two parts a step arrive and one is fused: the queue fills, then
         // drops (it is full before the step's part leaves it).
         for k in 1..=40u64 {
@@ -445,16 +455,13 @@ mod tests {
     #[test]
     fn a_true_state_given_is_flown_once_aligned_and_forgotten_on_reset() {
         let mut nav = Navigator::bmi088();
-        let rest = ImuSample {
-            gyro_frd_radps: Vector3::zeros(),
-            accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
-        };
+        let rest = at_rest();
+        // A mocap's position and heading.
         let fix = Fix {
-            pos_ned_m: Some(Vector3::new(0.0, 0.0, -1.0)),
-            pos_sigma_m: Vector3::repeat(0.01),
             yaw_rad: Some(0.0),
             yaw_sigma_rad: 0.01,
-            ..Fix::EMPTY
+            vel_ned_mps: None,
+            ..flood_fix()
         };
         // Somewhere else entirely, so that it cannot be the estimate.
         let truth = StateEstimate {
