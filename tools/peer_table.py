@@ -97,7 +97,8 @@ def book():
 
 def fly_one(job):
     sil_host, out_dir, n, (c, state, v, r) = job
-    path = os.path.join(out_dir, "flights", f"{measure_name(c, state, v, r)}.json")
+    name = measure_name(c, state, v, r)
+    path = os.path.join(out_dir, "flights", f"{name}.json")
     cmd = [sys.executable, os.path.join(HERE, "rotorpy_hil.py"), "--sil-host", sil_host, "--controller", c,
            "--vehicle", v, "--port", str(4800 + n), "--gcs-port", str(14800 + n), "--truth-port", str(15800 + n),
            "--json", path] + FLIGHTS[r]
@@ -105,12 +106,12 @@ def fly_one(job):
         cmd += ["--state", state]
     p = subprocess.run(cmd, capture_output=True, text=True)
     check = [ln for ln in p.stdout.splitlines() if ln.startswith("rotorpy check:")]
-    print(f"{measure_name(c, state, v, r)}: {check[-1] if check else 'no check line'}", file=sys.stderr)
+    print(f"{name}: {check[-1] if check else 'no check line'}", file=sys.stderr)
     if p.returncode != 0 or not os.path.exists(path):
         sys.stderr.write(p.stderr[-2000:])
-        raise SystemExit(f"the flight {measure_name(c, state, v, r)} failed")
+        raise SystemExit(f"the flight {name} failed")
     with open(path) as f:
-        return measure_name(c, state, v, r), json.load(f)
+        return name, json.load(f)
 
 
 def fmt(x, unit_s=False):

@@ -47,6 +47,7 @@ from rotorpy.vehicles.multirotor import Multirotor  # noqa: E402
 from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
 from reference import EIGHT_PERIOD_S, Reference, window_figures  # noqa: E402
 from rotorpy.wind.default_winds import ConstantWind  # noqa: E402
+from scipy.spatial.transform import Rotation  # noqa: E402
 
 
 # Motor layouts as each vendor numbers its motors: (forward, right) hub position
@@ -141,23 +142,27 @@ class Peer:
         return self.vehicle.step(state, control, dt)
 
 
+# The frames odometry() turns rotorpy's state between, made once (it runs
+# at every step).
+NED_OF_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+FLU_OF_FRD = np.diag([1.0, -1.0, -1.0])
+UNKNOWN_COVARIANCE = [float("nan")] * 21
+
+
 def odometry(state, t):
     """rotorpy's true state (ENU world, FLU body, its quaternion x, y, z, w)
     as MAVLink ODOMETRY's arguments: position in MAV_FRAME_LOCAL_NED about
     the start (rotorpy's origin, where PX4Multirotor starts: home), the
     attitude body FRD -> NED (w, x, y, z), velocity and rates in
     MAV_FRAME_BODY_FRD; covariances unknown (NaN)."""
-    from scipy.spatial.transform import Rotation
-    ned_of_enu = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    flu_of_frd = np.diag([1.0, -1.0, -1.0])
+    ned_of_enu, flu_of_frd = NED_OF_ENU, FLU_OF_FRD
     r = ned_of_enu @ Rotation.from_quat(state["q"]).as_matrix() @ flu_of_frd  # FRD -> NED
     x, y, z, w = Rotation.from_matrix(r).as_quat()
     pos = ned_of_enu @ np.asarray(state["x"], dtype=float)
     vel = r.T @ (ned_of_enu @ np.asarray(state["v"], dtype=float))
     rates = flu_of_frd @ np.asarray(state["w"], dtype=float)
-    nan = [float("nan")] * 21
     return (int(round(t * 1e6)), 1, 12, *map(float, pos), [float(w), float(x), float(y), float(z)],
-            *map(float, vel), *map(float, rates), nan, nan, 0, 0, 100)
+            *map(float, vel), *map(float, rates), UNKNOWN_COVARIANCE, UNKNOWN_COVARIANCE, 0, 0, 100)
 
 
 def PX4Multirotor_initial(quad_params):
