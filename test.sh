@@ -82,8 +82,9 @@ fi
 python3 -m pip check
 python3 -c 'import sys; assert sys.prefix.endswith(".venv"), sys.prefix'
 
-stage "format"
+stage "format, and the Python tools' lint (ruff, pinned; tools/ruff.toml)"
 cargo fmt --all -- --check
+ruff check tools
 stage "clippy (host, all targets)"
 cargo clippy --workspace --all-targets -- -D warnings
 if full; then

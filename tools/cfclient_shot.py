@@ -31,24 +31,15 @@ import sys
 import tempfile
 import time
 
+from fctools.checks import Checks
+
 PORT = 19850
 URI = f'udp://127.0.0.1:{PORT}'
 DISPLAY = ':97'
 SIZE = (1280, 860)
 CONNECT_XY = ('305', '47')
 
-passed = 0
-failed = 0
-
-
-def check(ok, what):
-    global passed, failed
-    if ok:
-        passed += 1
-        print(f'  ok   {what}')
-    else:
-        failed += 1
-        print(f'  FAIL {what}')
+check = Checks('cfclient')
 
 
 def wait_for(pred, secs, step=0.2):
@@ -110,7 +101,7 @@ def main():
         procs.append(cfc)
 
         def window():
-            r = subprocess.run(['xdotool', 'search', '--onlyvisible', '--name', '.'], env=env,
+            r = subprocess.run(['xdotool', 'search', '--onlyvisible', '--name', '.'], check=False, env=env,
                                capture_output=True, text=True)
             ids = r.stdout.split()
             return ids[0] if ids else None
@@ -124,7 +115,7 @@ def main():
         # Ctrl+I shortcut does not fire).
         subprocess.run(['xdotool', 'mousemove', '--window', window(), *CONNECT_XY, 'click', '1'], env=env,
                        check=True)
-        text = lambda: log.read_text(errors='replace')  # noqa: E731
+        text = lambda: log.read_text(errors='replace')
         connected = wait_for(lambda: f'Connection completed [{URI}]' in text(), 30)
         check(connected, f'cfclient connected to {URI} (its "Connection completed")')
         blocks = wait_for(lambda: text().count('Have successfully started logging') >= 3, 10)
@@ -147,8 +138,8 @@ def main():
             except subprocess.TimeoutExpired:
                 p.kill()
         shutil.rmtree(home, ignore_errors=True)
-    print(f'cfclient check: {passed} passed, {failed} failed')
-    sys.exit(1 if failed else 0)
+    print(check.summary())
+    sys.exit(check.exit_code())
 
 
 if __name__ == '__main__':

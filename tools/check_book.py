@@ -10,6 +10,7 @@ study/ is the generated report, whose own links tools/check_report.py
 checks; the book's links *into* it are checked here. A line per page; the
 whole is one check, ending with `book check: 1 passed, 0 failed` (or 0, 1).
 """
+import functools
 import sys
 from html.parser import HTMLParser
 from pathlib import Path
@@ -29,12 +30,12 @@ class Page(HTMLParser):
                 self.links.append(v)
 
 
-def parse(path, cache={}):
-    if path not in cache:
-        p = Page()
-        p.feed(path.read_text(errors="replace"))
-        cache[path] = p
-    return cache[path]
+@functools.cache
+def parse(path):
+    """The links of the page at `path` (each page read once)."""
+    p = Page()
+    p.feed(path.read_text(errors="replace"))
+    return p
 
 
 def main():
@@ -52,7 +53,7 @@ def main():
         bad = []
         for link in parse(page).links:
             u = urlsplit(link)
-            if u.scheme or link.startswith("//") or link.startswith("mailto:"):
+            if u.scheme or link.startswith(("//", "mailto:")):
                 continue
             target = page if not u.path else (page.parent / unquote(u.path)).resolve()
             if u.path.endswith("/") or target.is_dir():

@@ -25,9 +25,9 @@ import numpy as np
 from scipy.linalg import expm
 
 # The OS4 (docs/book/src/model.md §2); a vehicle file overrides these.
-OS4 = dict(mass_kg=0.65, gravity_mps2=9.81, inertia_kgm2=[7.5e-3, 7.5e-3, 1.3e-2], arm_m=0.23,
-           kf_ns2=3.13e-5, km_nms2=7.5e-7, kt_nspm=[0.1, 0.1, 0.15], kr_nms=[0.1, 0.1, 0.15],
-           omega_max_radps=600.0)
+OS4 = {"mass_kg": 0.65, "gravity_mps2": 9.81, "inertia_kgm2": [7.5e-3, 7.5e-3, 1.3e-2], "arm_m": 0.23,
+           "kf_ns2": 3.13e-5, "km_nms2": 7.5e-7, "kt_nspm": [0.1, 0.1, 0.15], "kr_nms": [0.1, 0.1, 0.15],
+           "omega_max_radps": 600.0}
 M, G = 0.65, 9.81
 IX, IY, IZ = 7.5e-3, 7.5e-3, 1.3e-2
 L, KF, KM = 0.23, 3.13e-5, 7.5e-7

@@ -9,17 +9,10 @@ import re
 import sys
 from pathlib import Path
 
+from fctools.checks import Checks
+
 d = Path(sys.argv[1])
-passed = failed = 0
-
-
-def check(ok, what):
-    global passed, failed
-    if ok:
-        passed += 1
-    else:
-        failed += 1
-        print(f"FAIL: {what}")
+check = Checks("report", quiet=True)
 
 
 md_path, html_path = d / "index.md", d / "index.html"
@@ -43,6 +36,6 @@ for section in ["## Headline", "## Figures", "Table 4.", "## Prediction horizon"
 book = [l for l in links if "docs/book/src/" in l and l.endswith(".md")]
 check(len(book) >= 5 and "## Read on" in md, f"index.md links into the book's chapters (found {len(book)})")
 check(html.count("<svg") >= 14 and "<img" not in html, "index.html inlines its figures")
-print(f"{passed} of {passed + failed} parts of the report hold")
-print(f"report check: {int(not failed)} passed, {int(bool(failed))} failed")
-sys.exit(1 if failed else 0)
+print(f"{check.passed} of {len(check.results)} parts of the report hold")
+print(f"report check: {int(not check.failed)} passed, {int(bool(check.failed))} failed")
+sys.exit(check.exit_code())

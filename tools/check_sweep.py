@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 
+from fctools.checks import Checks
 from measure import record
 
 FLOWN = ("PD", "LQR", "MPC fast")
@@ -27,13 +28,9 @@ def main():
     ap.add_argument("--samples", type=int, default=400)
     ap.add_argument("--min-success", type=float, default=99.0, help="%")
     a = ap.parse_args()
-    d = json.load(open(a.sweep_json))
-    passed = failed = 0
-
-    def check(ok, what):
-        nonlocal passed, failed
-        passed, failed = passed + ok, failed + (not ok)
-        print(("  ok   " if ok else "FAIL ") + what)
+    with open(a.sweep_json) as f:
+        d = json.load(f)
+    check = Checks("sweep")
 
     check(d["options"]["samples"] == a.samples, f"{d['options']['samples']} vehicles drawn (asked {a.samples})")
     rows = {r["controller"]: r for r in d["controllers"]}
@@ -59,8 +56,8 @@ def main():
         record("sweep_mpc_fast_success_pct_min", min(r["success_pct"] for r in fast), "%", "check_sweep.py")
         record("sweep_mpc_fast_rmse_max_m", max(r["rmse_percentiles_m"][3] for r in fast), "m", "check_sweep.py")
     record("sweep_samples", d["options"]["samples"], "vehicles", "check_sweep.py")
-    print(f"sweep check: {passed} passed, {failed} failed")
-    sys.exit(1 if failed else 0)
+    print(check.summary())
+    sys.exit(check.exit_code())
 
 
 if __name__ == "__main__":

@@ -26,17 +26,9 @@ import tempfile
 import numpy as np
 from pyulog import ULog
 
-passed = failed = 0
+from fctools.checks import Checks
 
-
-def check(ok, what):
-    global passed, failed
-    if ok:
-        passed += 1
-        print(f"  ok   {what}")
-    else:
-        failed += 1
-        print(f"  FAIL {what}")
+check = Checks("ulog")
 
 
 def topic(log, name):
@@ -58,13 +50,14 @@ def check_fly(sil):
             f.write("mass_kg = 0.7\n")
         subprocess.run([sil, "fly", "--controller", "lqr", "--scenario", "helix", "--duration", "20",
                         "--vehicle", veh, "--ulog", ulg, "--json", js], check=True, stdout=subprocess.DEVNULL)
-        res = json.load(open(js))
+        with open(js) as f:
+            res = json.load(f)
         log = ULog(ulg)
     print(f"fly: {ulg}: {len(log.data_list)} topics, {sum(len(d.data['timestamp']) for d in log.data_list)} samples")
     gt = topic(log, "vehicle_local_position_groundtruth")
     sp = topic(log, "vehicle_local_position_setpoint")
     check(np.array_equal(gt["timestamp"], sp["timestamp"]), "truth and set-point share their 10 ms rows")
-    rows = int(round(res["duration_s"] / 0.01)) + 1
+    rows = round(res["duration_s"] / 0.01) + 1
     check(len(gt["timestamp"]) == rows, f"{len(gt['timestamp'])} rows for {res['duration_s']} s (10 ms)")
     for ax in "xyz":
         rmse = math.sqrt(float(np.mean((gt[ax].astype(float) - sp[ax].astype(float)) ** 2)))
@@ -92,7 +85,8 @@ def check_fly(sil):
 
 
 def check_hil(ulg, js):
-    res = json.load(open(js))
+    with open(js) as f:
+        res = json.load(f)
     log = ULog(ulg)
     print(f"hil: {ulg}: {len(log.data_list)} topics, {sum(len(d.data['timestamp']) for d in log.data_list)} samples")
     gt = topic(log, "vehicle_local_position_groundtruth")
@@ -133,8 +127,8 @@ def main():
         check_hil(sys.argv[2], sys.argv[3])
     else:
         raise SystemExit(__doc__)
-    print(f"ulog check: {passed} passed, {failed} failed")
-    sys.exit(1 if failed else 0)
+    print(check.summary())
+    sys.exit(check.exit_code())
 
 
 if __name__ == "__main__":

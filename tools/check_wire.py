@@ -11,16 +11,9 @@ import subprocess
 import sys
 import time
 
-passed = failed = 0
+from fctools.checks import Checks
 
-
-def check(ok, what):
-    global passed, failed
-    if ok:
-        passed += 1
-    else:
-        failed += 1
-        print(f"FAIL: {what}")
+check = Checks("wire", quiet=True)
 
 
 def crc32c(data):
@@ -200,13 +193,13 @@ def main():
         check(c.recv() == ("Heartbeat", 77), "heartbeat echoed")
         check(c.bad_crc == 0 and c.frames > 3000, f"{c.frames} answers, {c.bad_crc} with a bad CRC")
         c.s.close()
-    except Exception as e:  # a protocol error is a failed check, not a crash
+    except Exception as e:  # noqa: BLE001 -- a protocol error is a failed check, not a crash
         check(False, f"client error: {e!r}")
     finally:
         srv.kill()
         srv.wait()
-    print(f"wire check: {passed} passed, {failed} failed")
-    sys.exit(1 if failed else 0)
+    print(check.summary())
+    sys.exit(check.exit_code())
 
 
 main()

@@ -29,7 +29,7 @@ from pathlib import Path
 from measure import budgets
 
 ROOT = Path(__file__).resolve().parent.parent
-MARK = re.compile(r"<!--m:([a-z0-9_]+)-->(.*?)<!--/m-->", re.S)
+MARK = re.compile(r"<!--m:([a-z0-9_]+)-->(.*?)<!--/m-->", re.DOTALL)
 NUMBER = re.compile(r"-?[0-9][0-9  ,]*(?:\.[0-9]+)?(?:[eE]-?[0-9]+)?")
 
 # (pattern on the key, relative tolerance, absolute tolerance, why).
@@ -92,7 +92,8 @@ def fmt(value, like):
 
 def load(path):
     """The measurements at `path`, with the budgets they are held to."""
-    d = json.load(open(path))
+    with open(path) as f:
+        d = json.load(f)
     out = {k: v["value"] for k, v in d["measurements"].items()}
     out.update(budgets())
     return out

@@ -37,13 +37,12 @@ Prints `crtp check: N passed, M failed` (`crtp-qemu check: ...` with --qemu,
 Usage: crtp_cflib.py SIL_HOST [--qemu | --qemu-crazyflie] [sil-host crtp options]
 """
 import importlib.metadata
-import json
+import itertools
 import math
 import os
 import pathlib
 import re
 import signal
-import socket
 import subprocess
 import sys
 import tarfile
@@ -57,6 +56,8 @@ from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crazyflie.syncLogger import SyncLogger
 
 from children import EndsWithFlight
+from fctools.checks import Checks
+from fctools.truth import Truth
 from measure import budgets, record
 
 PORT = 19850
@@ -72,64 +73,11 @@ CONTROLLER = [a for a in sys.argv[2:] if a not in ('--qemu', '--qemu-crazyflie')
 SYSLINK = '127.0.0.1:19880'
 BRIDGE = pathlib.Path(__file__).resolve().parent / 'nrf51_bridge.py'
 
-passed = 0
-failed = 0
+LABEL = '-qemu-crazyflie' if CRAZYFLIE else '-qemu' if QEMU else ''
+check = Checks(f'crtp{LABEL}')
 # Each QEMU session's (worst data-ready -> answer instructions, late steps,
 # steps passed during a design).
 TIMINGS = []
-
-
-def check(ok, what):
-    global passed, failed
-    if ok:
-        passed += 1
-        print(f'  ok   {what}')
-    else:
-        failed += 1
-        print(f'  FAIL {what}')
-
-
-class Truth(threading.Thread):
-    """The plant's true pose, from sil-host's --truth-to stream."""
-
-    def __init__(self):
-        super().__init__(daemon=True)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(('127.0.0.1', TRUTH_PORT))
-        self.sock.settimeout(0.5)
-        self.last = None
-        self.stop = False
-        self.walls = []  # (plant s, wall s) of each sleep()
-
-    def run(self):
-        while not self.stop:
-            try:
-                self.last = json.loads(self.sock.recv(1024))
-            except socket.timeout:
-                pass
-
-    def pos(self):
-        t = self.last
-        return (t['x'], t['y'], t['z'])
-
-    def t(self):
-        return self.last['t'] if self.last else 0.0
-
-    def sleep(self, secs, every=None):
-        """Waits `secs` of the plant's time (the truth stream's `t`), calling
-        `every()` each 20 ms of it meanwhile (a set-point stream at 50 Hz). In
-        the SIL the plant keeps wall time; in QEMU it runs slower (the emulated
-        image), and a flight's phases are timed on the vehicle's clock, as
-        cflib's durations are."""
-        t0 = self.t()
-        w0 = time.time()
-        called = None
-        while self.t() < t0 + secs and time.time() < w0 + 50 * secs:
-            if every and (called is None or self.t() >= called + 0.02):
-                called = self.t()
-                every()
-            time.sleep(0.002)
-        self.walls.append((self.t() - t0, time.time() - w0))
 
 
 class Sil:
@@ -137,7 +85,7 @@ class Sil:
 
     def __init__(self, sil_host, *extra, truth=None):
         if truth:
-            truth.last = None  # the previous session's clock is not this one's
+            truth.reset()  # the previous session's clock is not this one's
         image = 'qemu-crazyflie' if CRAZYFLIE else 'qemu'
         target = ['--target', image, '--syslink', SYSLINK] if QEMU else []
         self.sil = subprocess.Popen([sil_host, 'crtp', *CONTROLLER, *target, '--listen', f'127.0.0.1:{PORT}',
@@ -251,13 +199,13 @@ def report(sil, failed_before):
         check(len(sets) >= 3 and len(hover) >= 1 and all(max(c) <= 255 for c in sets),
               f'the Crazyflie image drove TIM2/TIM4: {len(sets)} compare sets logged armed, '
               f'{len(hover)} at hover (e.g. {hover[:1]})')
-    if failed > failed_before:
+    if check.failed > failed_before:
         print(f'sil-host said:\n{out[-4000:]}\nthe bridge said: {bridge.strip()}')
     return out
 
 
 def near(truth, goal, what):
-    p = truth.pos()
+    p = truth.pos
     err = math.dist(p, goal)
     check(err <= TOL_M, f'{what}: truth ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) is {100 * err:.1f} cm '
           f'from ({goal[0]}, {goal[1]}, {goal[2]}) (bound {100 * TOL_M:.0f} cm)')
@@ -294,7 +242,7 @@ def estimator_settled(scf):
 
 def session_high_level(sil_host, truth):
     print('session 1: the SIL\'s motion capture, the high-level commander')
-    failed_before = failed
+    failed_before = check.failed
     sil = Sil(sil_host, truth=truth)
     try:
         scf = connect()
@@ -338,7 +286,7 @@ def session_high_level(sil_host, truth):
             for ts, data, _ in log:
                 stamps.append(ts)
                 est = (data['stateEstimate.x'], data['stateEstimate.y'], data['stateEstimate.z'])
-                errs.append(math.dist(est, truth.pos()))
+                errs.append(math.dist(est, truth.pos))
                 if len(stamps) == 100:
                     break
         # cflib starts a new block twice (after its creation, then start()); the
@@ -346,7 +294,7 @@ def session_high_level(sil_host, truth):
         # block is sampled and stamped when the link's task (lowest priority)
         # sends it: on the image a step late at times (11 ms, then 9: the block
         # stays on its 10 ms grid), as the Crazyflie's log task stamps when it runs.
-        gaps = sorted(b - a for a, b in zip(stamps, stamps[1:]))
+        gaps = sorted(b - a for a, b in itertools.pairwise(stamps))
         check(gaps[1] >= 9 and gaps[-1] <= 11 and gaps[len(gaps) // 2] == 10,
               f'SyncLogger at 100 Hz: 100 samples, timestamps 10 ms apart (gaps {gaps[0]}–{gaps[-1]} ms, '
               f'one re-phase allowed, a step of jitter)')
@@ -356,7 +304,7 @@ def session_high_level(sil_host, truth):
         time.sleep(0.3)
         check('Is armed' in cf.supervisor.read_state_list(), 'armed (supervisor state bits)')
         hl = cf.high_level_commander
-        start = truth.pos()
+        start = truth.pos
         hl.takeoff(0.5, 2.0)
         truth.sleep(3.0)
         near(truth, (start[0], start[1], 0.5), 'takeoff(0.5, 2) after 3 s')
@@ -396,7 +344,7 @@ def session_high_level(sil_host, truth):
 
 def session_extpos(sil_host, truth):
     print('session 2: send_extpos as the only position source, send_position_setpoint')
-    failed_before = failed
+    failed_before = check.failed
     sil = Sil(sil_host, '--position-source', 'external', truth=truth)
     try:
         scf = connect()
@@ -425,7 +373,7 @@ def session_extpos(sil_host, truth):
         time.sleep(0.3)
         check('Is armed' in cf.supervisor.read_state_list(), 'armed on extpos')
         for goal, secs in (((0.0, 0.0, 0.5), 3.0), ((0.5, -0.3, 0.7), 4.0)):
-            truth.sleep(secs, every=lambda: cf.commander.send_position_setpoint(*goal, 0.0))
+            truth.sleep(secs, every=lambda goal=goal: cf.commander.send_position_setpoint(*goal, 0.0))
             near(truth, goal, f'send_position_setpoint{goal} for {secs:.0f} s')
         cf.commander.send_notify_setpoint_stop()
         cf.high_level_commander.land(0.0, 2.0)
@@ -441,7 +389,7 @@ def session_extpos(sil_host, truth):
 
 def session_dead_imu(sil_host, truth):
     print(f'session 3: the IMU answers NaN for {1000 * DEAD_S:.0f} ms in a hover (sil-host --imu-dead)')
-    failed_before = failed
+    failed_before = check.failed
     sil = Sil(sil_host, '--imu-dead', f'{DEAD_AT_S},{DEAD_S}', truth=truth)
     said = []
     try:
@@ -453,16 +401,16 @@ def session_dead_imu(sil_host, truth):
         time.sleep(0.3)
         cf.high_level_commander.takeoff(1.0, 2.0)
         truth.sleep(3.0)
-        hover = truth.pos()
-        check(truth.t() < DEAD_AT_S - 0.5 and abs(hover[2] - 1.0) < 0.1,
-              f'hovering at {hover[2]:.2f} m before the IMU dies at {DEAD_AT_S} s (plant time {truth.t():.1f} s)')
-        truth.sleep(DEAD_AT_S + 0.5 - truth.t())
+        hover = truth.pos
+        check(truth.t < DEAD_AT_S - 0.5 and abs(hover[2] - 1.0) < 0.1,
+              f'hovering at {hover[2]:.2f} m before the IMU dies at {DEAD_AT_S} s (plant time {truth.t:.1f} s)')
+        truth.sleep(DEAD_AT_S + 0.5 - truth.t)
         text = ''.join(said)
         check('IMU silent for more than 10 ms: failsafe descent' in text,
               'the console said: IMU silent for more than 10 ms: failsafe descent')
         # Straight down at 0.3 m/s from 1 m, then motors off.
         truth.sleep(5.0)
-        p = truth.pos()
+        p = truth.pos
         drift = math.dist(p[:2], hover[:2])
         check(p[2] < TOL_M and not truth.last['flying'] and drift < 0.1,
               f'descended and landed where it hovered: z {p[2]:.3f} m, {100 * drift:.1f} cm from the hover '
@@ -504,7 +452,7 @@ def session_examples(sil_host):
                            ('parameters/basicparam.py', 'Parameters downloaded')):
         sil = Sil(sil_host)
         try:
-            r = subprocess.run([sys.executable, str(examples / script)], env=env, capture_output=True,
+            r = subprocess.run([sys.executable, str(examples / script)], check=False, env=env, capture_output=True,
                                text=True, timeout=60, cwd=examples / script.split('/')[0])
             lines = r.stdout.count('\n')
             check(r.returncode == 0 and expect in r.stdout,
@@ -532,7 +480,7 @@ def session_persistent(sil_host):
         return
     store = pathlib.Path('target/cflib-persistent.bin').resolve()
     store.unlink(missing_ok=True)
-    failed_before = failed
+    failed_before = check.failed
     sil = Sil(sil_host, '--storage', str(store))
     try:
         cf = connect().cf
@@ -580,26 +528,25 @@ def session_persistent(sil_host):
 def main():
     sil_host = sys.argv[1]
     cflib.crtp.init_drivers()
-    truth = Truth()
-    truth.start()
+    truth = Truth(TRUTH_PORT)
+    truth.follow()
     session_high_level(sil_host, truth)
     session_extpos(sil_host, truth)
     session_dead_imu(sil_host, truth)
     session_examples(sil_host)
     session_persistent(sil_host)
-    truth.stop = True
+    truth.close()
     plant = sum(p for p, _ in truth.walls)
     wall = sum(w for _, w in truth.walls)
     print(f'the plant flew {plant:.1f} s in {wall:.1f} s of wall time (real-time factor {plant / max(wall, 1e-9):.2f})')
-    label = '-qemu-crazyflie' if CRAZYFLIE else '-qemu' if QEMU else ''
     if TIMINGS:
         image = 'crazyflie' if CRAZYFLIE else 'crtp'
         source = f'tools/crtp_cflib.py --qemu{"-crazyflie" if CRAZYFLIE else ""}'
         record(f'{image}_qemu_answer_worst_icount', max(a for a, _, _ in TIMINGS), 'instructions', source)
         record(f'{image}_qemu_late_steps', sum(n for _, n, _ in TIMINGS), 'steps', source)
         record(f'{image}_qemu_design_passed_steps', sum(p for _, _, p in TIMINGS), 'steps', source)
-    print(f'crtp{label} check: {passed} passed, {failed} failed')
-    sys.exit(1 if failed else 0)
+    print(check.summary())
+    sys.exit(check.exit_code())
 
 
 if __name__ == '__main__':

@@ -39,7 +39,9 @@ import sys
 import time
 
 os.environ["MAVLINK20"] = "1"
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
+
+from fctools.checks import Checks
 
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_DO_SET_MODE = 176
@@ -52,10 +54,10 @@ REAL32 = 9
 
 
 class Gcs:
-    def __init__(self, url, timeout):
+    def __init__(self, url, timeout, name="gcs"):
+        self.check = Checks(name, flush=True)
         self.m = mavutil.mavlink_connection(url, source_system=254, source_component=190)
         self.timeout = timeout
-        self.results = []
         self.texts = []
         self.seen = {}
         self.boot_ms = 0
@@ -64,18 +66,11 @@ class Gcs:
         self.beating = True
         self.last_beat = 0.0
 
-    def summary(self, prefix):
-        """Prints `PREFIX P passed, F failed` (and what failed); the exit
-        status: 1 if anything failed or nothing was checked."""
-        failed = [w for ok, w in self.results if not ok]
-        passed = len(self.results) - len(failed)
-        print(f"{prefix} {passed} passed, {len(failed)} failed" + (f" ({'; '.join(failed)})" if failed else ""))
-        return 1 if failed or not self.results else 0
-
-    def check(self, ok, what):
-        self.results.append((bool(ok), what))
-        print(("ok   " if ok else "FAIL ") + what, flush=True)
-        return ok
+    def summary(self):
+        """Prints `NAME check: P passed, F failed` (and what failed); the
+        exit status: 1 if anything failed or nothing was checked."""
+        print(self.check.summary(say_failures=True), flush=True)
+        return self.check.exit_code()
 
     def recv(self, types, timeout=None):
         """The next message of one of `types`, keeping note of everything else."""
@@ -261,7 +256,7 @@ def main():
     a = ap.parse_args()
     g = Gcs(a.url, a.timeout)
     g.run(a.step, a.tolerance)
-    return g.summary("gcs check:")
+    return g.summary()
 
 
 if __name__ == "__main__":

@@ -43,9 +43,9 @@ import sys
 import time
 
 os.environ["MAVLINK20"] = "1"
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-from mav_gcs import Gcs  # noqa: E402
+from mav_gcs import Gcs
 
 ARM_DISARM = 400
 DO_SET_MODE = 176
@@ -286,14 +286,14 @@ def main():
     ap.add_argument("--keep", metavar="FILE", help="then set a key and a parameter to keep; note them in FILE")
     ap.add_argument("--after-restart", metavar="FILE", help="only check what --keep left in FILE")
     a = ap.parse_args()
-    s = Session(a.url, a.timeout)
+    s = Session(a.url, a.timeout, name="signing")
     if a.after_restart:
         s.after_restart(a.after_restart)
     else:
         s.run()
         if a.keep:
             s.keep(a.keep)
-    return s.summary("signing check:")
+    return s.summary()
 
 
 if __name__ == "__main__":

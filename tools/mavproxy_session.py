@@ -42,14 +42,15 @@ import tempfile
 import threading
 import time
 
-from hil_truth import Truth
+from fctools.checks import Checks
+from fctools.truth import Truth
 
 
 class Session:
     def __init__(self, url, truth, timeout):
         self.truth = truth
         self.timeout = timeout
-        self.results = []
+        self.check = Checks("mavproxy", flush=True)
         self.lines = queue.Queue()
         self.seen = []
         self.dir = tempfile.mkdtemp(prefix="mavproxy-")
@@ -67,11 +68,6 @@ class Session:
     def _read(self):
         for line in self.p.stdout:
             self.lines.put(line.rstrip("\n"))
-
-    def check(self, ok, what):
-        self.results.append((bool(ok), what))
-        print(("ok   " if ok else "FAIL ") + what, flush=True)
-        return ok
 
     def send(self, cmd):
         print(f"> {cmd}", flush=True)
@@ -98,7 +94,7 @@ class Session:
         since = None
         while time.time() < end:
             self.truth.poll()
-            p = self.truth.ned
+            p = self.truth.pos
             while not self.lines.empty():
                 self._take(self.lines.get())
             if p is not None and math.dist(p, ned) <= tol:
@@ -176,7 +172,7 @@ class Session:
         self.check(self.expect(lambda l: "Mode RTL" in l) is not None, "mode RTL")
         line = self.expect(lambda l: "DISARMED" in l, timeout=3 * self.timeout)
         self.truth.poll()
-        p = self.truth.ned
+        p = self.truth.pos
         d = math.dist(p, [0.0, 0.0, 0.0]) if p is not None else math.inf
         self.check(line is not None and d <= 0.2, f"landed and DISARMED {d:.3f} m from home (20 cm)")
         # The vehicle has no fence; MAVProxy's fence module reads a clear
@@ -198,10 +194,8 @@ def main():
         if s.p.poll() is None:
             s.p.kill()
         shutil.rmtree(s.dir, ignore_errors=True)
-    failed = [w for ok, w in s.results if not ok]
-    tail = f" ({'; '.join(failed)})" if failed else ""
-    print(f"mavproxy check: {len(s.results) - len(failed)} passed, {len(failed)} failed{tail}", flush=True)
-    return 0 if not failed and s.results else 1
+    print(s.check.summary(say_failures=True), flush=True)
+    return s.check.exit_code()
 
 
 if __name__ == "__main__":

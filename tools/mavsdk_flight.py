@@ -35,30 +35,26 @@ import math
 import sys
 import time
 
-from mavsdk.asyncio import Configuration, ComponentType, Mavsdk
+from mavsdk import Autopilot
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.manual_control import ManualControlAsync
 from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-from mavsdk.plugins.mavlink_direct import MavlinkMessage
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
-from mavsdk.asyncio.plugins.telemetry import TelemetryAsync, FlightMode, LandedState
-from mavsdk import Autopilot
+from mavsdk.asyncio.plugins.telemetry import FlightMode, LandedState, TelemetryAsync
+from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
-from hil_truth import Truth
+from fctools.checks import Checks
+from fctools.truth import Truth
 
 
 class Flight:
     def __init__(self, truth, timeout):
         self.truth = truth
         self.timeout = timeout
-        self.results = []
-
-    def check(self, ok, what):
-        self.results.append((bool(ok), what))
-        print(("ok   " if ok else "FAIL ") + what, flush=True)
-        return ok
+        self.check = Checks("mavsdk", flush=True)
 
     async def until(self, cond, what, timeout=None):
         """Waits (wall time) until `cond()` holds; checks it."""
@@ -86,7 +82,7 @@ class Flight:
 
         ok = await self.until(near, what)
         if not ok:
-            print(f"     rotorpy at {self.truth.ned}, {self.truth.dist(ned):.3f} m from {ned}", flush=True)
+            print(f"     rotorpy at {self.truth.pos}, {self.truth.dist(ned):.3f} m from {ned}", flush=True)
         return ok
 
     async def pace(self, system, param):
@@ -155,7 +151,7 @@ class Flight:
                 bat = await asyncio.wait_for(tel.battery(), 3.0)
                 none = math.isnan(bat.voltage_v) or abs(bat.voltage_v - 65.535) < 1e-3
                 said = f"{bat.voltage_v:.3f} V, {bat.remaining_percent} %"
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 none, said = True, "nothing in 3 s"
             self.check(none, f"no battery reported: MAVLink's 'not sent' ({said})")
             mode = await tel.flight_mode()
@@ -197,18 +193,18 @@ class Flight:
             await manual.start_position_control()
             await self.until(lambda: mode_is(FlightMode.POSCTL), "joystick: Position mode")
             self.truth.poll()
-            start = list(self.truth.ned)
+            start = list(self.truth.pos)
             yaw = math.radians((await tel.attitude_euler()).yaw_deg)
             ahead = (math.cos(yaw), math.sin(yaw))  # forward, NED
             stick[0] = 0.6  # forward: (0.6 - 0.05) / 0.95 of MPC_VEL_MANUAL, 0.58 m/s
             low = [start[2]]
 
             def along():
-                d = (self.truth.ned[0] - start[0], self.truth.ned[1] - start[1])
+                d = (self.truth.pos[0] - start[0], self.truth.pos[1] - start[1])
                 return d[0] * ahead[0] + d[1] * ahead[1], d[1] * ahead[0] - d[0] * ahead[1]
 
             async def moved():
-                low.append(self.truth.ned[2])
+                low.append(self.truth.pos[2])
                 return along()[0] >= 0.8
 
             await self.until(moved, f"joystick forward: rotorpy 0.8 m along its heading ({math.degrees(yaw):.0f} deg)")
@@ -284,13 +280,10 @@ def main():
     f = Flight(Truth(a.truth_port), a.timeout)
     try:
         asyncio.run(f.run(a.url))
-    except Exception as e:  # a MAVSDK error is a failed check, with its reason
+    except Exception as e:  # noqa: BLE001 -- a MAVSDK error is a failed check, with its reason
         f.check(False, f"MAVSDK raised {type(e).__name__}: {e}")
-    failed = [w for ok, w in f.results if not ok]
-    passed = len(f.results) - len(failed)
-    tail = f" ({'; '.join(failed)})" if failed else ""
-    print(f"mavsdk check: {passed} passed, {len(failed)} failed{tail}", flush=True)
-    return 0 if not failed and f.results else 1
+    print(f.check.summary(say_failures=True), flush=True)
+    return f.check.exit_code()
 
 
 if __name__ == "__main__":

@@ -125,7 +125,7 @@ def main():
 
     dec = Decoder()
     client = None
-    stats = dict(uplink=0, polls=0, downlink=0, ready=0, battery=0, other=0)
+    stats = {'uplink': 0, 'polls': 0, 'downlink': 0, 'ready': 0, 'battery': 0, 'other': 0}
     last_up = last_batt = 0.0
     empty = 0  # polls in a row with no downlink after them
     answered = False  # a downlink packet since the last uplink

@@ -24,11 +24,10 @@ Usage: peer_daqp.py PATH_TO_SIL_HOST [--markdown FILE]
 Prints one line per QP and `daqp check: N passed, N failed`.
 """
 import argparse
+import importlib.metadata
 import json
 import subprocess
 import time
-
-import importlib.metadata
 
 import daqp
 import numpy as np
@@ -68,8 +67,8 @@ def main():
         d = json.loads(out.stdout)
         h, g = np.array(d["H"]), np.array(d["g"])
         lb, ub, z = np.array(d["lb"]), np.array(d["ub"]), np.array(d["solution"])
-        f = lambda v: 0.5 * v @ h @ v + g @ v
-        x, fval, exitflag, info, wall = daqp_solve(h, g, lb, ub)
+        f = lambda v, h=h, g=g: 0.5 * v @ h @ v + g @ v
+        x, _fval, exitflag, info, wall = daqp_solve(h, g, lb, ub)
         # DAQP's answer checked on its own: in the box, projected gradient ≈ 0.
         kkt = np.max(np.abs(x - np.clip(x - (h @ x + g), lb, ub)))
         rounding = 4 * np.finfo(np.float32).eps * max(abs(f(x)), 1.0)

@@ -104,7 +104,7 @@ def fly_one(job):
            "--json", path] + FLIGHTS[r]
     if c != "se3":
         cmd += ["--state", state]
-    p = subprocess.run(cmd, capture_output=True, text=True)
+    p = subprocess.run(cmd, check=False, capture_output=True, text=True)
     check = [ln for ln in p.stdout.splitlines() if ln.startswith("rotorpy check:")]
     print(f"{name}: {check[-1] if check else 'no check line'}", file=sys.stderr)
     if p.returncode != 0 or not os.path.exists(path):
@@ -149,8 +149,8 @@ def fly(a):
     pinned = ", ".join(f"{k} {v}" for k, v in versions.items() if v)
     text = ["# Against the controllers users fly: the whole table", "",
             "Written by `python3 tools/peer_table.py fly docs/peers` (every flight's figures in",
-            "[`peers.json`](peers.json), their summaries under `flights/`), flown on "
-            f"{datetime.date.today().isoformat()} with {pinned}.",
+            ("[`peers.json`](peers.json), their summaries under `flights/`), flown on "
+            f"{datetime.date.today().isoformat()} with {pinned}."),
             "Every figure is rotorpy's true state against the reference; how the flights",
             "compare and what the figures mean: the book's \"Against the controllers users",
             "fly\". `./test.sh` flies the Crazyflie's rows the book states and holds them.", ""]

@@ -25,30 +25,30 @@ an RMSE above --max-rmse.
 import argparse
 import importlib.metadata
 import json
-import re
-import platform
-import tempfile
 import os
+import platform
+import re
 import socket
 import subprocess
 import sys
+import tempfile
 
 # pymavlink speaks MAVLink 1 unless told otherwise before it is imported;
 # the flight controller reads MAVLink 2 only.
 os.environ["MAVLINK20"] = "1"
 
-import numpy as np  # noqa: E402
-from children import EndsWithFlight  # noqa: E402
-from measure import record  # noqa: E402
-from rotorpy.vehicles.crazyflie_params import quad_params as crazyflie_params  # noqa: E402
-from rotorpy.vehicles.hummingbird_params import quad_params as hummingbird_params  # noqa: E402
-from rotorpy.controllers.quadrotor_control import SE3Control  # noqa: E402
-from rotorpy.vehicles.multirotor import Multirotor  # noqa: E402
-from rotorpy.vehicles.px4_multirotor import PX4Multirotor  # noqa: E402
-from reference import EIGHT_PERIOD_S, Reference, window_figures  # noqa: E402
-from rotorpy.wind.default_winds import ConstantWind  # noqa: E402
-from scipy.spatial.transform import Rotation  # noqa: E402
+import numpy as np
+from rotorpy.controllers.quadrotor_control import SE3Control
+from rotorpy.vehicles.crazyflie_params import quad_params as crazyflie_params
+from rotorpy.vehicles.hummingbird_params import quad_params as hummingbird_params
+from rotorpy.vehicles.multirotor import Multirotor
+from rotorpy.vehicles.px4_multirotor import PX4Multirotor
+from rotorpy.wind.default_winds import ConstantWind
+from scipy.spatial.transform import Rotation
 
+from children import EndsWithFlight
+from measure import record
+from reference import EIGHT_PERIOD_S, Reference, window_figures
 
 # Motor layouts as each vendor numbers its motors: (forward, right) hub position
 # in units of the hub's x/y offset (the Crazyflie's 43 mm hubs at 45°: 30.4 mm),
@@ -134,7 +134,7 @@ class Peer:
 
     def step(self, state, t, dt):
         pos, vel, acc, jerk, snap = self.reference.at(t)
-        enu = lambda v: np.array([v[1], v[0], -v[2]])  # noqa: E731
+        enu = lambda v: np.array([v[1], v[0], -v[2]])
         flat = {"x": enu(pos), "x_dot": enu(vel), "x_ddot": enu(acc), "x_dddot": enu(jerk), "x_ddddot": enu(snap),
                 "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
         control = self.controller.update(t, state, flat)
@@ -161,7 +161,7 @@ def odometry(state, t):
     pos = ned_of_enu @ np.asarray(state["x"], dtype=float)
     vel = r.T @ (ned_of_enu @ np.asarray(state["v"], dtype=float))
     rates = flu_of_frd @ np.asarray(state["w"], dtype=float)
-    return (int(round(t * 1e6)), 1, 12, *map(float, pos), [float(w), float(x), float(y), float(z)],
+    return (round(t * 1e6), 1, 12, *map(float, pos), [float(w), float(x), float(y), float(z)],
             *map(float, vel), *map(float, rates), UNKNOWN_COVARIANCE, UNKNOWN_COVARIANCE, 0, 0, 100)
 
 
@@ -319,7 +319,7 @@ def main():
         wind = ConstantWind(we, wn, -wd)  # rotorpy's world frame is ENU
     zero = {"cmd_motor_speeds": np.zeros(4)}
     track, commands = [], []
-    steps = int(round(a.duration / a.dt))
+    steps = round(a.duration / a.dt)
     for k in range(steps):
         if wind is not None:
             state["wind"] = wind.update(k * a.dt, state["x"])
@@ -425,7 +425,7 @@ def main():
         err = float(dist[-1]) if len(dist) else float("inf")
         res["rotorpy"].update(
             window_s=[from_s, end_s], rmse_m=float(np.sqrt(np.mean(dist**2))) if len(dist) else None,
-            worst_m=float(dist.max()) if len(dist) else None, final_error_m=err, rows=int(len(dist)))
+            worst_m=float(dist.max()) if len(dist) else None, final_error_m=err, rows=len(dist))
     if reference is not None:
         q = params_for(a.vehicle, "rotorpy")
         res["rotorpy"]["windows"] = window_figures(reference, track, np.array(commands), hover_fraction(q), end_s)
