@@ -7,6 +7,7 @@ the firmware says of itself:
 1. `SyncCrazyflie('udp://...').open_link()` reaches fully connected (both
    TOCs and every parameter value downloaded);
 2. a parameter set and read back; a refused write reads back unchanged;
+   `ctl.ID` is a `uint8_t`: cflib refuses 5.05, the vehicle an unknown id;
 3. a `SyncLogger` of stateEstimate.x/y/z at 100 Hz: rate, timestamps, and the
    estimate within 3 cm of the truth;
 4. arm (supervisor); `takeoff(0.5, 2)`, `go_to(1, 0.5, 0.8, 0, 3)`,
@@ -260,6 +261,20 @@ def session_high_level(sil_host, truth):
         time.sleep(0.3)
         mass = float(cf.param.get_value('veh.MASS'))
         check(abs(mass - 0.03) < 1e-6, f'a refused write (veh.MASS = -1) reads back the value in force, {mass}')
+        # Integers are typed as such in the TOC: cflib reads ctl.ID as an
+        # integer and refuses a fraction itself; a controller id no
+        # controller has is refused by the vehicle, and reads back unchanged.
+        elem = cf.param.toc.get_element_by_complete_name('ctl.ID')
+        ctl = cf.param.get_value('ctl.ID')
+        try:
+            cf.param.set_value('ctl.ID', '5.05')
+            sent = True
+        except ValueError:
+            sent = False
+        cf.param.set_value('ctl.ID', 250)
+        time.sleep(0.3)
+        check(elem.ctype == 'uint8_t' and ctl.isdigit() and not sent and cf.param.get_value('ctl.ID') == ctl,
+              f'ctl.ID is a {elem.ctype} ({ctl}); cflib refuses 5.05, the vehicle refuses 250: reads back {ctl}')
         # cflib's persistent parameters: stored where the vehicle keeps them
         # (in QEMU a RAM stand-in, which its boot log names), then cleared;
         # in process without --storage there is nowhere to keep them (EIO).

@@ -915,3 +915,41 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
     assert_eq!(kept.ask(&mut v, misc(5)).payload(), &[5, id[0], id[1], 0]);
     assert_eq!(state(kept.ask(&mut v, misc(4))), not_stored);
 }
+
+/// The param TOC declares each parameter's true type: `ctl.ID` is a
+/// `uint8_t` and `fs.TIMEOUT_MS` a `uint16_t` (cflib then writes whole
+/// numbers, and refuses "5.05" itself), both read and written in their
+/// width; a controller id no controller has is refused, and the answer
+/// carries the value in force.
+#[test]
+fn integer_parameters_are_typed_as_integers_in_the_toc() {
+    use crate::vehicle::param_types;
+    let find = |g: &[u8], n: &[u8]| {
+        (0..PARAM_COUNT)
+            .find(|&i| param_entry(i).is_some_and(|(name, _, _)| name.is(g, n)))
+            .unwrap() as u16
+    };
+    let (ctl, fs, w_pos) = (find(b"ctl", b"ID"), find(b"fs", b"TIMEOUT_MS"), find(b"mpc", b"W_POS"));
+    let ty = |i: u16| param_entry(usize::from(i)).unwrap().1;
+    assert_eq!(ty(ctl), param_types::U8 | param_types::EXTENDED);
+    assert_eq!(ty(fs), param_types::U16 | param_types::EXTENDED);
+    assert_eq!(ty(w_pos), param_types::FLOAT | param_types::EXTENDED);
+
+    let mut v = at_rest(3000);
+    // Read: [id, status 0, value in its width].
+    let read = |v: &mut CrtpVehicle, i: u16| ask(v, pk(Port::Param, 1, &i.to_le_bytes())).payload().to_vec();
+    let c = ctl.to_le_bytes();
+    let before = read(&mut v, ctl);
+    assert_eq!(before.len(), 4, "{before:?}");
+    assert_eq!(before[2], 0);
+    let f = fs.to_le_bytes();
+    assert_eq!(read(&mut v, fs), [f[0], f[1], 0, 50, 0]);
+    // Written as a uint16_t, answered and read back as one.
+    let r = ask(&mut v, pk(Port::Param, 2, &[f[0], f[1], 200, 0]));
+    assert_eq!(r.payload(), &[f[0], f[1], 200, 0]);
+    assert_eq!(read(&mut v, fs), [f[0], f[1], 0, 200, 0]);
+    // No controller has id 250: refused, the answer is the value in force.
+    let r = ask(&mut v, pk(Port::Param, 2, &[c[0], c[1], 250]));
+    assert_eq!(r.payload(), &[c[0], c[1], before[3]]);
+    assert_eq!(read(&mut v, ctl), before);
+}

@@ -59,7 +59,7 @@ use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
 use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
-use fc_loop::params::{Refusal, Settings, PARAMS};
+use fc_loop::params::{ParamType, Refusal, Settings, PARAMS};
 use fc_loop::{run_job, FcConfig, Job, Loop, Mutex, Outbox, ParamPlan};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
@@ -151,6 +151,8 @@ vars! {
 pub mod param_types {
     /// `uint8_t`.
     pub const U8: u8 = 0x08;
+    /// `uint16_t`.
+    pub const U16: u8 = 0x09;
     /// `float`.
     pub const FLOAT: u8 = 0x06;
     /// Flag: read-only (`PARAM_RONLY`); cflib refuses to write it.
@@ -271,8 +273,9 @@ pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
                 name,
                 lower_group: true,
             },
-            // Every flight parameter persists, as the Crazyflie's tuning does.
-            param_types::FLOAT | param_types::EXTENDED,
+            // Its true type; every flight parameter persists, as the
+            // Crazyflie's tuning does.
+            toc_type(p.ty) | param_types::EXTENDED,
             None,
         ));
     }
@@ -286,6 +289,15 @@ pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
         t,
         Some(extra),
     ))
+}
+
+/// The param TOC's type byte of a parameter of type `ty`.
+const fn toc_type(ty: ParamType) -> u8 {
+    match ty {
+        ParamType::F32 => param_types::FLOAT,
+        ParamType::U8 => param_types::U8,
+        ParamType::U16 => param_types::U16,
+    }
 }
 
 /// How the vehicle flies now.
@@ -1934,10 +1946,11 @@ fn same_type(a: u8, b: u8) -> bool {
 }
 
 /// Appends `v` to `r` as parameter type `t` (its flags ignored): a byte
-/// for `uint8_t`, four little-endian bytes for `float`.
+/// for `uint8_t`, two little-endian bytes for `uint16_t`, four for `float`.
 pub(crate) fn put_typed(r: &mut Packet, t: u8, v: f32) {
     let _ = match t & param_types::TYPE {
         param_types::U8 => r.extend(&[v as u8]),
+        param_types::U16 => r.extend(&(v as u16).to_le_bytes()),
         _ => r.extend(&v.to_le_bytes()),
     };
 }
@@ -1946,6 +1959,7 @@ pub(crate) fn put_typed(r: &mut Packet, t: u8, v: f32) {
 fn read_value(t: u8, b: &[u8]) -> Option<f32> {
     match t & param_types::TYPE {
         param_types::U8 => b.first().map(|&v| f32::from(v)),
+        param_types::U16 => b.get(..2).map(|v| f32::from(u16::from_le_bytes([v[0], v[1]]))),
         param_types::FLOAT => f32_at(b, 0),
         _ => None,
     }

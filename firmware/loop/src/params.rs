@@ -4,8 +4,10 @@
 //! with its unit, how to read and write it in [`Settings`], and whether a
 //! change re-designs the controller (allowed only while disarmed).
 //!
-//! Every value is a `MAV_PARAM_TYPE_REAL32`; the integer-valued ones
-//! (choices, bit masks, milliseconds) must be whole numbers. A write is
+//! Each parameter has a true type ([`ParamType`]): a real, or a whole
+//! number (choices, bit masks, milliseconds) that CRTP's param TOC declares
+//! as `uint8_t` or `uint16_t`. MAVLink carries every value as a
+//! `MAV_PARAM_TYPE_REAL32`; there an integer's setter refuses a fraction. A write is
 //! applied to a copy of the settings and the copy is checked as a whole
 //! ([`Settings::check`]): the vehicle against its plausible ranges, the
 //! rotor layout for a mixer that can produce every wrench, the controller
@@ -318,6 +320,37 @@ pub struct Param {
     pub set: fn(&mut Settings, f32) -> Result<(), Refusal>,
     /// A change re-designs the controller (refused while armed).
     pub redesign: bool,
+    /// Its true type: what CRTP's param TOC declares, and what a write
+    /// must be (an integer's setter refuses a fraction).
+    pub ty: ParamType,
+}
+
+/// A parameter's true type.
+///
+/// CRTP's param TOC declares it, so cflib and cfclient write an integer
+/// parameter as one (cflib refuses "5.05" for a `uint8_t` before sending
+/// it). MAVLink carries every value as a `REAL32` (`AUTOPILOT_VERSION`
+/// says `PARAM_ENCODE_C_CAST`); an integer's setter refuses a fraction
+/// there ([`Refusal::NotInteger`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamType {
+    /// A real number (`float`).
+    F32,
+    /// A whole number from 0 to 255 (`uint8_t`).
+    U8,
+    /// A whole number from 0 to 65 535 (`uint16_t`).
+    U16,
+}
+
+impl ParamType {
+    /// The largest value the type holds (`f32::MAX` for a real).
+    pub const fn max(self) -> f32 {
+        match self {
+            ParamType::F32 => f32::MAX,
+            ParamType::U8 => 255.0,
+            ParamType::U16 => 65_535.0,
+        }
+    }
 }
 
 impl core::fmt::Debug for Param {
@@ -366,6 +399,7 @@ macro_rules! real {
                 Ok(())
             },
             redesign: $redesign,
+            ty: ParamType::F32,
         }
     };
 }
@@ -445,6 +479,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U8,
     },
     real!("MOT_HUB_M", "distance of each hub from the centre, m", false, hub_m),
     Param {
@@ -456,6 +491,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U8,
     },
     Param {
         id: "MOT_UNIT",
@@ -475,6 +511,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U8,
     },
     Param {
         id: "MOT_PWM_MIN",
@@ -488,6 +525,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U16,
     },
     Param {
         id: "MOT_PWM_MAX",
@@ -501,6 +539,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U16,
     },
     Param {
         id: "CTL_ID",
@@ -512,6 +551,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: true,
+        ty: ParamType::U8,
     },
     Param {
         id: "CTL_FF",
@@ -530,6 +570,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: true,
+        ty: ParamType::U8,
     },
     Param {
         id: "FS_TIMEOUT_MS",
@@ -540,6 +581,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U16,
     },
     real!(
         "FS_DESCENT",
@@ -556,6 +598,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U16,
     },
     Param {
         id: "HIL_FIX_MS",
@@ -566,6 +609,7 @@ pub const PARAMS: [Param; 52] = [
             Ok(())
         },
         redesign: false,
+        ty: ParamType::U16,
     },
     real!("PD_X_P", "PD north loop, (m/s^2)/m", true, tuning.pd_position[0].kp),
     real!("PD_X_D", "PD north loop, (m/s^2)/(m/s)", true, tuning.pd_position[0].kd),

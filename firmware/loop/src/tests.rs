@@ -785,3 +785,36 @@ fn every_motor_layout_is_a_mot_frame_value() {
     );
     assert_eq!(params::write(&s, i, 1.5).unwrap_err(), Refusal::NotInteger);
 }
+
+/// Each parameter's declared type is what its setter takes: an integer
+/// parameter (the ones CRTP's TOC declares `uint8_t`/`uint16_t`) holds a
+/// whole number its type can carry, refuses a fraction (`CTL_ID` = 5.05 is
+/// not taken as 5) and refuses one past its type's range; a real one
+/// takes a fraction.
+#[test]
+fn every_parameter_takes_what_its_type_says() {
+    use params::{ParamType, Refusal, Settings, PARAMS};
+    let s = Settings::os4();
+    let mut integers = 0;
+    for (i, p) in PARAMS.iter().enumerate() {
+        let v = (p.get)(&s);
+        match p.ty {
+            ParamType::F32 => {
+                let r = params::write(&s, i, v * 1.001 + 1e-4);
+                assert_ne!(r.err(), Some(Refusal::NotInteger), "{} is a real", p.id);
+            }
+            ty => {
+                integers += 1;
+                assert!(v.fract() == 0.0 && (0.0..=ty.max()).contains(&v), "{} = {v}", p.id);
+                // A fraction inside its range (above 0, below the value
+                // in force where it can be).
+                let frac = if v >= 1.0 { v - 0.05 } else { v + 0.05 };
+                assert_eq!(params::write(&s, i, frac).unwrap_err(), Refusal::NotInteger, "{}", p.id);
+                assert!(params::write(&s, i, ty.max() + 1.0).is_err(), "{} past {ty:?}", p.id);
+            }
+        }
+    }
+    assert_eq!(integers, 10);
+    let ctl = params::index_of(b"CTL_ID").unwrap();
+    assert_eq!(PARAMS[ctl].ty, ParamType::U8);
+}
