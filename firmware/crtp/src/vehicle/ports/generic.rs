@@ -1,0 +1,97 @@
+//! Ports generic set-points (7) and the legacy commander (3).
+
+use crate::vehicle::*;
+
+impl CrtpCore {
+    pub(in crate::vehicle) fn on_generic(&mut self, p: &Packet) -> Result<(), CrtpError> {
+        let d = p.payload();
+        let Some(&kind) = d.first() else {
+            return Err(short(p));
+        };
+        if p.channel() == 1 {
+            // Meta: notify set-point stop, valid for a further u32 ms.
+            return match (kind, d.get(1..5)) {
+                (0, Some(ms)) => {
+                    let ms = u32::from_le_bytes([ms[0], ms[1], ms[2], ms[3]]);
+                    if let Mode::Generic { handover_us, .. } = &mut self.mode {
+                        *handover_us = Some(self.now_us + u64::from(ms) * 1000);
+                    }
+                    Ok(())
+                }
+                (0, None) => Err(short(p)),
+                _ => Err(unsupported(p)),
+            };
+        }
+        if p.channel() != 0 {
+            return Err(unsupported(p));
+        }
+        if kind == 0 {
+            self.mode = Mode::Idle;
+            return Ok(());
+        }
+        let vals = [f32_at(d, 1), f32_at(d, 5), f32_at(d, 9), f32_at(d, 13)];
+        let [Some(a), Some(b), Some(c), Some(e)] = vals else {
+            return if matches!(kind, 7 | 8 | 10) {
+                Err(short(p))
+            } else {
+                Err(unsupported(p))
+            };
+        };
+        if ![a, b, c, e].iter().all(|v| v.is_finite()) {
+            return Err(CrtpError::BadValue { port: p.port() });
+        }
+        let here = self.reference();
+        let deg = core::f32::consts::PI / 180.0;
+        let mut sp = match (kind, self.mode) {
+            (_, Mode::Generic { sp, .. }) => sp,
+            _ => Setpoint::hold(here.pos_ned_m, here.yaw_rad),
+        };
+        match kind {
+            // Position: x, y, z (m), yaw (deg).
+            7 => {
+                sp = Setpoint::hold(frames::ned_from_cf([a, b, c]), frames::heading_from_cf_yaw(e * deg));
+            }
+            // Velocity in the world: vx, vy, vz (m/s), yaw rate (deg/s).
+            8 => {
+                sp.vel_ned_mps = frames::ned_from_cf([a, b, c]);
+                sp.acc_ned_mps2 = Vector3::zeros();
+                sp.yaw_rate_radps = -e * deg;
+            }
+            // Hover: vx, vy in the body frame (m/s), yaw rate (deg/s), height (m).
+            10 => {
+                let yaw_cf = frames::heading_from_cf_yaw(sp.yaw_rad);
+                let (s, co) = (libm::sinf(yaw_cf), libm::cosf(yaw_cf));
+                let world = [a * co - b * s, a * s + b * co, 0.0];
+                sp.vel_ned_mps = frames::ned_from_cf(world);
+                sp.acc_ned_mps2 = Vector3::zeros();
+                sp.pos_ned_m[2] = -e;
+                sp.yaw_rate_radps = -c * deg;
+            }
+            _ => return Err(unsupported(p)),
+        }
+        if !self.armed {
+            return Err(CrtpError::Refused { port: p.port() });
+        }
+        if !matches!(self.mode, Mode::Generic { .. }) && !self.take_control() {
+            return Err(CrtpError::Refused { port: p.port() });
+        }
+        self.mode = Mode::Generic {
+            sp,
+            last_us: self.now_us,
+            handover_us: None,
+        };
+        Ok(())
+    }
+
+    pub(in crate::vehicle) fn on_legacy_commander(&mut self, p: &Packet) -> Result<(), CrtpError> {
+        // roll, pitch, yaw rate (f32 each), thrust (u16).
+        match u16_at(p.payload(), 12) {
+            Some(0) => {
+                self.mode = Mode::Idle;
+                Ok(())
+            }
+            Some(_) => Err(unsupported(p)),
+            None => Err(short(p)),
+        }
+    }
+}

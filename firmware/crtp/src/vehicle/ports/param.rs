@@ -1,0 +1,470 @@
+//! Port param (2): the param TOC of [`fc_loop::params::PARAMS`] (each in
+//! its true type) and of [`EXTRA_PARAMS`]; read, write, set by name,
+//! default values, extended types, persistent storage.
+
+use crate::vehicle::*;
+
+/// Param type bytes (cflib's `ParamTocElement.types`).
+pub mod param_types {
+    /// `uint8_t`.
+    pub const U8: u8 = 0x08;
+    /// `uint16_t`.
+    pub const U16: u8 = 0x09;
+    /// `float`.
+    pub const FLOAT: u8 = 0x06;
+    /// Flag: read-only (`PARAM_RONLY`); cflib refuses to write it.
+    pub const RONLY: u8 = 0x40;
+    /// Flag: extended type information (`PARAM_EXTENDED`); cflib asks for
+    /// it, and ours says "persistent".
+    pub const EXTENDED: u8 = 0x10;
+    /// The type's bits (size, integer or float, signedness) under the flags.
+    pub const TYPE: u8 = 0x0F;
+}
+
+/// A parameter under a Crazyflie name, beside [`PARAMS`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Extra {
+    /// `kalman.resetEstimation`: 1 restarts the estimator (on the ground).
+    ResetEstimation,
+    /// `stabilizer.controller`: our controller id (`CTL_ID`).
+    Controller,
+    /// `stabilizer.estimator`: 2, the Kalman filter (the only one here).
+    Estimator,
+    /// `commander.enHighLevel`: 1, the high-level commander is always on.
+    EnHighLevel,
+    /// `pid_attitude.*`: the PD controller's attitude gain [`PARAMS`] index.
+    Alias(usize),
+    /// `deck.bc*`: read-only, 0: no expansion deck is attached. cfclient's
+    /// flight tab reads them to offer height hold and command-based flight.
+    Deck,
+}
+
+/// The index in [`PARAMS`] of the parameter named `id` (a compile-time
+/// lookup: a name that is not there does not build).
+const fn param_index(id: &str) -> usize {
+    let mut i = 0;
+    while i < PARAMS.len() {
+        let (a, b) = (PARAMS[i].id.as_bytes(), id.as_bytes());
+        if a.len() == b.len() {
+            let mut k = 0;
+            while k < a.len() && a[k] == b[k] {
+                k += 1;
+            }
+            if k == a.len() {
+                return i;
+            }
+        }
+        i += 1;
+    }
+    panic!("no such parameter")
+}
+
+/// `CTL_ID`'s index.
+const CTL_ID: usize = param_index("CTL_ID");
+
+/// The Crazyflie-named parameters after [`PARAMS`] in the param TOC.
+pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 18] = [
+    ("kalman", "resetEstimation", param_types::U8, Extra::ResetEstimation),
+    ("stabilizer", "controller", param_types::U8, Extra::Controller),
+    ("stabilizer", "estimator", param_types::U8, Extra::Estimator),
+    ("commander", "enHighLevel", param_types::U8, Extra::EnHighLevel),
+    (
+        "pid_attitude",
+        "roll_kp",
+        param_types::FLOAT,
+        Extra::Alias(param_index("PD_ROLL_P")),
+    ),
+    (
+        "pid_attitude",
+        "roll_kd",
+        param_types::FLOAT,
+        Extra::Alias(param_index("PD_ROLL_D")),
+    ),
+    (
+        "pid_attitude",
+        "pitch_kp",
+        param_types::FLOAT,
+        Extra::Alias(param_index("PD_PITCH_P")),
+    ),
+    (
+        "pid_attitude",
+        "pitch_kd",
+        param_types::FLOAT,
+        Extra::Alias(param_index("PD_PITCH_D")),
+    ),
+    (
+        "pid_attitude",
+        "yaw_kp",
+        param_types::FLOAT,
+        Extra::Alias(param_index("PD_YAW_P")),
+    ),
+    (
+        "pid_attitude",
+        "yaw_kd",
+        param_types::FLOAT,
+        Extra::Alias(param_index("PD_YAW_D")),
+    ),
+    ("deck", "bcFlow", DECK, Extra::Deck),
+    ("deck", "bcFlow2", DECK, Extra::Deck),
+    ("deck", "bcZRanger", DECK, Extra::Deck),
+    ("deck", "bcZRanger2", DECK, Extra::Deck),
+    ("deck", "bcLighthouse4", DECK, Extra::Deck),
+    ("deck", "bcLoco", DECK, Extra::Deck),
+    ("deck", "bcDWM1000", DECK, Extra::Deck),
+    ("deck", "bcLedRing", DECK, Extra::Deck),
+];
+
+/// A deck's attached flag: `PARAM_UINT8 | PARAM_RONLY`, as the firmware's deck drivers declare it.
+const DECK: u8 = param_types::U8 | param_types::RONLY;
+
+/// Entries in the param TOC.
+pub const PARAM_COUNT: usize = PARAMS.len() + EXTRA_PARAMS.len();
+
+/// Group and name of param `id`, its type byte, and what it is.
+pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
+    if let Some(p) = PARAMS.get(id) {
+        let (group, name) = p.id.split_once('_').unwrap_or(("fc", p.id));
+        return Some((
+            Name {
+                group,
+                name,
+                lower_group: true,
+            },
+            // Its true type; every flight parameter persists, as the
+            // Crazyflie's tuning does.
+            toc_type(p.ty) | param_types::EXTENDED,
+            None,
+        ));
+    }
+    let &(group, name, t, extra) = EXTRA_PARAMS.get(id - PARAMS.len())?;
+    Some((
+        Name {
+            group,
+            name,
+            lower_group: false,
+        },
+        t,
+        Some(extra),
+    ))
+}
+
+/// The param TOC's type byte of a parameter of type `ty`.
+const fn toc_type(ty: ParamType) -> u8 {
+    match ty {
+        ParamType::F32 => param_types::FLOAT,
+        ParamType::U8 => param_types::U8,
+        ParamType::U16 => param_types::U16,
+    }
+}
+
+/// A parameter value of param type `t` in `b`, as f32.
+fn same_type(a: u8, b: u8) -> bool {
+    a & param_types::TYPE == b & param_types::TYPE
+}
+
+/// Appends `v` to `r` as parameter type `t` (its flags ignored): a byte
+/// for `uint8_t`, two little-endian bytes for `uint16_t`, four for `float`.
+pub(crate) fn put_typed(r: &mut Packet, t: u8, v: f32) {
+    let _ = match t & param_types::TYPE {
+        param_types::U8 => r.extend(&[v as u8]),
+        param_types::U16 => r.extend(&(v as u16).to_le_bytes()),
+        _ => r.extend(&v.to_le_bytes()),
+    };
+}
+
+/// `[f32]` from the start of `b` as parameter type `t`.
+fn read_value(t: u8, b: &[u8]) -> Option<f32> {
+    match t & param_types::TYPE {
+        param_types::U8 => b.first().map(|&v| f32::from(v)),
+        param_types::U16 => b.get(..2).map(|v| f32::from(u16::from_le_bytes([v[0], v[1]]))),
+        param_types::FLOAT => f32_at(b, 0),
+        _ => None,
+    }
+}
+
+/// The answer to the `MISC_SETBYNAME` request `request` (`[0, group\0,
+/// name\0, type, value]`) with status `code`: `[0, group\0, name\0, code]`.
+fn set_by_name_reply(request: &Packet, code: u8) -> Packet {
+    let d = request.payload().get(1..).unwrap_or(&[]);
+    let mut parts = d.splitn(3, |&b| b == 0);
+    let names = match (parts.next(), parts.next()) {
+        (Some(group), Some(name)) => (group.len() + name.len() + 2).min(d.len()),
+        _ => d.len(),
+    };
+    let mut r = reply(Port::Param, 3, &[0]);
+    let _ = r.extend(&d[..names]);
+    let _ = r.extend(&[code]);
+    r
+}
+
+impl CrtpCore {
+    /// Parameter `id`'s value in force.
+    pub(in crate::vehicle) fn param_value(&self, id: usize) -> Option<f32> {
+        let s = self.core.settings();
+        let (_, _, extra) = param_entry(id)?;
+        Some(match extra {
+            None => (PARAMS[id].get)(s),
+            Some(Extra::ResetEstimation) => 0.0,
+            Some(Extra::Controller) => (PARAMS[CTL_ID].get)(s),
+            Some(Extra::Estimator) => 2.0,
+            Some(Extra::EnHighLevel) => 1.0,
+            Some(Extra::Alias(i)) => (PARAMS[i].get)(s),
+            Some(Extra::Deck) => 0.0,
+        })
+    }
+
+    /// Parameter `id`'s value at boot.
+    pub(in crate::vehicle) fn param_default(&self, id: usize) -> Option<f32> {
+        let (_, _, extra) = param_entry(id)?;
+        Some(match extra {
+            None => (PARAMS[id].get)(&self.defaults),
+            Some(Extra::Controller) => (PARAMS[CTL_ID].get)(&self.defaults),
+            Some(Extra::Alias(i)) => (PARAMS[i].get)(&self.defaults),
+            Some(_) => self.param_value(id)?,
+        })
+    }
+
+    /// Writes parameter `id`: checked, applied (re-designs only while the
+    /// motors are off; a re-design is queued for the controller's side,
+    /// and `reply` answered when it is done). Refused while other
+    /// controller work is under way.
+    pub(in crate::vehicle) fn param_write(&mut self, id: usize, value: f32, reply: Reply) -> Result<Written, Refusal> {
+        let (_, _, extra) = param_entry(id).ok_or(Refusal::Unknown)?;
+        if self.busy() {
+            return Err(Refusal::Busy);
+        }
+        let index = match extra {
+            None => id,
+            Some(Extra::Controller) => CTL_ID,
+            Some(Extra::Alias(i)) => i,
+            Some(Extra::ResetEstimation) if value == 0.0 => return Ok(Written::Now),
+            Some(Extra::ResetEstimation) if self.flying() => return Err(Refusal::Armed),
+            Some(Extra::ResetEstimation) => {
+                self.core.open_session();
+                self.heading_seen = false;
+                self.say(format_args!("estimator reset"));
+                return Ok(Written::Now);
+            }
+            Some(Extra::Estimator) if value == 2.0 => return Ok(Written::Now),
+            Some(Extra::EnHighLevel) if value == 1.0 => return Ok(Written::Now),
+            // Read-only: the value in force, 0, is the only one taken.
+            Some(Extra::Deck) if value == 0.0 => return Ok(Written::Now),
+            Some(_) => return Err(Refusal::Range { lo: value, hi: value }),
+        };
+        let plan = self.core.plan_param(index, value, !self.flying())?;
+        if let ParamPlan::Set(next) | ParamPlan::Redesign(next) = &plan {
+            // The mixer's settings checked before anything is taken.
+            next.mixer()?;
+        }
+        match self.core.apply_unless_design(plan) {
+            Some(next) => {
+                self.work = WorkState::Queued(ControllerWork::Param { next, reply });
+                Ok(Written::Later)
+            }
+            None => {
+                self.mixer = Some(self.core.settings().mixer()?);
+                Ok(Written::Now)
+            }
+        }
+    }
+
+    /// The answer to the parameter write `request` (by id on channel 2:
+    /// the value in force; by name: its status), refused for `refused`
+    /// (said on the console) or not.
+    pub(in crate::vehicle) fn written_reply(&mut self, request: &Packet, refused: Option<Refusal>) -> Packet {
+        let d = request.payload();
+        if request.channel() == 3 {
+            return set_by_name_reply(request, if refused.is_some() { log::ENOEXEC } else { 0 });
+        }
+        let id = u16_at(d, 0).map_or(usize::MAX, usize::from);
+        if let (Some(why), Some((name, _, _))) = (refused, param_entry(id)) {
+            self.say(format_args!("{}.{}: {}", name.group, name.name, why));
+        }
+        let mut r = reply(Port::Param, 2, &d[..2.min(d.len())]);
+        // The value in force, changed or not.
+        let now = self.param_value(id).unwrap_or(f32::NAN);
+        self.put_value(&mut r, id, now);
+        r
+    }
+
+    pub(in crate::vehicle) fn on_param<S: CrtpSink>(
+        &mut self,
+        p: &Packet,
+        out: &mut S,
+    ) -> Result<Result<(), CrtpError>, S::Error> {
+        let d = p.payload();
+        match p.channel() {
+            0 => match d.first() {
+                Some(&toc::CMD_GET_INFO_V2) => {
+                    let crc = toc::crc((0..PARAM_COUNT).filter_map(param_entry).map(|(n, t, _)| (t, n)));
+                    if let Ok(r) = toc::info_packet(Port::Param, PARAM_COUNT as u16, crc, &[]) {
+                        out.send(&r)?;
+                    }
+                }
+                Some(&toc::CMD_GET_ITEM_V2) => {
+                    let Some(id) = u16_at(d, 1) else {
+                        return Ok(Err(short(p)));
+                    };
+                    let r = match param_entry(usize::from(id)) {
+                        Some((n, t, _)) => toc::item_packet(Port::Param, id, t, &n).unwrap_or(Packet::NULL),
+                        None => toc::no_item_packet(Port::Param),
+                    };
+                    out.send(&r)?;
+                }
+                _ => return Ok(Err(unsupported(p))),
+            },
+            1 => {
+                let Some(id) = u16_at(d, 0) else {
+                    return Ok(Err(short(p)));
+                };
+                let mut r = reply(Port::Param, 1, &id.to_le_bytes());
+                match self.param_value(usize::from(id)) {
+                    Some(v) => {
+                        let _ = r.extend(&[0]);
+                        self.put_value(&mut r, usize::from(id), v);
+                    }
+                    None => {
+                        let _ = r.extend(&[log::ENOENT]);
+                    }
+                }
+                out.send(&r)?;
+            }
+            2 => {
+                let Some(id) = u16_at(d, 0) else {
+                    return Ok(Err(short(p)));
+                };
+                let id = usize::from(id);
+                let Some((_, t, _)) = param_entry(id) else {
+                    let mut r = reply(Port::Param, 2, &d[..2]);
+                    let _ = r.extend(&[log::ENOENT]);
+                    out.send(&r)?;
+                    return Ok(Err(unsupported(p)));
+                };
+                if self.busy() {
+                    // Not answered: the client repeats its write, and it is
+                    // taken once the design under way is done.
+                    return Ok(Err(CrtpError::Refused { port: p.port() }));
+                }
+                let refused = match read_value(t, &d[2..]) {
+                    Some(v) => match self.param_write(id, v, Reply::Crtp(*p)) {
+                        Ok(Written::Later) => return Ok(Ok(())),
+                        Ok(Written::Now) => None,
+                        Err(e) => Some(e),
+                    },
+                    None => Some(Refusal::NotInteger),
+                };
+                let r = self.written_reply(p, refused);
+                out.send(&r)?;
+                if refused.is_some() {
+                    return Ok(Err(CrtpError::Refused { port: p.port() }));
+                }
+            }
+            3 => return self.on_param_misc(p, out),
+            _ => return Ok(Err(unsupported(p))),
+        }
+        Ok(Ok(()))
+    }
+
+    /// Appends parameter `id`'s value `v` in its type.
+    pub(in crate::vehicle) fn put_value(&self, r: &mut Packet, id: usize, v: f32) {
+        put_typed(r, param_entry(id).map_or(param_types::FLOAT, |(_, t, _)| t), v);
+    }
+
+    pub(in crate::vehicle) fn on_param_misc<S: CrtpSink>(
+        &mut self,
+        p: &Packet,
+        out: &mut S,
+    ) -> Result<Result<(), CrtpError>, S::Error> {
+        let d = p.payload();
+        let Some(&cmd) = d.first() else {
+            return Ok(Err(short(p)));
+        };
+        if cmd == 0 {
+            return self.on_set_by_name(p, out);
+        }
+        let Some(id) = u16_at(d, 1) else {
+            return Ok(Err(short(p)));
+        };
+        let idb = id.to_le_bytes();
+        let mut r = reply(Port::Param, 3, &[cmd, idb[0], idb[1]]);
+        let index = usize::from(id);
+        let known = param_entry(index).is_some();
+        // Persistent: the flight parameters (the TOC's extended flag).
+        let persistent = index < PARAMS.len();
+        match cmd {
+            // Extended type: 1, persistent (status 0 first, protocol 11+).
+            7 if known => {
+                let _ = r.extend(&[0, u8::from(persistent)]);
+            }
+            8 if known => {
+                let _ = r.extend(&[0]);
+                let v = self.param_default(index).unwrap_or(0.0);
+                self.put_value(&mut r, index, v);
+            }
+            // Store the value in force, get the state, clear: as the
+            // Crazyflie's persistent parameters, answered by the link's
+            // owner with its storage ([`CrtpCore::take_persist`]). One at
+            // a time: another is not answered (cflib asks again).
+            3..=5 if persistent => {
+                if self.persist.is_some() {
+                    return Ok(Err(CrtpError::Refused { port: p.port() }));
+                }
+                self.persist = Some(PersistRequest {
+                    cmd,
+                    id,
+                    now: self.param_value(index).unwrap_or(0.0),
+                    default: self.param_default(index).unwrap_or(0.0),
+                    ty: param_entry(index).map_or(param_types::FLOAT, |(_, t, _)| t),
+                });
+                return Ok(Ok(()));
+            }
+            // Not persistent, and unknown ids.
+            3..=5 | 7 | 8 => {
+                let _ = r.extend(&[log::ENOENT]);
+            }
+            _ => return Ok(Err(unsupported(p))),
+        }
+        out.send(&r)?;
+        Ok(Ok(()))
+    }
+
+    /// `MISC_SETBYNAME`: `[0, group\0, name\0, type, value]`, answered
+    /// `[0, group\0, name\0, error]`.
+    pub(in crate::vehicle) fn on_set_by_name<S: CrtpSink>(
+        &mut self,
+        p: &Packet,
+        out: &mut S,
+    ) -> Result<Result<(), CrtpError>, S::Error> {
+        let d = &p.payload()[1..];
+        let mut parts = d.splitn(3, |&b| b == 0);
+        let (Some(group), Some(name), Some(rest)) = (parts.next(), parts.next(), parts.next()) else {
+            return Ok(Err(short(p)));
+        };
+        let Some((&t, value)) = rest.split_first() else {
+            return Ok(Err(short(p)));
+        };
+        let id = (0..PARAM_COUNT).find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(group, name)));
+        if id.is_some() && self.busy() {
+            // As a write by id: not answered until the design under way is done.
+            return Ok(Err(CrtpError::Refused { port: p.port() }));
+        }
+        let code = match (id, read_value(t, value)) {
+            (None, _) => log::ENOENT,
+            // The type as the firmware compares it: without its flags.
+            (Some(i), Some(v)) if param_entry(i).is_some_and(|(_, pt, _)| same_type(pt, t)) => {
+                match self.param_write(i, v, Reply::Crtp(*p)) {
+                    Ok(Written::Later) => return Ok(Ok(())),
+                    Ok(Written::Now) => 0,
+                    Err(_) => log::ENOEXEC,
+                }
+            }
+            _ => log::ENOEXEC,
+        };
+        out.send(&set_by_name_reply(p, code))?;
+        Ok(if code == 0 {
+            Ok(())
+        } else {
+            Err(CrtpError::Refused { port: p.port() })
+        })
+    }
+}

@@ -1,0 +1,160 @@
+//! Port supervisor (9): arming, recovery, emergency stop and the state
+//! bits; the checks before a take-off.
+
+use crate::vehicle::*;
+
+impl CrtpCore {
+    pub(in crate::vehicle) fn can_fly(&self) -> bool {
+        self.core.navigator().mode() == NavMode::Navigating
+            && !self.tumbled
+            && !self.locked
+            && self.sensors.is_ok()
+            && self.vbat_v.is_some_and(|v| v >= BATTERY_FLOOR_V)
+    }
+
+    /// The supervisor's state bits (cflib's `Supervisor.STATES` order).
+    pub fn supervisor_bits(&self) -> u16 {
+        let high = matches!(self.mode, Mode::High { .. });
+        let finished = match self.mode {
+            Mode::High { seg, .. } => seg.finished(self.now_us),
+            _ => true,
+        };
+        let bits = [
+            self.can_fly() && !self.armed,
+            self.armed,
+            false,
+            self.can_fly(),
+            self.flying(),
+            self.tumbled,
+            self.locked,
+            self.tumbled,
+            high,
+            finished,
+            false,
+        ];
+        bits.iter()
+            .enumerate()
+            .fold(0, |acc, (i, &b)| acc | (u16::from(b) << i))
+    }
+
+    /// Arms (if the supervisor allows) or disarms; the answer is whether it
+    /// did, and whether it is armed now.
+    pub(in crate::vehicle) fn request_arming(&mut self, arm: bool) -> bool {
+        if !arm {
+            self.armed = false;
+            self.mode = Mode::Idle;
+            self.say(format_args!("disarmed"));
+            return true;
+        }
+        if self.armed {
+            return true;
+        }
+        if let Err(down) = self.sensors {
+            self.say(format_args!("arming refused: {down}"));
+            return false;
+        }
+        match self.vbat_v {
+            None => {
+                self.say(format_args!("arming refused: no battery reading yet"));
+                return false;
+            }
+            Some(v) if v < BATTERY_FLOOR_V => {
+                self.say(format_args!(
+                    "arming refused: battery {v:.2} V below {BATTERY_FLOOR_V:.2} V"
+                ));
+                return false;
+            }
+            Some(_) => {}
+        }
+        let why = match self.core.navigator().mode() {
+            _ if self.locked => Some("locked: restart"),
+            _ if self.tumbled => Some("tumbled: recover"),
+            NavMode::Aligning => Some("estimator aligning"),
+            NavMode::Failsafe => Some("estimator failsafe"),
+            NavMode::Navigating if self.mixer.is_none() => Some("not started"),
+            NavMode::Navigating => None,
+        };
+        if let Some(why) = why {
+            self.say(format_args!("arming refused: {why}"));
+            return false;
+        }
+        self.armed = true;
+        self.mode = Mode::Idle;
+        self.say(format_args!("armed"));
+        true
+    }
+
+    /// Starts flying `mode` from idle: the controller's state forgotten (no
+    /// state wound up on the ground; [`ControllerWork::Reset`]).
+    pub(in crate::vehicle) fn take_control(&mut self) -> bool {
+        if !self.armed {
+            self.say(format_args!("not armed"));
+            return false;
+        }
+        if self.busy() {
+            self.say(format_args!("controller design under way"));
+            return false;
+        }
+        if self.mode == Mode::Idle {
+            self.work = WorkState::Queued(ControllerWork::Reset);
+        }
+        true
+    }
+
+    pub(in crate::vehicle) fn recover(&mut self) -> bool {
+        if self.locked || self.flying() {
+            return false;
+        }
+        self.tumbled = false;
+        true
+    }
+
+    pub(in crate::vehicle) fn on_supervisor<S: CrtpSink>(
+        &mut self,
+        p: &Packet,
+        out: &mut S,
+    ) -> Result<Result<(), CrtpError>, S::Error> {
+        let d = p.payload();
+        let Some(&cmd) = d.first() else {
+            return Ok(Err(short(p)));
+        };
+        let bits = self.supervisor_bits();
+        match (p.channel(), cmd) {
+            (0, 0x0C) => {
+                let b = bits.to_le_bytes();
+                out.send(&reply(Port::Supervisor, 0, &[0x8C, b[0], b[1]]))?;
+            }
+            (0, 0x01..=0x0B) => {
+                let bit = (bits >> (cmd - 1)) & 1;
+                out.send(&reply(Port::Supervisor, 0, &[0x80 | cmd, bit as u8]))?;
+            }
+            (1, 0x01) => {
+                let Some(&arm) = d.get(1) else {
+                    return Ok(Err(short(p)));
+                };
+                let ok = self.request_arming(arm != 0);
+                out.send(&reply(Port::Supervisor, 1, &[0x81, u8::from(ok), u8::from(self.armed)]))?;
+            }
+            (1, 0x02) => {
+                let ok = self.recover();
+                out.send(&reply(
+                    Port::Supervisor,
+                    1,
+                    &[0x82, u8::from(ok), u8::from(!self.tumbled)],
+                ))?;
+            }
+            (1, 0x03) => self.emergency_stop(),
+            (1, 0x04) => {}
+            _ => return Ok(Err(unsupported(p))),
+        }
+        Ok(Ok(()))
+    }
+
+    /// Motors off and locked until restarted, as the Crazyflie's emergency stop.
+    pub(in crate::vehicle) fn emergency_stop(&mut self) {
+        self.mode = Mode::Idle;
+        self.armed = false;
+        self.locked = true;
+        self.say(format_args!("emergency stop: locked"));
+    }
+}

@@ -1,0 +1,73 @@
+//! The vehicle split as an image splits it (the controller's task apart
+//! from the link's): [`fly_step`], [`pass_step`], [`run_work`].
+
+use super::*;
+
+/// The [`Loop`] inside a locked [`CrtpCore`], as [`run_job`] locks it.
+struct LoopOf<'a, M>(&'a mut M);
+
+impl<M: Mutex> Mutex for LoopOf<'_, M>
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    type T = Loop;
+    fn lock<R>(&mut self, f: impl FnOnce(&mut Loop) -> R) -> R {
+        self.0.lock(|v| f(&mut v.borrow_mut().core))
+    }
+}
+
+/// Flies `step` on the controller `ctrl` (the controller's task), the
+/// vehicle `v` locked only to take the step's inputs and record its
+/// result; returns the inputs to apply `[U1 N, U2 N, U3 N, U4 N·m]`.
+pub fn fly_step<M: Mutex, C: CycleClock>(
+    v: &mut M,
+    ctrl: &mut AnyController<f32>,
+    step: ImuStep,
+    clock: &C,
+) -> Vector4<f32>
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    let mut answer = Answer::default();
+    if let Some(job) = step.job {
+        let _ = run_job(&mut LoopOf(v), ctrl, job, &mut answer, clock);
+    }
+    v.lock(|v| v.borrow_mut().imu_end(&step, answer.u))
+}
+
+/// Answers `step` without a controller: the controller's task's step while
+/// its controller is lent to a re-design ([`ControllerWork::designs`]),
+/// which runs only disarmed with no mode flown (a take-off is refused while
+/// one is under way). The loop records the step as one the controller did
+/// not fly; the motors stay off. Returns the inputs applied (zero).
+pub fn pass_step<M: Mutex, C: CycleClock>(v: &mut M, step: ImuStep, clock: &C) -> Vector4<f32>
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    if let Some(Job::Step(s)) = step.job {
+        let _ = LoopOf(v).lock(|l| l.finish(&s, None, clock));
+    }
+    v.lock(|v| v.borrow_mut().imu_end(&step, None))
+}
+
+/// Runs `work` ([`CrtpCore::take_work`]) on the controller `ctrl`, the
+/// design with the vehicle `v` unlocked; returns its result and, for the
+/// simulator's write, its answer ([`CrtpCore::work_done`]).
+pub fn run_work<M: Mutex>(
+    v: &mut M,
+    ctrl: &mut AnyController<f32>,
+    work: ControllerWork,
+) -> (Result<(), Refusal>, Option<FromFc>)
+where
+    M::T: BorrowMut<CrtpCore>,
+{
+    let r = match work {
+        ControllerWork::Reset => {
+            ctrl.reset();
+            Ok(())
+        }
+        ControllerWork::Param { next, .. } => fc_loop::apply_plan(&mut LoopOf(v), ctrl, ParamPlan::Redesign(next)),
+    };
+    let answer = v.lock(|v| v.borrow_mut().work_done(&work, r));
+    (r, answer)
+}

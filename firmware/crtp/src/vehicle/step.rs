@@ -1,0 +1,172 @@
+//! The IMU step's shared half: the estimator, the set-point of the mode
+//! in force, the supervisor (failsafes, tumble, the set-point watchdog).
+
+use super::*;
+
+impl CrtpCore {
+    /// One IMU sample taken at `t_us` (`None`: the board's driver had
+    /// none) with the fixes of the host's own position source (`heading`:
+    /// they carry one), the IMU task's half: the sample checked (a bad or
+    /// missing one replaced by the last good one,
+    /// [`crate::supervisor::ImuGuard`]), the set-point of this instant, one
+    /// estimator step, the supervisor's checks; returns the controller's
+    /// step ([`fly_step`] flies it).
+    pub fn imu_begin<C: CycleClock>(
+        &mut self,
+        t_us: u64,
+        imu: Option<&ImuSample>,
+        fixes: &[Fix],
+        clock: &C,
+    ) -> ImuStep {
+        if t_us < self.now_us {
+            // A host that started again: a new time line.
+            self.core.open_session();
+            self.imu.restart();
+            self.baro.reset();
+        }
+        let (sample, _) = self.imu.take(t_us, imu);
+        // The interval a velocity set-point moves over (at most 0.1 s).
+        let dt_s = (t_us.saturating_sub(self.now_us) as f32 * 1e-6).min(0.1);
+        self.now_us = t_us;
+        for f in fixes {
+            self.heading_seen |= f.yaw_rad.is_some();
+            self.core.push_fix(f);
+        }
+        let sp = self.setpoint_now(t_us, dt_s);
+        if let Some(sp) = sp {
+            self.core.set_setpoint(&sp);
+        }
+        self.seq = self.seq.wrapping_add(1);
+        // Nothing to step on before the first good sample.
+        let job = sample
+            .and_then(|imu| self.core.imu_job(self.seq, t_us, &imu, clock, t_us))
+            .map(|job| match job {
+                // The estimator's state goes out in log blocks, not with every
+                // step's answer (our protocol's `Nav`): not built.
+                Job::Step(step) => Job::Step(fc_loop::Step { nav: false, ..step }),
+                other => other,
+            });
+        // The controller changes nothing the supervisor reads.
+        self.supervise(t_us);
+        ImuStep {
+            job,
+            setpoint: sp.is_some(),
+        }
+    }
+
+    /// The end of an IMU step whose controller answered `u` (`None`: no
+    /// answer): the inputs to apply, zero unless armed and flying a
+    /// set-point.
+    pub fn imu_end(&mut self, step: &ImuStep, u: Option<[f32; 4]>) -> Vector4<f32> {
+        let on = self.armed && self.mode != Mode::Idle && step.setpoint;
+        self.u = match u {
+            Some(u) if on => Vector4::from(u),
+            _ => Vector4::zeros(),
+        };
+        self.u
+    }
+
+    /// The set-point to fly at `t_us`, `dt_s` after the last step (the mode
+    /// advanced: hand-over, watchdog, velocity), `None` while idle.
+    pub(in crate::vehicle) fn setpoint_now(&mut self, t_us: u64, dt_s: f32) -> Option<Setpoint<f32>> {
+        if let Mode::Generic {
+            sp,
+            last_us,
+            handover_us,
+        } = self.mode
+        {
+            let age_ms = t_us.saturating_sub(last_us) / 1000;
+            if handover_us.is_some_and(|h| t_us >= h) {
+                self.hold_from(&Reference::from(&sp), t_us);
+            } else if age_ms > SETPOINT_STOP_MS {
+                self.mode = Mode::Idle;
+                self.say(format_args!("set-points stopped: motors off"));
+            }
+        }
+        let r = match &mut self.mode {
+            Mode::Idle => return None,
+            Mode::High { seg, .. } => seg.eval(t_us),
+            Mode::Generic { sp, last_us, .. } => {
+                if t_us.saturating_sub(*last_us) / 1000 > SETPOINT_LEVEL_MS {
+                    // Level and still where it is.
+                    sp.vel_ned_mps = Vector3::zeros();
+                    sp.acc_ned_mps2 = Vector3::zeros();
+                    sp.yaw_rate_radps = 0.0;
+                } else {
+                    // A velocity set-point moves its position.
+                    sp.pos_ned_m += sp.vel_ned_mps * dt_s;
+                    sp.yaw_rad += sp.yaw_rate_radps * dt_s;
+                }
+                Reference::from(&*sp)
+            }
+        };
+        Some(r.setpoint())
+    }
+
+    /// Holds `from` (brought to rest over half a second) under the
+    /// high-level commander.
+    pub(in crate::vehicle) fn hold_from(&mut self, from: &Reference, t_us: u64) {
+        self.mode = match Segment::plan(t_us, from, from.pos_ned_m, from.yaw_rad, 0.5) {
+            Ok(seg) => Mode::High { seg, landing: false },
+            Err(_) => Mode::Idle,
+        };
+    }
+
+    /// The IMU's silence, tumble detection and the end of a landing.
+    pub(in crate::vehicle) fn supervise(&mut self, t_us: u64) {
+        if !self.imu.silent() {
+            self.failsafe = false;
+        } else if self.flying() && !matches!(self.mode, Mode::High { landing: true, .. }) {
+            // Every command while silent is overruled by the descent.
+            self.failsafe_descent(t_us);
+        }
+        let Some(est) = self.core.navigator().estimate() else {
+            return;
+        };
+        let q = est.att;
+        // The body z axis' down component: cos(tilt).
+        let cos_tilt = 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]);
+        if self.flying() && cos_tilt < COS_TUMBLE_TILT {
+            self.tumbled = true;
+            self.mode = Mode::Idle;
+            self.say(format_args!("tumbled: motors off"));
+        }
+        if let Mode::High { seg, landing: true } = self.mode {
+            if seg.finished(t_us) && (est.pos_ned_m[2] - seg.goal().pos_ned_m[2]).abs() < LANDED_M {
+                self.mode = Mode::Idle;
+                self.say(format_args!("landed: motors off"));
+            }
+        }
+    }
+
+    /// Straight down from where the vehicle is flying to the frame's z = 0
+    /// (the floor of a motion-capture or Lighthouse frame) at
+    /// [`FAILSAFE_DESCENT_MPS`], landed as a landing is.
+    pub(in crate::vehicle) fn failsafe_descent(&mut self, t_us: u64) {
+        if !self.failsafe {
+            self.failsafe = true;
+            let ms = IMU_TIMEOUT_US / 1000;
+            self.say(format_args!("IMU silent for more than {ms} ms: failsafe descent"));
+        }
+        let here = self.reference();
+        let height_m = (-here.pos_ned_m[2]).max(0.0);
+        let goal = Vector3::new(here.pos_ned_m[0], here.pos_ned_m[1], 0.0);
+        let dur_s = (height_m / FAILSAFE_DESCENT_MPS).max(0.5);
+        self.mode = match Segment::plan(t_us, &here, goal, here.yaw_rad, dur_s) {
+            Ok(seg) => Mode::High { seg, landing: true },
+            Err(_) => Mode::Idle,
+        };
+    }
+
+    /// What is flown now, as a reference (the estimate at rest when idle).
+    pub(in crate::vehicle) fn reference(&self) -> Reference {
+        match &self.mode {
+            Mode::High { seg, .. } => seg.eval(self.now_us),
+            Mode::Generic { sp, .. } => Reference::from(sp),
+            Mode::Idle => match self.core.navigator().estimate() {
+                Some(e) => Reference::at_rest(e.pos_ned_m, e.euler()[2]),
+                None => Reference::at_rest(Vector3::zeros(), 0.0),
+            },
+        }
+    }
+}
