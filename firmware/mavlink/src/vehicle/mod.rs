@@ -1,0 +1,536 @@
+//! The flight controller as a MAVLink vehicle: [`MavVehicle`] takes the
+//! messages of a simulator (PX4's HIL interface) and of a ground station,
+//! runs the flight loop ([`fc_loop::FlightCore`]) on them, and answers.
+//!
+//! - `HIL_SENSOR` → one estimator step (the controller on its schedule),
+//!   answered by one `HIL_ACTUATOR_CONTROLS` (lockstep): the motor
+//!   commands of the mixer the parameters describe, zero while disarmed.
+//!   Its time (`time_usec`) is the loop's clock (lockstep): a gap longer
+//!   than `FS_TIMEOUT_MS` is a failsafe episode, as on our own protocol.
+//! - `HIL_STATE_QUATERNION` → a position and heading fix every
+//!   `HIL_FIX_MS` (a mocap-like source; its velocity is not used). Its
+//!   first position is home, the origin of the local NED frame.
+//! - `COMMAND_LONG` `MAV_CMD_COMPONENT_ARM_DISARM` → arm (refused while the
+//!   estimator aligns or is in its failsafe) or disarm; `COMMAND_ACK` and a
+//!   `STATUSTEXT` answer. Arming designs the controller afresh (no state
+//!   wound up on the ground) and, unless a set-point came first, holds the
+//!   position armed at. Disarming in the air (more than [`IN_AIR_M`] above
+//!   where it armed) is refused unless forced (`param2` = 21196), as PX4 does.
+//! - Ground-station loss (`FS_GCS_MS`, once a `HEARTBEAT` of type
+//!   `MAV_TYPE_GCS` has been heard): armed and silent that long → land
+//!   where it is and disarm on the ground.
+//! - `SET_POSITION_TARGET_LOCAL_NED` (`MAV_FRAME_LOCAL_NED`, position
+//!   given; velocity, acceleration, yaw and yaw rate when not masked) → the
+//!   set-point (feed-forward as given).
+//! - The parameter protocol over [`params::PARAMS`]; a refused
+//!   `PARAM_SET` is answered with the unchanged value and a `STATUSTEXT`
+//!   saying why.
+//! - Telemetry on simulated time: `HEARTBEAT` 1 Hz (to both peers),
+//!   `SYS_STATUS` 2 Hz, `ATTITUDE` and `LOCAL_POSITION_NED` 50 Hz.
+//!
+//! Anything else (other systems' messages, unknown commands) is counted
+//! and answered where MAVLink expects an answer (`MAV_RESULT_UNSUPPORTED`).
+
+use crate::hil::{self, Home, StateFixSigmas};
+use crate::mission::{Mission, Step, MISSION_CAPACITY};
+use crate::modes::{joystick_velocity, nav_index_of, FlightMode, Legs, NavSettings, Route, NAV_PARAMS};
+use crate::params::{self, Refusal, Settings, PARAMS};
+use crate::MavMessage;
+use core::convert::Infallible;
+use fc_core::control::Setpoint;
+use fc_core::estimate::Fix;
+use fc_core::model::airframe::Mixer;
+#[cfg(test)]
+use fc_core::model::airframe::MixerError;
+use fc_loop::baro::Barometer;
+use fc_loop::nav::NavMode;
+use fc_loop::planner::Reference;
+use fc_loop::schedule::Schedule;
+use fc_loop::{FcConfig, FlightCore, Outbox};
+use fc_proto::FromFc;
+use hal_shim::CycleClock;
+use mavlink::dialects::common::*;
+
+mod commands;
+mod flight;
+mod missions;
+mod parameters;
+mod sensors;
+mod streams;
+
+pub use commands::autopilot_version;
+#[cfg(test)]
+use commands::FORCE;
+#[cfg(test)]
+use parameters::param_id;
+pub use flight::{setpoint_from_target, streamed_jerk, JERK_GAP_MAX_MS, JERK_MAX_MPS3};
+use nalgebra::{Vector3, Vector4};
+pub use parameters::{param_index_of, PARAM_COUNT};
+pub use streams::{MIN_INTERVAL_US, STREAMS};
+
+/// Who a message is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Peer {
+    /// The simulator (HIL_ACTUATOR_CONTROLS).
+    Simulator,
+    /// The ground station (telemetry, acknowledgements, parameters).
+    GroundStation,
+}
+
+/// Where [`MavVehicle`]'s messages go (one link for both peers on the
+/// image; a TCP and a UDP socket on the host).
+pub trait MavSink {
+    /// What sending can fail with.
+    type Error;
+    /// Sends `msg` to `to`.
+    fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<(), Self::Error>;
+    /// The ground station link's signing state, if this link signs (a
+    /// `SETUP_SIGNING` changes it; `None`: the request is ignored).
+    fn signing(&mut self) -> Option<&mut crate::signing::Signing> {
+        None
+    }
+    /// Where settings persist across a reboot, if anywhere: a parameter a
+    /// ground station sets is stored there at once (as PX4 saves its
+    /// parameters), and a signing key when `SETUP_SIGNING` sets it.
+    /// `None`: they live until power-off.
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        None
+    }
+}
+
+/// What the vehicle did with what it got.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct VehicleCounters {
+    /// `HIL_SENSOR` steps flown.
+    pub steps: u32,
+    /// `HIL_SENSOR`s refused (inertial fields not flagged, not finite).
+    pub sensors_refused: u32,
+    /// `HIL_STATE_QUATERNION`s refused (non-unit attitude).
+    pub states_refused: u32,
+    /// Steps on which the mixer clamped a motor (armed).
+    pub clamped_steps: u32,
+    /// Set-points refused (frame, mask, not finite).
+    pub setpoints_refused: u32,
+    /// Commands refused or not supported.
+    pub commands_refused: u32,
+    /// Parameter writes refused.
+    pub params_refused: u32,
+    /// Messages this vehicle has no use for.
+    pub ignored: u32,
+    /// Barometer readings fused (flagged in `HIL_SENSOR`).
+    pub baro_fixes: u32,
+    /// Magnetometer headings fused (flagged in `HIL_SENSOR`).
+    pub mag_fixes: u32,
+}
+
+/// Height above the arming point from which the vehicle is in the air, m.
+pub const IN_AIR_M: f32 = 0.15;
+/// Within this of the height it armed at, a landing vehicle has landed, m.
+pub const LANDED_M: f32 = 0.03;
+/// Slower than this vertically (estimated), a landing vehicle on the ground has landed, m/s.
+pub const LANDED_MPS: f32 = 0.2;
+
+/// `AUTOPILOT_VERSION` (148), sent when asked for.
+const AUTOPILOT_VERSION_ID: u32 = 148;
+/// This firmware's version in PX4's encoding (major, minor, patch, 255 for
+/// a release): the crates' version, 0.1.0.
+pub const FLIGHT_SW_VERSION: u32 = 0x0001_00FF;
+/// A flagged `HIL_SENSOR` barometer (and magnetometer) is fused at most
+/// this often, µs (50 Hz; `HIL_SENSOR` comes at the IMU's rate).
+pub const BARO_PERIOD_US: u64 = fc_loop::baro::PERIOD_US;
+/// 1σ assumed of a barometric height, m.
+pub const BARO_SIGMA_M: f32 = fc_loop::baro::SIGMA_M;
+/// 1σ assumed of a magnetometer heading, rad (2°).
+pub const MAG_SIGMA_RAD: f32 = 0.035;
+
+/// The flight loop's answers to one `Imu` step, kept.
+#[derive(Default)]
+struct Answer {
+    u: Option<[f32; 4]>,
+    cycles: u32,
+}
+
+impl Outbox for Answer {
+    type Error = Infallible;
+    fn send(&mut self, msg: &FromFc) -> Result<(), Infallible> {
+        match msg {
+            FromFc::Actuator { u, .. } => self.u = Some(*u),
+            FromFc::Telemetry { cycles, .. } => self.cycles = *cycles,
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+/// A 50-byte `STATUSTEXT` being written.
+struct Text {
+    buf: [u8; 50],
+    len: usize,
+}
+
+impl core::fmt::Write for Text {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        for &b in s.as_bytes() {
+            if self.len < self.buf.len() {
+                self.buf[self.len] = b;
+                self.len += 1;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The flight controller behind MAVLink (see the module's documentation).
+pub struct MavVehicle {
+    core: FlightCore,
+    /// `None` until started.
+    mixer: Option<Mixer<f32>>,
+    armed: bool,
+    /// Simulated time of the last ground-station `HEARTBEAT`, µs.
+    gcs_seen_us: Option<u64>,
+    /// The flight mode ([`crate::modes`]).
+    mode: FlightMode,
+    /// The automatic modes' settings (PX4's parameters).
+    nav: NavSettings,
+    /// The automatic mode's route.
+    route: Route,
+    /// The mission store and its transfers.
+    mission: Mission,
+    /// The mission item flown (Mission mode).
+    mission_phase: Option<MissionPhase>,
+    /// A mission's `DO_CHANGE_SPEED`, for the rest of it.
+    mission_cruise_mps: Option<f32>,
+    /// The last offboard set-point, and when it came (simulated µs).
+    offboard: Option<(Setpoint<f32>, u64)>,
+    /// The last streamed acceleration and its sender's time
+    /// (`time_boot_ms`), for the jerk the message has no field for.
+    offboard_acc: Option<(Vector3<f32>, u32)>,
+    /// The joystick's last `MANUAL_CONTROL` (x, y, z, r), and when it came.
+    manual: Option<([i16; 4], u64)>,
+    /// Where it armed (estimated), NED about the origin, m: the home a
+    /// return flies to (the origin until it arms).
+    home_ned_m: Vector3<f32>,
+    /// The simulator's first position: the origin of the local frame.
+    home: Option<Home>,
+    /// Time of the last fix taken, µs.
+    last_fix_us: Option<u64>,
+    /// The `HIL_SENSOR` barometer: its reference (the first reading
+    /// referenced to the estimated height then) and rate.
+    baro: Barometer,
+    /// Magnetic heading minus true heading (the declination, and whatever
+    /// the simulator's field adds), rad: the first reading referenced to
+    /// the estimated heading then.
+    mag_ref_rad: Option<f32>,
+    /// When a magnetometer heading is next fused (every [`BARO_PERIOD_US`]).
+    mag_due: Schedule,
+    /// Time of the last `HIL_SENSOR`, µs.
+    last_sensor_us: Option<u64>,
+    /// The `Imu` sequence number.
+    seq: u32,
+    /// Motor commands of the last step.
+    motors: [f32; 4],
+    /// Cycles of the last step, and the clock's rate.
+    cycles: (u32, u32),
+    /// The telemetry streams: interval (µs, 0: off) and next time due, in
+    /// [`STREAMS`]' order.
+    streams: [(u64, u64); STREAMS.len()],
+    /// Frames the links' readers refused (for `SYS_STATUS.errors_comm`).
+    link_errors: u32,
+    /// Position last reported by the simulator, NED about home, m.
+    reported_ned_m: Option<Vector3<f64>>,
+    counters: VehicleCounters,
+    system_id: u8,
+}
+
+/// Milliseconds since boot of simulated time `t_us` (MAVLink's `time_boot_ms`).
+fn boot_ms(t_us: u64) -> u32 {
+    (t_us / 1000) as u32
+}
+
+/// The mission item flown.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum MissionPhase {
+    /// Flying to `goal` (NED, m); reached within `accept_m`, then held `hold_s`.
+    Flying {
+        seq: u16,
+        goal: Vector3<f32>,
+        accept_m: f32,
+        hold_s: f32,
+    },
+    /// Holding until `until_us`.
+    Holding { seq: u16, until_us: u64 },
+}
+
+/// A command, from `COMMAND_LONG` or `COMMAND_INT` (its x and y as f32).
+struct Command {
+    command: MavCmd,
+    params: [f32; 7],
+}
+
+impl MavVehicle {
+    /// A vehicle with `settings` (checked; the controller designed), MAVLink
+    /// system `system_id`, disarmed, its estimator waiting for samples.
+    pub fn new(settings: Settings, system_id: u8) -> Result<Self, Refusal> {
+        let mut v = Self::unstarted(settings, system_id);
+        v.start()?;
+        Ok(v)
+    }
+
+    /// The vehicle with nothing designed yet (motors off until
+    /// [`MavVehicle::start`] succeeds). The firmware constructs it this way,
+    /// in its static home, so that the design does not run beneath a stack
+    /// copy of the whole vehicle (its controller is ≈ 7 KiB).
+    pub fn unstarted(settings: Settings, system_id: u8) -> Self {
+        Self {
+            core: FlightCore::unstarted_with(FcConfig::default(), settings),
+            mixer: None,
+            armed: false,
+            gcs_seen_us: None,
+            mode: FlightMode::Position,
+            nav: NavSettings::default(),
+            route: Route::new(),
+            mission: Mission::new(),
+            mission_phase: None,
+            mission_cruise_mps: None,
+            offboard: None,
+            offboard_acc: None,
+            manual: None,
+            home_ned_m: Vector3::zeros(),
+            home: None,
+            last_fix_us: None,
+            baro: Barometer::new(),
+            mag_ref_rad: None,
+            mag_due: Schedule::new(),
+            last_sensor_us: None,
+            seq: 0,
+            motors: [0.0; 4],
+            cycles: (0, 1),
+            streams: STREAMS.map(|(_, us)| (us, 0)),
+            link_errors: 0,
+            reported_ned_m: None,
+            counters: VehicleCounters::default(),
+            system_id,
+        }
+    }
+
+    /// Checks the settings and designs the controller in place; the
+    /// session is open from then on (set-points may come before samples).
+    pub fn start(&mut self) -> Result<(), Refusal> {
+        self.mixer = Some(self.core.start_front_end()?);
+        Ok(())
+    }
+
+    /// Armed (the motors turn).
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// The settings in force (the parameters' values).
+    pub fn settings(&self) -> &Settings {
+        self.core.settings()
+    }
+
+    /// The flight loop (its estimator, set-point, counters).
+    pub fn core(&self) -> &FlightCore {
+        &self.core
+    }
+
+    /// What was done with what arrived.
+    pub fn counters(&self) -> VehicleCounters {
+        self.counters
+    }
+
+    /// The motor commands of the last step (zero while disarmed).
+    pub fn motors(&self) -> [f32; 4] {
+        self.motors
+    }
+
+    /// Where the simulator last said the vehicle is (NED about home, m):
+    /// for the host's measurements, not used in flight.
+    pub fn reported_position(&self) -> Option<Vector3<f64>> {
+        self.reported_ned_m
+    }
+
+    /// Records how many frames the links' readers have refused in all
+    /// (reported in `SYS_STATUS.errors_comm`).
+    pub fn set_link_errors(&mut self, refused: u32) {
+        self.link_errors = refused;
+    }
+
+    /// Handles one message from system `from_system`; answers go to `out`.
+    /// `now_us` is the caller's clock (only a free-running loop uses it).
+    // MISSION_REQUEST and MISSION_SET_CURRENT are deprecated, and sent.
+    #[allow(deprecated)]
+    pub fn handle<S: MavSink, C: CycleClock>(
+        &mut self,
+        msg: &MavMessage,
+        out: &mut S,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), S::Error> {
+        match msg {
+            MavMessage::HIL_SENSOR(m) => self.on_sensor(m, out, clock, now_us),
+            MavMessage::HIL_STATE_QUATERNION(m) => {
+                self.on_state(m);
+                Ok(())
+            }
+            MavMessage::COMMAND_LONG(m) if self.for_me(m.target_system) => {
+                let c = Command {
+                    command: m.command,
+                    params: [m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7],
+                };
+                self.on_command(&c, out)
+            }
+            MavMessage::COMMAND_INT(m) if self.for_me(m.target_system) => {
+                // x and y are integers (degrees × 1e7 in global frames);
+                // none of the commands answered here reads them.
+                let c = Command {
+                    command: m.command,
+                    params: [m.param1, m.param2, m.param3, m.param4, m.x as f32, m.y as f32, m.z],
+                };
+                self.on_command(&c, out)
+            }
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
+            // PX4's receiver turns SET_MODE into DO_SET_MODE (base mode,
+            // main and sub mode from the custom mode), answered alike.
+            MavMessage::SET_MODE(m) if self.for_me(m.target_system) => {
+                let c = Command {
+                    command: MavCmd::MAV_CMD_DO_SET_MODE,
+                    params: [
+                        f32::from(m.base_mode.bits()),
+                        ((m.custom_mode >> 16) & 0xff) as f32,
+                        (m.custom_mode >> 24) as f32,
+                        0.0,
+                        0.0,
+                        0.0,
+                        0.0,
+                    ],
+                };
+                self.on_command(&c, out)
+            }
+            MavMessage::SETUP_SIGNING(m) if self.for_me(m.target_system) => {
+                let armed = self.armed;
+                let Some(s) = out.signing() else {
+                    return Ok(());
+                };
+                let authenticated = s.last_authenticated();
+                match s.setup(&m.secret_key, m.initial_timestamp, authenticated, armed) {
+                    Ok(done) => {
+                        let kept = (s.key().copied().unwrap_or([0; 32]), s.timestamp());
+                        self.say(out, MavSeverity::MAV_SEVERITY_NOTICE, format_args!("{done}"))?;
+                        // No key is kept as the all-zero key (PX4's blank key file).
+                        match out.storage().map(|st| st.set_signing(&kept.0, kept.1)) {
+                            Some(Err(e)) => self.say(
+                                out,
+                                MavSeverity::MAV_SEVERITY_ERROR,
+                                format_args!("signing key not stored: {e}"),
+                            ),
+                            _ => Ok(()),
+                        }
+                    }
+                    Err(why) => self.say(out, MavSeverity::MAV_SEVERITY_WARNING, format_args!("{why}")),
+                }
+            }
+            MavMessage::MANUAL_CONTROL(m) if self.for_me(m.target) => {
+                self.manual = Some(([m.x, m.y, m.z, m.r], self.last_sensor_us.unwrap_or(0)));
+                Ok(())
+            }
+            MavMessage::MISSION_COUNT(_)
+            | MavMessage::MISSION_ITEM_INT(_)
+            | MavMessage::MISSION_REQUEST_LIST(_)
+            | MavMessage::MISSION_REQUEST_INT(_)
+            | MavMessage::MISSION_REQUEST(_)
+            | MavMessage::MISSION_CLEAR_ALL(_)
+            | MavMessage::MISSION_SET_CURRENT(_)
+            | MavMessage::MISSION_ACK(_) => {
+                let t_us = self.last_sensor_us.unwrap_or(0);
+                if self.mode == FlightMode::Mission
+                    && !matches!(
+                        msg,
+                        MavMessage::MISSION_REQUEST_LIST(_)
+                            | MavMessage::MISSION_REQUEST_INT(_)
+                            | MavMessage::MISSION_REQUEST(_)
+                            | MavMessage::MISSION_ACK(_)
+                    )
+                {
+                    // The mission flown is not changed under it: Hold first.
+                    let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
+                }
+                self.mission
+                    .handle(msg, t_us, self.home.as_ref(), self.home_ned_m[2], out)?;
+                Ok(())
+            }
+            MavMessage::PARAM_REQUEST_LIST(m) if self.for_me(m.target_system) => {
+                for i in 0..PARAM_COUNT {
+                    self.send_param(i, out)?;
+                }
+                Ok(())
+            }
+            MavMessage::PARAM_REQUEST_READ(m) if self.for_me(m.target_system) => {
+                let index = if m.param_index >= 0 {
+                    Some(m.param_index as usize).filter(|&i| i < PARAM_COUNT)
+                } else {
+                    param_index_of(&m.param_id[..])
+                };
+                match index {
+                    Some(i) => self.send_param(i, out),
+                    None => self.status(
+                        out,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &m.param_id[..],
+                        Refusal::Unknown,
+                    ),
+                }
+            }
+            MavMessage::PARAM_SET(m) if self.for_me(m.target_system) => self.on_param_set(m, out),
+            MavMessage::HEARTBEAT(h) => {
+                if h.mavtype == MavType::MAV_TYPE_GCS {
+                    self.gcs_seen_us = Some(self.last_sensor_us.unwrap_or(0));
+                }
+                Ok(())
+            }
+            _ => {
+                self.counters.ignored = self.counters.ignored.wrapping_add(1);
+                Ok(())
+            }
+        }
+    }
+
+    /// `target` is this system (0: broadcast).
+    fn for_me(&self, target: u8) -> bool {
+        target == 0 || target == self.system_id
+    }
+
+    /// The flight mode.
+    pub fn mode(&self) -> FlightMode {
+        self.mode
+    }
+
+    /// The automatic modes' settings (PX4's parameters).
+    pub fn nav_settings(&self) -> &NavSettings {
+        &self.nav
+    }
+
+    /// A `STATUSTEXT` naming parameter `id` and why it was refused.
+    fn status<S: MavSink>(&self, out: &mut S, sev: MavSeverity, id: &[u8], why: Refusal) -> Result<(), S::Error> {
+        let len = id.iter().position(|&b| b == 0).unwrap_or(id.len());
+        let name = core::str::from_utf8(&id[..len]).unwrap_or("?");
+        self.say(out, sev, format_args!("{name}: {why}"))
+    }
+
+    /// Sends a `STATUSTEXT` (cut at 50 characters).
+    fn say<S: MavSink>(&self, out: &mut S, severity: MavSeverity, text: core::fmt::Arguments) -> Result<(), S::Error> {
+        let mut t = Text { buf: [0; 50], len: 0 };
+        let _ = core::fmt::write(&mut t, text);
+        out.send(
+            Peer::GroundStation,
+            &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                severity,
+                text: t.buf.into(),
+            }),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,139 @@
+//! PX4's HIL inputs: `HIL_SENSOR` (one estimator step), the barometer and
+//! magnetometer in it, `HIL_STATE_QUATERNION` fixes (and on the host, the
+//! simulator's true state).
+
+use super::*;
+
+impl MavVehicle {
+    /// Flies `truth` (the simulator's true state, NED about home: the
+    /// origin of `HIL_STATE_QUATERNION`'s first fix) in place of the
+    /// estimate, from the estimator's alignment on: the controller alone,
+    /// for measuring it against a peer given perfect state. Host builds
+    /// only (`truth-state`); the images fly their estimate.
+    #[cfg(feature = "truth-state")]
+    pub fn fly_truth(&mut self, truth: fc_core::control::StateEstimate<f32>) {
+        self.core.navigator_mut().set_truth(Some(truth));
+    }
+
+    pub(in crate::vehicle) fn on_sensor<S: MavSink, C: CycleClock>(
+        &mut self,
+        m: &HIL_SENSOR_DATA,
+        out: &mut S,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), S::Error> {
+        let Ok(s) = hil::imu_from_hil_sensor(m) else {
+            self.counters.sensors_refused = self.counters.sensors_refused.wrapping_add(1);
+            return Ok(());
+        };
+        let mut answer = Answer::default();
+        if self.last_sensor_us.is_none_or(|t| s.time_us < t) {
+            // The first sample, or a simulator that started again: a new time line.
+            self.core.open_session();
+            self.home = None;
+            self.last_fix_us = None;
+            self.baro.reset();
+            self.mag_ref_rad = None;
+            self.mag_due.reset();
+            for (k, st) in self.streams.iter_mut().enumerate() {
+                *st = (STREAMS[k].1, s.time_us);
+            }
+        }
+        let dt_s = self
+            .last_sensor_us
+            .map_or(0.0, |t| s.time_us.saturating_sub(t) as f32 * 1e-6);
+        self.last_sensor_us = Some(s.time_us);
+        if let Some(alt) = s.baro_alt_m {
+            self.on_baro(s.time_us, alt);
+        }
+        if let Some(mag) = s.mag_frd_gauss {
+            self.on_mag(s.time_us, &mag);
+        }
+        self.seq = self.seq.wrapping_add(1);
+        let _ = self
+            .core
+            .imu_step(self.seq, s.time_us, &s.imu, &mut answer, clock, now_us);
+        self.cycles = (answer.cycles, clock.hz());
+        self.counters.steps = self.counters.steps.wrapping_add(1);
+        let u = Vector4::from(answer.u.unwrap_or([0.0; 4]));
+        let cmd = self.mixer.map(|m| m.commands(&u));
+        let armed = self.armed && cmd.is_some();
+        self.motors = match cmd {
+            Some(c) if armed => c.commands,
+            _ => [0.0; 4],
+        };
+        if armed && cmd.is_some_and(|c| c.clamped) {
+            self.counters.clamped_steps = self.counters.clamped_steps.wrapping_add(1);
+        }
+        out.send(
+            Peer::Simulator,
+            &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.armed)),
+        )?;
+        self.watch_ground_station(s.time_us, out)?;
+        self.mission.tick(s.time_us, out)?;
+        self.fly_mode(s.time_us, dt_s, out)?;
+        self.telemetry(s.time_us, out)
+    }
+
+    /// A barometric altitude (`HIL_SENSOR`, flagged): fused as the height
+    /// above home at most every [`BARO_PERIOD_US`], once the estimator has
+    /// a position. Its first reading is referenced to the estimated height
+    /// then (a barometer's altitude is above sea level, and drifts with the
+    /// weather: what is fused is its change).
+    pub(in crate::vehicle) fn on_baro(&mut self, t_us: u64, alt_m: f32) {
+        let est_down_m = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        let Some(fix) = self.baro.fix(t_us, alt_m, est_down_m) else {
+            return;
+        };
+        self.core.push_fix(&fix);
+        self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
+    }
+
+    /// A magnetometer reading (`HIL_SENSOR`, all three axes flagged): its
+    /// tilt-compensated heading ([`hil::mag_heading_rad`], levelled with the
+    /// estimated roll and pitch) fused at most every [`BARO_PERIOD_US`].
+    /// The first reading is referenced to the estimated heading then, which
+    /// removes the declination (no world magnetic model on board).
+    pub(in crate::vehicle) fn on_mag(&mut self, t_us: u64, mag_frd: &Vector3<f32>) {
+        let Some(est) = self.core.navigator().estimate() else {
+            return;
+        };
+        let e = est.euler();
+        let Some(psi_mag) = hil::mag_heading_rad(mag_frd, e[0], e[1]) else {
+            return;
+        };
+        if !self.mag_due.due(t_us, BARO_PERIOD_US) {
+            return;
+        }
+        let reference = *self.mag_ref_rad.get_or_insert(psi_mag - e[2]);
+        let fix = Fix {
+            yaw_rad: Some(fc_core::control::wrap_pi(psi_mag - reference)),
+            yaw_sigma_rad: MAG_SIGMA_RAD,
+            ..Fix::EMPTY
+        };
+        self.core.push_fix(&fix);
+        self.counters.mag_fixes = self.counters.mag_fixes.wrapping_add(1);
+    }
+
+    pub(in crate::vehicle) fn on_state(&mut self, m: &HIL_STATE_QUATERNION_DATA) {
+        if !hil::on_earth(m) {
+            self.counters.states_refused = self.counters.states_refused.wrapping_add(1);
+            return;
+        }
+        let home = *self.home.get_or_insert(Home::of(m));
+        self.reported_ned_m = Some(home.ned_m(m.lat, m.lon, m.alt));
+        let period_us = u64::from(self.core.settings().fix_period_ms) * 1000;
+        if self.last_fix_us.is_some_and(|t| m.time_usec < t + period_us) {
+            return;
+        }
+        match hil::fix_from_hil_state(m, &home, &StateFixSigmas::MOCAP_LIKE) {
+            Ok(mut f) => {
+                // A mocap gives position and heading, not velocity.
+                f.vel_ned_mps = None;
+                self.core.push_fix(&f);
+                self.last_fix_us = Some(m.time_usec);
+            }
+            Err(_) => self.counters.states_refused = self.counters.states_refused.wrapping_add(1),
+        }
+    }
+}
