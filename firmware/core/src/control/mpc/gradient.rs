@@ -1,0 +1,291 @@
+//! The MPC's step-time work besides the QP: the observer update, the
+//! reference over the horizon in the heading frame, and the QP's gradient
+//! by adjoint recursion.
+
+use super::*;
+
+impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T, N, M, NZ> {
+    /// Adjoint gradient of the state cost for the errors `e[k] = x[k] − r[k]`
+    /// of steps 1..=N: per-move sums of `Bdᵀλ_{k+1}`.
+    pub(super) fn state_gradient(&self, e: &[Vec12<T>; N]) -> SVector<T, NZ> {
+        if self.decoupled {
+            let mut g = SVector::<T, NZ>::zeros();
+            let (z, y, x, w) = CHANNELS;
+            self.channel_gradient(z, 0, e, &mut g);
+            self.channel_gradient(y, 1, e, &mut g);
+            self.channel_gradient(x, 2, e, &mut g);
+            self.channel_gradient(w, 3, e, &mut g);
+            return g;
+        }
+        self.dense_gradient(e)
+    }
+
+    /// [`Mpc::state_gradient`] of one channel: the adjoint recursion on the
+    /// states `idx` of input `ch` alone (the others are not coupled to it).
+    /// The indices are constants once inlined, so each product is a few
+    /// loads and multiply-adds with no index arithmetic.
+    #[inline(always)]
+    pub(super) fn channel_gradient<const K: usize>(
+        &self,
+        idx: [usize; K],
+        ch: usize,
+        e: &[Vec12<T>; N],
+        g: &mut SVector<T, NZ>,
+    ) {
+        // Terminal step: P·e restricted to the channel.
+        let mut lambda = [T::zero(); K];
+        for (a, &i) in idx.iter().enumerate() {
+            let mut s = T::zero();
+            for &j in idx.iter() {
+                s += self.p_term[(i, j)] * e[N - 1][j];
+            }
+            lambda[a] = s;
+        }
+        let mut k = N - 1;
+        loop {
+            let mut gk = T::zero();
+            for (b, &j) in idx.iter().enumerate() {
+                gk += self.bd[(j, ch)] * lambda[b];
+            }
+            g[4 * block_of::<M>(k) + ch] += gk;
+            if k == 0 {
+                return;
+            }
+            k -= 1;
+            let mut next = [T::zero(); K];
+            for (a, &i) in idx.iter().enumerate() {
+                let mut s = self.q[i] * e[k][i];
+                for (b, &j) in idx.iter().enumerate() {
+                    s += self.ad[(j, i)] * lambda[b];
+                }
+                next[a] = s;
+            }
+            lambda = next;
+        }
+    }
+
+    /// [`Mpc::state_gradient`] over all 12 states (a model that does not decouple).
+    pub(super) fn dense_gradient(&self, e: &[Vec12<T>; N]) -> SVector<T, NZ> {
+        let mut g = SVector::<T, NZ>::zeros();
+        let mut lambda = Vec12::<T>::zeros();
+        for k in (0..N).rev() {
+            let w = if k == N - 1 {
+                mul(&self.p_term, &e[k])
+            } else {
+                self.q.component_mul(&e[k])
+            };
+            lambda = w + tr_mul(&self.ad, &lambda);
+            // x[k] is the state after input step k: its λ feeds input step k.
+            let gk = tr_mul(&self.bd, &lambda);
+            let b = block_of::<M>(k);
+            for c in 0..4 {
+                g[4 * b + c] += gk[c];
+            }
+        }
+        g
+    }
+
+    /// The state cost's gradient (references zero) of the free response
+    /// from `x0` under the per-step input `input(k)` added to the
+    /// prediction: the design's one simulation, for the Hessian's columns
+    /// and the responses `Gx`, `Gw`, `Gt`.
+    pub(super) fn response_gradient(&self, x0: Vec12<T>, input: &dyn Fn(usize) -> Vec12<T>) -> SVector<T, NZ> {
+        let mut x = [Vec12::<T>::zeros(); N];
+        let mut xk = x0;
+        for (k, xs) in x.iter_mut().enumerate() {
+            xk = mul(&self.ad, &xk) + input(k);
+            *xs = xk;
+        }
+        self.state_gradient(&x)
+    }
+
+    /// State in the frame of heading `yaw`, in the form's coordinates.
+    pub(super) fn heading_state(&self, est: &StateEstimate<T>, yaw: T) -> Vec12<T> {
+        let frame = HeadingFrame::new(yaw);
+        let mut x = Vec12::<T>::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&est.pos_ned_m));
+        x.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&est.vel_ned_mps));
+        let att = self.attitude_coords(&est.att, &frame);
+        x.fixed_rows_mut::<3>(6).copy_from(&att);
+        x.fixed_rows_mut::<3>(9).copy_from(&est.rates_frd_radps);
+        x
+    }
+
+    /// Attitude `q` relative to a heading frame in the form's coordinates.
+    pub(super) fn attitude_coords(&self, q: &Vector4<T>, frame: &HeadingFrame<T>) -> Vector3<T> {
+        let qr = frame.attitude(q);
+        match self.cfg.form {
+            AttitudeForm::Quaternion => Vector3::new(qr[1], qr[2], qr[3]),
+            AttitudeForm::Euler => {
+                let e = quat_to_euler(&qr);
+                Vector3::new(e[0], e[1], wrap_pi(e[2]))
+            }
+        }
+    }
+
+    /// Reference at prediction step `k` (1-based) as a heading-frame state and
+    /// the input reference `U_ref − U_hover`.
+    pub(super) fn reference_state(
+        &self,
+        sp: &Setpoint<T>,
+        dist_acc_ned: &Vector3<T>,
+        yaw: T,
+        frame: &HeadingFrame<T>,
+    ) -> (Vec12<T>, Vector4<T>) {
+        // Target calculation of offset-free MPC: in feed-forward mode the
+        // attitude and thrust are those that produce the reference acceleration
+        // *given the estimated disturbance* (thrust must supply a_ref − d̂), and
+        // the torque references cancel the estimated moment. Without this the
+        // attitude weights pull against the tilt that holds off the wind.
+        let mut spd = *sp;
+        let mut torque_ref = Vector3::<T>::zeros();
+        if self.cfg.reference == ReferenceMode::Feedforward {
+            spd.acc_ned_mps2 -= *dist_acc_ned;
+            let p = &self.params;
+            torque_ref = Vector3::new(
+                -p.inertia_kgm2[0] * self.dist[3] / p.arm_m,
+                -p.inertia_kgm2[1] * self.dist[4] / p.arm_m,
+                -p.inertia_kgm2[2] * self.dist[5],
+            );
+        }
+        let ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
+        let lim = lit::<T>(self.cfg.max_heading_error_rad);
+        // The heading error the reference asks for, capped.
+        let dpsi = crate::math::limit(wrap_pi(ar.yaw_rad - yaw), lim);
+        let mut r = Vec12::<T>::zeros();
+        r.fixed_rows_mut::<3>(0).copy_from(&frame.to_frame(&sp.pos_ned_m));
+        r.fixed_rows_mut::<3>(3).copy_from(&frame.to_frame(&sp.vel_ned_mps));
+        // The reference attitude relative to the heading frame: for ZYX
+        // angles `q_h⁻¹ ⊗ q(φ, θ, ψ_h + Δψ) = q(φ, θ, Δψ)`, so its Euler
+        // coordinates are (φ, θ, Δψ) and its quaternion that of (φ, θ, Δψ),
+        // without a round trip through the frame.
+        let att = match self.cfg.form {
+            AttitudeForm::Euler => Vector3::new(ar.roll_rad, ar.pitch_rad, dpsi),
+            AttitudeForm::Quaternion => {
+                let q = crate::model::euler_to_quat(ar.roll_rad, ar.pitch_rad, dpsi);
+                let q = if q[0] < T::zero() { -q } else { q };
+                Vector3::new(q[1], q[2], q[3])
+            }
+        };
+        r.fixed_rows_mut::<3>(6).copy_from(&att);
+        r.fixed_rows_mut::<3>(9).copy_from(&ar.rates_frd_radps);
+        let du = Vector4::new(
+            ar.thrust_n - self.u_hover[0],
+            torque_ref[0],
+            torque_ref[1],
+            torque_ref[2],
+        );
+        (r, du)
+    }
+
+    /// Setpoint `k` prediction steps ahead: the preview if complete, else the
+    /// current setpoint extrapolated along its velocity, acceleration and jerk.
+    pub(super) fn horizon_setpoint(&self, sp: &Setpoint<T>, k: usize) -> Setpoint<T> {
+        if self.preview_valid {
+            return self.preview[k - 1];
+        }
+        sp.extrapolate(lit::<T>(self.cfg.pred_dt_s) * lit::<T>(k as f64))
+    }
+
+    /// The disturbance estimate with its force part in `frame`.
+    pub(super) fn dist_in(&self, frame: &HeadingFrame<T>) -> SVector<T, 6> {
+        let mut d = self.dist;
+        d.fixed_rows_mut::<3>(0)
+            .copy_from(&frame.to_frame(&self.dist.fixed_rows::<3>(0).into_owned()));
+        d
+    }
+
+    /// Observer update from the previous step's prediction (and, with a
+    /// trend, the low-passed rate of the horizontal estimate).
+    ///
+    /// The observer model is the ZOH at the execution period `T`; a step of
+    /// measured length `dt` ([`Controller::elapsed`]) scales the predicted
+    /// change by `dt/T` (exact to first order in `dt`; the second-order
+    /// error `dt·(dt − T)·A·ẋ/2` is ≈ 1e-5 m/s on a 2 ms step), and so the
+    /// innovations are read against the right interval, not as a
+    /// disturbance.
+    pub(super) fn observe(&mut self, est: &StateEstimate<T>) {
+        let t_nominal = lit::<T>(self.cfg.exec_dt_s);
+        let dt = self.next_dt.take().unwrap_or(t_nominal);
+        let Some(tau) = self.cfg.observer_tau_s else { return };
+        // The thrust and yaw torque the rotors delivered over the step: the
+        // lag's mean over it, `u + (u₀ − u)·(τr/dt)·(1 − e^(−dt/τr))` from
+        // `u₀` at its start towards the input sent `u` (exact for a
+        // first-order lag). Roll and pitch keep the input sent.
+        let du_applied = if self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero() {
+            if self.lag_factors.0 != dt {
+                let r = dt / self.params.rotor_tau_s;
+                let decay = (-r).exp();
+                self.lag_factors = (dt, decay, (T::one() - decay) / r);
+            }
+            let (_, decay, mean) = self.lag_factors;
+            let u0 = self.du_delivered;
+            self.du_delivered = self.du_prev + (u0 - self.du_prev) * decay;
+            let mut applied = self.du_prev;
+            for c in LAGGED_CHANNELS {
+                applied[c] += (u0[c] - self.du_prev[c]) * mean;
+            }
+            applied
+        } else {
+            self.du_prev
+        };
+        let Some((x_prev, yaw_prev)) = self.last else { return };
+        self.last_dt = dt;
+        let scale = dt / t_nominal;
+        let frame = HeadingFrame::new(yaw_prev);
+        // Disturbance in the previous heading frame.
+        let mut dh = self.dist_in(&frame);
+        let meas = self.heading_state(est, yaw_prev);
+        // Only the velocity and rate rows of the prediction are read.
+        let mut nu = Vec12::<T>::zeros();
+        for i in [3, 4, 5, 9, 10, 11] {
+            let mut p = T::zero();
+            for j in 0..12 {
+                p += self.ad_e[(i, j)] * x_prev[j];
+            }
+            for c in 0..4 {
+                p += self.bd_e[(i, c)] * du_applied[c];
+            }
+            for c in 0..6 {
+                p += self.wd_e[(i, c)] * dh[c];
+            }
+            nu[i] = meas[i] - (x_prev[i] + (p - x_prev[i]) * scale);
+        }
+        // Attribute velocity and rate innovations to the disturbance, low-passed.
+        let gain = (dt / lit::<T>(tau)).min(T::one());
+        let gain_m = (dt / lit::<T>(self.cfg.observer_moment_tau_s)).min(T::one());
+        for i in 0..3 {
+            let bf = self.wd_e[(3 + i, i)] * scale;
+            let bm = self.wd_e[(9 + i, 3 + i)] * scale;
+            if bf > T::zero() {
+                dh[i] += gain * nu[3 + i] / bf;
+            }
+            if bm > T::zero() {
+                dh[3 + i] += gain_m * nu[9 + i] / bm;
+            }
+        }
+        // Back to NED and clamp to a physical range (±1 g, ±100 rad/s²).
+        let f_ned = frame.to_ned(&dh.fixed_rows::<3>(0).into_owned());
+        dh.fixed_rows_mut::<3>(0).copy_from(&f_ned);
+        let g = self.params.gravity_mps2;
+        for i in 0..3 {
+            dh[i] = dh[i].max(-g).min(g);
+            dh[3 + i] = dh[3 + i].max(lit(-100.0)).min(lit(100.0));
+        }
+        if !dh.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        if self.cfg.disturbance_trend_s.is_some() {
+            // The trend's rate filter (see `disturbance_rate`): two cascaded
+            // low-passes of the horizontal estimate. Differencing the estimate
+            // directly would pass its noise at a gain of 1/dt.
+            let a = (dt / lit::<T>(self.cfg.disturbance_rate_filter_s)).min(T::one());
+            for i in 0..2 {
+                let l1 = self.dist_lp[0][i] + a * (dh[i] - self.dist_lp[0][i]);
+                self.dist_lp[0][i] = l1;
+                self.dist_lp[1][i] += a * (l1 - self.dist_lp[1][i]);
+            }
+        }
+        self.dist = dh;
+    }
+}
