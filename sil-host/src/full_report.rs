@@ -570,7 +570,7 @@ pub fn write_report(o: &ReportOptions) -> Result<Written> {
             md.push_str(
                 "The thumbv7em image in QEMU's netduinoplus2 (`-icount shift=0`: SysTick counts 0.168 per executed \
                  instruction), flown in lockstep over the emulated USART on a short set-point, beside the same \
-                 flight in-process. Worst-case budgets: the book's firmware chapter, `firmware/stm32f405/src/bin/budget.rs`. The \
+                 flight in-process. Worst-case budgets: the book's firmware chapter, `firmware/stm32f405/src/bin/budget/main.rs`. The \
                  firmware's failsafe timer runs on the frames' simulated time, so a busy host cannot trigger it: \
                  the failsafe column is 0 unless the flight itself starves the controller of valid frames.\n\n\
                  | controller | steps | instructions mean | instructions max | RMSE x/y/z m, QEMU | RMSE x/y/z m, in-process | failsafe entries |\n\

@@ -1,5 +1,5 @@
 //! Every budget the images are held to, in one place, each with the reason
-//! it is what it is. The cycle harness (`src/bin/budget.rs`), the tests
+//! it is what it is. The cycle harness (`src/bin/budget/main.rs`), the tests
 //! (`tests/tests/image.rs`, `tests/tests/qemu.rs`), `./test.sh` (the image
 //! as flashed) and the book (`tools/claims.py` reads this file: each
 //! constant is the figure `budget_<name in lower case>`) take them from

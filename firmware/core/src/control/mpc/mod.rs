@@ -171,7 +171,7 @@ impl MpcConfig {
     /// still but lost the robustness sweep's worst corner. The whole image
     /// step (IMU sample, estimator with a fix, this MPC, output) is at worst
     /// 63 k / 68 k instructions Euler / quaternion in QEMU, 85 % / 91 % of
-    /// a 1 kHz step at CPI 1.5 × margin 1.5 (`src/bin/budget.rs`).
+    /// a 1 kHz step at CPI 1.5 × margin 1.5 (`src/bin/budget/main.rs`).
     ///
     /// Tuning (docs/book/src/mpc.md): position weights 800 (z 120) and
     /// velocity weights 20 (z 8) for tracking; heavy roll/pitch-rate
