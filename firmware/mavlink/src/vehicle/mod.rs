@@ -50,6 +50,7 @@ use fc_loop::{FcConfig, FlightCore, Outbox};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
+use nalgebra::{Vector3, Vector4};
 
 mod commands;
 mod flight;
@@ -61,10 +62,9 @@ mod streams;
 pub use commands::autopilot_version;
 #[cfg(test)]
 use commands::FORCE;
+pub use flight::{setpoint_from_target, streamed_jerk, JERK_GAP_MAX_MS, JERK_MAX_MPS3};
 #[cfg(test)]
 use parameters::param_id;
-pub use flight::{setpoint_from_target, streamed_jerk, JERK_GAP_MAX_MS, JERK_MAX_MPS3};
-use nalgebra::{Vector3, Vector4};
 pub use parameters::{param_index_of, PARAM_COUNT};
 pub use streams::{MIN_INTERVAL_US, STREAMS};
 
