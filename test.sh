@@ -99,9 +99,11 @@ cargo clippy -p fc-crazyflie --target thumbv7em-none-eabihf --bins -- -D warning
 # two packages, so the same features: nothing is compiled twice).
 cargo build -p fc-stm32f405 -p fc-crazyflie --release --target thumbv7em-none-eabihf --target-dir target/firmware-image
 stage "the hardware builds (clock-tree bring-up on, defmt over RTT; not run here)"
-cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
+# Linted in the QEMU images' target dir (the dependencies' checks are
+# theirs); built in target/hardware, as a user's `cargo board-build` does.
+cargo clippy -p fc-stm32f405 --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins -- -D warnings
 cargo board-build  # the alias a user with a board runs (.cargo/config.toml; `cargo board-run` flashes it)
-cargo clippy -p fc-crazyflie --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins --target-dir target/hardware -- -D warnings
+cargo clippy -p fc-crazyflie --target thumbv7em-none-eabihf --no-default-features --features log-rtt --bins -- -D warnings
 cargo cf-build  # the Crazyflie 2.1 image as flashed (the book's "The Crazyflie 2.1")
 # The file cfloader and dfu-util write at 0x08004000: it must begin with the
 # image's vector table (the initial SP inside the 128 KiB SRAM, below the
