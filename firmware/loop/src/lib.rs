@@ -29,6 +29,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod arming;
 pub mod baro;
 pub mod nav;
 pub mod params;

@@ -3,6 +3,7 @@
 //! `AUTOPILOT_VERSION`.
 
 use super::*;
+use fc_loop::arming::{self, ArmRefusal, ArmingState};
 
 /// `param2` of a disarm that is obeyed in the air too (MAVLink's magic number).
 pub(super) const FORCE: f32 = 21196.0;
@@ -193,21 +194,30 @@ impl MavVehicle {
     /// Arms if the estimator navigates; the controller is designed afresh.
     /// Where it arms is home; it holds there (or, in Offboard, flies the
     /// streamed set-point; an automatic mode becomes Hold).
-    pub(in crate::vehicle) fn arm(&mut self) -> Result<(), &'static str> {
+    pub(in crate::vehicle) fn arm(&mut self) -> Result<(), ArmRefusal> {
         if self.armed {
             return Ok(());
         }
-        if self.mixer.is_none() {
-            return Err("not started");
-        }
-        let est = match (self.core.navigator().mode(), self.core.navigator().estimate()) {
-            (NavMode::Navigating, Some(e)) => e,
-            (NavMode::Aligning, _) => return Err("estimator aligning"),
-            _ => return Err("estimator failsafe"),
+        // The one arming check (fc_loop::arming). PX4's HIL gives no
+        // battery reading, and nothing here locks or sees a tumble.
+        let estimate = self.core.navigator().estimate();
+        let nav = match (self.core.navigator().mode(), estimate) {
+            (NavMode::Navigating, None) => NavMode::Failsafe,
+            (mode, _) => mode,
         };
+        arming::check(&ArmingState {
+            sensor_down: None,
+            battery_v: None,
+            battery_floor_v: 0.0,
+            locked: false,
+            tumbled: false,
+            nav,
+            started: self.mixer.is_some(),
+        })?;
+        let est = estimate.ok_or(ArmRefusal::EstimatorFailsafe)?;
         self.core
             .try_select(self.core.settings().controller)
-            .map_err(|_| "controller design failed")?;
+            .map_err(|_| ArmRefusal::DesignFailed)?;
         let yaw = fc_core::quat_to_euler(&est.att)[2];
         match (self.mode, self.offboard) {
             (FlightMode::Offboard, Some((sp, _))) => {

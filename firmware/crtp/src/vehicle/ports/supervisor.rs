@@ -2,6 +2,7 @@
 //! bits; the checks before a take-off.
 
 use crate::vehicle::*;
+use fc_loop::arming::{self, ArmingState};
 
 impl CrtpCore {
     pub(in crate::vehicle) fn can_fly(&self) -> bool {
@@ -49,32 +50,18 @@ impl CrtpCore {
         if self.armed {
             return true;
         }
-        if let Err(down) = self.sensors {
-            self.say(format_args!("arming refused: {down}"));
-            return false;
-        }
-        match self.vbat_v {
-            None => {
-                self.say(format_args!("arming refused: no battery reading yet"));
-                return false;
-            }
-            Some(v) if v < BATTERY_FLOOR_V => {
-                self.say(format_args!(
-                    "arming refused: battery {v:.2} V below {BATTERY_FLOOR_V:.2} V"
-                ));
-                return false;
-            }
-            Some(_) => {}
-        }
-        let why = match self.core.navigator().mode() {
-            _ if self.locked => Some("locked: restart"),
-            _ if self.tumbled => Some("tumbled: recover"),
-            NavMode::Aligning => Some("estimator aligning"),
-            NavMode::Failsafe => Some("estimator failsafe"),
-            NavMode::Navigating if self.mixer.is_none() => Some("not started"),
-            NavMode::Navigating => None,
+        // The one arming check (fc_loop::arming), with everything this
+        // vehicle's supervisor monitors.
+        let state = ArmingState {
+            sensor_down: self.sensors.err().map(|d| (d.device, d.why)),
+            battery_v: Some(self.vbat_v),
+            battery_floor_v: BATTERY_FLOOR_V,
+            locked: self.locked,
+            tumbled: self.tumbled,
+            nav: self.core.navigator().mode(),
+            started: self.mixer.is_some(),
         };
-        if let Some(why) = why {
+        if let Err(why) = arming::check(&state) {
             self.say(format_args!("arming refused: {why}"));
             return false;
         }
