@@ -138,6 +138,30 @@ pub const BOOT_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Lqr, Att
 /// one can be designed: the tuned Euler PD (no design step, cannot fail).
 pub const FALLBACK_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Pd, AttitudeForm::Euler);
 
+/// The flight loop's answers to one step, kept: what a protocol adapter
+/// needs of them (the inputs to apply, the step's cycle count), without
+/// a wire message in between.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct StepAnswer {
+    /// The inputs `[U1 N, U2 N, U3 N, U4 N·m]` of the step (`None`: no
+    /// `Actuator` answer, the step was not flown).
+    pub u: Option<[f32; 4]>,
+    /// The cycles the step took (its `Telemetry`).
+    pub cycles: u32,
+}
+
+impl Outbox for StepAnswer {
+    type Error = core::convert::Infallible;
+    fn send(&mut self, msg: &FromFc) -> Result<(), Self::Error> {
+        match msg {
+            FromFc::Actuator { u, .. } => self.u = Some(*u),
+            FromFc::Telemetry { cycles, .. } => self.cycles = *cycles,
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
 /// Where the flight loop's answers go: encoded into frames on a
 /// [`ByteLink`] ([`Framed`]), or to a front end that translates them.
 pub trait Outbox {

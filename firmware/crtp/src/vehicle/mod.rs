@@ -52,7 +52,6 @@ use crate::supervisor::{ImuCounters, ImuGuard, SensorDown, BATTERY_FLOOR_V, FAIL
 use crate::toc::{self, Name};
 use crate::{f32_at, frames, u16_at, CrtpCounters, CrtpError, Packet, Port};
 use core::borrow::BorrowMut;
-use core::convert::Infallible;
 use core::fmt::Write as _;
 use fc_core::control::Setpoint;
 use fc_core::control::{AnyController, Controller};
@@ -61,7 +60,7 @@ use fc_core::model::airframe::Mixer;
 use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
 use fc_loop::params::{ParamType, Refusal, Settings, PARAMS};
-use fc_loop::{run_job, FcConfig, Job, Loop, Mutex, Outbox, ParamPlan};
+use fc_loop::{run_job, FcConfig, Job, Loop, Mutex, ParamPlan, StepAnswer};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use nalgebra::{Vector3, Vector4};
@@ -136,22 +135,6 @@ enum Mode {
         last_us: u64,
         handover_us: Option<u64>,
     },
-}
-
-/// The flight loop's answers to one `Imu` step, kept.
-#[derive(Default)]
-struct Answer {
-    u: Option<[f32; 4]>,
-}
-
-impl Outbox for Answer {
-    type Error = Infallible;
-    fn send(&mut self, msg: &FromFc) -> Result<(), Infallible> {
-        if let FromFc::Actuator { u, .. } = msg {
-            self.u = Some(*u);
-        }
-        Ok(())
-    }
 }
 
 /// Console text, cut into packets of up to 30 bytes as the Crazyflie's

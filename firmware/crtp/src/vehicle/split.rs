@@ -28,7 +28,7 @@ pub fn fly_step<M: Mutex, C: CycleClock>(
 where
     M::T: BorrowMut<CrtpCore>,
 {
-    let mut answer = Answer::default();
+    let mut answer = StepAnswer::default();
     if let Some(job) = step.job {
         let _ = run_job(&mut LoopOf(v), ctrl, job, &mut answer, clock);
     }

@@ -36,7 +36,6 @@ use crate::mission::{Mission, Step, MISSION_CAPACITY};
 use crate::modes::{joystick_velocity, nav_index_of, FlightMode, Legs, NavSettings, Route, NAV_PARAMS};
 use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
-use core::convert::Infallible;
 use fc_core::control::Setpoint;
 use fc_core::estimate::Fix;
 use fc_core::model::airframe::Mixer;
@@ -46,8 +45,7 @@ use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
 use fc_loop::planner::Reference;
 use fc_loop::schedule::Schedule;
-use fc_loop::{FcConfig, FlightCore, Outbox};
-use fc_proto::FromFc;
+use fc_loop::{FcConfig, FlightCore, StepAnswer};
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
 use nalgebra::{Vector3, Vector4};
@@ -142,25 +140,6 @@ pub const BARO_PERIOD_US: u64 = fc_loop::baro::PERIOD_US;
 pub const BARO_SIGMA_M: f32 = fc_loop::baro::SIGMA_M;
 /// 1σ assumed of a magnetometer heading, rad (2°).
 pub const MAG_SIGMA_RAD: f32 = 0.035;
-
-/// The flight loop's answers to one `Imu` step, kept.
-#[derive(Default)]
-struct Answer {
-    u: Option<[f32; 4]>,
-    cycles: u32,
-}
-
-impl Outbox for Answer {
-    type Error = Infallible;
-    fn send(&mut self, msg: &FromFc) -> Result<(), Infallible> {
-        match msg {
-            FromFc::Actuator { u, .. } => self.u = Some(*u),
-            FromFc::Telemetry { cycles, .. } => self.cycles = *cycles,
-            _ => {}
-        }
-        Ok(())
-    }
-}
 
 /// A 50-byte `STATUSTEXT` being written.
 struct Text {

@@ -26,7 +26,7 @@ impl MavVehicle {
             self.counters.sensors_refused = self.counters.sensors_refused.wrapping_add(1);
             return Ok(());
         };
-        let mut answer = Answer::default();
+        let mut answer = StepAnswer::default();
         if self.last_sensor_us.is_none_or(|t| s.time_us < t) {
             // The first sample, or a simulator that started again: a new time line.
             self.core.open_session();

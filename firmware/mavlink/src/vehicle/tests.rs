@@ -5,6 +5,7 @@
 use super::*;
 use crate::modes::NAV_PARAMS;
 use crate::{encode, MavHeader, MavReader, MAX_FRAME};
+use core::convert::Infallible;
 use fc_core::model::VehicleParams;
 use hal_shim::CycleClock;
 
