@@ -69,7 +69,9 @@ impl core::fmt::Display for ArmRefusal {
         match self {
             ArmRefusal::SensorDown { device, why } => write!(f, "{device}: {why}"),
             ArmRefusal::NoBatteryReading => f.write_str("no battery reading yet"),
-            ArmRefusal::BatteryLow { v, floor_v } => write!(f, "battery {v:.2} V below {floor_v:.2} V"),
+            ArmRefusal::BatteryLow { v, floor_v } => {
+                write!(f, "battery {} V below {} V", Centi(*v), Centi(*floor_v))
+            }
             ArmRefusal::Locked => f.write_str("locked: restart"),
             ArmRefusal::Tumbled => f.write_str("tumbled: recover"),
             ArmRefusal::Aligning => f.write_str("estimator aligning"),
@@ -77,6 +79,32 @@ impl core::fmt::Display for ArmRefusal {
             ArmRefusal::NotStarted => f.write_str("not started"),
             ArmRefusal::DesignFailed => f.write_str("controller design failed"),
         }
+    }
+}
+
+/// A value with two decimals, as `{:.2}` writes it, without core's float
+/// formatting: the refusal is reachable from every image's arming path, and
+/// that machinery is ≈ 20 KiB of flash on the M4 (`firmware-mavlink` has
+/// no other use for it).
+struct Centi(f32);
+
+impl core::fmt::Display for Centi {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let v = self.0;
+        if v.is_nan() {
+            return f.write_str("NaN");
+        }
+        if v.is_infinite() {
+            return f.write_str(if v > 0.0 { "inf" } else { "-inf" });
+        }
+        if v.abs() >= 1e7 {
+            // Past what an i32 of hundredths holds: no voltage, said so.
+            return f.write_str(if v > 0.0 { ">1e7" } else { "<-1e7" });
+        }
+        let c = libm::roundf(v * 100.0) as i32;
+        let sign = if c < 0 { "-" } else { "" };
+        let c = c.unsigned_abs();
+        write!(f, "{sign}{}.{:02}", c / 100, c % 100)
     }
 }
 
@@ -242,5 +270,15 @@ mod tests {
             ..all
         };
         assert!(matches!(check(&no_sensor), Err(ArmRefusal::BatteryLow { .. })));
+    }
+
+    /// The voltages are written as `{:.2}` writes them.
+    #[test]
+    fn volts_have_two_decimals_as_core_writes_them() {
+        for v in [0.0f32, 3.1, 3.2, 3.999, 4.2, 12.6, 0.004, -1.25, 0.5, 100.0] {
+            assert_eq!(format!("{}", Centi(v)), format!("{v:.2}"), "{v}");
+        }
+        assert_eq!(format!("{}", Centi(f32::NAN)), "NaN");
+        assert_eq!(format!("{}", Centi(f32::INFINITY)), "inf");
     }
 }
