@@ -953,3 +953,42 @@ fn integer_parameters_are_typed_as_integers_in_the_toc() {
     assert_eq!(r.payload(), &[c[0], c[1], before[3]]);
     assert_eq!(read(&mut v, ctl), before);
 }
+
+/// The log variables read, by name, what they say: the estimate in the
+/// Crazyflie's world frame (x forward, y left, z up) and its variances,
+/// the heading counter-clockwise in degrees, the set-point, the battery
+/// and the supervisor's state; before an estimate, its variables are 0.
+#[test]
+fn log_variables_read_the_estimate_set_point_and_supervisor_by_name() {
+    let at = |g: &str, n: &str| LOG_VARS.iter().position(|x| x.group == g && x.name == n).unwrap();
+    let fresh = CrtpVehicle::new(Settings::os4()).unwrap();
+    let vals = fresh.log_values();
+    for (g, n) in [
+        ("stateEstimate", "x"),
+        ("stateEstimate", "y"),
+        ("stateEstimate", "yaw"),
+        ("kalman", "varPZ"),
+    ] {
+        assert_eq!(vals[at(g, n)].to_bits(), 0, "{g}.{n} before an estimate");
+    }
+
+    let v = at_rest(3000);
+    let vals = v.log_values();
+    let e = v.core().navigator().estimate().unwrap();
+    assert_eq!(vals[at("stateEstimate", "x")], e.pos_ned_m[0]);
+    assert_eq!(vals[at("stateEstimate", "y")], -e.pos_ned_m[1]);
+    assert_eq!(vals[at("stateEstimate", "z")], -e.pos_ned_m[2]);
+    assert_eq!(vals[at("stateEstimate", "vz")], -e.vel_ned_mps[2]);
+    let yaw_deg = -e.euler()[2] * 180.0 / core::f32::consts::PI;
+    assert!((vals[at("stateEstimate", "yaw")] - yaw_deg).abs() < 1e-4);
+    assert_eq!(vals[at("stabilizer", "yaw")], vals[at("stateEstimate", "yaw")]);
+    let cov = v.core().navigator().estimator().covariance();
+    assert_eq!(vals[at("kalman", "varPX")], cov[(0, 0)]);
+    assert_eq!(vals[at("kalman", "varPZ")], cov[(2, 2)]);
+    assert_eq!(vals[at("ctrltarget", "z")], -v.core().setpoint().pos_ned_m[2]);
+    assert_eq!(vals[at("pm", "vbat")], 3.9);
+    assert_eq!(vals[at("sys", "armed")], 0.0);
+    assert_eq!(vals[at("sys", "canfly")], 1.0);
+    assert_eq!(vals[at("motor", "m1")], 0.0);
+    assert_eq!(vals[at("supervisor", "info")], f32::from(v.supervisor_bits()));
+}

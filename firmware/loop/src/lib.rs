@@ -35,6 +35,7 @@ pub mod nav;
 pub mod params;
 pub mod planner;
 pub mod schedule;
+pub mod telemetry;
 
 mod flight_core;
 mod jobs;

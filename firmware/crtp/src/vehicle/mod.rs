@@ -69,7 +69,7 @@ mod ports;
 mod split;
 mod step;
 
-pub use ports::logging::{LogVar, LOG_VARS};
+pub use ports::logging::{LogSample, LogVar, LOG_VARS};
 pub(crate) use ports::param::put_typed;
 pub use ports::param::{param_entry, param_types, Extra, EXTRA_PARAMS, PARAM_COUNT};
 pub use split::{fly_step, pass_step, run_work};

@@ -2,6 +2,29 @@
 //! the telemetry of the flight stack.
 
 use crate::vehicle::*;
+use fc_loop::telemetry::Snapshot;
+
+/// What the log variables are read from: the flight stack's snapshot and
+/// the CRTP vehicle's own state, taken once per sampling.
+#[derive(Debug, Clone, Copy)]
+pub struct LogSample {
+    /// The flight loop's snapshot.
+    pub flight: Snapshot,
+    /// The step's inputs `[U1 N, U2 N, U3 N, U4 N·m]`.
+    pub u: Vector4<f32>,
+    /// The motor commands, fractions of full scale.
+    pub motors: [f32; 4],
+    /// The battery, V (0 before a reading).
+    pub battery_v: f32,
+    /// The nRF51's power state (`pm.state`).
+    pub pm_state: i8,
+    /// The supervisor would let it fly.
+    pub can_fly: bool,
+    /// Armed.
+    pub armed: bool,
+    /// The supervisor's state bits.
+    pub supervisor: u16,
+}
 
 /// One log variable: its name, its log type, and how it is read.
 #[derive(Debug, Clone, Copy)]
@@ -12,32 +35,88 @@ pub struct LogVar {
     pub name: &'static str,
     /// Log type ([`crate::log::types`]).
     pub kind: u8,
+    /// Its value in a sample.
+    pub get: fn(&LogSample) -> f32,
 }
 
-macro_rules! vars {
-    ($($group:literal . $name:literal : $kind:ident),+ $(,)?) => {
-        /// The log TOC, in id order. Positions and velocities are in the
-        /// Crazyflie's world frame (x forward, y left, z up; m, m/s),
-        /// angles in degrees (roll right-side-down, pitch nose-up and yaw
-        /// counter-clockwise positive), `kalman.varP*` the estimator's
-        /// position variances (m²), `pm.vbat` volts, `motor.m*` the
-        /// commands as fractions of 65 535.
-        pub const LOG_VARS: &[LogVar] = &[$(LogVar { group: $group, name: $name, kind: log::types::$kind }),+];
-    };
+const fn var(group: &'static str, name: &'static str, kind: u8, get: fn(&LogSample) -> f32) -> LogVar {
+    LogVar { group, name, kind, get }
 }
 
-vars! {
-    "stateEstimate"."x": FLOAT, "stateEstimate"."y": FLOAT, "stateEstimate"."z": FLOAT,
-    "stateEstimate"."vx": FLOAT, "stateEstimate"."vy": FLOAT, "stateEstimate"."vz": FLOAT,
-    "stateEstimate"."roll": FLOAT, "stateEstimate"."pitch": FLOAT, "stateEstimate"."yaw": FLOAT,
-    "stabilizer"."roll": FLOAT, "stabilizer"."pitch": FLOAT, "stabilizer"."yaw": FLOAT,
-    "stabilizer"."thrust": FLOAT,
-    "kalman"."varPX": FLOAT, "kalman"."varPY": FLOAT, "kalman"."varPZ": FLOAT,
-    "pm"."vbat": FLOAT, "pm"."state": I8,
-    "motor"."m1": U16, "motor"."m2": U16, "motor"."m3": U16, "motor"."m4": U16,
-    "sys"."canfly": U8, "sys"."armed": U8, "supervisor"."info": U16,
-    "ctrltarget"."x": FLOAT, "ctrltarget"."y": FLOAT, "ctrltarget"."z": FLOAT,
+/// Degrees per radian.
+const DEG: f32 = 180.0 / core::f32::consts::PI;
+
+/// The Crazyflie's world-frame attitude, degrees: roll, pitch, heading
+/// (0 without an estimate).
+fn attitude_deg(s: &LogSample) -> [f32; 3] {
+    if !s.flight.estimated {
+        return [0.0; 3];
+    }
+    let e = s.flight.euler_rad;
+    [e[0] * DEG, e[1] * DEG, frames::heading_from_cf_yaw(e[2]) * DEG]
 }
+
+/// An estimated NED vector in the Crazyflie's world frame (0 without an
+/// estimate).
+fn estimated(s: &LogSample, ned: &Vector3<f32>) -> [f32; 3] {
+    if s.flight.estimated {
+        frames::cf_from_ned(ned)
+    } else {
+        [0.0; 3]
+    }
+}
+
+/// A motor command as the Crazyflie logs it, of 65 535.
+fn motor(s: &LogSample, i: usize) -> f32 {
+    s.motors[i].clamp(0.0, 1.0) * 65535.0
+}
+
+use crate::log::types::{FLOAT, I8, U16, U8};
+
+/// The log TOC, in id order, each variable beside how it is read.
+/// Positions and velocities are in the Crazyflie's world frame (x forward,
+/// y left, z up; m, m/s), angles in degrees (roll right-side-down, pitch
+/// nose-up and yaw counter-clockwise positive), `kalman.varP*` the
+/// estimator's position variances (m²), `pm.vbat` volts, `motor.m*` the
+/// commands as fractions of 65 535.
+pub const LOG_VARS: &[LogVar] = &[
+    var("stateEstimate", "x", FLOAT, |s| estimated(s, &s.flight.pos_ned_m)[0]),
+    var("stateEstimate", "y", FLOAT, |s| estimated(s, &s.flight.pos_ned_m)[1]),
+    var("stateEstimate", "z", FLOAT, |s| estimated(s, &s.flight.pos_ned_m)[2]),
+    var("stateEstimate", "vx", FLOAT, |s| estimated(s, &s.flight.vel_ned_mps)[0]),
+    var("stateEstimate", "vy", FLOAT, |s| estimated(s, &s.flight.vel_ned_mps)[1]),
+    var("stateEstimate", "vz", FLOAT, |s| estimated(s, &s.flight.vel_ned_mps)[2]),
+    var("stateEstimate", "roll", FLOAT, |s| attitude_deg(s)[0]),
+    var("stateEstimate", "pitch", FLOAT, |s| attitude_deg(s)[1]),
+    var("stateEstimate", "yaw", FLOAT, |s| attitude_deg(s)[2]),
+    var("stabilizer", "roll", FLOAT, |s| attitude_deg(s)[0]),
+    var("stabilizer", "pitch", FLOAT, |s| attitude_deg(s)[1]),
+    var("stabilizer", "yaw", FLOAT, |s| attitude_deg(s)[2]),
+    var("stabilizer", "thrust", FLOAT, |s| {
+        (s.u[0] / s.flight.u1_max_n).clamp(0.0, 1.0) * 65535.0
+    }),
+    var("kalman", "varPX", FLOAT, |s| s.flight.pos_var_m2[0]),
+    var("kalman", "varPY", FLOAT, |s| s.flight.pos_var_m2[1]),
+    var("kalman", "varPZ", FLOAT, |s| s.flight.pos_var_m2[2]),
+    var("pm", "vbat", FLOAT, |s| s.battery_v),
+    var("pm", "state", I8, |s| f32::from(s.pm_state)),
+    var("motor", "m1", U16, |s| motor(s, 0)),
+    var("motor", "m2", U16, |s| motor(s, 1)),
+    var("motor", "m3", U16, |s| motor(s, 2)),
+    var("motor", "m4", U16, |s| motor(s, 3)),
+    var("sys", "canfly", U8, |s| f32::from(u8::from(s.can_fly))),
+    var("sys", "armed", U8, |s| f32::from(u8::from(s.armed))),
+    var("supervisor", "info", U16, |s| f32::from(s.supervisor)),
+    var("ctrltarget", "x", FLOAT, |s| {
+        frames::cf_from_ned(&s.flight.setpoint_ned_m)[0]
+    }),
+    var("ctrltarget", "y", FLOAT, |s| {
+        frames::cf_from_ned(&s.flight.setpoint_ned_m)[1]
+    }),
+    var("ctrltarget", "z", FLOAT, |s| {
+        frames::cf_from_ned(&s.flight.setpoint_ned_m)[2]
+    }),
+];
 
 /// A log variable's TOC name.
 fn log_name(v: &LogVar) -> Name<'static> {
@@ -69,40 +148,27 @@ impl CrtpCore {
         }
     }
 
+    /// What the log variables are read from now.
+    pub fn log_sample(&self) -> LogSample {
+        LogSample {
+            flight: self.core.snapshot(),
+            u: self.u,
+            motors: self.motors(),
+            battery_v: self.battery_v(),
+            pm_state: self.pm_state,
+            can_fly: self.can_fly(),
+            armed: self.armed,
+            supervisor: self.supervisor_bits(),
+        }
+    }
+
     /// The log variables' values now, in [`LOG_VARS`] order.
     pub fn log_values(&self) -> [f32; LOG_VARS.len()] {
+        let sample = self.log_sample();
         let mut v = [0.0; LOG_VARS.len()];
-        let deg = 180.0 / core::f32::consts::PI;
-        if let Some(e) = self.core.navigator().estimate() {
-            let p = frames::cf_from_ned(&e.pos_ned_m);
-            let vel = frames::cf_from_ned(&e.vel_ned_mps);
-            let rpy = e.euler();
-            let att = [rpy[0] * deg, rpy[1] * deg, frames::heading_from_cf_yaw(rpy[2]) * deg];
-            v[0..3].copy_from_slice(&p);
-            v[3..6].copy_from_slice(&vel);
-            v[6..9].copy_from_slice(&att);
-            v[9..12].copy_from_slice(&att);
-            let cov = self.core.navigator().estimator().covariance();
-            for i in 0..3 {
-                v[13 + i] = cov[(i, i)];
-            }
+        for (value, var) in v.iter_mut().zip(LOG_VARS) {
+            *value = (var.get)(&sample);
         }
-        let u1_max = 4.0
-            * self.core.vehicle().kf_ns2
-            * self.core.vehicle().omega_max_radps
-            * self.core.vehicle().omega_max_radps;
-        v[12] = (self.u[0] / u1_max).clamp(0.0, 1.0) * 65535.0;
-        v[16] = self.battery_v();
-        v[17] = f32::from(self.pm_state);
-        let motors = self.motors();
-        for i in 0..4 {
-            v[18 + i] = motors[i].clamp(0.0, 1.0) * 65535.0;
-        }
-        v[22] = f32::from(u8::from(self.can_fly()));
-        v[23] = f32::from(u8::from(self.armed));
-        v[24] = f32::from(self.supervisor_bits());
-        let target = frames::cf_from_ned(&self.core.setpoint().pos_ned_m);
-        v[25..28].copy_from_slice(&target);
         v
     }
 
