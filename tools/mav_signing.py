@@ -158,7 +158,11 @@ class Session(Gcs):
         self.m.mav.setup_signing_send(self.sys, self.comp, list(KEY), ts)
         self.m.setup_signing(KEY, sign_outgoing=True, initial_timestamp=ts, link_id=0)
         n = len(self.texts)
-        hb = self.recv(["HEARTBEAT"], timeout=10.0)
+        # 30 s of wall time, as every other heartbeat wait here: the image in
+        # QEMU beats at 1 Hz of its own time, which runs at a sixth of wall
+        # time or slower in lockstep with rotorpy (10 s missed it once in CI).
+        # pymavlink drops unsigned frames from here on, so what arrives verified.
+        hb = self.recv(["HEARTBEAT"], timeout=30.0)
         self.check(hb is not None and getattr(hb, "_signed", False),
                    "after SETUP_SIGNING the vehicle's frames verify with the key")
         self.settle(0.5)
@@ -241,7 +245,7 @@ class Session(Gcs):
         ts = now_2015()
         self.m.mav.setup_signing_send(self.sys, self.comp, list(KEPT_KEY), ts)
         self.m.setup_signing(KEPT_KEY, sign_outgoing=True, initial_timestamp=ts, link_id=0)
-        hb = self.recv(["HEARTBEAT"], timeout=10.0)
+        hb = self.recv(["HEARTBEAT"], timeout=30.0)
         self.check(hb is not None and getattr(hb, "_signed", False), "a second key set: frames verify with it")
         fs = self.param("FS_TIMEOUT_MS")
         self.m.mav.param_set_send(self.sys, self.comp, b"FS_TIMEOUT_MS", fs + 200.0, REAL32)
@@ -267,7 +271,7 @@ class Session(Gcs):
         self.check(not self.armed(), "unsigned: arm ignored")
         ts = now_2015()
         self.m.setup_signing(KEPT_KEY, sign_outgoing=True, initial_timestamp=ts, link_id=0)
-        hb = self.recv(["HEARTBEAT"], timeout=10.0)
+        hb = self.recv(["HEARTBEAT"], timeout=30.0)
         first = self.vehicle_timestamp()
         self.check(hb is not None and getattr(hb, "_signed", False) and first is not None
                    and kept["timestamp"] is not None and first > kept["timestamp"],
