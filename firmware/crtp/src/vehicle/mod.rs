@@ -85,8 +85,6 @@ pub const TUMBLE_TILT_RAD: f32 = core::f32::consts::FRAC_PI_3;
 /// `cosf` works in f64, which the Cortex-M4 has no unit for: ≈ 1 000
 /// instructions a step).
 pub const COS_TUMBLE_TILT: f32 = 0.5;
-/// A landing has landed within this of its goal height, m.
-pub const LANDED_M: f32 = 0.05;
 /// 1σ of an external position (the Crazyflie's `locSrv.extPosStdDev`), m.
 pub const EXTPOS_SIGMA_M: f32 = 0.01;
 /// 1σ of an external pose's heading (`locSrv.extQuatStdDev`), rad.

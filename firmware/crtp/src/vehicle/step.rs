@@ -132,7 +132,7 @@ impl CrtpCore {
             self.say(format_args!("tumbled: motors off"));
         }
         if let Mode::High { seg, landing: true } = self.mode {
-            if seg.finished(t_us) && (est.pos_ned_m[2] - seg.goal().pos_ned_m[2]).abs() < LANDED_M {
+            if seg.finished(t_us) && fc_loop::land::on_ground(&est, seg.goal().pos_ned_m[2]) {
                 self.mode = Mode::Idle;
                 self.say(format_args!("landed: motors off"));
             }

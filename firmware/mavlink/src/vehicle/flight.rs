@@ -198,12 +198,14 @@ impl MavVehicle {
                     self.mode = FlightMode::Hold;
                     return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("takeoff done: hold"));
                 }
-                // Landed (PX4's land detector, simplified): landing, on the
-                // ground it armed on and not moving up or down.
+                // Landed (fc_loop::land): landing, on the ground it armed on
+                // and not moving up or down.
                 let landing = self.mode == FlightMode::Land || self.route_descending();
-                let on_ground = self.core.navigator().estimate().is_some_and(|e| {
-                    (e.pos_ned_m[2] - self.home_ned_m[2]).abs() < LANDED_M && e.vel_ned_mps[2].abs() < LANDED_MPS
-                });
+                let on_ground = self
+                    .core
+                    .navigator()
+                    .estimate()
+                    .is_some_and(|e| fc_loop::land::on_ground(&e, self.home_ned_m[2]));
                 if landing && on_ground {
                     self.disarm();
                     return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("landed: disarmed"));

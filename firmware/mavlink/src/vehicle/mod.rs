@@ -123,10 +123,6 @@ pub struct VehicleCounters {
 
 /// Height above the arming point from which the vehicle is in the air, m.
 pub const IN_AIR_M: f32 = 0.15;
-/// Within this of the height it armed at, a landing vehicle has landed, m.
-pub const LANDED_M: f32 = 0.03;
-/// Slower than this vertically (estimated), a landing vehicle on the ground has landed, m/s.
-pub const LANDED_MPS: f32 = 0.2;
 
 /// `AUTOPILOT_VERSION` (148), sent when asked for.
 const AUTOPILOT_VERSION_ID: u32 = 148;
