@@ -1,5 +1,5 @@
 //! The board's part of the supervisor. The vehicle's own
-//! (`fc_crtp::vehicle::CrtpCore` with `fc_crtp::supervisor`) decides:
+//! (`fc_crtp::vehicle::CrtpShared` with `fc_crtp::supervisor`) decides:
 //! arming (estimator aligned, battery above 3.2 V, not tumbled or locked,
 //! the board's sensors up), tumble (beyond 60°: motors off), every IMU
 //! sample (a bad or missing one replaced by the last good one for 10 ms,
@@ -11,7 +11,7 @@
 //!   ([`down`]: the part and a short reason; the driver's full
 //!   [`SensorError`] goes to the image's log);
 //! - **each sample or its absence**: an [`crate::ImuSource`]'s error is a
-//!   missing sample (`None` to `CrtpCore::imu_begin`), counted there.
+//!   missing sample (`None` to `CrtpShared::imu_begin`), counted there.
 //!
 //! A data-ready line that stops altogether runs no step at all; the IWDG,
 //! fed only while the IMU task steps (`fc_stm32f405::watchdog`), then resets the
@@ -39,7 +39,7 @@ pub fn down(e: &SensorError) -> SensorDown {
 }
 
 /// The start-up results of the IMU and the barometer as the vehicle takes
-/// them (`CrtpCore::set_sensors`): the first that failed, or `Ok`.
+/// them (`CrtpShared::set_sensors`): the first that failed, or `Ok`.
 pub fn sensors_up(imu: Result<(), SensorError>, baro: Result<(), SensorError>) -> Result<(), SensorDown> {
     imu.and(baro).map_err(|e| down(&e))
 }

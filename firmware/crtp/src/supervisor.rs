@@ -3,7 +3,7 @@
 //! whether the battery is above its floor, and every IMU sample.
 //!
 //! - **Arming** is refused while a sensor the board reported down
-//!   ([`SensorDown`], [`crate::vehicle::CrtpCore::set_sensors`]) or the
+//!   ([`SensorDown`], [`crate::vehicle::CrtpShared::set_sensors`]) or the
 //!   battery is below [`BATTERY_FLOOR_V`], as well as for the vehicle's own
 //!   reasons (aligning, tumbled, locked).
 //! - **Every IMU sample** goes through an [`ImuGuard`]: a sample the board

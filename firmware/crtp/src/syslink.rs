@@ -15,7 +15,7 @@
 //! STM32 says `RADIO_READY` at boot; the nRF51 echoes it and reports the
 //! battery (`PM_BATTERY_STATE`: flags, V, A).
 
-use crate::vehicle::{CrtpCore, CrtpSink};
+use crate::vehicle::{CrtpShared, CrtpSink};
 use crate::{f32_at, CrtpError, Packet, MAX_PACKET};
 use core::borrow::BorrowMut;
 use fc_loop::Mutex;
@@ -379,7 +379,7 @@ impl<const Q: usize> CrtpSink for Downlink<Q> {
 /// The vehicle is reached through a [`Mutex`] and locked one packet at a
 /// time, never while the radio's USART is written: in-process it is the
 /// [`crate::vehicle::CrtpVehicle`] itself, on an image a short lock of the
-/// [`CrtpCore`] the IMU task shares.
+/// [`CrtpShared`] the IMU task shares.
 #[derive(Debug)]
 pub struct Syslink<const Q: usize> {
     decoder: Decoder,
@@ -435,7 +435,7 @@ impl<const Q: usize> Syslink<Q> {
     /// console lines, the log blocks sampled) goes to the downlink queue.
     pub fn poll<M: Mutex>(&mut self, vehicle: &mut M)
     where
-        M::T: BorrowMut<CrtpCore>,
+        M::T: BorrowMut<CrtpShared>,
     {
         // A full queue drops the block's sample (counted), as a radio would.
         let down = &mut self.down;
@@ -445,7 +445,7 @@ impl<const Q: usize> Syslink<Q> {
     /// Feeds the bytes `rx` from the nRF51; answers on `link`.
     pub fn receive<M: Mutex, L: ByteLink>(&mut self, rx: &[u8], vehicle: &mut M, link: &mut L) -> Result<(), L::Error>
     where
-        M::T: BorrowMut<CrtpCore>,
+        M::T: BorrowMut<CrtpShared>,
     {
         for &b in rx {
             match self.decoder.push(b) {
@@ -468,7 +468,7 @@ impl<const Q: usize> Syslink<Q> {
         link: &mut L,
     ) -> Result<(), L::Error>
     where
-        M::T: BorrowMut<CrtpCore>,
+        M::T: BorrowMut<CrtpShared>,
     {
         match p.ty() {
             types::RADIO_RAW | types::RADIO_RAW_BROADCAST => {

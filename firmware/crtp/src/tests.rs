@@ -371,11 +371,11 @@ fn a_simulator_writes_the_flight_loops_table_by_index() {
     let mass = index_of(b"VEH_MASS").unwrap();
     // In range: applied (a re-design, the motors being off), the value in force returned.
     assert_eq!(v.write_param(mass, 0.75), Ok(0.75));
-    assert_eq!((PARAMS[mass].get)(v.core().settings()), 0.75);
+    assert_eq!((PARAMS[mass].get)(v.flight_loop().settings()), 0.75);
     // Out of range or not a number: refused, the value in force kept.
     assert!(matches!(v.write_param(mass, -1.0), Err(Refusal::Range { .. })));
     assert!(matches!(v.write_param(mass, f32::NAN), Err(Refusal::Range { .. })));
-    assert_eq!((PARAMS[mass].get)(v.core().settings()), 0.75);
+    assert_eq!((PARAMS[mass].get)(v.flight_loop().settings()), 0.75);
     // No such entry.
     assert_eq!(v.write_param(PARAMS.len(), 1.0), Err(Refusal::Unknown));
 }
@@ -512,7 +512,7 @@ fn the_simulators_redesigning_write_is_answered_by_the_controllers_side() {
         panic!("{answer:?}")
     };
     assert_eq!(value, 0.75);
-    assert_eq!(core.core().settings().vehicle.mass_kg, 0.75);
+    assert_eq!(core.flight_loop().settings().vehicle.mass_kg, 0.75);
 }
 
 /// A take-off forgets the controller's state (`ControllerWork::Reset`)
@@ -637,13 +637,13 @@ fn the_mixer_follows_a_motor_layout_write() {
     use fc_loop::params::{index_of, Airframe};
     use nalgebra::Vector4;
     let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
-    let selections = v.core().selections();
+    let selections = v.flight_loop().selections();
     // Hover thrust with a roll torque: each layout spreads it differently.
     let u = Vector4::new(6.0, 0.05, 0.0, 0.0);
     let before = v.mixer().unwrap().thrusts(&u);
     let frame = index_of(b"MOT_FRAME").unwrap();
     assert_eq!(v.write_param(frame, 4.0), Ok(4.0));
-    assert_eq!(v.core().selections(), selections, "no design");
+    assert_eq!(v.flight_loop().selections(), selections, "no design");
     let expected = Settings {
         airframe: Airframe::XCrazyflie,
         ..Settings::os4()
@@ -747,7 +747,7 @@ fn a_silent_imu_in_flight_is_held_for_10_ms_then_a_failsafe_descent() {
     }
     v.handle(&pk(Port::HighLevel, 0, &go), &mut out).unwrap();
     bad(&mut v, 5, &mut t_ms);
-    let sp = v.core().setpoint().pos_ned_m;
+    let sp = v.flight_loop().setpoint().pos_ned_m;
     assert!(sp[0].abs() < 1e-3 && sp[2] > -1.0, "descending where it was: {sp:?}");
     // Good samples again: the descent goes on, to the ground, motors off.
     rest(&mut v, t_ms, 6000);
@@ -773,7 +773,7 @@ fn the_barometer_is_fused_as_its_change_from_the_first_reading() {
     };
     let p0 = 101_325.0 - 120.0 * 12.0;
     let alt = |p: f32| fc_loop::baro::pressure_altitude_m(p).unwrap();
-    let down = |v: &CrtpVehicle| v.core().navigator().estimate().unwrap().pos_ned_m[2];
+    let down = |v: &CrtpVehicle| v.flight_loop().navigator().estimate().unwrap().pos_ned_m[2];
     assert!(down(&v).abs() < 0.01);
     // The board offers a reading every ms; 50 Hz are fused.
     let mut fused = 0;
@@ -788,7 +788,7 @@ fn the_barometer_is_fused_as_its_change_from_the_first_reading() {
     // the estimate there (with no other position source the filter's
     // velocity and accelerometer bias take part of it: it overshoots by
     // about 0.1 m over the next 5 s, then settles).
-    let rejected = |v: &CrtpVehicle| v.core().navigator().counters().alt_rejected;
+    let rejected = |v: &CrtpVehicle| v.flight_loop().navigator().counters().alt_rejected;
     for k in 3000..6000u64 {
         v.baro((k + 1) * 1000, alt(p0 - 2.4));
         v.imu_step((k + 1) * 1000, &imu, &[], &clock);
@@ -974,7 +974,7 @@ fn log_variables_read_the_estimate_set_point_and_supervisor_by_name() {
 
     let v = at_rest(3000);
     let vals = v.log_values();
-    let e = v.core().navigator().estimate().unwrap();
+    let e = v.flight_loop().navigator().estimate().unwrap();
     assert_eq!(vals[at("stateEstimate", "x")], e.pos_ned_m[0]);
     assert_eq!(vals[at("stateEstimate", "y")], -e.pos_ned_m[1]);
     assert_eq!(vals[at("stateEstimate", "z")], -e.pos_ned_m[2]);
@@ -982,10 +982,10 @@ fn log_variables_read_the_estimate_set_point_and_supervisor_by_name() {
     let yaw_deg = -e.euler()[2] * 180.0 / core::f32::consts::PI;
     assert!((vals[at("stateEstimate", "yaw")] - yaw_deg).abs() < 1e-4);
     assert_eq!(vals[at("stabilizer", "yaw")], vals[at("stateEstimate", "yaw")]);
-    let cov = v.core().navigator().estimator().covariance();
+    let cov = v.flight_loop().navigator().estimator().covariance();
     assert_eq!(vals[at("kalman", "varPX")], cov[(0, 0)]);
     assert_eq!(vals[at("kalman", "varPZ")], cov[(2, 2)]);
-    assert_eq!(vals[at("ctrltarget", "z")], -v.core().setpoint().pos_ned_m[2]);
+    assert_eq!(vals[at("ctrltarget", "z")], -v.flight_loop().setpoint().pos_ned_m[2]);
     assert_eq!(vals[at("pm", "vbat")], 3.9);
     assert_eq!(vals[at("sys", "armed")], 0.0);
     assert_eq!(vals[at("sys", "canfly")], 1.0);

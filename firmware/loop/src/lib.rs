@@ -38,11 +38,11 @@ pub mod planner;
 pub mod schedule;
 pub mod telemetry;
 
-mod flight_core;
+mod flight_loop;
 mod jobs;
 mod wire;
 
-pub use flight_core::FlightCore;
+pub use flight_loop::FlightLoop;
 pub use jobs::{
     apply_plan, fallback_controller, install, run_job, select, start_front_end, ControlJob, Design, Job, ParamPlan,
     Step,
@@ -93,7 +93,7 @@ pub enum TimeBase {
     /// time does not increase is not flown and is counted as out of order.
     Lockstep,
     /// Free-running (a vehicle): the caller's real clock, the `now_us` of
-    /// [`FlightCore::service`] and [`Loop::check_timeout`]; the
+    /// [`FlightLoop::service`] and [`Loop::check_timeout`]; the
     /// frames' `t_us` is not used.
     FreeRunning,
 }
@@ -109,7 +109,7 @@ impl Default for FcConfig {
     }
 }
 
-/// Bounds of a plausible sensor state (see `FlightCore`'s frame checks).
+/// Bounds of a plausible sensor state (see `FlightLoop`'s frame checks).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plausible {
     /// Largest position coordinate, m (NED).
@@ -177,7 +177,7 @@ pub trait Outbox {
 /// counters, the session, the parameters, the estimator and its schedule,
 /// the failsafe, the output held.
 ///
-/// [`FlightCore`] is a `Loop` and its controller, stepped in one call. An
+/// [`FlightLoop`] is a `Loop` and its controller, stepped in one call. An
 /// image that runs the estimator and the controller at two interrupt
 /// priorities keeps them apart: the `Loop` is shared (the sample's
 /// interrupt steps the estimator in it, [`Loop::on_frame`]), the controller
@@ -244,7 +244,7 @@ pub type Answers = heapless::Vec<FromFc, 4>;
 impl Loop {
     /// The loop with `settings`, nothing designed yet: its controller is
     /// the tuned Euler PD ([`FALLBACK_CONTROLLER`], which has no period of
-    /// its own) until a design ([`FlightCore::start`]). Built in place
+    /// its own) until a design ([`FlightLoop::start`]). Built in place
     /// (inlined), so that no stack copy of it is made.
     #[inline(always)]
     pub fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {

@@ -1,4 +1,4 @@
-//! FlightCore: handshake, lockstep, every failure class of the issue, the
+//! FlightLoop: handshake, lockstep, every failure class of the issue, the
 //! failsafe and its recovery, and a fuzzer over raw bytes.
 
 use super::*;
@@ -32,7 +32,7 @@ fn hover_state() -> [f32; 13] {
 }
 
 struct Rig {
-    fc: FlightCore,
+    fc: FlightLoop,
     link: LoopbackLink,
     clock: FakeClock,
 }
@@ -43,7 +43,7 @@ impl Rig {
     }
     fn with(cfg: FcConfig) -> Self {
         Self {
-            fc: FlightCore::new(cfg).unwrap(),
+            fc: FlightLoop::new(cfg).unwrap(),
             link: LoopbackLink::default(),
             clock: FakeClock(0.into()),
         }

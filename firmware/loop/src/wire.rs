@@ -49,7 +49,7 @@ pub fn setpoint_from_wire(w: &WireSetpoint) -> Option<Setpoint<f32>> {
 /// under `settings`: parameter `index`'s id and value in force, and why a
 /// write was refused (`refusal`; 0 when it was not, `Unknown`'s code for an
 /// index past the table). For a board whose simulator writes its
-/// parameters as [`FlightCore`] answers them (`firmware-crtp`).
+/// parameters as [`FlightLoop`] answers them (`firmware-crtp`).
 pub fn param_answer(settings: &params::Settings, index: u16, refusal: Option<params::Refusal>) -> FromFc {
     let p = params::PARAMS.get(usize::from(index));
     let mut id = [0u8; 16];

@@ -8,12 +8,12 @@
 //! | priority | task | interrupt | work |
 //! |---|---|---|---|
 //! | 4 | `radio_bytes` | USART6 receive | the nRF51's bytes into their queue (1 Mbaud: a byte every 10 µs), the link pended |
-//! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame), or pended by the board's IMU | decodes the simulator's frames, takes the board's sample; a sample steps the estimator ([`CrtpCore::imu_begin`]) and goes to the controller |
+//! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame), or pended by the board's IMU | decodes the simulator's frames, takes the board's sample; a sample steps the estimator ([`CrtpShared::imu_begin`]) and goes to the controller |
 //! | 3 | `gyro_ready`, `imu_bus_event`, `imu_bus_error` | EXTI15_10, I2C3_EV, I2C3_ER | the board's own IMU ([`ImuBus`]: the Crazyflie's BMI088; none in QEMU): data-ready starts the reads, the bus's interrupts advance them |
 //! | 2 | `controller` | CAN2_RX0 (pended) | flies each step on the controller ([`fly_step`]), drives the outputs, answers the simulator; a take-off's reset ([`run_work`]) |
 //! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle, answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
 //!
-//! The vehicle's shared part ([`CrtpCore`]) is locked for an estimator
+//! The vehicle's shared part ([`CrtpShared`]) is locked for an estimator
 //! step, a packet, a step's result; never for a controller step, a design
 //! or a USART write. A re-designing parameter write (tens of milliseconds,
 //! allowed only disarmed, and no take-off while it runs) borrows the
@@ -37,7 +37,7 @@ mod app {
     use fc_core::control::AnyController;
     use fc_core::estimate::{Fix, ImuSample};
     use fc_crtp::syslink::Syslink;
-    use fc_crtp::vehicle::{fly_step, pass_step, run_work, ControllerWork, CrtpCore, ImuStep};
+    use fc_crtp::vehicle::{fly_step, pass_step, run_work, ControllerWork, CrtpShared, ImuStep};
     use fc_loop::params::Refusal;
     use fc_loop::{fix_from_wire, Mutex};
     use fc_proto::{FrameDecoder, FromFc, ToFc};
@@ -71,7 +71,7 @@ mod app {
     #[shared]
     struct Shared {
         /// The vehicle without its controller.
-        v: &'static mut CrtpCore,
+        v: &'static mut CrtpShared,
         /// USART1's transmitter: the simulator's answers.
         sim_tx: Usart,
         /// What the tasks measured.
@@ -293,7 +293,7 @@ mod app {
 
     impl<V, T> Stepping<'_, V, T>
     where
-        V: rtic::Mutex<T = &'static mut CrtpCore>,
+        V: rtic::Mutex<T = &'static mut CrtpShared>,
         T: rtic::Mutex<T = Timing>,
     {
         /// The estimator's step of a sample taken at `t_us` (`None`:
@@ -402,7 +402,7 @@ mod app {
             // outputs show besides the motors.
             let (armed, nav, battery_v) = v.lock(|v| {
                 v.sample_logs();
-                (v.armed(), v.core().navigator().mode(), v.battery_v())
+                (v.armed(), v.flight_loop().navigator().mode(), v.battery_v())
             });
             outputs.report(armed, nav, battery_v);
             timing.lock(|t| {
@@ -483,7 +483,7 @@ mod app {
 
     impl<M, C> Handing<'_, M, C>
     where
-        M: Mutex<T = &'static mut CrtpCore>,
+        M: Mutex<T = &'static mut CrtpShared>,
         C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
     {
         /// Runs the re-design `work` on the controller, borrowed from the
@@ -505,11 +505,11 @@ mod app {
 
     impl<M, C> Mutex for Handing<'_, M, C>
     where
-        M: Mutex<T = &'static mut CrtpCore>,
+        M: Mutex<T = &'static mut CrtpShared>,
         C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
     {
-        type T = CrtpCore;
-        fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpCore) -> R) -> R {
+        type T = CrtpShared;
+        fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpShared) -> R) -> R {
             let (r, work) = self.v.lock(|v| {
                 let r = f(v);
                 (r, v.take_work())

@@ -1,7 +1,7 @@
 //! What the CRTP images share (`firmware-crtp` on the plain STM32F405,
 //! `firmware-crazyflie` on the Crazyflie 2.1), around the RTIC application
 //! both include (`src/crtp_app.rs`): syslink to the nRF51 radio on USART6,
-//! the vehicle ([`fc_crtp::vehicle::CrtpCore`] and its controller, the
+//! the vehicle ([`fc_crtp::vehicle::CrtpShared`] and its controller, the
 //! same code `sil-host crtp` runs in-process) behind it, and the
 //! simulator's sensors on USART1.
 //!
@@ -23,7 +23,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use fc_core::estimate::ImuSample;
 use fc_crtp::supervisor::ImuCounters;
 use fc_crtp::syslink::SyslinkCounters;
-use fc_crtp::vehicle::CrtpCore;
+use fc_crtp::vehicle::CrtpShared;
 use fc_proto::{encode, FromFc, MAX_FRAME};
 use hal_shim::stm32f405::{rx_overruns, Port, TxTimeout, Usart};
 use hal_shim::ByteLink;
@@ -42,7 +42,7 @@ pub const FIXES: usize = 4;
 pub trait Outputs {
     /// Applies the inputs `u` `[U1 N, U2 N, U3 N, U4 N·m]` of a step of
     /// the vehicle `v` (zero: motors off).
-    fn drive(&mut self, v: &CrtpCore, u: &Vector4<f32>);
+    fn drive(&mut self, v: &CrtpShared, u: &Vector4<f32>);
     /// After the step is answered, off its deadline and with the vehicle
     /// unlocked: what the outputs show besides the motors (LEDs) and their
     /// log lines, for a vehicle `armed` whose navigator is in `nav` on a

@@ -50,7 +50,7 @@ mod board;
 mod app {
     use crate::board;
     use fc_core::control::AnyController;
-    use fc_loop::{run_job, FcConfig, FlightCore, Job, Loop, Mutex, Outbox};
+    use fc_loop::{run_job, FcConfig, FlightLoop, Job, Loop, Mutex, Outbox};
     use fc_proto::{encode, Counters, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use fc_stm32f405::log_changes;
     use fc_stm32f405::timing::{StepTiming, Timing};
@@ -97,7 +97,7 @@ mod app {
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let (clock, tx) = board::bring_up();
-        let Some(fc) = flight_core() else {
+        let Some(fc) = flight_loop() else {
             board::fail("flight loop already taken");
         };
         if fc.start().is_err() {
@@ -315,8 +315,8 @@ mod app {
     /// `start`, after this frame is gone, so the design's stack is not
     /// beneath a copy of the loop.
     #[inline(never)]
-    fn flight_core() -> Option<&'static mut FlightCore> {
-        cortex_m::singleton!(: FlightCore = FlightCore::unstarted(FcConfig::default()))
+    fn flight_loop() -> Option<&'static mut FlightLoop> {
+        cortex_m::singleton!(: FlightLoop = FlightLoop::unstarted(FcConfig::default()))
     }
 }
 

@@ -10,7 +10,7 @@ use fc_core::control::StateEstimate;
 use fc_core::control::{ControllerSpec, Setpoint};
 use fc_core::QuatState;
 use fc_loop::nav::NavMode;
-use fc_loop::{setpoint_to_wire, FcConfig, FlightCore};
+use fc_loop::{setpoint_to_wire, FcConfig, FlightLoop};
 use fc_proto::{encode, FrameDecoder, FromFc, ToFc, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION};
 use hal_shim::host::{LoopbackLink, MonotonicClock};
 use std::io::{ErrorKind, Read, Write};
@@ -81,7 +81,7 @@ fn frame(m: &ToFc) -> Result<Vec<u8>> {
 enum Transport {
     /// The core in this process behind a loopback byte link.
     Local {
-        fc: Box<FlightCore>,
+        fc: Box<FlightLoop>,
         link: LoopbackLink,
         clock: MonotonicClock,
         t0: Instant,
@@ -106,7 +106,7 @@ pub struct FcClient {
 impl FcClient {
     /// The core in-process, reached through frames only.
     pub fn local() -> Result<Self> {
-        let fc = FlightCore::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("flight controller: {e}"))?;
+        let fc = FlightLoop::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("flight controller: {e}"))?;
         Ok(Self::with(Transport::Local {
             fc: Box::new(fc),
             link: LoopbackLink::default(),

@@ -2,7 +2,7 @@
 //! a TCP socket, one client after another.
 
 use anyhow::{bail, Result};
-use fc_loop::{FcConfig, FlightCore};
+use fc_loop::{FcConfig, FlightLoop};
 use hal_shim::host::MonotonicClock;
 use hal_shim::ByteLink;
 use std::io::{ErrorKind, Read, Write};
@@ -95,7 +95,7 @@ fn session(stream: TcpStream, o: &ServeOptions) -> Result<fc_proto::Counters> {
     // write then fails after `idle` instead of blocking the server forever.
     stream.set_write_timeout(Some(idle))?;
     let mut link = TcpLink(stream);
-    let mut fc = FlightCore::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("flight controller: {e}"))?;
+    let mut fc = FlightLoop::new(FcConfig::default()).map_err(|e| anyhow::anyhow!("flight controller: {e}"))?;
     let clock = MonotonicClock::default();
     let t0 = Instant::now();
     let mut last_valid = Instant::now();

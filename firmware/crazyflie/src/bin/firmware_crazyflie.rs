@@ -46,7 +46,7 @@ pub use target::{imu_bus, vehicle, BoardOutputs, ImuBus, WATCHDOG};
 mod target {
     use fc_crazyflie::leds::{self, pattern, Indication, LedPin, Leds, Lit};
     use fc_crazyflie::motors::{self, MotorOutput, CF21_LEGACY_PROPELLERS};
-    use fc_crtp::vehicle::{CrtpCore, CrtpVehicle};
+    use fc_crtp::vehicle::{CrtpShared, CrtpVehicle};
     use fc_loop::nav::NavMode;
     use fc_loop::params::{Airframe, Settings};
     use nalgebra::Vector4;
@@ -111,7 +111,7 @@ mod target {
     }
 
     impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
-        fn drive(&mut self, v: &CrtpCore, u: &Vector4<f32>) {
+        fn drive(&mut self, v: &CrtpShared, u: &Vector4<f32>) {
             // The vehicle's mixer follows every parameter write (`MOT_FRAME`
             // changes it without a design).
             let out = match (v.armed(), v.mixer()) {

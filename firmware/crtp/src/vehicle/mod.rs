@@ -3,16 +3,16 @@
 //! the flight loop ([`fc_loop::Loop`] and its controller) on its own
 //! sensors.
 //!
-//! It is two parts, as the flight loop is: [`CrtpCore`], everything but the
+//! It is two parts, as the flight loop is: [`CrtpShared`], everything but the
 //! controller (the packets, the modes, the supervisor, the loop), and the
 //! controller. In-process ([`CrtpVehicle`]) they step together. An image
 //! that runs the IMU, the controller and the link at three interrupt
 //! priorities keeps them apart: the IMU task takes each sample's estimator
-//! half ([`CrtpCore::imu_begin`]), the controller's task flies it
+//! half ([`CrtpShared::imu_begin`]), the controller's task flies it
 //! ([`fly_step`]) and runs the controller work a packet asked for
-//! ([`CrtpCore::take_work`], [`run_work`]) — a take-off's reset, a
+//! ([`CrtpShared::take_work`], [`run_work`]) — a take-off's reset, a
 //! parameter write that re-designs (answered once it is done) — and the
-//! link's task handles packets under short locks of the [`CrtpCore`].
+//! link's task handles packets under short locks of the [`CrtpShared`].
 //!
 //! Services (port: what), each port in a file of its own under `ports/`
 //! (the IMU step in `step.rs`, the image's split in `split.rs`):
@@ -218,7 +218,7 @@ enum Written {
     Later,
 }
 
-/// An IMU step's estimator half ([`CrtpCore::imu_begin`]), for the
+/// An IMU step's estimator half ([`CrtpShared::imu_begin`]), for the
 /// controller's side ([`fly_step`]).
 #[derive(Debug, Clone, Copy)]
 pub struct ImuStep {
@@ -229,32 +229,32 @@ pub struct ImuStep {
 }
 
 /// The flight controller behind CRTP in one piece (see the module's
-/// documentation): a [`CrtpCore`] (reached through `Deref`) and its
+/// documentation): a [`CrtpShared`] (reached through `Deref`) and its
 /// controller, whose work runs at once.
 pub struct CrtpVehicle {
-    core: CrtpCore,
+    shared: CrtpShared,
     ctrl: AnyController<f32>,
 }
 
 impl core::ops::Deref for CrtpVehicle {
-    type Target = CrtpCore;
-    fn deref(&self) -> &CrtpCore {
-        &self.core
+    type Target = CrtpShared;
+    fn deref(&self) -> &CrtpShared {
+        &self.shared
     }
 }
 
 impl core::ops::DerefMut for CrtpVehicle {
-    fn deref_mut(&mut self) -> &mut CrtpCore {
-        &mut self.core
+    fn deref_mut(&mut self) -> &mut CrtpShared {
+        &mut self.shared
     }
 }
 
 /// The vehicle reached directly: the controller work a locked moment
 /// asked for runs before the lock ends (syslink's packets, in-process).
 impl Mutex for CrtpVehicle {
-    type T = CrtpCore;
-    fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpCore) -> R) -> R {
-        let r = f(&mut self.core);
+    type T = CrtpShared;
+    fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpShared) -> R) -> R {
+        let r = f(&mut self.shared);
         self.run_pending();
         r
     }
@@ -273,7 +273,7 @@ impl CrtpVehicle {
     /// [`CrtpVehicle::start`] succeeds), for a static home on the image.
     pub fn unstarted(settings: Settings) -> Self {
         Self {
-            core: CrtpCore::unstarted(settings),
+            shared: CrtpShared::unstarted(settings),
             ctrl: fc_loop::fallback_controller(settings.vehicle),
         }
     }
@@ -282,19 +282,19 @@ impl CrtpVehicle {
     /// report as defaults: the built-in ones, where the vehicle booted with
     /// stored values (by default, the settings it was made with).
     pub fn set_defaults(&mut self, defaults: Settings) {
-        self.core.defaults = defaults;
+        self.shared.defaults = defaults;
     }
 
     /// Checks the settings and designs the controller in place.
     pub fn start(&mut self) -> Result<(), Refusal> {
-        self.core.mixer = Some(fc_loop::start_front_end(&mut self.core.core, &mut self.ctrl)?);
+        self.shared.mixer = Some(fc_loop::start_front_end(&mut self.shared.lp, &mut self.ctrl)?);
         Ok(())
     }
 
     /// The shared part and the controller apart, for an image that runs
     /// them in two tasks ([`fly_step`], [`run_work`]).
-    pub fn split(&mut self) -> (&mut CrtpCore, &mut AnyController<f32>) {
-        (&mut self.core, &mut self.ctrl)
+    pub fn split(&mut self) -> (&mut CrtpShared, &mut AnyController<f32>) {
+        (&mut self.shared, &mut self.ctrl)
     }
 
     /// Writes entry `index` of the flight loop's parameter table
@@ -303,40 +303,44 @@ impl CrtpVehicle {
     /// motors are off. Returns the value in force.
     pub fn write_param(&mut self, index: usize, value: f32) -> Result<f32, Refusal> {
         let param = PARAMS.get(index).ok_or(Refusal::Unknown)?;
-        if let Written::Later = self.core.param_write(index, value, Reply::Caller)? {
+        if let Written::Later = self.shared.param_write(index, value, Reply::Caller)? {
             if let Some((r, _)) = self.run_pending() {
                 r?;
             }
         }
-        Ok((param.get)(self.core.core.settings()))
+        Ok((param.get)(self.shared.lp.settings()))
     }
 
     /// One IMU sample taken at `t_us` with the fixes of the host's own
-    /// position source: [`CrtpCore::imu_begin`], [`fly_step`], then the
-    /// log blocks due sampled ([`CrtpCore::sample_logs`]).
+    /// position source: [`CrtpShared::imu_begin`], [`fly_step`], then the
+    /// log blocks due sampled ([`CrtpShared::sample_logs`]).
     /// Returns the inputs to apply (zero: motors off).
     pub fn imu_step<C: CycleClock>(&mut self, t_us: u64, imu: &ImuSample, fixes: &[Fix], clock: &C) -> Vector4<f32> {
-        let step = self.core.imu_begin(t_us, Some(imu), fixes, clock);
-        let u = fly_step(&mut fc_loop::Exclusive(&mut self.core), &mut self.ctrl, step, clock);
-        self.core.sample_logs();
+        let step = self.shared.imu_begin(t_us, Some(imu), fixes, clock);
+        let u = fly_step(&mut fc_loop::Exclusive(&mut self.shared), &mut self.ctrl, step, clock);
+        self.shared.sample_logs();
         u
     }
 
     /// Handles one packet; answers go to `out`, a re-designing write's
     /// once its design (run here) is done.
     pub fn handle<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Result<(), S::Error> {
-        self.core.handle(p, out)?;
+        self.shared.handle(p, out)?;
         self.run_pending();
-        if let Some(r) = self.core.take_persist() {
+        if let Some(r) = self.shared.take_persist() {
             r.answer(out)?;
         }
-        self.core.send_queued(out)
+        self.shared.send_queued(out)
     }
 
     /// Runs the controller work a packet queued, if any.
     fn run_pending(&mut self) -> Option<(Result<(), Refusal>, Option<FromFc>)> {
-        let work = self.core.take_work()?;
-        Some(run_work(&mut fc_loop::Exclusive(&mut self.core), &mut self.ctrl, work))
+        let work = self.shared.take_work()?;
+        Some(run_work(
+            &mut fc_loop::Exclusive(&mut self.shared),
+            &mut self.ctrl,
+            work,
+        ))
     }
 }
 
@@ -354,8 +358,8 @@ enum WorkState {
 
 /// The CRTP vehicle without its controller (see the module's
 /// documentation): what the link's and the IMU's tasks share.
-pub struct CrtpCore {
-    core: Loop,
+pub struct CrtpShared {
+    lp: Loop,
     /// Controller work asked for and not yet done.
     work: WorkState,
     /// The answer of a re-designing parameter write, sent before the console.
@@ -395,12 +399,12 @@ pub struct CrtpCore {
     baro_fixes: u32,
 }
 
-impl CrtpCore {
+impl CrtpShared {
     /// The vehicle's shared part with nothing designed yet (motors off
     /// until [`CrtpVehicle::start`] succeeds).
     pub fn unstarted(settings: Settings) -> Self {
         Self {
-            core: Loop::unstarted_with(FcConfig::default(), settings),
+            lp: Loop::unstarted_with(FcConfig::default(), settings),
             work: WorkState::Idle,
             reply: None,
             persist: None,
@@ -453,10 +457,10 @@ impl CrtpCore {
     /// ([`Barometer`]). `true` if it was fused; a reading that is not a
     /// measurement, or one before the estimator has a position, is not.
     pub fn baro(&mut self, t_us: u64, alt_m: f32) -> bool {
-        let est_down_m = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        let est_down_m = self.lp.navigator().estimate().map(|e| e.pos_ned_m[2]);
         match self.baro.fix(t_us, alt_m, est_down_m) {
             Some(fix) => {
-                self.core.push_fix(&fix);
+                self.lp.push_fix(&fix);
                 self.baro_fixes = self.baro_fixes.wrapping_add(1);
                 true
             }
@@ -464,7 +468,7 @@ impl CrtpCore {
         }
     }
 
-    /// Barometer fixes fused since start-up ([`CrtpCore::baro`]).
+    /// Barometer fixes fused since start-up ([`CrtpShared::baro`]).
     pub fn baro_fixes(&self) -> u32 {
         self.baro_fixes
     }
@@ -473,8 +477,8 @@ impl CrtpCore {
     /// `ParamSet` of entry `index` of [`PARAMS`], the same ids as the CRTP
     /// table's first entries), as a client's write is: checked, applied,
     /// re-designing only while the motors are off. Returns the answer, or
-    /// `None` when a re-design was queued ([`CrtpCore::take_work`]), whose
-    /// answer [`CrtpCore::work_done`] gives.
+    /// `None` when a re-design was queued ([`CrtpShared::take_work`]), whose
+    /// answer [`CrtpShared::work_done`] gives.
     pub fn sim_param(&mut self, index: u16, value: f32) -> Option<FromFc> {
         let r = match PARAMS.get(usize::from(index)) {
             None => Err(Refusal::Unknown),
@@ -482,13 +486,13 @@ impl CrtpCore {
         };
         match r {
             Ok(Written::Later) => None,
-            Ok(Written::Now) => Some(fc_loop::param_answer(self.core.settings(), index, None)),
-            Err(e) => Some(fc_loop::param_answer(self.core.settings(), index, Some(e))),
+            Ok(Written::Now) => Some(fc_loop::param_answer(self.lp.settings(), index, None)),
+            Err(e) => Some(fc_loop::param_answer(self.lp.settings(), index, Some(e))),
         }
     }
 
     /// The controller work a packet asked for, handed to the controller's
-    /// side (which answers with [`CrtpCore::work_done`]); until then no
+    /// side (which answers with [`CrtpShared::work_done`]); until then no
     /// other work is taken and parameter writes are refused as busy.
     pub fn take_work(&mut self) -> Option<ControllerWork> {
         match self.work {
@@ -519,7 +523,7 @@ impl CrtpCore {
             }
             (ControllerWork::Param { reply, .. }, r) => {
                 let r = r.and_then(|()| {
-                    self.mixer = Some(self.core.settings().mixer()?);
+                    self.mixer = Some(self.lp.settings().mixer()?);
                     Ok(())
                 });
                 match reply {
@@ -532,7 +536,7 @@ impl CrtpCore {
                         self.reply = Some(self.written_reply(request, r.err()));
                         None
                     }
-                    Reply::Sim(index) => Some(fc_loop::param_answer(self.core.settings(), *index, r.err())),
+                    Reply::Sim(index) => Some(fc_loop::param_answer(self.lp.settings(), *index, r.err())),
                     Reply::Caller => None,
                 }
             }
@@ -555,8 +559,8 @@ impl CrtpCore {
     }
 
     /// The flight loop (estimator, set-point, counters).
-    pub fn core(&self) -> &Loop {
-        &self.core
+    pub fn flight_loop(&self) -> &Loop {
+        &self.lp
     }
 
     /// What was done with the packets.
@@ -624,7 +628,7 @@ impl CrtpCore {
     }
 
     /// Sends what is waiting: a re-designing write's answer, console lines,
-    /// then the log blocks sampled ([`CrtpCore::sample_logs`]).
+    /// then the log blocks sampled ([`CrtpShared::sample_logs`]).
     pub fn poll<S: CrtpSink>(&mut self, out: &mut S) -> Result<(), S::Error> {
         self.send_queued(out)?;
         while let Some(p) = self.sampled.pop_front() {

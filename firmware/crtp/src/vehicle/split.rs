@@ -3,16 +3,16 @@
 
 use super::*;
 
-/// The [`Loop`] inside a locked [`CrtpCore`], as [`run_job`] locks it.
+/// The [`Loop`] inside a locked [`CrtpShared`], as [`run_job`] locks it.
 struct LoopOf<'a, M>(&'a mut M);
 
 impl<M: Mutex> Mutex for LoopOf<'_, M>
 where
-    M::T: BorrowMut<CrtpCore>,
+    M::T: BorrowMut<CrtpShared>,
 {
     type T = Loop;
     fn lock<R>(&mut self, f: impl FnOnce(&mut Loop) -> R) -> R {
-        self.0.lock(|v| f(&mut v.borrow_mut().core))
+        self.0.lock(|v| f(&mut v.borrow_mut().lp))
     }
 }
 
@@ -26,7 +26,7 @@ pub fn fly_step<M: Mutex, C: CycleClock>(
     clock: &C,
 ) -> Vector4<f32>
 where
-    M::T: BorrowMut<CrtpCore>,
+    M::T: BorrowMut<CrtpShared>,
 {
     let mut answer = StepAnswer::default();
     if let Some(job) = step.job {
@@ -42,7 +42,7 @@ where
 /// not fly; the motors stay off. Returns the inputs applied (zero).
 pub fn pass_step<M: Mutex, C: CycleClock>(v: &mut M, step: ImuStep, clock: &C) -> Vector4<f32>
 where
-    M::T: BorrowMut<CrtpCore>,
+    M::T: BorrowMut<CrtpShared>,
 {
     if let Some(Job::Step(s)) = step.job {
         let _ = LoopOf(v).lock(|l| l.finish(&s, None, clock));
@@ -50,16 +50,16 @@ where
     v.lock(|v| v.borrow_mut().imu_end(&step, None))
 }
 
-/// Runs `work` ([`CrtpCore::take_work`]) on the controller `ctrl`, the
+/// Runs `work` ([`CrtpShared::take_work`]) on the controller `ctrl`, the
 /// design with the vehicle `v` unlocked; returns its result and, for the
-/// simulator's write, its answer ([`CrtpCore::work_done`]).
+/// simulator's write, its answer ([`CrtpShared::work_done`]).
 pub fn run_work<M: Mutex>(
     v: &mut M,
     ctrl: &mut AnyController<f32>,
     work: ControllerWork,
 ) -> (Result<(), Refusal>, Option<FromFc>)
 where
-    M::T: BorrowMut<CrtpCore>,
+    M::T: BorrowMut<CrtpShared>,
 {
     let r = match work {
         ControllerWork::Reset => {

@@ -3,7 +3,7 @@
 
 use super::*;
 
-impl CrtpCore {
+impl CrtpShared {
     /// One IMU sample taken at `t_us` (`None`: the board's driver had
     /// none) with the fixes of the host's own position source (`heading`:
     /// they carry one), the IMU task's half: the sample checked (a bad or
@@ -20,7 +20,7 @@ impl CrtpCore {
     ) -> ImuStep {
         if t_us < self.now_us {
             // A host that started again: a new time line.
-            self.core.open_session();
+            self.lp.open_session();
             self.imu.restart();
             self.baro.reset();
         }
@@ -30,16 +30,16 @@ impl CrtpCore {
         self.now_us = t_us;
         for f in fixes {
             self.heading_seen |= f.yaw_rad.is_some();
-            self.core.push_fix(f);
+            self.lp.push_fix(f);
         }
         let sp = self.setpoint_now(t_us, dt_s);
         if let Some(sp) = sp {
-            self.core.set_setpoint(&sp);
+            self.lp.set_setpoint(&sp);
         }
         self.seq = self.seq.wrapping_add(1);
         // Nothing to step on before the first good sample.
         let job = sample
-            .and_then(|imu| self.core.imu_job(self.seq, t_us, &imu, clock, t_us))
+            .and_then(|imu| self.lp.imu_job(self.seq, t_us, &imu, clock, t_us))
             .map(|job| match job {
                 // The estimator's state goes out in log blocks, not with every
                 // step's answer (our protocol's `Nav`): not built.
@@ -120,7 +120,7 @@ impl CrtpCore {
             // Every command while silent is overruled by the descent.
             self.failsafe_descent(t_us);
         }
-        let Some(est) = self.core.navigator().estimate() else {
+        let Some(est) = self.lp.navigator().estimate() else {
             return;
         };
         let q = est.att;
@@ -163,7 +163,7 @@ impl CrtpCore {
         match &self.mode {
             Mode::High { seg, .. } => seg.eval(self.now_us),
             Mode::Generic { sp, .. } => Reference::from(sp),
-            Mode::Idle => match self.core.navigator().estimate() {
+            Mode::Idle => match self.lp.navigator().estimate() {
                 Some(e) => Reference::at_rest(e.pos_ned_m, e.euler()[2]),
                 None => Reference::at_rest(Vector3::zeros(), 0.0),
             },

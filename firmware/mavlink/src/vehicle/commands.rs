@@ -200,8 +200,8 @@ impl MavVehicle {
         }
         // The one arming check (fc_loop::arming). PX4's HIL gives no
         // battery reading, and nothing here locks or sees a tumble.
-        let estimate = self.core.navigator().estimate();
-        let nav = match (self.core.navigator().mode(), estimate) {
+        let estimate = self.flight.navigator().estimate();
+        let nav = match (self.flight.navigator().mode(), estimate) {
             (NavMode::Navigating, None) => NavMode::Failsafe,
             (mode, _) => mode,
         };
@@ -215,16 +215,16 @@ impl MavVehicle {
             started: self.mixer.is_some(),
         })?;
         let est = estimate.ok_or(ArmRefusal::EstimatorFailsafe)?;
-        self.core
-            .try_select(self.core.settings().controller)
+        self.flight
+            .try_select(self.flight.settings().controller)
             .map_err(|_| ArmRefusal::DesignFailed)?;
         let yaw = fc_core::quat_to_euler(&est.att)[2];
         match (self.mode, self.offboard) {
             (FlightMode::Offboard, Some((sp, _))) => {
-                self.core.set_setpoint(&sp);
+                self.flight.set_setpoint(&sp);
             }
             (mode, _) => {
-                self.core.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
+                self.flight.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
                 if mode != FlightMode::Position {
                     self.mode = FlightMode::Hold;
                 }

@@ -96,13 +96,13 @@ impl MavVehicle {
         t_us: u64,
         alt_amsl_m: f32,
     ) -> Result<(), &'static str> {
-        let est = self.core.navigator().estimate();
+        let est = self.flight.navigator().estimate();
         let here = est.map(|e| e.pos_ned_m);
         let yaw = est.map_or(0.0, |e| fc_core::quat_to_euler(&e.att)[2]);
         match mode {
             FlightMode::Position | FlightMode::Hold => {
                 if let (true, Some(p)) = (self.armed, here) {
-                    self.core.set_setpoint(&Setpoint::hold(p, yaw));
+                    self.flight.set_setpoint(&Setpoint::hold(p, yaw));
                 }
             }
             FlightMode::Offboard => {
@@ -113,7 +113,7 @@ impl MavVehicle {
                     return Err("no set-points streaming");
                 };
                 if self.armed {
-                    self.core.set_setpoint(&sp);
+                    self.flight.set_setpoint(&sp);
                 }
             }
             FlightMode::Mission => {
@@ -158,8 +158,8 @@ impl MavVehicle {
                         legs.push_back((Vector3::new(h[0], h[1], ground), self.nav.land_mps))
                     }
                 };
-                let from = Reference::from(self.core.setpoint());
-                if !self.route.start(t_us, &from, legs, self.core.setpoint().yaw_rad) {
+                let from = Reference::from(self.flight.setpoint());
+                if !self.route.start(t_us, &from, legs, self.flight.setpoint().yaw_rad) {
                     return Err("goal out of range");
                 }
             }
@@ -193,7 +193,7 @@ impl MavVehicle {
                 let Some((r, done)) = self.route.at(t_us) else {
                     return Ok(());
                 };
-                self.core.set_setpoint(&r.setpoint());
+                self.flight.set_setpoint(&r.setpoint());
                 if self.mode == FlightMode::Takeoff && done {
                     self.mode = FlightMode::Hold;
                     return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("takeoff done: hold"));
@@ -202,7 +202,7 @@ impl MavVehicle {
                 // and not moving up or down.
                 let landing = self.mode == FlightMode::Land || self.route_descending();
                 let on_ground = self
-                    .core
+                    .flight
                     .navigator()
                     .estimate()
                     .is_some_and(|e| fc_loop::land::on_ground(&e, self.home_ned_m[2]));
@@ -253,7 +253,7 @@ impl MavVehicle {
             }
             return Ok(());
         }
-        let mut sp = *self.core.setpoint();
+        let mut sp = *self.flight.setpoint();
         let (v, yaw_rate) = joystick_velocity(&self.nav, x, y, z, r, sp.yaw_rad);
         let dt = dt_s.clamp(0.0, 0.1);
         sp.pos_ned_m += v * dt;
@@ -263,7 +263,7 @@ impl MavVehicle {
         sp.vel_ned_mps = v;
         sp.acc_ned_mps2 = Vector3::zeros();
         sp.yaw_rate_radps = yaw_rate;
-        self.core.set_setpoint(&sp);
+        self.flight.set_setpoint(&sp);
         Ok(())
     }
 
@@ -276,7 +276,7 @@ impl MavVehicle {
         now_us: u64,
         out: &mut S,
     ) -> Result<(), S::Error> {
-        let limit_us = u64::from(self.core.settings().gcs_loss_ms) * 1000;
+        let limit_us = u64::from(self.flight.settings().gcs_loss_ms) * 1000;
         let lost = self.gcs_seen_us.is_some_and(|t| now_us.saturating_sub(t) > limit_us);
         if self.armed
             && self.mode != FlightMode::Land
@@ -297,7 +297,7 @@ impl MavVehicle {
     /// Armed and more than [`IN_AIR_M`] above where it armed (estimated):
     /// disarming would drop it.
     pub(in crate::vehicle) fn in_air(&self) -> bool {
-        let down = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        let down = self.flight.navigator().estimate().map(|e| e.pos_ned_m[2]);
         self.armed && down.is_some_and(|d| d < self.home_ned_m[2] - IN_AIR_M)
     }
 
@@ -332,9 +332,9 @@ impl MavVehicle {
         // in Offboard, as PX4 does. A masked heading keeps the one held:
         // armed, the set-point's; on the ground, the vehicle's own, so a
         // take-off in Offboard keeps the heading it has.
-        let held_yaw = match (self.armed, self.core.navigator().estimate()) {
+        let held_yaw = match (self.armed, self.flight.navigator().estimate()) {
             (false, Some(e)) => fc_core::quat_to_euler(&e.att)[2],
-            _ => self.core.setpoint().yaw_rad,
+            _ => self.flight.setpoint().yaw_rad,
         };
         let sp = setpoint_from_target(m, held_yaw).filter(|sp| sp.is_valid());
         match sp {
@@ -346,7 +346,7 @@ impl MavVehicle {
                 }
                 self.offboard = Some((sp, self.last_sensor_us.unwrap_or(0)));
                 if self.mode == FlightMode::Offboard && self.armed {
-                    self.core.set_setpoint(&sp);
+                    self.flight.set_setpoint(&sp);
                 }
                 Ok(())
             }

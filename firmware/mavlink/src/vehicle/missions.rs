@@ -18,7 +18,7 @@ impl MavVehicle {
                         return self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("mission done: hold"));
                     };
                     let origin = self.home.unwrap_or_default();
-                    let sp = *self.core.setpoint();
+                    let sp = *self.flight.setpoint();
                     let from = Reference::from(&sp);
                     let mut legs = Legs::new();
                     let (goal, accept_m, hold_s) = match item.step(&origin, self.home_ned_m[2]) {
@@ -88,10 +88,10 @@ impl MavVehicle {
                     let Some((r, done)) = self.route.at(t_us) else {
                         return Ok(());
                     };
-                    self.core.set_setpoint(&r.setpoint());
+                    self.flight.set_setpoint(&r.setpoint());
                     let accept = if accept_m > 0.0 { accept_m } else { self.nav.acc_rad_m };
                     let near = self
-                        .core
+                        .flight
                         .navigator()
                         .estimate()
                         .is_some_and(|e| (e.pos_ned_m - goal).norm() <= accept);

@@ -1,6 +1,6 @@
 //! The flight controller as a MAVLink vehicle: [`MavVehicle`] takes the
 //! messages of a simulator (PX4's HIL interface) and of a ground station,
-//! runs the flight loop ([`fc_loop::FlightCore`]) on them, and answers.
+//! runs the flight loop ([`fc_loop::FlightLoop`]) on them, and answers.
 //!
 //! - `HIL_SENSOR` → one estimator step (the controller on its schedule),
 //!   answered by one `HIL_ACTUATOR_CONTROLS` (lockstep): the motor
@@ -45,7 +45,7 @@ use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
 use fc_loop::planner::Reference;
 use fc_loop::schedule::Schedule;
-use fc_loop::{FcConfig, FlightCore, StepAnswer};
+use fc_loop::{FcConfig, FlightLoop, StepAnswer};
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
 use nalgebra::{Vector3, Vector4};
@@ -157,7 +157,7 @@ impl core::fmt::Write for Text {
 
 /// The flight controller behind MAVLink (see the module's documentation).
 pub struct MavVehicle {
-    core: FlightCore,
+    flight: FlightLoop,
     /// `None` until started.
     mixer: Option<Mixer<f32>>,
     armed: bool,
@@ -257,7 +257,7 @@ impl MavVehicle {
     /// copy of the whole vehicle (its controller is ≈ 7 KiB).
     pub fn unstarted(settings: Settings, system_id: u8) -> Self {
         Self {
-            core: FlightCore::unstarted_with(FcConfig::default(), settings),
+            flight: FlightLoop::unstarted_with(FcConfig::default(), settings),
             mixer: None,
             armed: false,
             gcs_seen_us: None,
@@ -291,7 +291,7 @@ impl MavVehicle {
     /// Checks the settings and designs the controller in place; the
     /// session is open from then on (set-points may come before samples).
     pub fn start(&mut self) -> Result<(), Refusal> {
-        self.mixer = Some(self.core.start_front_end()?);
+        self.mixer = Some(self.flight.start_front_end()?);
         Ok(())
     }
 
@@ -302,12 +302,12 @@ impl MavVehicle {
 
     /// The settings in force (the parameters' values).
     pub fn settings(&self) -> &Settings {
-        self.core.settings()
+        self.flight.settings()
     }
 
     /// The flight loop (its estimator, set-point, counters).
-    pub fn core(&self) -> &FlightCore {
-        &self.core
+    pub fn flight_loop(&self) -> &FlightLoop {
+        &self.flight
     }
 
     /// What was done with what arrived.

@@ -82,8 +82,8 @@ impl MavVehicle {
     /// Sets parameter `index` to `value`: checked, and applied to the
     /// controller (re-designed while disarmed), the mixer and the failsafe.
     pub fn apply(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
-        self.core.apply_param(index, value, !self.armed)?;
-        self.mixer = Some(self.core.settings().mixer()?);
+        self.flight.apply_param(index, value, !self.armed)?;
+        self.mixer = Some(self.flight.settings().mixer()?);
         Ok(())
     }
 
@@ -92,7 +92,7 @@ impl MavVehicle {
             PARAMS.get(index),
             index.checked_sub(PARAMS.len()).and_then(|k| NAV_PARAMS.get(k)),
         ) {
-            (Some(p), _) => (p.get)(self.core.settings()),
+            (Some(p), _) => (p.get)(self.flight.settings()),
             (None, Some(p)) => (p.get)(&self.nav),
             (None, None) => return Ok(()),
         };

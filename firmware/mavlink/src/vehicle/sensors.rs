@@ -12,7 +12,7 @@ impl MavVehicle {
     /// only (`truth-state`); the images fly their estimate.
     #[cfg(feature = "truth-state")]
     pub fn fly_truth(&mut self, truth: fc_core::control::StateEstimate<f32>) {
-        self.core.navigator_mut().set_truth(Some(truth));
+        self.flight.navigator_mut().set_truth(Some(truth));
     }
 
     pub(in crate::vehicle) fn on_sensor<S: MavSink, C: CycleClock>(
@@ -29,7 +29,7 @@ impl MavVehicle {
         let mut answer = StepAnswer::default();
         if self.last_sensor_us.is_none_or(|t| s.time_us < t) {
             // The first sample, or a simulator that started again: a new time line.
-            self.core.open_session();
+            self.flight.open_session();
             self.home = None;
             self.last_fix_us = None;
             self.baro.reset();
@@ -51,7 +51,7 @@ impl MavVehicle {
         }
         self.seq = self.seq.wrapping_add(1);
         let _ = self
-            .core
+            .flight
             .imu_step(self.seq, s.time_us, &s.imu, &mut answer, clock, now_us);
         self.cycles = (answer.cycles, clock.hz());
         self.counters.steps = self.counters.steps.wrapping_add(1);
@@ -81,11 +81,11 @@ impl MavVehicle {
     /// then (a barometer's altitude is above sea level, and drifts with the
     /// weather: what is fused is its change).
     pub(in crate::vehicle) fn on_baro(&mut self, t_us: u64, alt_m: f32) {
-        let est_down_m = self.core.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        let est_down_m = self.flight.navigator().estimate().map(|e| e.pos_ned_m[2]);
         let Some(fix) = self.baro.fix(t_us, alt_m, est_down_m) else {
             return;
         };
-        self.core.push_fix(&fix);
+        self.flight.push_fix(&fix);
         self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
     }
 
@@ -95,7 +95,7 @@ impl MavVehicle {
     /// The first reading is referenced to the estimated heading then, which
     /// removes the declination (no world magnetic model on board).
     pub(in crate::vehicle) fn on_mag(&mut self, t_us: u64, mag_frd: &Vector3<f32>) {
-        let Some(est) = self.core.navigator().estimate() else {
+        let Some(est) = self.flight.navigator().estimate() else {
             return;
         };
         let e = est.euler();
@@ -111,7 +111,7 @@ impl MavVehicle {
             yaw_sigma_rad: MAG_SIGMA_RAD,
             ..Fix::EMPTY
         };
-        self.core.push_fix(&fix);
+        self.flight.push_fix(&fix);
         self.counters.mag_fixes = self.counters.mag_fixes.wrapping_add(1);
     }
 
@@ -122,7 +122,7 @@ impl MavVehicle {
         }
         let home = *self.home.get_or_insert(Home::of(m));
         self.reported_ned_m = Some(home.ned_m(m.lat, m.lon, m.alt));
-        let period_us = u64::from(self.core.settings().fix_period_ms) * 1000;
+        let period_us = u64::from(self.flight.settings().fix_period_ms) * 1000;
         if self.last_fix_us.is_some_and(|t| m.time_usec < t + period_us) {
             return;
         }
@@ -130,7 +130,7 @@ impl MavVehicle {
             Ok(mut f) => {
                 // A mocap gives position and heading, not velocity.
                 f.vel_ned_mps = None;
-                self.core.push_fix(&f);
+                self.flight.push_fix(&f);
                 self.last_fix_us = Some(m.time_usec);
             }
             Err(_) => self.counters.states_refused = self.counters.states_refused.wrapping_add(1),

@@ -44,7 +44,7 @@ impl MavVehicle {
     /// Message `id` as of `t_us`, if this vehicle sends it (and has what it
     /// carries: an estimate, a home).
     pub(in crate::vehicle) fn message(&self, id: u32, t_us: u64) -> Option<MavMessage> {
-        let est = self.core.navigator().estimate();
+        let est = self.flight.navigator().estimate();
         let time_boot_ms = boot_ms(t_us);
         Some(match id {
             0 => MavMessage::HEARTBEAT(hil::heartbeat(self.armed, self.mode.custom_mode())),
@@ -139,7 +139,7 @@ impl MavVehicle {
     /// `mag_ratio`; no height-above-ground or airspeed source: 0).
     pub(in crate::vehicle) fn estimator_status(&self, t_us: u64) -> ESTIMATOR_STATUS_DATA {
         use EstimatorStatusFlags as F;
-        let nav = self.core.navigator();
+        let nav = self.flight.navigator();
         let sig = nav.estimator().sigmas();
         let navigating = nav.mode() == NavMode::Navigating;
         let mut flags = F::empty();
@@ -186,7 +186,7 @@ impl MavVehicle {
             present |= S::MAV_SYS_STATUS_SENSOR_GPS;
         }
         let mut healthy = present;
-        let navigating = self.core.navigator().mode() == NavMode::Navigating && !self.core.failsafe();
+        let navigating = self.flight.navigator().mode() == NavMode::Navigating && !self.flight.failsafe();
         if !navigating {
             healthy.remove(
                 S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
@@ -221,7 +221,7 @@ impl MavVehicle {
             errors_count1: self.counters.sensors_refused.min(u32::from(u16::MAX)) as u16,
             errors_count2: self.counters.params_refused.min(u32::from(u16::MAX)) as u16,
             errors_count3: self.counters.commands_refused.min(u32::from(u16::MAX)) as u16,
-            errors_count4: self.core.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
+            errors_count4: self.flight.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
             battery_remaining: -1,
         }
     }

@@ -290,9 +290,9 @@ fn parameters_answer_as_the_protocol_says_and_redesigns_wait_for_disarm() {
     // Accepted, re-designed while disarmed: the core flies the new mass.
     v.handle(&param_set("VEH_MASS", 0.7), &mut out, &Still, 0).unwrap();
     assert_eq!(out.param("VEH_MASS"), Some(0.7));
-    assert_eq!(v.core().vehicle().mass_kg, 0.7);
+    assert_eq!(v.flight_loop().vehicle().mass_kg, 0.7);
     v.handle(&param_set("CTL_ID", 0.0), &mut out, &Still, 0).unwrap();
-    assert_eq!(v.core().spec(), fc_loop::FALLBACK_CONTROLLER);
+    assert_eq!(v.flight_loop().spec(), fc_loop::FALLBACK_CONTROLLER);
     v.handle(&param_set("NO_SUCH", 1.0), &mut out, &Still, 0).unwrap();
     out.assert_text("NO_SUCH: no such parameter");
 
@@ -311,7 +311,7 @@ fn parameters_answer_as_the_protocol_says_and_redesigns_wait_for_disarm() {
     v.handle(&param_set("FS_TIMEOUT_MS", 80.0), &mut out, &Still, 0)
         .unwrap();
     assert_eq!(out.param("FS_TIMEOUT_MS"), Some(80.0));
-    assert_eq!(v.core().settings().failsafe_timeout_ms, 80);
+    assert_eq!(v.flight_loop().settings().failsafe_timeout_ms, 80);
     // Disarming on the ground is obeyed; the next answer is all zeros.
     v.handle(&command(0.0, 0.0), &mut out, &Still, 0).unwrap();
     assert!(!v.armed());
@@ -404,13 +404,13 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
         0,
     )
     .unwrap();
-    assert_ne!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    assert_ne!(v.flight_loop().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     v.handle(&set_mode(FlightMode::Offboard), &mut out, &Still, 0).unwrap();
     assert_eq!(v.mode(), FlightMode::Offboard);
     v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
     assert!(v.armed());
-    assert_eq!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
-    assert_eq!(v.core().setpoint().yaw_rad, 0.5);
+    assert_eq!(v.flight_loop().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    assert_eq!(v.flight_loop().setpoint().yaw_rad, 0.5);
     // The stream's jerk is the slope of its acceleration over the sender's
     // clock: +0.1 m/s² in 10 ms is 10 m/s³; a steeper change is a step
     // (no jerk), as is a gap of more than 100 ms.
@@ -427,7 +427,7 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
             0,
         )
         .unwrap();
-        let j = v.core().setpoint().jerk_ned_mps3;
+        let j = v.flight_loop().setpoint().jerk_ned_mps3;
         assert!(
             (j[0] - jerk).abs() < 1e-3 && j[1] == 0.0 && j[2] == 0.0,
             "{t_ms} ms: {j:?}"
@@ -441,7 +441,7 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     };
     v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(masked), &mut out, &Still, 0)
         .unwrap();
-    assert_eq!(v.core().setpoint().yaw_rad, 0.5);
+    assert_eq!(v.flight_loop().setpoint().yaw_rad, 0.5);
     // A NaN velocity (not masked) is refused by the flight loop: counted,
     // said, and the set-point in force stays.
     let bad = SET_POSITION_TARGET_LOCAL_NED_DATA {
@@ -452,7 +452,7 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(bad), &mut out, &Still, 0)
         .unwrap();
     assert_eq!(v.counters().setpoints_refused, 2);
-    assert_eq!(v.core().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    assert_eq!(v.flight_loop().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     assert!(
         out.texts()
             .iter()
@@ -488,7 +488,7 @@ fn losing_the_ground_station_lands_and_disarms() {
     let mut out = Sent::default();
     let t = rest(&mut v, &mut out, t, 4_900);
     assert!(v.armed() && out.texts().is_empty(), "{:?}", out.texts());
-    assert!(v.core().setpoint().pos_ned_m[2] < -0.5, "climbing");
+    assert!(v.flight_loop().setpoint().pos_ned_m[2] < -0.5, "climbing");
     assert_eq!(v.mode(), FlightMode::Takeoff);
     // Silent past 5 s: land where it is, then disarm on the ground.
     rest(&mut v, &mut out, t, 200);
@@ -760,7 +760,12 @@ fn sensors_only(edit: impl Fn(&mut HIL_SENSOR_DATA), mut each: impl FnMut(u64, &
 #[test]
 fn a_flagged_barometer_bounds_the_height_without_position_fixes() {
     let drift = |baro: bool| {
-        let z = |v: &MavVehicle| v.core().navigator().estimate().map_or(f32::NAN, |e| e.pos_ned_m[2]);
+        let z = |v: &MavVehicle| {
+            v.flight_loop()
+                .navigator()
+                .estimate()
+                .map_or(f32::NAN, |e| e.pos_ned_m[2])
+        };
         let mut z_7s = f32::NAN;
         let v = sensors_only(
             |m| {
@@ -812,7 +817,11 @@ fn a_flagged_magnetometer_holds_the_heading_without_fixes() {
             },
             |_, _| {},
         );
-        let psi = v.core().navigator().estimate().map_or(f32::NAN, |e| e.euler()[2]);
+        let psi = v
+            .flight_loop()
+            .navigator()
+            .estimate()
+            .map_or(f32::NAN, |e| e.euler()[2]);
         (psi, v.counters().mag_fixes)
     };
     let (dead_reckoned, none) = heading(false);
@@ -1016,7 +1025,7 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     // 1.5 m at 0.5 m/s: 6.6 s; the heartbeat after says Hold.
     let t = rest(&mut v, &mut out, t, 8_000);
     assert_eq!(v.mode(), FlightMode::Hold);
-    assert!((v.core().setpoint().pos_ned_m[2] + 1.5).abs() < 1e-4);
+    assert!((v.flight_loop().setpoint().pos_ned_m[2] + 1.5).abs() < 1e-4);
     out.assert_text("takeoff done: hold");
     let MavMessage::HEARTBEAT(hb) = last(&out, "HEARTBEAT") else {
         unreachable!()
@@ -1043,7 +1052,7 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     v.handle(&target, &mut out, &Still, 0).unwrap();
     v.handle(&set_mode(FlightMode::Offboard), &mut out, &Still, 0).unwrap();
     assert_eq!(
-        (v.mode(), v.core().setpoint().pos_ned_m[0]),
+        (v.mode(), v.flight_loop().setpoint().pos_ned_m[0]),
         (FlightMode::Offboard, 2.0)
     );
     let t = rest(&mut v, &mut out, t, 1_100);
@@ -1065,11 +1074,11 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     let mut t = t;
     while v.armed() && t < 60_000_000 {
         t = rest(&mut v, &mut out, t, 100);
-        highest = highest.min(v.core().setpoint().pos_ned_m[2]);
+        highest = highest.min(v.flight_loop().setpoint().pos_ned_m[2]);
     }
     assert!(!v.armed(), "landed and disarmed");
     assert!((highest + 2.0).abs() < 1e-3, "{highest}");
-    let sp = v.core().setpoint().pos_ned_m;
+    let sp = v.flight_loop().setpoint().pos_ned_m;
     assert!(sp[0].abs() < 1e-3 && sp[1].abs() < 1e-3, "over home: {sp:?}");
     out.assert_text("landed: disarmed");
 }
@@ -1298,14 +1307,14 @@ fn a_joystick_moves_the_setpoint_in_position_mode_and_its_loss_lands() {
         v.handle(&stick(0, 0), &mut out, &Still, 0).unwrap();
         t = rest(&mut v, &mut out, t, 50);
     }
-    assert!(v.core().setpoint().pos_ned_m[2] <= 1e-3 && v.core().setpoint().pos_ned_m[2] > -1e-3);
+    assert!(v.flight_loop().setpoint().pos_ned_m[2] <= 1e-3 && v.flight_loop().setpoint().pos_ned_m[2] > -1e-3);
     // Full forward, centred throttle, 20 Hz for 1 s: 1 m north at 1 m/s.
-    let north0 = v.core().setpoint().pos_ned_m[0];
+    let north0 = v.flight_loop().setpoint().pos_ned_m[0];
     for _ in 0..20 {
         v.handle(&stick(1000, 500), &mut out, &Still, 0).unwrap();
         t = rest(&mut v, &mut out, t, 50);
     }
-    let sp = *v.core().setpoint();
+    let sp = *v.flight_loop().setpoint();
     assert!((sp.pos_ned_m[0] - north0 - 1.0).abs() < 0.01, "{sp:?}");
     assert!((sp.vel_ned_mps[0] - 1.0).abs() < 1e-6 && sp.pos_ned_m[1].abs() < 1e-6);
     // Silent: lost after 0.5 s, Land (here on the ground: landed at once).

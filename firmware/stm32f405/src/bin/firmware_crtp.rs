@@ -42,13 +42,13 @@ impl BoardOutputs {
 
 #[cfg(target_os = "none")]
 impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
-    fn drive(&mut self, v: &fc_crtp::vehicle::CrtpCore, u: &nalgebra::Vector4<f32>) {
+    fn drive(&mut self, v: &fc_crtp::vehicle::CrtpShared, u: &nalgebra::Vector4<f32>) {
         use hal_shim::ActuatorOutput;
         match (v.armed(), v.mixer()) {
             (true, Some(mixer)) => {
                 // Each rotor's thrust (the layout's mixer) as its speed,
                 // √(T / kf), over Ωmax: the duty.
-                let p = v.core().vehicle();
+                let p = v.flight_loop().vehicle();
                 let duty = mixer
                     .thrusts(u)
                     .map(|t| libm::sqrtf(t.max(0.0) / p.kf_ns2) / p.omega_max_radps);

@@ -2,7 +2,7 @@
 
 use crate::vehicle::*;
 
-impl CrtpCore {
+impl CrtpShared {
     pub(in crate::vehicle) fn on_generic(&mut self, p: &Packet) -> Result<(), CrtpError> {
         let d = p.payload();
         let Some(&kind) = d.first() else {

@@ -3,7 +3,7 @@
 
 use crate::vehicle::*;
 
-impl CrtpCore {
+impl CrtpShared {
     pub(in crate::vehicle) fn on_high_level(&mut self, p: &Packet) -> Result<(), CrtpError> {
         let d = p.payload();
         let Some(&cmd) = d.first() else {

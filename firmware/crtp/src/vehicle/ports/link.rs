@@ -4,7 +4,7 @@
 
 use crate::vehicle::*;
 
-impl CrtpCore {
+impl CrtpShared {
     pub(in crate::vehicle) fn on_link<S: CrtpSink>(
         &mut self,
         p: &Packet,

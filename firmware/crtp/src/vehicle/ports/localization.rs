@@ -15,7 +15,7 @@ fn position_fix(p: [f32; 3]) -> Option<Fix> {
     Some(f)
 }
 
-impl CrtpCore {
+impl CrtpShared {
     pub(in crate::vehicle) fn on_localization(&mut self, p: &Packet) -> Result<(), CrtpError> {
         let d = p.payload();
         let bad = CrtpError::BadValue { port: p.port() };
@@ -25,11 +25,11 @@ impl CrtpCore {
                     return Err(short(p));
                 };
                 let mut fix = position_fix([x, y, z]).ok_or(bad)?;
-                if !self.heading_seen && self.core.navigator().mode() == NavMode::Aligning {
+                if !self.heading_seen && self.lp.navigator().mode() == NavMode::Aligning {
                     fix.yaw_rad = Some(0.0);
                     fix.yaw_sigma_rad = BOOT_HEADING_SIGMA_RAD;
                 }
-                self.core.push_fix(&fix);
+                self.lp.push_fix(&fix);
                 Ok(())
             }
             (1, Some(&8)) => {
@@ -45,7 +45,7 @@ impl CrtpCore {
                 fix.yaw_rad = Some(frames::heading_from_cf_yaw(frames::cf_yaw_of_quat(qx, qy, qz, qw)));
                 fix.yaw_sigma_rad = EXTPOSE_SIGMA_RAD;
                 self.heading_seen = true;
-                self.core.push_fix(&fix);
+                self.lp.push_fix(&fix);
                 Ok(())
             }
             (1, Some(&3)) => {

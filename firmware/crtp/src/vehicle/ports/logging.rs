@@ -127,7 +127,7 @@ fn log_name(v: &LogVar) -> Name<'static> {
     }
 }
 
-impl CrtpCore {
+impl CrtpShared {
     /// Samples the log blocks due at the last step's time (their values and
     /// that time, in ms): called once per step, after it is flown
     /// ([`CrtpVehicle::imu_step`]; an image's controller task), so a block's
@@ -151,7 +151,7 @@ impl CrtpCore {
     /// What the log variables are read from now.
     pub fn log_sample(&self) -> LogSample {
         LogSample {
-            flight: self.core.snapshot(),
+            flight: self.lp.snapshot(),
             u: self.u,
             motors: self.motors(),
             battery_v: self.battery_v(),

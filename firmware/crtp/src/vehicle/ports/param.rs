@@ -197,10 +197,10 @@ fn set_by_name_reply(request: &Packet, code: u8) -> Packet {
     r
 }
 
-impl CrtpCore {
+impl CrtpShared {
     /// Parameter `id`'s value in force.
     pub(in crate::vehicle) fn param_value(&self, id: usize) -> Option<f32> {
-        let s = self.core.settings();
+        let s = self.lp.settings();
         let (_, _, extra) = param_entry(id)?;
         Some(match extra {
             None => (PARAMS[id].get)(s),
@@ -240,7 +240,7 @@ impl CrtpCore {
             Some(Extra::ResetEstimation) if value == 0.0 => return Ok(Written::Now),
             Some(Extra::ResetEstimation) if self.flying() => return Err(Refusal::Armed),
             Some(Extra::ResetEstimation) => {
-                self.core.open_session();
+                self.lp.open_session();
                 self.heading_seen = false;
                 self.say(format_args!("estimator reset"));
                 return Ok(Written::Now);
@@ -251,18 +251,18 @@ impl CrtpCore {
             Some(Extra::Deck) if value == 0.0 => return Ok(Written::Now),
             Some(_) => return Err(Refusal::Range { lo: value, hi: value }),
         };
-        let plan = self.core.plan_param(index, value, !self.flying())?;
+        let plan = self.lp.plan_param(index, value, !self.flying())?;
         if let ParamPlan::Set(next) | ParamPlan::Redesign(next) = &plan {
             // The mixer's settings checked before anything is taken.
             next.mixer()?;
         }
-        match self.core.apply_unless_design(plan) {
+        match self.lp.apply_unless_design(plan) {
             Some(next) => {
                 self.work = WorkState::Queued(ControllerWork::Param { next, reply });
                 Ok(Written::Later)
             }
             None => {
-                self.mixer = Some(self.core.settings().mixer()?);
+                self.mixer = Some(self.lp.settings().mixer()?);
                 Ok(Written::Now)
             }
         }
@@ -403,7 +403,7 @@ impl CrtpCore {
             }
             // Store the value in force, get the state, clear: as the
             // Crazyflie's persistent parameters, answered by the link's
-            // owner with its storage ([`CrtpCore::take_persist`]). One at
+            // owner with its storage ([`CrtpShared::take_persist`]). One at
             // a time: another is not answered (cflib asks again).
             3..=5 if persistent => {
                 if self.persist.is_some() {

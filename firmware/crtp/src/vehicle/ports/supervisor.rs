@@ -4,9 +4,9 @@
 use crate::vehicle::*;
 use fc_loop::arming::{self, ArmingState};
 
-impl CrtpCore {
+impl CrtpShared {
     pub(in crate::vehicle) fn can_fly(&self) -> bool {
-        self.core.navigator().mode() == NavMode::Navigating
+        self.lp.navigator().mode() == NavMode::Navigating
             && !self.tumbled
             && !self.locked
             && self.sensors.is_ok()
@@ -58,7 +58,7 @@ impl CrtpCore {
             battery_floor_v: BATTERY_FLOOR_V,
             locked: self.locked,
             tumbled: self.tumbled,
-            nav: self.core.navigator().mode(),
+            nav: self.lp.navigator().mode(),
             started: self.mixer.is_some(),
         };
         if let Err(why) = arming::check(&state) {

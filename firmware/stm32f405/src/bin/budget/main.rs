@@ -9,7 +9,7 @@
 //! - `control`: instructions in the controller's `update`;
 //! - `loop`: instructions in everything the firmware does per step (frame
 //!   decoding of setpoint, preview and sensor frames, the controller, the
-//!   replies), through [`fc_loop::FlightCore`] exactly as the image runs it;
+//!   replies), through [`fc_loop::FlightLoop`] exactly as the image runs it;
 //! - for the MPCs, `certified (exact QP)`: the same step held against a
 //!   1 kHz budget whatever the preset's rate. The QP is solved exactly by
 //!   enumerating every active set of its independent blocks
@@ -60,7 +60,7 @@ mod target {
     use fc_core::estimate::{Eskf, EskfConfig, Fix, ImuSample};
     use fc_core::{euler_to_quat, VehicleParams};
     use fc_loop::nav::Navigator;
-    use fc_loop::{run_job, setpoint_to_wire, Exclusive, FcConfig, FlightCore, Framed, Outbox};
+    use fc_loop::{run_job, setpoint_to_wire, Exclusive, FcConfig, FlightLoop, Framed, Outbox};
     use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use fc_stm32f405::SYSCLK_HZ;
     use hal_shim::stm32f405::SysTickClock;
@@ -90,11 +90,11 @@ mod target {
     }
 
     /// The controller under test, in static RAM and designed in place, as
-    /// the image's lives inside its `FlightCore`: the stack figures are then
+    /// the image's lives inside its `FlightLoop`: the stack figures are then
     /// the design's and the flight's, not a harness copy of the controller.
     static mut SLOT: Option<AnyController<f32>> = None;
     /// The flight loop of the `loop` rows, likewise.
-    static mut CORE: Option<FlightCore> = None;
+    static mut CORE: Option<FlightLoop> = None;
 
     /// The controller slot (a placeholder PD until a row designs its own).
     #[inline(never)]
@@ -114,10 +114,10 @@ mod target {
     /// A fresh, unstarted flight loop in its static home (the caller starts
     /// it, outside this frame, as the image does).
     #[inline(never)]
-    fn fresh_core(cfg: FcConfig) -> &'static mut FlightCore {
+    fn fresh_core(cfg: FcConfig) -> &'static mut FlightLoop {
         // SAFETY: as for `slot`.
         let s = unsafe { &mut *core::ptr::addr_of_mut!(CORE) };
-        s.insert(FlightCore::unstarted(cfg))
+        s.insert(FlightLoop::unstarted(cfg))
     }
 
     /// The estimator of the `estimator` row, in static RAM as the image's would be.
@@ -492,7 +492,7 @@ mod target {
     /// halves' ticks when the frame was a step; `None` if anything failed.
     #[inline(never)]
     fn as_tasks(
-        fc: &mut FlightCore,
+        fc: &mut FlightLoop,
         frame: Result<ToFc, fc_proto::FrameError>,
         link: &mut MemLink,
         clock: &SysTickClock,

@@ -82,7 +82,7 @@ pub(super) fn open_session(
     cfg: FcConfig,
     id: u8,
     clock: &SysTickClock,
-) -> Option<(&'static mut FlightCore, &'static mut MemLink)> {
+) -> Option<(&'static mut FlightLoop, &'static mut MemLink)> {
     let fc = fresh_core(cfg);
     fc.start().ok()?;
     let link = fresh_link();

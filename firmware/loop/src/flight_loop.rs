@@ -1,4 +1,4 @@
-//! [`FlightCore`]: the flight loop and its controller in one piece, for
+//! [`FlightLoop`]: the flight loop and its controller in one piece, for
 //! the host and for images that run them in one task.
 
 use crate::*;
@@ -9,11 +9,11 @@ use crate::*;
 /// same; the image does it over USART1):
 ///
 /// ```
-/// use fc_loop::{FcConfig, FlightCore};
+/// use fc_loop::{FcConfig, FlightLoop};
 /// use fc_proto::{encode, FrameDecoder, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
 /// use hal_shim::host::{LoopbackLink, MonotonicClock};
 ///
-/// let mut fc = FlightCore::new(FcConfig::default())?; // quaternion LQR, motors off
+/// let mut fc = FlightLoop::new(FcConfig::default())?; // quaternion LQR, motors off
 /// let (mut link, clock) = (LoopbackLink::default(), MonotonicClock::default());
 /// let send = |link: &mut LoopbackLink, m: &ToFc| {
 ///     let mut frame = [0u8; MAX_FRAME];
@@ -38,30 +38,30 @@ use crate::*;
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug)]
-pub struct FlightCore {
+pub struct FlightLoop {
     /// Everything but the controller.
     lp: Loop,
     /// The running controller.
     ctrl: AnyController<f32>,
 }
 
-impl core::ops::Deref for FlightCore {
+impl core::ops::Deref for FlightLoop {
     type Target = Loop;
     fn deref(&self) -> &Loop {
         &self.lp
     }
 }
 
-impl core::ops::DerefMut for FlightCore {
+impl core::ops::DerefMut for FlightLoop {
     fn deref_mut(&mut self) -> &mut Loop {
         &mut self.lp
     }
 }
 
-impl FlightCore {
+impl FlightLoop {
     /// A flight controller running the quaternion LQR until told otherwise,
     /// motors off until the first valid sensor frame:
-    /// [`FlightCore::unstarted`] then [`FlightCore::start`].
+    /// [`FlightLoop::unstarted`] then [`FlightLoop::start`].
     pub fn new(cfg: FcConfig) -> Result<Self, ControlError> {
         let mut me = Self::unstarted(cfg);
         me.start()?;
@@ -69,7 +69,7 @@ impl FlightCore {
     }
 
     /// The flight loop with nothing designed yet: it flies the tuned Euler
-    /// PD (which needs no design) until [`FlightCore::start`] designs the
+    /// PD (which needs no design) until [`FlightLoop::start`] designs the
     /// boot controller in place. The firmware constructs it this way, in
     /// its static home, so that the boot design does not run beneath a
     /// stack copy of the whole loop (the controller is ≈ 7 KiB).
@@ -78,7 +78,7 @@ impl FlightCore {
     }
 
     /// The flight loop with `settings` (the parameters: vehicle,
-    /// controller, failsafe), nothing designed yet: [`FlightCore::start`]
+    /// controller, failsafe), nothing designed yet: [`FlightLoop::start`]
     /// checks the settings and designs their controller for their vehicle,
     /// in place.
     pub fn unstarted_with(cfg: FcConfig, settings: params::Settings) -> Self {
@@ -105,7 +105,7 @@ impl FlightCore {
     }
 
     /// For a protocol front end (MAVLink, CRTP): checks the settings,
-    /// designs their controller in place ([`FlightCore::start`]), opens the
+    /// designs their controller in place ([`FlightLoop::start`]), opens the
     /// session (set-points may come before samples) and returns the mixer
     /// the settings give for the front end's motors.
     pub fn start_front_end(&mut self) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
