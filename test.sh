@@ -235,30 +235,31 @@ hil_start() {
     HIL_N=$((HIL_N + 1))
 }
 hil_wait() { while [ ${#HIL_PIDS[@]} -gt 0 ]; do hil_reap_first; done; }
-# The step to (1, 0, -1) m: each controller at its preset, holding the goal
-# within 2 cm from 10 s to 30 s on rotorpy's truth, calm, and within 3 cm in
-# a steady 0.5 m/s wind (rotorpy's ConstantWind), on both of rotorpy's vehicles.
-step() { echo --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 30 --hold-from 10; }
-# A reference's flight: the circle 25 s (22 s of it), the figure-8 23 s (3
-# laps and a third; 14 s after the first lap).
-ref_s() { if [ "$1" = eight ]; then echo 23; else echo 25; fi; }
+# Each reference's flight, as the peer table flies it (tools/peer_table.py's
+# FLIGHTS): the step to (1, 0, -1) m held from 10 s to 30 s; the circle 25 s
+# (22 s of it); the figure-8 23 s (3 laps and a third; 14 s after the first
+# lap). The step's holds here: each controller at its preset within 2 cm on
+# rotorpy's truth, calm, and within 3 cm in a steady 0.5 m/s wind (rotorpy's
+# ConstantWind), on both of rotorpy's vehicles.
+ref_args() { python3 tools/peer_table.py args "$1"; }
+STEP=$(ref_args step) CIRCLE=$(ref_args circle)
 lqr_rmse() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["rotorpy"]["rmse_m"])' "$1"; }
-hil_start $(step) --max-hold-error 0.02 --measure lqr_crazyflie_step \
+hil_start $STEP --max-hold-error 0.02 --measure lqr_crazyflie_step \
     --json target/rotorpy-hil.json --ulog target/rotorpy-hil.ulg
-hil_start --scenario circle --duration 25 --measure lqr_crazyflie_circle \
+hil_start $CIRCLE --measure lqr_crazyflie_circle \
     --json target/rotorpy-hil-circle.json
-hil_start --vehicle crazyflie --controller mpc $(step) --max-hold-error 0.02 --measure mpc_crazyflie_step \
+hil_start --vehicle crazyflie --controller mpc $STEP --max-hold-error 0.02 --measure mpc_crazyflie_step \
     --json target/rotorpy-hil-crazyflie-mpc.json
 if full; then
-hil_start --controller pd $(step) --max-hold-error 0.02 --measure pd_crazyflie_step \
+hil_start --controller pd $STEP --max-hold-error 0.02 --measure pd_crazyflie_step \
     --json target/rotorpy-hil-pd.json
 for vehicle in crazyflie hummingbird; do
     for controller in pd lqr mpc; do
         if [ "$vehicle" = hummingbird ]; then
-            hil_start --vehicle "$vehicle" --controller "$controller" $(step) --max-hold-error 0.02 \
+            hil_start --vehicle "$vehicle" --controller "$controller" $STEP --max-hold-error 0.02 \
                 --measure "${controller}_${vehicle}_step" --json "target/rotorpy-hil-$vehicle-$controller.json"
         fi
-        hil_start --vehicle "$vehicle" --controller "$controller" $(step) --wind 0.5,0,0 --max-hold-error 0.03 \
+        hil_start --vehicle "$vehicle" --controller "$controller" $STEP --wind 0.5,0,0 --max-hold-error 0.03 \
             --measure "${controller}_${vehicle}_step_wind" --json "target/rotorpy-hil-$vehicle-$controller-wind.json"
     done
 done
@@ -268,7 +269,7 @@ for layout in px4 betaflight crazyflie plus; do
     hil_start --layout "$layout" --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 10 \
         --measure "layout_$layout" --json "target/rotorpy-hil-$layout.json"
 done
-hil_start --vehicle hummingbird --scenario circle --duration 25 --measure lqr_hummingbird_circle \
+hil_start --vehicle hummingbird $CIRCLE --measure lqr_hummingbird_circle \
     --json target/rotorpy-hil-hummingbird-circle.json
 # The peer: rotorpy's own SE3 geometric controller (Lee/Mellinger), from its
 # true state, on the same vehicles, references, windows and figures
@@ -276,12 +277,12 @@ hil_start --vehicle hummingbird --scenario circle --duration 25 --measure lqr_hu
 # SE3 on the Crazyflie's circle and figure-8, and the Hummingbird's circle);
 # the whole table (every controller through its estimator and on the true
 # state, both vehicles) is `python3 tools/peer_table.py fly docs/peers`.
-hil_start --vehicle crazyflie --controller se3 $(step) --max-hold-error 0.02 \
+hil_start --vehicle crazyflie --controller se3 $STEP --max-hold-error 0.02 \
     --measure se3_crazyflie_step --json target/rotorpy-hil-crazyflie-se3-step.json
 for vehicle in crazyflie hummingbird; do
     for ref in circle eight; do
         [ "$vehicle/$ref" != hummingbird/eight ] || continue
-        hil_start --vehicle "$vehicle" --controller se3 --scenario "$ref" --duration "$(ref_s "$ref")" \
+        hil_start --vehicle "$vehicle" --controller se3 $(ref_args "$ref") \
             --measure "se3_${vehicle}_$ref" --json "target/rotorpy-hil-$vehicle-se3-$ref.json"
     done
 done
@@ -292,18 +293,18 @@ done
 # starts once the one two before it has ended, and each flight below reads
 # only files of flights at least two before it (the LQR's, read as its
 # arguments are expanded, three).
-hil_start --vehicle crazyflie --controller mpc --scenario circle --duration 25 --measure mpc_crazyflie_circle \
+hil_start --vehicle crazyflie --controller mpc $CIRCLE --measure mpc_crazyflie_circle \
     --max-rmse "$(lqr_rmse target/rotorpy-hil-circle.json)" --beat target/rotorpy-hil-crazyflie-se3-circle.json \
     --json target/rotorpy-hil-crazyflie-mpc-circle.json
-hil_start --vehicle hummingbird --controller mpc --scenario circle --duration 25 --measure mpc_hummingbird_circle \
+hil_start --vehicle hummingbird --controller mpc $CIRCLE --measure mpc_hummingbird_circle \
     --max-rmse "$(lqr_rmse target/rotorpy-hil-hummingbird-circle.json)" \
     --beat target/rotorpy-hil-hummingbird-se3-circle.json \
     --json target/rotorpy-hil-hummingbird-mpc-circle.json
-hil_start --vehicle crazyflie --controller mpc --scenario eight --duration 23 \
+hil_start --vehicle crazyflie --controller mpc $(ref_args eight) \
     --measure mpc_crazyflie_eight --beat target/rotorpy-hil-crazyflie-se3-eight.json \
     --json target/rotorpy-hil-crazyflie-mpc-eight.json
 for ref in circle eight; do
-    hil_start --vehicle crazyflie --controller mpc --state truth --scenario "$ref" --duration "$(ref_s "$ref")" \
+    hil_start --vehicle crazyflie --controller mpc --state truth $(ref_args "$ref") \
         --measure "mpc_truth_crazyflie_$ref" --beat "target/rotorpy-hil-crazyflie-se3-$ref.json" \
         --json "target/rotorpy-hil-crazyflie-mpc-truth-$ref.json"
 done
