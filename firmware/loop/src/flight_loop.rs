@@ -1,7 +1,10 @@
 //! [`FlightLoop`]: the flight loop and its controller in one piece, for
 //! the host and for images that run them in one task.
 
-use crate::*;
+use crate::{
+    apply_plan, fallback_controller, install, params, run_job, select, start_front_end, AnyController, ByteLink,
+    ControlError, ControllerSpec, CycleClock, Exclusive, FcConfig, Framed, ImuSample, Job, Loop, Outbox, ToFc,
+};
 
 /// The flight controller's state between steps.
 ///
@@ -95,7 +98,7 @@ impl FlightLoop {
     }
 
     /// Designs the settings' controller (by default the boot controller,
-    /// [`BOOT_CONTROLLER`]) in place for their vehicle. On error (settings
+    /// [`BOOT_CONTROLLER`](crate::BOOT_CONTROLLER)) in place for their vehicle. On error (settings
     /// [`params::Settings::check`] refuses, or a failed design) the loop
     /// keeps flying the fallback PD.
     pub fn start(&mut self) -> Result<(), ControlError> {

@@ -1,7 +1,12 @@
 //! Work for the controller's task ([`Job`]): a step to fly, a design to
 //! run; how an image's tasks run it ([`run_job`]) and install its result.
 
-use crate::*;
+use crate::{
+    param_answer, params, AnyController, ControlError, ControlOutput, ControllerSpec, CycleClock, Exclusive, Loop,
+    Mutex, Navigator, Outbox, PdEuler, PdEulerGains, ReferenceMode, Setpoint, StateEstimate, VehicleParams,
+    FALLBACK_CONTROLLER,
+};
+use fc_core::control::Controller;
 
 /// Work for the controller's task: everything that needs the controller.
 #[derive(Debug, Clone, Copy)]
@@ -122,7 +127,7 @@ pub enum ParamPlan {
 
 /// Runs `job` on the controller's side: the controller `ctrl`, the shared
 /// loop `lp` locked only to read the step's previews and to record its
-/// result, the answers to `out`. [`FlightLoop`] calls it directly; an image
+/// result, the answers to `out`. [`FlightLoop`](crate::FlightLoop) calls it directly; an image
 /// whose controller runs in its own task calls it there.
 pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
     lp: &mut M,
@@ -193,7 +198,7 @@ pub fn select<M: Mutex<T = Loop>>(
 }
 
 /// Starts a protocol front end's loop `lp` with its controller `ctrl`
-/// ([`FlightLoop::start_front_end`]): the settings checked, their
+/// ([`FlightLoop::start_front_end`](crate::FlightLoop::start_front_end)): the settings checked, their
 /// controller designed in place, the session opened (set-points may come
 /// before samples); returns the mixer the settings give for its motors.
 pub fn start_front_end(

@@ -3,7 +3,11 @@
 //! selections and parameters; answers out as frames ([`Framed`]); the
 //! conversions between wire and core types.
 
-use crate::*;
+use crate::{
+    encode, params, ByteLink, ControllerSpec, CycleClock, Fix, FrameDecoder, FrameError, FromFc, ImuSample, Job, Loop,
+    NavMode, Outbox, QuatState, Setpoint, StateEstimate, Step, TimeBase, ToFc, Vector3, WireFix, WireSetpoint,
+    MAX_FRAME, PROTOCOL_VERSION,
+};
 
 /// Our own protocol's frames on a byte link.
 pub struct Framed<'a, L>(pub &'a mut L);
@@ -49,7 +53,7 @@ pub fn setpoint_from_wire(w: &WireSetpoint) -> Option<Setpoint<f32>> {
 /// under `settings`: parameter `index`'s id and value in force, and why a
 /// write was refused (`refusal`; 0 when it was not, `Unknown`'s code for an
 /// index past the table). For a board whose simulator writes its
-/// parameters as [`FlightLoop`] answers them (`firmware-crtp`).
+/// parameters as [`FlightLoop`](crate::FlightLoop) answers them (`firmware-crtp`).
 pub fn param_answer(settings: &params::Settings, index: u16, refusal: Option<params::Refusal>) -> FromFc {
     let p = params::PARAMS.get(usize::from(index));
     let mut id = [0u8; 16];

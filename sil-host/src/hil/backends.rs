@@ -2,7 +2,14 @@
 //! process ([`InProcess`]) or the `firmware-mavlink` image in QEMU
 //! ([`InQemu`]); the simulator's true state from `ODOMETRY`.
 
-use super::*;
+use super::{
+    bail, common, encode, route, status_text, Duration, Instant, MavHeader, MavMessage, MavReader, MavSink, MavVehicle,
+    Peer, Result, Settings, Signing, SocketAddr, StateEstimate, TcpStream, UdpSocket, Vector3, Vehicle, COMPONENT_ID,
+    MAX_FRAME, MISSION_GCS_ID, SYSTEM_ID,
+};
+use anyhow::Context;
+use std::io::Read;
+use std::io::Write;
 
 /// [`MavVehicle`] in this process.
 pub(super) struct InProcess {

@@ -1,7 +1,11 @@
 //! The vehicle split as an image splits it (the controller's task apart
 //! from the link's): [`fly_step`], [`pass_step`], [`run_work`].
 
-use super::*;
+use super::{
+    run_job, AnyController, BorrowMut, ControllerWork, CrtpShared, CycleClock, FromFc, ImuStep, Job, Loop, Mutex,
+    ParamPlan, Refusal, StepAnswer, Vector4,
+};
+use fc_core::control::Controller;
 
 /// The [`Loop`] inside a locked [`CrtpShared`], as [`run_job`] locks it.
 struct LoopOf<'a, M>(&'a mut M);

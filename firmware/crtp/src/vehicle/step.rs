@@ -1,7 +1,10 @@
 //! The IMU step's shared half: the estimator, the set-point of the mode
 //! in force, the supervisor (failsafes, tumble, the set-point watchdog).
 
-use super::*;
+use super::{
+    CrtpShared, CycleClock, Fix, ImuSample, ImuStep, Job, Mode, Reference, Segment, Setpoint, Vector3, Vector4,
+    COS_TUMBLE_TILT, FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US, SETPOINT_LEVEL_MS, SETPOINT_STOP_MS,
+};
 
 impl CrtpShared {
     /// One IMU sample taken at `t_us` (`None`: the board's driver had
@@ -10,7 +13,7 @@ impl CrtpShared {
     /// missing one replaced by the last good one,
     /// [`crate::supervisor::ImuGuard`]), the set-point of this instant, one
     /// estimator step, the supervisor's checks; returns the controller's
-    /// step ([`fly_step`] flies it).
+    /// step ([`fly_step`](super::fly_step) flies it).
     pub fn imu_begin<C: CycleClock>(
         &mut self,
         t_us: u64,

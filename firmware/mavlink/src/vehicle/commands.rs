@@ -2,7 +2,11 @@
 //! modes, take-off, land, return, mission start, message intervals;
 //! `AUTOPILOT_VERSION`.
 
-use super::*;
+use super::{
+    Command, FlightMode, MavCmd, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavSeverity, MavSink,
+    MavVehicle, NavMode, Peer, Setpoint, AUTOPILOT_VERSION_DATA, AUTOPILOT_VERSION_ID, COMMAND_ACK_DATA,
+    FLIGHT_SW_VERSION, MIN_INTERVAL_US, STREAMS,
+};
 use fc_loop::arming::{self, ArmRefusal, ArmingState};
 
 /// `param2` of a disarm that is obeyed in the air too (MAVLink's magic number).

@@ -2,7 +2,10 @@
 //! (`SET_POSITION_TARGET_LOCAL_NED`), manual control, the ground-station
 //! loss failsafe, the land detector.
 
-use super::*;
+use super::{
+    joystick_velocity, FlightMode, Legs, MavFrame, MavLandedState, MavSeverity, MavSink, MavVehicle,
+    PositionTargetTypemask, Reference, Setpoint, Vector3, IN_AIR_M, SET_POSITION_TARGET_LOCAL_NED_DATA,
+};
 
 /// The longest gap between two streamed accelerations that still gives a
 /// jerk, ms (an Offboard stream comes at 10–50 Hz; PX4 leaves Offboard

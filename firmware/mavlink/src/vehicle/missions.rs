@@ -1,7 +1,10 @@
 //! Flying the mission uploaded through the mission micro-service
 //! ([`crate::mission`]): each item's goal, acceptance and hold.
 
-use super::*;
+use super::{
+    FlightMode, Legs, MavCmd, MavMessage, MavSeverity, MavSink, MavVehicle, MissionPhase, Peer, Reference, Step,
+    Vector3, MISSION_CAPACITY, MISSION_ITEM_REACHED_DATA,
+};
 
 impl MavVehicle {
     /// Mission mode's step: the item flown (its route, its hold), then the

@@ -3,7 +3,10 @@
 //! with a `PARAM_VALUE` (a refusal with the value in force and a
 //! `STATUSTEXT`).
 
-use super::*;
+use super::{
+    nav_index_of, params, MavMessage, MavParamType, MavSeverity, MavSink, MavVehicle, Peer, Refusal, NAV_PARAMS,
+    PARAMS, PARAM_SET_DATA, PARAM_VALUE_DATA,
+};
 
 /// Every parameter served: the flight loop's ([`PARAMS`]), then the
 /// automatic modes' ([`NAV_PARAMS`]).

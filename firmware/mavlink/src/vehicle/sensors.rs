@@ -2,7 +2,10 @@
 //! magnetometer in it, `HIL_STATE_QUATERNION` fixes (and on the host, the
 //! simulator's true state).
 
-use super::*;
+use super::{
+    hil, CycleClock, Fix, Home, MavMessage, MavSink, MavVehicle, Peer, StateFixSigmas, StepAnswer, Vector3, Vector4,
+    BARO_PERIOD_US, HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA, MAG_SIGMA_RAD, STREAMS,
+};
 
 impl MavVehicle {
     /// Flies `truth` (the simulator's true state, NED about home: the

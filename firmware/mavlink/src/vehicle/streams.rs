@@ -1,7 +1,11 @@
 //! The telemetry streams: which message each stream sends, at what rate
 //! (`SET_MESSAGE_INTERVAL` changes it), built from the flight stack's state.
 
-use super::*;
+use super::{
+    autopilot_version, boot_ms, hil, EstimatorStatusFlags, MavMessage, MavSink, MavSysStatusSensor, MavVehicle,
+    MavVtolState, NavMode, Peer, ATTITUDE_DATA, ATTITUDE_QUATERNION_DATA, AUTOPILOT_VERSION_ID, ESTIMATOR_STATUS_DATA,
+    EXTENDED_SYS_STATE_DATA, GLOBAL_POSITION_INT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA,
+};
 
 /// The telemetry streams and their default intervals, µs of simulated
 /// time (`MAV_CMD_SET_MESSAGE_INTERVAL` changes them): message id, interval.

@@ -2,7 +2,11 @@
 //! step): the prediction model's exact ZOH, the disturbance observer, the
 //! condensed Hessian, the terminal weight and the QP's iteration bound.
 
-use super::*;
+use super::{
+    block_of, euler_hover_model, lit, quat_hover_model, solve_dare, zoh_into, AttitudeForm, BoxQp, ControlError,
+    Controller, LinearModel, Mat12, Mpc, MpcConfig, QpSettings, RealField, SMatrix, Setpoint, Vec12, Vector3, Vector4,
+    VehicleParams, CHANNELS,
+};
 
 /// The f64 matrices of one discretisation, in one place: the continuous
 /// hover model with the disturbance inputs appended, `[B | Bw]` (Bw =

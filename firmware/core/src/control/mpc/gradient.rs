@@ -2,7 +2,10 @@
 //! reference over the horizon in the heading frame, and the QP's gradient
 //! by adjoint recursion.
 
-use super::*;
+use super::{
+    block_of, lit, mul, quat_to_euler, tr_mul, wrap_pi, AttitudeForm, AttitudeRef, HeadingFrame, Mpc, RealField,
+    ReferenceMode, SVector, Setpoint, StateEstimate, Vec12, Vector3, Vector4, CHANNELS, LAGGED_CHANNELS,
+};
 
 impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T, N, M, NZ> {
     /// Adjoint gradient of the state cost for the errors `e[k] = x[k] − r[k]`

@@ -114,7 +114,7 @@ mod target {
     /// A fresh, unstarted flight loop in its static home (the caller starts
     /// it, outside this frame, as the image does).
     #[inline(never)]
-    fn fresh_core(cfg: FcConfig) -> &'static mut FlightLoop {
+    fn fresh_flight_loop(cfg: FcConfig) -> &'static mut FlightLoop {
         // SAFETY: as for `slot`.
         let s = unsafe { &mut *core::ptr::addr_of_mut!(CORE) };
         s.insert(FlightLoop::unstarted(cfg))

@@ -1,7 +1,10 @@
 //! The `loop` rows' in-memory byte link: our protocol's frames pushed in,
 //! the loop's answers decoded as they go; the session and preview frames.
 
-use super::*;
+use super::{
+    encode, fresh_flight_loop, reference, setpoint_to_wire, ByteLink, FcConfig, Fix, FlightLoop, FrameDecoder, FromFc,
+    SysTickClock, ToFc, Vector3, MAX_FRAME, PROTOCOL_VERSION,
+};
 
 /// The `loop` rows' byte link (its 4 KiB queue is static RAM, as the
 /// image's USART queues are).
@@ -83,7 +86,7 @@ pub(super) fn open_session(
     id: u8,
     clock: &SysTickClock,
 ) -> Option<(&'static mut FlightLoop, &'static mut MemLink)> {
-    let fc = fresh_core(cfg);
+    let fc = fresh_flight_loop(cfg);
     fc.start().ok()?;
     let link = fresh_link();
     push(
