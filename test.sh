@@ -317,51 +317,32 @@ python3 -c 'import sys, pyulog.info; sys.argv = ["ulog_info", sys.argv[1]]; pyul
 python3 tools/check_ulog.py hil target/rotorpy-hil.ulg target/rotorpy-hil.json | tee -a "$log"
 python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
 # Two lanes from here, each about one core (a flight in lockstep, or QEMU and
-# its client taking turns): the MAVLink checks in this shell; beside them, in
-# a subshell, the MAVSDK flight on the image (on ports of its own), then the
-# CRTP sessions (ports 198xx) and the Slurm sweep. The lane's output goes to
-# target/lane-beside.out and is shown when the MAVLink checks are done; its
-# check lines join the count, its stages the table (marked "beside").
+# its client taking turns): the MAVLink checks, then cfclient and the Slurm
+# sweep, in this shell; beside them, in a subshell, the cflib sessions (ports
+# 198xx), then the MAVSDK flight on the image (on ports of its own). The
+# lane's output goes to target/lane-beside.out and is shown when this shell's
+# checks are done; its check lines join the count, its stages the table
+# (marked "beside").
 lane_beside() {
     TIMES=() STAGE=""
     log=target/lane-beside.log
     : >"$log"
     stage_prefix="(beside) "
-    stage "the same MAVSDK script against firmware-mavlink in QEMU (about 5 min)"
-    hil --target qemu --mavsdk --duration 150 --port 4561 --gcs-port 14551 --truth-port 14561 \
-        --json target/rotorpy-hil-mavsdk-qemu.json | grep "^mavsdk check:" | tee -a "$log"
     stage "cflib (pinned), unmodified, flies sil-host crtp; then cflib's own examples"
     bounded 900 python3 tools/crtp_cflib.py target/release/sil-host | tee -a "$log"
     stage "the same cflib sessions against firmware-crtp in QEMU (syslink through tools/nrf51_bridge.py)"
     bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu | tee -a "$log"
     stage "and against the Crazyflie 2.1 image in QEMU (behind the bootloader's stand-in)"
     bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
-    stage "cfclient (pinned, in its own venv), unmodified, connects under Xvfb"
-    if ! command -v Xvfb >/dev/null || ! command -v xdotool >/dev/null || ! command -v import >/dev/null; then
-        echo "== installing Xvfb, xdotool, ImageMagick and Qt's X11 libraries (apt)"
-        if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
-        $SUDO apt-get update -qq
-        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends xvfb xdotool imagemagick \
-            libgl1 libegl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1 libxcb-randr0 \
-            libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 libfontconfig1 libdbus-1-3 fonts-dejavu-core >/dev/null
-    fi
-    # Its own venv (PyQt6 and cflib's pins differ from the checks'), pinned with hashes too.
-    if [ ! -x target/cfclient-venv/bin/cfclient ] || ! cmp -s tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt; then
-        rm -rf target/cfclient-venv
-        python3 -m venv target/cfclient-venv
-        target/cfclient-venv/bin/python -m pip install --quiet --disable-pip-version-check --require-hashes \
-            -r tools/requirements-cfclient.txt
-        cp tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt
-    fi
-    bounded 600 python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/cfclient \
-        --out target/cfclient-flight-tab.png | tee -a "$log"
-    stage "the robustness sweep as a Slurm job array (single-node Slurm: slurm-wlm, munge)"
-    bounded 1200 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 \
-        --out target/slurm-sweep | tee -a "$log"
+    # The CRTP ports are free from here: cfclient may take 19850 (in this shell).
+    touch target/lane-beside.crtp-done
+    stage "the same MAVSDK script against firmware-mavlink in QEMU (about 5 min)"
+    hil --target qemu --mavsdk --duration 150 --port 4561 --gcs-port 14551 --truth-port 14561 \
+        --json target/rotorpy-hil-mavsdk-qemu.json | grep "^mavsdk check:" | tee -a "$log"
     end_stage
     printf '%s\n' "${TIMES[@]}" >target/lane-beside.times
 }
-rm -f target/lane-beside.times
+rm -f target/lane-beside.times target/lane-beside.crtp-done
 lane_beside >target/lane-beside.out 2>&1 &
 LANE_BESIDE=$!
 stage "the same step flight on the image: firmware-mavlink in QEMU, USART1 bridged to rotorpy"
@@ -382,8 +363,33 @@ stage "MAVSDK (pinned), unmodified, flies it as a PX4, in process"
 hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
 stage "MAVProxy (pinned), unmodified, on its standard input"
 hil --mavproxy --duration 90 --json target/rotorpy-hil-mavproxy.json | grep "^mavproxy check:" | tee -a "$log"
+# cfclient takes cflib's port (19850): once the lane beside has done its CRTP sessions.
 end_stage
-echo "== the lane beside: MAVSDK on the image, the CRTP sessions, Slurm (target/lane-beside.out)"
+while [ ! -f target/lane-beside.crtp-done ] && kill -0 "$LANE_BESIDE" 2>/dev/null; do sleep 2; done
+stage "cfclient (pinned, in its own venv), unmodified, connects under Xvfb"
+if ! command -v Xvfb >/dev/null || ! command -v xdotool >/dev/null || ! command -v import >/dev/null; then
+    echo "== installing Xvfb, xdotool, ImageMagick and Qt's X11 libraries (apt)"
+    if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends xvfb xdotool imagemagick \
+        libgl1 libegl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1 libxcb-randr0 \
+        libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 libfontconfig1 libdbus-1-3 fonts-dejavu-core >/dev/null
+fi
+# Its own venv (PyQt6 and cflib's pins differ from the checks'), pinned with hashes too.
+if [ ! -x target/cfclient-venv/bin/cfclient ] || ! cmp -s tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt; then
+    rm -rf target/cfclient-venv
+    python3 -m venv target/cfclient-venv
+    target/cfclient-venv/bin/python -m pip install --quiet --disable-pip-version-check --require-hashes \
+        -r tools/requirements-cfclient.txt
+    cp tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt
+fi
+bounded 600 python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/cfclient \
+    --out target/cfclient-flight-tab.png | tee -a "$log"
+stage "the robustness sweep as a Slurm job array (single-node Slurm: slurm-wlm, munge)"
+bounded 1200 tools/slurm_sweep.sh target/release/sil-host --tasks 8 --samples 16 --duration 4 \
+    --out target/slurm-sweep | tee -a "$log"
+end_stage
+echo "== the lane beside: the CRTP sessions, MAVSDK on the image (target/lane-beside.out)"
 if wait "$LANE_BESIDE"; then lane_rc=0; else lane_rc=$?; fi
 cat target/lane-beside.out
 cat target/lane-beside.log >>"$log"
