@@ -161,7 +161,7 @@ class Session(Gcs):
         # 30 s of wall time, as every other heartbeat wait here: the image in
         # QEMU beats at 1 Hz of its own time, which runs at a sixth of wall
         # time or slower in lockstep with rotorpy (10 s missed it once in CI).
-        # pymavlink drops unsigned frames from here on, so what arrives verified.
+        # pymavlink drops unsigned frames from here on: what arrives is verified.
         hb = self.recv(["HEARTBEAT"], timeout=30.0)
         self.check(hb is not None and getattr(hb, "_signed", False),
                    "after SETUP_SIGNING the vehicle's frames verify with the key")
