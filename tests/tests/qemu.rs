@@ -784,8 +784,8 @@ fn qemu_flight_does_not_depend_on_the_hosts_load() {
     }
 }
 
-/// A deliberate HardFault (the `fault` program, linked with the images'
-/// `board.rs`): its motors run at half duty on TIM3, then it executes an
+/// A deliberate HardFault (the `fault` program, bound to the images'
+/// handlers, `fc_stm32f405::board`): its motors run at half duty on TIM3, then it executes an
 /// undefined instruction. The board's handler must turn the motors off (all
 /// four compare values 0, loaded at once), say over defmt where the fault
 /// was — a pc inside the program's `main`, found by `nm` in the ELF — and end

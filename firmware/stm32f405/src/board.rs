@@ -1,16 +1,18 @@
-//! The board glue both images share (`firmware`, our protocol, and
-//! `firmware-mavlink`): defmt's logger and timestamps, the SysTick and
-//! USART1 interrupt handlers, the panic handler, bring-up of the clock
-//! tree, SysTick and USART1, and the idle wait. Included by each binary
-//! (`#[path]`), not the library: the handlers are link-time symbols, and
-//! the QEMU harness programs define their own.
+//! The board glue every image shares: defmt's logger and timestamps,
+//! bring-up of the clock tree, SysTick and USART1, the idle wait, the way a
+//! fault stops the motors and what the fault and panic handlers say.
+//!
+//! The handlers themselves are link-time symbols (the vector table's
+//! `SysTick`, `DefaultHandler` and `HardFault`, the panic handler), which
+//! the QEMU harness programs define their own way; so an image binds them
+//! with one macro, [`board_runtime!`](crate::board_runtime), and everything
+//! they do is here.
 
+use crate::{bring_up_clocks, PCLK2_HZ, SYSCLK_HZ};
 use core::panic::PanicInfo;
-use cortex_m_rt::exception;
 use cortex_m_semihosting::debug;
 #[cfg(feature = "log-rtt")]
 use defmt_rtt as _;
-use fc_stm32f405::{bring_up_clocks, PCLK2_HZ, SYSCLK_HZ};
 use hal_shim::stm32f405::{Port, SysTickClock, Usart};
 
 // Log lines carry the SysTick time in µs.
@@ -117,7 +119,6 @@ pub fn bring_up() -> (SysTickClock, Usart) {
 }
 
 /// The loop's clock, µs since boot.
-#[allow(dead_code, reason = "firmware-crtp keeps the time of its IMU samples instead")]
 pub fn now_us(clock: &SysTickClock) -> u64 {
     us_of(clock.ticks())
 }
@@ -129,27 +130,12 @@ pub fn now_us(clock: &SysTickClock) -> u64 {
 /// no wake-up is lost; the handler runs when the mask lifts. Under QEMU a
 /// halted CPU lets the emulator deliver the next byte without executing
 /// guest instructions (so idle time does not count as instructions).
-#[allow(dead_code, reason = "firmware's RTIC tasks wait in their idle task instead")]
 pub fn idle() {
     cortex_m::interrupt::free(|_| {
         if !hal_shim::stm32f405::rx_pending() {
             cortex_m::asm::wfi();
         }
     });
-}
-
-/// SysTick wrap: extends the 24-bit counter to 64 bits.
-#[exception]
-fn SysTick() {
-    hal_shim::stm32f405::systick_isr();
-}
-
-/// Every device interrupt lands here; a USART's moves bytes into its queue.
-#[exception]
-unsafe fn DefaultHandler(irqn: i16) {
-    if let Some(port) = Port::of_irq(irqn) {
-        hal_shim::stm32f405::usart_isr(port);
-    }
 }
 
 /// What stops the motors in a fault, as a function's address: the
@@ -160,12 +146,14 @@ static MOTORS_OFF: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicU
 /// Names the function that turns this board's motors off at once and
 /// returns their timers' name and four compare values read back (a fault
 /// handler's first act).
-#[allow(dead_code, reason = "only boards whose motors are not on TIM3 call it")]
 pub fn on_fault_stop_motors(f: fn() -> (&'static str, [u32; 4])) {
     MOTORS_OFF.store(f as usize, core::sync::atomic::Ordering::Relaxed);
 }
 
-fn stop_motors() -> (&'static str, [u32; 4]) {
+/// Stops the motors at once (the function [`on_fault_stop_motors`]
+/// named, TIM3 otherwise): the timers' name and their compare values read
+/// back.
+pub fn stop_motors() -> (&'static str, [u32; 4]) {
     match MOTORS_OFF.load(core::sync::atomic::Ordering::Relaxed) {
         0 => ("TIM3", hal_shim::stm32f405::motors_off_now()),
         f => {
@@ -176,39 +164,16 @@ fn stop_motors() -> (&'static str, [u32; 4]) {
     }
 }
 
-// The HardFault vector. A stack overflow (the stack, linked by flip-link
-// beneath the statics, ran off the start of RAM) faults while the
-// processor stacks the exception frame, so the handler starts with the
-// stack pointer below the stack: any push would fault again and lock the
-// core up. This entry therefore checks MSP first and, if it is below the
-// stack's lowest address (`_stack_end`), restarts the stack at its top
-// (the overflowed frames are lost anyway; nothing returns) and passes no
-// frame. Then `board_hard_fault` (Rust) stops the motors and says why.
-core::arch::global_asm!(
-    ".section .text.HardFault, \"ax\"",
-    ".global HardFault",
-    ".type HardFault, %function",
-    ".thumb_func",
-    "HardFault:",
-    "    mrs   r1, msp",
-    "    mov   r0, r1",
-    "    ldr   r2, =_stack_end",
-    "    cmp   r1, r2",
-    "    bhs   1f",
-    "    ldr   r2, =_stack_start",
-    "    mov   sp, r2",
-    "    movs  r0, #0",
-    "1:  b     board_hard_fault",
-    ".ltorg",
-);
-
 /// A fault (bad access, undefined instruction, a stack overflow): stops the
 /// motors, says where (or that the stack overflowed), then ends as [`fail`]
 /// does (QEMU exits with failure; a board halts with the motors off).
 /// `frame` is the stacked exception frame, null when the stack overflowed;
 /// `sp` the stack pointer at the fault.
-#[no_mangle]
-unsafe extern "C" fn board_hard_fault(frame: *const cortex_m_rt::ExceptionFrame, sp: u32) -> ! {
+///
+/// # Safety
+///
+/// `frame` is null or points at the exception frame the processor stacked.
+pub unsafe fn hard_fault(frame: *const cortex_m_rt::ExceptionFrame, sp: u32) -> ! {
     let (timers, ccr) = stop_motors();
     // SAFETY: non-null only when MSP was inside the stack, where the
     // processor stacked the frame.
@@ -234,8 +199,9 @@ unsafe extern "C" fn board_hard_fault(frame: *const cortex_m_rt::ExceptionFrame,
     })
 }
 
-#[panic_handler]
-fn panic(info: &PanicInfo) -> ! {
+/// The panic handler's work: the motors off, where it panicked, then QEMU
+/// exits with failure (a board halts).
+pub fn panic(info: &PanicInfo) -> ! {
     stop_motors();
     // The core never panics on input; if anything does, say where.
     if let Some(l) = info.location() {
@@ -247,4 +213,68 @@ fn panic(info: &PanicInfo) -> ! {
     loop {
         cortex_m::asm::wfi();
     }
+}
+
+/// Binds the board glue's link-time symbols in an image (once, at its
+/// crate's root, on the target): the SysTick handler (the 64-bit clock),
+/// the device interrupts' default handler (the USARTs' queues), the
+/// HardFault vector ([`hard_fault`]: a stack overflow caught before
+/// anything is pushed) and the panic handler ([`panic`](fn@panic)). An RTIC image's
+/// own tasks bind the interrupts they use; the rest land here.
+#[macro_export]
+macro_rules! board_runtime {
+    () => {
+        /// SysTick wrap: extends the 24-bit counter to 64 bits.
+        #[cortex_m_rt::exception]
+        fn SysTick() {
+            hal_shim::stm32f405::systick_isr();
+        }
+
+        /// Every device interrupt lands here; a USART's moves bytes into its queue.
+        #[cortex_m_rt::exception]
+        unsafe fn DefaultHandler(irqn: i16) {
+            if let Some(port) = hal_shim::stm32f405::Port::of_irq(irqn) {
+                hal_shim::stm32f405::usart_isr(port);
+            }
+        }
+
+        // The HardFault vector. A stack overflow (the stack, linked by
+        // flip-link beneath the statics, ran off the start of RAM) faults
+        // while the processor stacks the exception frame, so the handler
+        // starts with the stack pointer below the stack: any push would
+        // fault again and lock the core up. This entry therefore checks MSP
+        // first and, if it is below the stack's lowest address
+        // (`_stack_end`), restarts the stack at its top (the overflowed
+        // frames are lost anyway; nothing returns) and passes no frame.
+        // Then `board_hard_fault` stops the motors and says why.
+        core::arch::global_asm!(
+            ".section .text.HardFault, \"ax\"",
+            ".global HardFault",
+            ".type HardFault, %function",
+            ".thumb_func",
+            "HardFault:",
+            "    mrs   r1, msp",
+            "    mov   r0, r1",
+            "    ldr   r2, =_stack_end",
+            "    cmp   r1, r2",
+            "    bhs   1f",
+            "    ldr   r2, =_stack_start",
+            "    mov   sp, r2",
+            "    movs  r0, #0",
+            "1:  b     board_hard_fault",
+            ".ltorg",
+        );
+
+        /// The HardFault entry's Rust half: `fc_stm32f405::board::hard_fault`.
+        #[no_mangle]
+        unsafe extern "C" fn board_hard_fault(frame: *const cortex_m_rt::ExceptionFrame, sp: u32) -> ! {
+            // SAFETY: the entry passes the stacked frame or null.
+            unsafe { $crate::board::hard_fault(frame, sp) }
+        }
+
+        #[panic_handler]
+        fn panic(info: &core::panic::PanicInfo) -> ! {
+            $crate::board::panic(info)
+        }
+    };
 }

@@ -1,8 +1,10 @@
-//! The CRTP images' RTIC 2 application, included by `firmware-crtp` (the
-//! plain STM32F405) and `firmware-crazyflie` (the Crazyflie 2.1), each of
-//! which gives it its board's outputs (`crate::BoardOutputs`, an
-//! [`Outputs`]), its watchdog (`crate::WATCHDOG`, a [`Watchdog`]) and its
-//! vehicle (`crate::vehicle()`, unstarted, in static RAM). Four interrupt priorities, as a flight controller's tasks are
+//! The CRTP images' RTIC 2 application, bound by `firmware-crtp` (the
+//! plain STM32F405) and `firmware-crazyflie` (the Crazyflie 2.1) with
+//! [`crtp_app!`](macro@crate::crtp_app). Each gives it, at its crate's root, its
+//! board's outputs (`BoardOutputs`, an [`Outputs`]), its watchdog
+//! (`WATCHDOG`, a [`Watchdog`]), its IMU (`ImuBus`, an [`ImuBus`], started
+//! by `imu_bus()`) and its vehicle (`vehicle()`, unstarted, in static
+//! RAM). Four interrupt priorities, as a flight controller's tasks are
 //! ordered (the sample first, then the controller, then the link):
 //!
 //! | priority | task | interrupt | work |
@@ -20,519 +22,539 @@
 //! controller for the link's task, which designs it in place: the
 //! controller's task meanwhile answers every step on time with the motors
 //! off ([`pass_step`]), so a design delays neither a sample nor a step.
-//! The image measures it as `firmware` does (`fc_stm32f405::timing`): for
+//! The image measures it as `firmware` does ([`crate::timing`]): for
 //! every step, data-ready → estimate and data-ready → outputs driven,
 //! against one 1 kHz period.
-
-use fc_stm32f405::crtp_image::{ImuBus, Outputs, Watchdog};
+//!
+//! [`Outputs`]: crate::crtp_image::Outputs
+//! [`Watchdog`]: crate::crtp_image::Watchdog
+//! [`ImuBus`]: crate::crtp_image::ImuBus
+//! [`CrtpShared`]: fc_crtp::vehicle::CrtpShared
+//! [`CrtpShared::imu_begin`]: fc_crtp::vehicle::CrtpShared::imu_begin
+//! [`fly_step`]: fc_crtp::vehicle::fly_step
+//! [`pass_step`]: fc_crtp::vehicle::pass_step
+//! [`run_work`]: fc_crtp::vehicle::run_work
 
 /// Whether the vehicle is armed, as the link's task last saw it: the
 /// settings store refuses writes then.
-static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+pub static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
-#[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
-mod app {
-    use super::{ImuBus, Outputs, Watchdog};
-    use crate::board;
-    use fc_core::control::AnyController;
-    use fc_core::estimate::{Fix, ImuSample};
-    use fc_crtp::syslink::Syslink;
-    use fc_crtp::vehicle::{fly_step, pass_step, run_work, ControllerWork, CrtpShared, ImuStep};
-    use fc_loop::params::Refusal;
-    use fc_loop::{fix_from_wire, Mutex};
-    use fc_proto::{FrameDecoder, FromFc, ToFc};
-    use fc_stm32f405::crtp_image::{log_changes, send, Last, SimCounters, DOWNLINK, FIXES, SYSLINK_BAUD};
-    use fc_stm32f405::timing::{StepTiming, Timing};
-    use fc_stm32f405::PCLK2_HZ;
-    use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, SysTickClock, Usart};
-    use heapless::spsc::{Consumer, Producer, Queue};
-    use nalgebra::Vector3;
-    use stm32f4::stm32f405::Interrupt;
+/// Binds the CRTP images' RTIC application (see the module's
+/// documentation) in an image, once, at its crate's root on the target,
+/// beside [`board_runtime!`](crate::board_runtime) and the board's parts
+/// the application names.
+#[macro_export]
+#[allow(
+    clippy::crate_in_macro_def,
+    reason = "`crate::` is the image's: the board's parts it names"
+)]
+macro_rules! crtp_app {
+    () => {
+        #[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
+        mod app {
+            use $crate::crtp_image::{ImuBus, Outputs, Watchdog};
+            use $crate::board;
+            use fc_core::control::AnyController;
+            use fc_core::estimate::{Fix, ImuSample};
+            use fc_crtp::syslink::Syslink;
+            use fc_crtp::vehicle::{fly_step, pass_step, run_work, ControllerWork, CrtpShared, ImuStep};
+            use fc_loop::params::Refusal;
+            use fc_loop::{fix_from_wire, Mutex};
+            use fc_proto::{FrameDecoder, FromFc, ToFc};
+            use $crate::crtp_image::{log_changes, send, Last, SimCounters, DOWNLINK, FIXES, SYSLINK_BAUD};
+            use $crate::timing::{StepTiming, Timing};
+            use $crate::PCLK2_HZ;
+            use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, SysTickClock, Usart};
+            use heapless::spsc::{Consumer, Producer, Queue};
+            use nalgebra::Vector3;
+            use stm32f4::stm32f405::Interrupt;
 
-    /// Steps waiting for the controller's task from the sample's.
-    const TASKS: usize = 8;
-    /// Work from the link's task (a take-off's reset: 2 is room enough).
-    const WORKS: usize = 2;
-    /// The sample task's answers to the simulator, waiting for the link.
-    const ANSWERS: usize = 8;
+            /// Steps waiting for the controller's task from the sample's.
+            const TASKS: usize = 8;
+            /// Work from the link's task (a take-off's reset: 2 is room enough).
+            const WORKS: usize = 2;
+            /// The sample task's answers to the simulator, waiting for the link.
+            const ANSWERS: usize = 8;
 
-    /// A sample's step for the controller's task, in the order the
-    /// samples came.
-    pub struct Task {
-        /// The sample's step: its controller half.
-        step: ImuStep,
-        /// The simulator's sequence number (`None`: the board's own
-        /// sample, not answered).
-        seq: Option<u32>,
-        /// Its data-ready time (SysTick ticks).
-        entry: u64,
-    }
-
-    #[shared]
-    struct Shared {
-        /// The vehicle without its controller.
-        v: &'static mut CrtpShared,
-        /// USART1's transmitter: the simulator's answers.
-        sim_tx: Usart,
-        /// What the tasks measured.
-        timing: Timing,
-        /// What the simulator's link did.
-        sim: SimCounters,
-        /// The board's own IMU (none in QEMU).
-        imu: crate::ImuBus,
-        /// The controller: the controller's task's, lent to the link's
-        /// task for a re-design (`None` meanwhile).
-        ctrl: Option<&'static mut AnyController<f32>>,
-    }
-
-    #[local]
-    struct Local {
-        outputs: crate::BoardOutputs,
-        decoder: FrameDecoder,
-        fixes: heapless::Vec<Fix, FIXES>,
-        tasks_in: Producer<'static, Task>,
-        tasks_out: Consumer<'static, Task>,
-        works_in: Producer<'static, ControllerWork>,
-        works_out: Consumer<'static, ControllerWork>,
-        answers_in: Producer<'static, FromFc>,
-        answers_out: Consumer<'static, FromFc>,
-        radio: Usart,
-        syslink: Syslink<DOWNLINK>,
-        last: Last,
-        logged: StepTiming,
-        tx_errors: u32,
-        sample_clock: SysTickClock,
-        control_clock: SysTickClock,
-    }
-
-    #[init(local = [
-        tasks: Queue<Task, TASKS> = Queue::new(),
-        works: Queue<ControllerWork, WORKS> = Queue::new(),
-        answers: Queue<FromFc, ANSWERS> = Queue::new(),
-        store: Option<fc_stm32f405::flash::Kept> = None,
-    ])]
-    fn init(cx: init::Context) -> (Shared, Local) {
-        let (clock, sim_tx) = board::bring_up();
-        let outputs = crate::BoardOutputs::start();
-        let Some(vehicle) = crate::vehicle() else {
-            board::fail("vehicle already taken");
-        };
-        if vehicle.start().is_err() {
-            board::fail("boot controller design failed");
-        }
-        // cflib's persistent parameters: the stored values, each through
-        // the check a client's write goes through.
-        let mut store = fc_stm32f405::flash::open_settings(&super::ARMED, |on| crate::WATCHDOG.designing(on))
-            .map(|s| cx.local.store.insert(s));
-        if let Some(st) = store.as_deref_mut() {
-            let (mut taken, mut refused) = (0u16, 0u16);
-            for i in 0..fc_loop::params::PARAMS.len() {
-                if let Ok(Some(value)) = fc_storage::Persist::param(st, i as u16) {
-                    match vehicle.write_param(i, value) {
-                        Ok(_) => taken += 1,
-                        Err(_) => refused += 1,
-                    }
-                }
+            /// A sample's step for the controller's task, in the order the
+            /// samples came.
+            pub struct Task {
+                /// The sample's step: its controller half.
+                step: ImuStep,
+                /// The simulator's sequence number (`None`: the board's own
+                /// sample, not answered).
+                seq: Option<u32>,
+                /// Its data-ready time (SysTick ticks).
+                entry: u64,
             }
-            defmt::info!(
-                "storage: {=u16} stored parameters taken, {=u16} refused",
-                taken,
-                refused
-            );
-        }
-        let (v, ctrl) = vehicle.split();
-        // The board's sensors, started (QEMU's: the simulator's).
-        let (imu, sensors) = crate::imu_bus();
-        v.set_sensors(sensors);
-        let mut radio = Usart::init(Port::Usart6, PCLK2_HZ, SYSLINK_BAUD);
-        let mut syslink: Syslink<DOWNLINK> = Syslink::new();
-        if syslink.boot(&mut radio).is_err() {
-            defmt::warn!("USART6 transmit timed out (RADIO_READY)");
-        }
-        if let Some(st) = store {
-            syslink.keep_in(st);
-        }
-        defmt::info!(
-            "up: CRTP over syslink on USART6, the simulator on USART1; tasks: radio bytes (4), data-ready (3), controller (2), link (1)"
-        );
-        let (tasks_in, tasks_out) = cx.local.tasks.split();
-        let (works_in, works_out) = cx.local.works.split();
-        let (answers_in, answers_out) = cx.local.answers.split();
-        (
-            Shared {
-                v,
-                sim_tx,
-                timing: Timing::new(fc_stm32f405::timing::DEADLINE_TICKS),
-                sim: SimCounters::default(),
-                imu,
-                ctrl: Some(ctrl),
-            },
-            Local {
-                outputs,
-                decoder: FrameDecoder::new(),
-                fixes: heapless::Vec::new(),
-                tasks_in,
-                tasks_out,
-                works_in,
-                works_out,
-                answers_in,
-                answers_out,
-                radio,
-                syslink,
-                last: Last::default(),
-                logged: StepTiming::default(),
-                tx_errors: 0,
-                sample_clock: clock,
-                control_clock: clock,
-            },
-        )
-    }
 
-    #[idle]
-    fn idle(_: idle::Context) -> ! {
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
-
-    /// The radio's bytes into their queue; the link's task takes them.
-    #[task(binds = USART6, priority = 4)]
-    fn radio_bytes(_: radio_bytes::Context) {
-        usart_isr(Port::Usart6);
-        rtic::pend(Interrupt::CAN2_RX1);
-    }
-
-    /// The simulator's frames: a parameter write (answered, or its design
-    /// left to the link's task), a fix (kept for the next sample), a
-    /// sample (data-ready: the estimator's step, then the controller's).
-    #[task(binds = USART1, priority = 3, shared = [v, timing, sim, imu], local = [decoder, fixes, tasks_in, answers_in, sample_clock])]
-    fn data_ready(cx: data_ready::Context) {
-        usart_isr(Port::Usart1);
-        let data_ready::LocalResources {
-            decoder,
-            fixes,
-            tasks_in,
-            answers_in,
-            sample_clock: clock,
-            ..
-        } = cx.local;
-        let (mut v, mut timing, mut sim, mut imu) = (cx.shared.v, cx.shared.timing, cx.shared.sim, cx.shared.imu);
-        let mut st = Stepping {
-            v: &mut v,
-            timing: &mut timing,
-            tasks_in,
-            fixes,
-            clock,
-        };
-        let mut buf = [0u8; 64];
-        loop {
-            let n = read_queued(Port::Usart1, &mut buf);
-            if n == 0 {
-                break;
+            #[shared]
+            struct Shared {
+                /// The vehicle without its controller.
+                v: &'static mut CrtpShared,
+                /// USART1's transmitter: the simulator's answers.
+                sim_tx: Usart,
+                /// What the tasks measured.
+                timing: Timing,
+                /// What the simulator's link did.
+                sim: SimCounters,
+                /// The board's own IMU (none in QEMU).
+                imu: crate::ImuBus,
+                /// The controller: the controller's task's, lent to the link's
+                /// task for a re-design (`None` meanwhile).
+                ctrl: Option<&'static mut AnyController<f32>>,
             }
-            for &b in &buf[..n] {
-                let m = match decoder.push::<ToFc>(b) {
-                    None => continue,
-                    Some(Err(_)) => {
-                        sim.lock(|c| c.bad = c.bad.wrapping_add(1));
-                        continue;
-                    }
-                    Some(Ok(m)) => m,
+
+            #[local]
+            struct Local {
+                outputs: crate::BoardOutputs,
+                decoder: FrameDecoder,
+                fixes: heapless::Vec<Fix, FIXES>,
+                tasks_in: Producer<'static, Task>,
+                tasks_out: Consumer<'static, Task>,
+                works_in: Producer<'static, ControllerWork>,
+                works_out: Consumer<'static, ControllerWork>,
+                answers_in: Producer<'static, FromFc>,
+                answers_out: Consumer<'static, FromFc>,
+                radio: Usart,
+                syslink: Syslink<DOWNLINK>,
+                last: Last,
+                logged: StepTiming,
+                tx_errors: u32,
+                sample_clock: SysTickClock,
+                control_clock: SysTickClock,
+            }
+
+            #[init(local = [
+                tasks: Queue<Task, TASKS> = Queue::new(),
+                works: Queue<ControllerWork, WORKS> = Queue::new(),
+                answers: Queue<FromFc, ANSWERS> = Queue::new(),
+                store: Option<$crate::flash::Kept> = None,
+            ])]
+            fn init(cx: init::Context) -> (Shared, Local) {
+                let (clock, sim_tx) = board::bring_up();
+                let outputs = crate::BoardOutputs::start();
+                let Some(vehicle) = crate::vehicle() else {
+                    board::fail("vehicle already taken");
                 };
-                match m {
-                    ToFc::ParamSet { index, value } => {
-                        // A write that re-designs stays queued in the
-                        // vehicle: the link's task (pended as this one
-                        // ends) takes it, designs and answers.
-                        if let Some(a) = st.v.lock(|v| v.sim_param(index, value)) {
-                            if answers_in.enqueue(a).is_err() {
-                                st.timing.lock(|t| t.answers_dropped(1));
+                if vehicle.start().is_err() {
+                    board::fail("boot controller design failed");
+                }
+                // cflib's persistent parameters: the stored values, each through
+                // the check a client's write goes through.
+                let mut store = $crate::flash::open_settings(&$crate::crtp_app::ARMED, |on| crate::WATCHDOG.designing(on))
+                    .map(|s| cx.local.store.insert(s));
+                if let Some(st) = store.as_deref_mut() {
+                    let (mut taken, mut refused) = (0u16, 0u16);
+                    for i in 0..fc_loop::params::PARAMS.len() {
+                        if let Ok(Some(value)) = fc_storage::Persist::param(st, i as u16) {
+                            match vehicle.write_param(i, value) {
+                                Ok(_) => taken += 1,
+                                Err(_) => refused += 1,
                             }
                         }
                     }
-                    ToFc::Fix(w) => {
-                        if st.fixes.push(fix_from_wire(&w)).is_err() {
-                            sim.lock(|c| c.fixes_dropped = c.fixes_dropped.wrapping_add(1));
+                    defmt::info!(
+                        "storage: {=u16} stored parameters taken, {=u16} refused",
+                        taken,
+                        refused
+                    );
+                }
+                let (v, ctrl) = vehicle.split();
+                // The board's sensors, started (QEMU's: the simulator's).
+                let (imu, sensors) = crate::imu_bus();
+                v.set_sensors(sensors);
+                let mut radio = Usart::init(Port::Usart6, PCLK2_HZ, SYSLINK_BAUD);
+                let mut syslink: Syslink<DOWNLINK> = Syslink::new();
+                if syslink.boot(&mut radio).is_err() {
+                    defmt::warn!("USART6 transmit timed out (RADIO_READY)");
+                }
+                if let Some(st) = store {
+                    syslink.keep_in(st);
+                }
+                defmt::info!(
+                    "up: CRTP over syslink on USART6, the simulator on USART1; tasks: radio bytes (4), data-ready (3), controller (2), link (1)"
+                );
+                let (tasks_in, tasks_out) = cx.local.tasks.split();
+                let (works_in, works_out) = cx.local.works.split();
+                let (answers_in, answers_out) = cx.local.answers.split();
+                (
+                    Shared {
+                        v,
+                        sim_tx,
+                        timing: Timing::new($crate::timing::DEADLINE_TICKS),
+                        sim: SimCounters::default(),
+                        imu,
+                        ctrl: Some(ctrl),
+                    },
+                    Local {
+                        outputs,
+                        decoder: FrameDecoder::new(),
+                        fixes: heapless::Vec::new(),
+                        tasks_in,
+                        tasks_out,
+                        works_in,
+                        works_out,
+                        answers_in,
+                        answers_out,
+                        radio,
+                        syslink,
+                        last: Last::default(),
+                        logged: StepTiming::default(),
+                        tx_errors: 0,
+                        sample_clock: clock,
+                        control_clock: clock,
+                    },
+                )
+            }
+
+            #[idle]
+            fn idle(_: idle::Context) -> ! {
+                loop {
+                    cortex_m::asm::wfi();
+                }
+            }
+
+            /// The radio's bytes into their queue; the link's task takes them.
+            #[task(binds = USART6, priority = 4)]
+            fn radio_bytes(_: radio_bytes::Context) {
+                usart_isr(Port::Usart6);
+                rtic::pend(Interrupt::CAN2_RX1);
+            }
+
+            /// The simulator's frames: a parameter write (answered, or its design
+            /// left to the link's task), a fix (kept for the next sample), a
+            /// sample (data-ready: the estimator's step, then the controller's).
+            #[task(binds = USART1, priority = 3, shared = [v, timing, sim, imu], local = [decoder, fixes, tasks_in, answers_in, sample_clock])]
+            fn data_ready(cx: data_ready::Context) {
+                usart_isr(Port::Usart1);
+                let data_ready::LocalResources {
+                    decoder,
+                    fixes,
+                    tasks_in,
+                    answers_in,
+                    sample_clock: clock,
+                    ..
+                } = cx.local;
+                let (mut v, mut timing, mut sim, mut imu) = (cx.shared.v, cx.shared.timing, cx.shared.sim, cx.shared.imu);
+                let mut st = Stepping {
+                    v: &mut v,
+                    timing: &mut timing,
+                    tasks_in,
+                    fixes,
+                    clock,
+                };
+                let mut buf = [0u8; 64];
+                loop {
+                    let n = read_queued(Port::Usart1, &mut buf);
+                    if n == 0 {
+                        break;
+                    }
+                    for &b in &buf[..n] {
+                        let m = match decoder.push::<ToFc>(b) {
+                            None => continue,
+                            Some(Err(_)) => {
+                                sim.lock(|c| c.bad = c.bad.wrapping_add(1));
+                                continue;
+                            }
+                            Some(Ok(m)) => m,
+                        };
+                        match m {
+                            ToFc::ParamSet { index, value } => {
+                                // A write that re-designs stays queued in the
+                                // vehicle: the link's task (pended as this one
+                                // ends) takes it, designs and answers.
+                                if let Some(a) = st.v.lock(|v| v.sim_param(index, value)) {
+                                    if answers_in.enqueue(a).is_err() {
+                                        st.timing.lock(|t| t.answers_dropped(1));
+                                    }
+                                }
+                            }
+                            ToFc::Fix(w) => {
+                                if st.fixes.push(fix_from_wire(&w)).is_err() {
+                                    sim.lock(|c| c.fixes_dropped = c.fixes_dropped.wrapping_add(1));
+                                }
+                            }
+                            ToFc::Imu { seq, t_us, gyro, accel } => {
+                                // Data-ready: the sample is whole (here, the `Imu`
+                                // frame's last byte).
+                                let entry = ticks_now();
+                                let s = ImuSample {
+                                    gyro_frd_radps: Vector3::from(gyro),
+                                    accel_frd_mps2: Vector3::from(accel),
+                                };
+                                st.sample(t_us, Some(&s), Some(seq), entry);
+                            }
+                            _ => sim.lock(|c| c.ignored = c.ignored.wrapping_add(1)),
                         }
                     }
-                    ToFc::Imu { seq, t_us, gyro, accel } => {
-                        // Data-ready: the sample is whole (here, the `Imu`
-                        // frame's last byte).
-                        let entry = ticks_now();
-                        let s = ImuSample {
-                            gyro_frd_radps: Vector3::from(gyro),
-                            accel_frd_mps2: Vector3::from(accel),
-                        };
-                        st.sample(t_us, Some(&s), Some(seq), entry);
-                    }
-                    _ => sim.lock(|c| c.ignored = c.ignored.wrapping_add(1)),
                 }
+                // The board's own barometer (50 Hz): a height fix before the next
+                // sample's step.
+                if let Some((at, alt_m)) = imu.lock(|b| b.take_baro()) {
+                    st.v.lock(|v| v.baro(board::us_of(at), alt_m));
+                }
+                // The board's own sample, read on its bus's interrupts (a board's
+                // data-ready line, its time taken there).
+                while let Some((entry, s)) = imu.lock(|b| b.take()) {
+                    st.sample(board::us_of(entry), s.as_ref(), None, entry);
+                }
+                rtic::pend(Interrupt::CAN2_RX1);
             }
-        }
-        // The board's own barometer (50 Hz): a height fix before the next
-        // sample's step.
-        if let Some((at, alt_m)) = imu.lock(|b| b.take_baro()) {
-            st.v.lock(|v| v.baro(board::us_of(at), alt_m));
-        }
-        // The board's own sample, read on its bus's interrupts (a board's
-        // data-ready line, its time taken there).
-        while let Some((entry, s)) = imu.lock(|b| b.take()) {
-            st.sample(board::us_of(entry), s.as_ref(), None, entry);
-        }
-        rtic::pend(Interrupt::CAN2_RX1);
-    }
 
-    /// The sample task's step, whichever source the sample came from.
-    struct Stepping<'a, V, T> {
-        v: &'a mut V,
-        timing: &'a mut T,
-        tasks_in: &'a mut Producer<'static, Task>,
-        fixes: &'a mut heapless::Vec<Fix, FIXES>,
-        clock: &'a SysTickClock,
-    }
-
-    impl<V, T> Stepping<'_, V, T>
-    where
-        V: rtic::Mutex<T = &'static mut CrtpShared>,
-        T: rtic::Mutex<T = Timing>,
-    {
-        /// The estimator's step of a sample taken at `t_us` (`None`:
-        /// missing) whose data-ready came at `entry`, then the controller's
-        /// queued (`seq`: the simulator's, answered).
-        fn sample(&mut self, t_us: u64, s: Option<&ImuSample>, seq: Option<u32>, entry: u64) {
-            let (fixes, clock) = (&mut *self.fixes, self.clock);
-            let step = self.v.lock(|v| v.imu_begin(t_us, s, fixes, clock));
-            self.fixes.clear();
-            let done = ticks_now();
-            crate::WATCHDOG.imu_step();
-            self.timing.lock(|t| t.estimated(entry, done));
-            if self.tasks_in.enqueue(Task { step, seq, entry }).is_err() {
-                self.timing.lock(|t| t.job_dropped());
+            /// The sample task's step, whichever source the sample came from.
+            struct Stepping<'a, V, T> {
+                v: &'a mut V,
+                timing: &'a mut T,
+                tasks_in: &'a mut Producer<'static, Task>,
+                fixes: &'a mut heapless::Vec<Fix, FIXES>,
+                clock: &'a SysTickClock,
             }
-            rtic::pend(Interrupt::CAN2_RX0);
-        }
-    }
 
-    /// The board's data-ready line (the Crazyflie's gyroscope INT3 on PC14,
-    /// EXTI14): the sample's reads start. Never fires in QEMU.
-    #[task(binds = EXTI15_10, priority = 3, shared = [imu])]
-    fn gyro_ready(mut cx: gyro_ready::Context) {
-        let entry = ticks_now();
-        if cx.shared.imu.lock(|b| b.data_ready(entry)) {
-            rtic::pend(Interrupt::USART1);
-        }
-    }
-
-    /// The board's IMU bus (I2C3): each event advances the sample's reads;
-    /// the last pends `data_ready`.
-    #[task(binds = I2C3_EV, priority = 3, shared = [imu])]
-    fn imu_bus_event(mut cx: imu_bus_event::Context) {
-        if cx.shared.imu.lock(|b| b.bus_interrupt(false)) {
-            rtic::pend(Interrupt::USART1);
-        }
-    }
-
-    /// The board's IMU bus's errors (NACK, bus error, arbitration lost).
-    #[task(binds = I2C3_ER, priority = 3, shared = [imu])]
-    fn imu_bus_error(mut cx: imu_bus_error::Context) {
-        if cx.shared.imu.lock(|b| b.bus_interrupt(true)) {
-            rtic::pend(Interrupt::USART1);
-        }
-    }
-
-    /// The controller: the link's work first (a take-off's reset), then
-    /// the sample task's steps in order; each step flown on the controller
-    /// (passed, motors off, while the link's task designs it), its outputs
-    /// driven and the simulator answered.
-    #[task(binds = CAN2_RX0, priority = 2, shared = [v, sim_tx, timing, ctrl], local = [outputs, tasks_out, works_out, control_clock])]
-    fn controller(cx: controller::Context) {
-        let controller::LocalResources {
-            outputs,
-            tasks_out,
-            works_out,
-            control_clock: clock,
-            ..
-        } = cx.local;
-        let (mut v, mut sim_tx, mut timing, mut ctrl) =
-            (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.ctrl);
-        // The link's task (below this one) cannot run before this task
-        // ends: the controller is this task's until then, or the link's
-        // for its whole design.
-        ctrl.lock(|ctrl| loop {
-            // The link's work (a take-off's reset) before the next step.
-            if let Some(work) = works_out.dequeue() {
-                let answer = match ctrl.as_deref_mut() {
-                    Some(c) => run_work(&mut v, c, work).1,
-                    // Not reached (a take-off is refused while a
-                    // design runs); refused if it were.
-                    None => v.lock(|v| v.work_done(&work, Err(Refusal::Busy))),
-                };
-                if let Some(a) = answer {
-                    if sim_tx.lock(|u| send(u, &a)).is_err() {
-                        timing.lock(|t| t.tx_timeout());
-                    }
-                }
-                continue;
-            }
-            let Some(Task { step, seq, entry }) = tasks_out.dequeue() else {
-                break;
-            };
-            let flown = ctrl.is_some();
-            let u = match ctrl.as_deref_mut() {
-                Some(c) => fly_step(&mut v, c, step, clock),
-                None => pass_step(&mut v, step, clock),
-            };
-            v.lock(|v| outputs.drive(v, &u));
-            // The step is flown when its outputs are driven.
-            let done = ticks_now();
-            crate::WATCHDOG.controller_step();
-            // The simulator's sample is answered; the board's own is not.
-            let sent = match seq {
-                Some(seq) => {
-                    let answer = FromFc::Actuator {
-                        seq,
-                        u: [u[0], u[1], u[2], u[3]],
-                        failsafe: false,
-                    };
-                    sim_tx.lock(|tx| send(tx, &answer))
-                }
-                None => Ok(()),
-            };
-            // The log blocks due, sampled at this step; what the
-            // outputs show besides the motors.
-            let (armed, nav, battery_v) = v.lock(|v| {
-                v.sample_logs();
-                (v.armed(), v.flight_loop().navigator().mode(), v.battery_v())
-            });
-            outputs.report(armed, nav, battery_v);
-            timing.lock(|t| {
-                if flown {
-                    t.flown(entry, done);
-                } else {
-                    t.passed(entry, done);
-                }
-                if sent.is_err() {
-                    t.tx_timeout();
-                }
-            });
-        });
-        rtic::pend(Interrupt::CAN2_RX1);
-    }
-
-    /// The link: the simulator's re-designs, the radio's packets (a
-    /// re-design one asks for run at once), the log blocks and answers
-    /// that fell due, the simulator's queued answers, then what changed in
-    /// the log.
-    #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, tx_errors])]
-    fn link(cx: link::Context) {
-        let link::LocalResources {
-            radio,
-            syslink,
-            works_in,
-            answers_out,
-            last,
-            logged,
-            tx_errors,
-            ..
-        } = cx.local;
-        let (v, mut sim_tx, mut timing, mut sim) = (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.sim);
-        let mut vehicle = Handing {
-            v,
-            works: works_in,
-            ctrl: cx.shared.ctrl,
-            answer: None,
-        };
-        let mut ok = true;
-        // The store refuses writes while armed.
-        super::ARMED.store(vehicle.v.lock(|v| v.armed()), core::sync::atomic::Ordering::Relaxed);
-        // The simulator's re-designing write, if one waits.
-        vehicle.lock(|_| ());
-        let mut buf = [0u8; 64];
-        loop {
-            let n = read_queued(Port::Usart6, &mut buf);
-            if n == 0 {
-                break;
-            }
-            ok &= syslink.receive(&buf[..n], &mut vehicle, radio).is_ok();
-        }
-        syslink.poll(&mut vehicle);
-        while let Some(m) = answers_out.dequeue().or_else(|| vehicle.answer.take()) {
-            ok &= sim_tx.lock(|u| send(u, &m)).is_ok();
-        }
-        if !ok {
-            *tx_errors = tx_errors.wrapping_add(1);
-            defmt::warn!("a USART transmit timed out ({=u32} so far)", *tx_errors);
-        }
-        crate::WATCHDOG.service();
-        let (armed, imu) = vehicle.v.lock(|v| (v.armed(), v.imu_counters()));
-        let sc = sim.lock(|c| *c);
-        log_changes(armed, imu, &syslink.counters(), &sc, last);
-        timing.lock(|t| t.snapshot()).log_if_due(logged);
-    }
-
-    /// The vehicle as the link's task locks it: the controller work a
-    /// packet asked for runs as the lock ends, a re-design here
-    /// ([`Handing::design`]), anything else in the controller's task.
-    struct Handing<'a, M, C> {
-        v: M,
-        works: &'a mut Producer<'static, ControllerWork>,
-        ctrl: C,
-        /// The simulator's answer to its re-designing write, once designed.
-        answer: Option<FromFc>,
-    }
-
-    impl<M, C> Handing<'_, M, C>
-    where
-        M: Mutex<T = &'static mut CrtpShared>,
-        C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
-    {
-        /// Runs the re-design `work` on the controller, borrowed from the
-        /// controller's task for it (which passes its steps meanwhile, the
-        /// vehicle disarmed); returns the simulator's answer, if it asked.
-        fn design(&mut self, work: ControllerWork) -> Option<FromFc> {
-            let Some(c) = self.ctrl.lock(|c| c.take()) else {
-                // Not reached (the controller's task gives it back before
-                // it ends); refused if it were.
-                return self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
-            };
-            crate::WATCHDOG.designing(true);
-            let (_, answer) = run_work(&mut self.v, c, work);
-            crate::WATCHDOG.designing(false);
-            self.ctrl.lock(|slot| *slot = Some(c));
-            answer
-        }
-    }
-
-    impl<M, C> Mutex for Handing<'_, M, C>
-    where
-        M: Mutex<T = &'static mut CrtpShared>,
-        C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
-    {
-        type T = CrtpShared;
-        fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpShared) -> R) -> R {
-            let (r, work) = self.v.lock(|v| {
-                let r = f(v);
-                (r, v.take_work())
-            });
-            match work {
-                // A packet's design is answered over CRTP (`work_done`),
-                // the simulator's by a message for it.
-                Some(work) if work.designs() => {
-                    if let Some(a) = self.design(work) {
-                        self.answer = Some(a);
-                    }
-                }
-                Some(work) => {
-                    if self.works.enqueue(work).is_err() {
-                        // Not reached (one piece of work at a time);
-                        // refused if it were.
-                        self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+            impl<V, T> Stepping<'_, V, T>
+            where
+                V: rtic::Mutex<T = &'static mut CrtpShared>,
+                T: rtic::Mutex<T = Timing>,
+            {
+                /// The estimator's step of a sample taken at `t_us` (`None`:
+                /// missing) whose data-ready came at `entry`, then the controller's
+                /// queued (`seq`: the simulator's, answered).
+                fn sample(&mut self, t_us: u64, s: Option<&ImuSample>, seq: Option<u32>, entry: u64) {
+                    let (fixes, clock) = (&mut *self.fixes, self.clock);
+                    let step = self.v.lock(|v| v.imu_begin(t_us, s, fixes, clock));
+                    self.fixes.clear();
+                    let done = ticks_now();
+                    crate::WATCHDOG.imu_step();
+                    self.timing.lock(|t| t.estimated(entry, done));
+                    if self.tasks_in.enqueue(Task { step, seq, entry }).is_err() {
+                        self.timing.lock(|t| t.job_dropped());
                     }
                     rtic::pend(Interrupt::CAN2_RX0);
                 }
-                None => {}
             }
-            r
+
+            /// The board's data-ready line (the Crazyflie's gyroscope INT3 on PC14,
+            /// EXTI14): the sample's reads start. Never fires in QEMU.
+            #[task(binds = EXTI15_10, priority = 3, shared = [imu])]
+            fn gyro_ready(mut cx: gyro_ready::Context) {
+                let entry = ticks_now();
+                if cx.shared.imu.lock(|b| b.data_ready(entry)) {
+                    rtic::pend(Interrupt::USART1);
+                }
+            }
+
+            /// The board's IMU bus (I2C3): each event advances the sample's reads;
+            /// the last pends `data_ready`.
+            #[task(binds = I2C3_EV, priority = 3, shared = [imu])]
+            fn imu_bus_event(mut cx: imu_bus_event::Context) {
+                if cx.shared.imu.lock(|b| b.bus_interrupt(false)) {
+                    rtic::pend(Interrupt::USART1);
+                }
+            }
+
+            /// The board's IMU bus's errors (NACK, bus error, arbitration lost).
+            #[task(binds = I2C3_ER, priority = 3, shared = [imu])]
+            fn imu_bus_error(mut cx: imu_bus_error::Context) {
+                if cx.shared.imu.lock(|b| b.bus_interrupt(true)) {
+                    rtic::pend(Interrupt::USART1);
+                }
+            }
+
+            /// The controller: the link's work first (a take-off's reset), then
+            /// the sample task's steps in order; each step flown on the controller
+            /// (passed, motors off, while the link's task designs it), its outputs
+            /// driven and the simulator answered.
+            #[task(binds = CAN2_RX0, priority = 2, shared = [v, sim_tx, timing, ctrl], local = [outputs, tasks_out, works_out, control_clock])]
+            fn controller(cx: controller::Context) {
+                let controller::LocalResources {
+                    outputs,
+                    tasks_out,
+                    works_out,
+                    control_clock: clock,
+                    ..
+                } = cx.local;
+                let (mut v, mut sim_tx, mut timing, mut ctrl) =
+                    (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.ctrl);
+                // The link's task (below this one) cannot run before this task
+                // ends: the controller is this task's until then, or the link's
+                // for its whole design.
+                ctrl.lock(|ctrl| loop {
+                    // The link's work (a take-off's reset) before the next step.
+                    if let Some(work) = works_out.dequeue() {
+                        let answer = match ctrl.as_deref_mut() {
+                            Some(c) => run_work(&mut v, c, work).1,
+                            // Not reached (a take-off is refused while a
+                            // design runs); refused if it were.
+                            None => v.lock(|v| v.work_done(&work, Err(Refusal::Busy))),
+                        };
+                        if let Some(a) = answer {
+                            if sim_tx.lock(|u| send(u, &a)).is_err() {
+                                timing.lock(|t| t.tx_timeout());
+                            }
+                        }
+                        continue;
+                    }
+                    let Some(Task { step, seq, entry }) = tasks_out.dequeue() else {
+                        break;
+                    };
+                    let flown = ctrl.is_some();
+                    let u = match ctrl.as_deref_mut() {
+                        Some(c) => fly_step(&mut v, c, step, clock),
+                        None => pass_step(&mut v, step, clock),
+                    };
+                    v.lock(|v| outputs.drive(v, &u));
+                    // The step is flown when its outputs are driven.
+                    let done = ticks_now();
+                    crate::WATCHDOG.controller_step();
+                    // The simulator's sample is answered; the board's own is not.
+                    let sent = match seq {
+                        Some(seq) => {
+                            let answer = FromFc::Actuator {
+                                seq,
+                                u: [u[0], u[1], u[2], u[3]],
+                                failsafe: false,
+                            };
+                            sim_tx.lock(|tx| send(tx, &answer))
+                        }
+                        None => Ok(()),
+                    };
+                    // The log blocks due, sampled at this step; what the
+                    // outputs show besides the motors.
+                    let (armed, nav, battery_v) = v.lock(|v| {
+                        v.sample_logs();
+                        (v.armed(), v.flight_loop().navigator().mode(), v.battery_v())
+                    });
+                    outputs.report(armed, nav, battery_v);
+                    timing.lock(|t| {
+                        if flown {
+                            t.flown(entry, done);
+                        } else {
+                            t.passed(entry, done);
+                        }
+                        if sent.is_err() {
+                            t.tx_timeout();
+                        }
+                    });
+                });
+                rtic::pend(Interrupt::CAN2_RX1);
+            }
+
+            /// The link: the simulator's re-designs, the radio's packets (a
+            /// re-design one asks for run at once), the log blocks and answers
+            /// that fell due, the simulator's queued answers, then what changed in
+            /// the log.
+            #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, tx_errors])]
+            fn link(cx: link::Context) {
+                let link::LocalResources {
+                    radio,
+                    syslink,
+                    works_in,
+                    answers_out,
+                    last,
+                    logged,
+                    tx_errors,
+                    ..
+                } = cx.local;
+                let (v, mut sim_tx, mut timing, mut sim) = (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.sim);
+                let mut vehicle = Handing {
+                    v,
+                    works: works_in,
+                    ctrl: cx.shared.ctrl,
+                    answer: None,
+                };
+                let mut ok = true;
+                // The store refuses writes while armed.
+                $crate::crtp_app::ARMED.store(vehicle.v.lock(|v| v.armed()), core::sync::atomic::Ordering::Relaxed);
+                // The simulator's re-designing write, if one waits.
+                vehicle.lock(|_| ());
+                let mut buf = [0u8; 64];
+                loop {
+                    let n = read_queued(Port::Usart6, &mut buf);
+                    if n == 0 {
+                        break;
+                    }
+                    ok &= syslink.receive(&buf[..n], &mut vehicle, radio).is_ok();
+                }
+                syslink.poll(&mut vehicle);
+                while let Some(m) = answers_out.dequeue().or_else(|| vehicle.answer.take()) {
+                    ok &= sim_tx.lock(|u| send(u, &m)).is_ok();
+                }
+                if !ok {
+                    *tx_errors = tx_errors.wrapping_add(1);
+                    defmt::warn!("a USART transmit timed out ({=u32} so far)", *tx_errors);
+                }
+                crate::WATCHDOG.service();
+                let (armed, imu) = vehicle.v.lock(|v| (v.armed(), v.imu_counters()));
+                let sc = sim.lock(|c| *c);
+                log_changes(armed, imu, &syslink.counters(), &sc, last);
+                timing.lock(|t| t.snapshot()).log_if_due(logged);
+            }
+
+            /// The vehicle as the link's task locks it: the controller work a
+            /// packet asked for runs as the lock ends, a re-design here
+            /// ([`Handing::design`]), anything else in the controller's task.
+            struct Handing<'a, M, C> {
+                v: M,
+                works: &'a mut Producer<'static, ControllerWork>,
+                ctrl: C,
+                /// The simulator's answer to its re-designing write, once designed.
+                answer: Option<FromFc>,
+            }
+
+            impl<M, C> Handing<'_, M, C>
+            where
+                M: Mutex<T = &'static mut CrtpShared>,
+                C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
+            {
+                /// Runs the re-design `work` on the controller, borrowed from the
+                /// controller's task for it (which passes its steps meanwhile, the
+                /// vehicle disarmed); returns the simulator's answer, if it asked.
+                fn design(&mut self, work: ControllerWork) -> Option<FromFc> {
+                    let Some(c) = self.ctrl.lock(|c| c.take()) else {
+                        // Not reached (the controller's task gives it back before
+                        // it ends); refused if it were.
+                        return self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+                    };
+                    crate::WATCHDOG.designing(true);
+                    let (_, answer) = run_work(&mut self.v, c, work);
+                    crate::WATCHDOG.designing(false);
+                    self.ctrl.lock(|slot| *slot = Some(c));
+                    answer
+                }
+            }
+
+            impl<M, C> Mutex for Handing<'_, M, C>
+            where
+                M: Mutex<T = &'static mut CrtpShared>,
+                C: rtic::Mutex<T = Option<&'static mut AnyController<f32>>>,
+            {
+                type T = CrtpShared;
+                fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpShared) -> R) -> R {
+                    let (r, work) = self.v.lock(|v| {
+                        let r = f(v);
+                        (r, v.take_work())
+                    });
+                    match work {
+                        // A packet's design is answered over CRTP (`work_done`),
+                        // the simulator's by a message for it.
+                        Some(work) if work.designs() => {
+                            if let Some(a) = self.design(work) {
+                                self.answer = Some(a);
+                            }
+                        }
+                        Some(work) => {
+                            if self.works.enqueue(work).is_err() {
+                                // Not reached (one piece of work at a time);
+                                // refused if it were.
+                                self.v.lock(|v| v.work_done(&work, Err(Refusal::Busy)));
+                            }
+                            rtic::pend(Interrupt::CAN2_RX0);
+                        }
+                        None => {}
+                    }
+                    r
+                }
+            }
         }
-    }
+    };
 }

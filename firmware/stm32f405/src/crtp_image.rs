@@ -1,6 +1,6 @@
 //! What the CRTP images share (`firmware-crtp` on the plain STM32F405,
 //! `firmware-crazyflie` on the Crazyflie 2.1), around the RTIC application
-//! both include (`src/crtp_app.rs`): syslink to the nRF51 radio on USART6,
+//! both bind ([`crate::crtp_app`]): syslink to the nRF51 radio on USART6,
 //! the vehicle ([`fc_crtp::vehicle::CrtpShared`] and its controller, the
 //! same code `sil-host crtp` runs in-process) behind it, and the
 //! simulator's sensors on USART1.

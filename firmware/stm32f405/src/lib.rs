@@ -7,8 +7,12 @@
 #![cfg_attr(target_os = "none", no_std)]
 #![deny(missing_docs)]
 
+#[cfg(target_os = "none")]
+pub mod board;
 pub mod budgets;
 pub mod clocks;
+#[cfg(target_os = "none")]
+pub mod crtp_app;
 #[cfg(target_os = "none")]
 pub mod crtp_image;
 pub mod equivalence;

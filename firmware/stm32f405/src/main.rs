@@ -43,15 +43,15 @@
 #![cfg_attr(target_os = "none", no_main)]
 
 #[cfg(target_os = "none")]
-mod board;
+fc_stm32f405::board_runtime!();
 
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
 mod app {
-    use crate::board;
     use fc_core::control::AnyController;
     use fc_loop::{run_job, FcConfig, FlightLoop, Job, Loop, Mutex, Outbox};
     use fc_proto::{encode, Counters, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
+    use fc_stm32f405::board;
     use fc_stm32f405::log_changes;
     use fc_stm32f405::timing::{StepTiming, Timing};
     use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, PwmActuators, SysTickClock, TxTimeout, Usart};

@@ -1,6 +1,6 @@
 //! A deliberate HardFault on the Crazyflie 2.1 image's layout, for the
 //! fault test (`tests/tests/qemu.rs`): booted through the boot shim, the
-//! board's handlers (`board.rs`), the Crazyflie's four motors on TIM2/TIM4
+//! board's handlers (`fc_stm32f405::board`), the Crazyflie's four motors on TIM2/TIM4
 //! at about half duty, then an undefined instruction. The handler must
 //! zero the four compares (the image's own motors-off, not TIM3's), log
 //! over defmt, and end the run as a failure.
@@ -13,15 +13,13 @@
 use stm32f4 as _;
 
 #[cfg(target_os = "none")]
-#[path = "../../../stm32f405/src/board.rs"]
-#[allow(dead_code, reason = "the fault test uses only the handlers and bring-up")]
-mod board;
+fc_stm32f405::board_runtime!();
 
 #[cfg(target_os = "none")]
 mod target {
-    use crate::board;
     use cortex_m_rt::entry;
     use fc_crazyflie::motors::{self, MotorOutput};
+    use fc_stm32f405::board;
 
     #[entry]
     fn main() -> ! {

@@ -4,7 +4,7 @@
 //!
 //! It is a Crazyflie's STM32 as cflib and cfclient know it: CRTP over
 //! syslink to the nRF51 radio on USART6 (the RTIC application of
-//! `fc-stm32f405`'s `src/crtp_app.rs`, which `firmware-crtp` runs too:
+//! `fc_stm32f405::crtp_app`, which `firmware-crtp` runs too:
 //! radio bytes at priority 4, the sample and estimator at 3, the
 //! controller at 2, the link at 1), the vehicle's parameters and samples from
 //! the simulator on USART1, and the Crazyflie's motors on TIM2/TIM4: every
@@ -32,12 +32,10 @@
 use stm32f4 as _;
 
 #[cfg(target_os = "none")]
-#[path = "../../../stm32f405/src/board.rs"]
-mod board;
+fc_stm32f405::board_runtime!();
 
 #[cfg(target_os = "none")]
-#[path = "../../../stm32f405/src/crtp_app.rs"]
-mod crtp_app;
+fc_stm32f405::crtp_app!();
 
 #[cfg(target_os = "none")]
 pub use target::{imu_bus, vehicle, BoardOutputs, ImuBus, WATCHDOG};
@@ -88,7 +86,7 @@ mod target {
         pub(crate) fn start() -> Self {
             // SAFETY: the only code that touches the motor peripherals.
             let (tim2, tim4) = unsafe { motors::start_on_chip() };
-            crate::board::on_fault_stop_motors(on_fault);
+            fc_stm32f405::board::on_fault_stop_motors(on_fault);
             // SAFETY: the only code that touches the LED pins.
             let mut leds = unsafe { leds::start_on_chip() };
             let last_lit = pattern(Indication::Booting, 0);

@@ -1,5 +1,5 @@
 //! A deliberate HardFault, for the fault test (`tests/tests/qemu.rs`): the
-//! board's own handlers (`board.rs`, as the images link them), the motors
+//! board's own handlers (`fc_stm32f405::board`, bound as the images bind them), the motors
 //! running on TIM3 at half duty, then an undefined instruction. The handler
 //! must turn the motors off, log where the fault was over defmt, and end the
 //! run as a failure (QEMU exits non-zero).
@@ -12,14 +12,12 @@
 use stm32f4 as _;
 
 #[cfg(target_os = "none")]
-#[path = "../board.rs"]
-#[allow(dead_code, reason = "the fault test uses only the handlers and bring-up")]
-mod board;
+fc_stm32f405::board_runtime!();
 
 #[cfg(target_os = "none")]
 mod target {
-    use crate::board;
     use cortex_m_rt::entry;
+    use fc_stm32f405::board;
     use fc_stm32f405::APB1_TIMER_CLK_HZ;
     use hal_shim::stm32f405::PwmActuators;
     use hal_shim::ActuatorOutput;

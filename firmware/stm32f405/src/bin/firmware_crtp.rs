@@ -1,6 +1,6 @@
 //! The STM32F405 image speaking CRTP as a Crazyflie 2.1's STM32 does
 //! (`thumbv7em-none-eabihf`), linked at 0x0800_0000 for QEMU: the RTIC
-//! application of `src/crtp_app.rs` (syslink to the nRF51 radio on USART6,
+//! application of `fc_stm32f405::crtp_app` (syslink to the nRF51 radio on USART6,
 //! the vehicle `fc_crtp::vehicle::CrtpVehicle` behind it, split between the
 //! sample's, the controller's and the link's tasks; the simulator on
 //! USART1). Its simulator stands in for the Crazyflie board's BMI088 and
@@ -14,12 +14,10 @@
 #![cfg_attr(target_os = "none", no_main)]
 
 #[cfg(target_os = "none")]
-#[path = "../board.rs"]
-mod board;
+fc_stm32f405::board_runtime!();
 
 #[cfg(target_os = "none")]
-#[path = "../crtp_app.rs"]
-mod crtp_app;
+fc_stm32f405::crtp_app!();
 
 /// This board's outputs: four motors on TIM3 (PWM at 400 Hz; PA6, PA7,
 /// PB0, PB1 on most F405 boards), and the steps they have been running.

@@ -21,17 +21,16 @@
 use stm32f4 as _;
 
 #[cfg(target_os = "none")]
-#[path = "../board.rs"]
-mod board;
+fc_stm32f405::board_runtime!();
 
 #[cfg(target_os = "none")]
 mod target {
-    use crate::board;
     use cortex_m_rt::entry;
     use fc_mavlink::params::Settings;
     use fc_mavlink::signing::{Signing, SIMULATOR_UNSIGNED};
     use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer, VehicleCounters};
     use fc_mavlink::{encode_signed, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
+    use fc_stm32f405::board;
     use fc_stm32f405::flash::Kept;
     use fc_storage::Persist;
     use hal_shim::stm32f405::{TxTimeout, Usart};

@@ -1,5 +1,5 @@
 //! A deliberate stack overflow, for the fault test (`tests/tests/qemu.rs`):
-//! the board's own handlers (`board.rs`), the motors running on TIM3, a
+//! the board's own handlers (`fc_stm32f405::board`), the motors running on TIM3, a
 //! canary in `.bss`, then a recursion without end. Linked with flip-link,
 //! the stack sits at the bottom of RAM, beneath every static: the overflow
 //! runs off 0x2000_0000 into unmapped memory and faults, the canary above
@@ -14,15 +14,13 @@
 use stm32f4 as _;
 
 #[cfg(target_os = "none")]
-#[path = "../board.rs"]
-#[allow(dead_code, reason = "the fault test uses only the handlers and bring-up")]
-mod board;
+fc_stm32f405::board_runtime!();
 
 #[cfg(target_os = "none")]
 mod target {
-    use crate::board;
     use core::sync::atomic::{AtomicU32, Ordering};
     use cortex_m_rt::entry;
+    use fc_stm32f405::board;
     use fc_stm32f405::APB1_TIMER_CLK_HZ;
     use hal_shim::stm32f405::PwmActuators;
     use hal_shim::ActuatorOutput;
