@@ -1,5 +1,5 @@
 //! The board glue every image shares: defmt's logger and timestamps,
-//! bring-up of the clock tree, SysTick and USART1, the idle wait, the way a
+//! bring-up of the clock tree, SysTick and USART1, the way a
 //! fault stops the motors and what the fault and panic handlers say.
 //!
 //! The handlers themselves are link-time symbols (the vector table's
@@ -121,21 +121,6 @@ pub fn bring_up() -> (SysTickClock, Usart) {
 /// The loop's clock, µs since boot.
 pub fn now_us(clock: &SysTickClock) -> u64 {
     us_of(clock.ticks())
-}
-
-/// Idles until the next interrupt (a received byte or a SysTick wrap):
-/// the polling images' wait (`firmware`'s RTIC idle task has its own).
-/// Interrupts are masked across the check and WFI: a byte arriving in
-/// between leaves its interrupt pending, which makes WFI return at once, so
-/// no wake-up is lost; the handler runs when the mask lifts. Under QEMU a
-/// halted CPU lets the emulator deliver the next byte without executing
-/// guest instructions (so idle time does not count as instructions).
-pub fn idle() {
-    cortex_m::interrupt::free(|_| {
-        if !hal_shim::stm32f405::rx_pending() {
-            cortex_m::asm::wfi();
-        }
-    });
 }
 
 /// What stops the motors in a fault, as a function's address: the
