@@ -21,7 +21,6 @@
 //! its peak speed is the mode's speed.
 
 use crate::params::Refusal;
-use fc_loop::planner::{Reference, Segment};
 use mavlink::dialects::common::MavModeFlag;
 use nalgebra::Vector3;
 
@@ -353,82 +352,8 @@ pub fn joystick_velocity(nav: &NavSettings, x: i16, y: i16, z: i16, r: i16, yaw_
     (v, axis(r, 0.0, 1000.0) * nav.manual_yaw_dps.to_radians())
 }
 
-/// Duration of a rest-to-rest segment of length `d` whose peak speed is `v`
-/// (the septic's peak is 35/16 · d / T), at least 0.5 s.
-pub fn leg_duration_s(d_m: f32, v_mps: f32) -> f32 {
-    (35.0 / 16.0 * d_m / v_mps.max(0.01)).max(0.5)
-}
-
-/// The legs of an automatic mode still to fly, each a goal (NED, m) and
-/// its speed, m/s.
-pub type Legs = heapless::Deque<(Vector3<f32>, f32), 3>;
-
-/// An automatic mode under way: the segment flown, the legs after it.
-#[derive(Debug, Clone, Default)]
-pub struct Route {
-    segment: Option<Segment>,
-    legs: Legs,
-    yaw_rad: f32,
-}
-
-impl Route {
-    /// Nothing to fly.
-    pub const fn new() -> Self {
-        Self {
-            segment: None,
-            legs: heapless::Deque::new(),
-            yaw_rad: 0.0,
-        }
-    }
-
-    /// From `from` at `t_us` through `legs` in turn, holding heading `yaw`;
-    /// `false` (nothing to fly) if no leg could be planned (a goal not
-    /// finite or farther than the planner's 1 km).
-    pub fn start(&mut self, t_us: u64, from: &Reference, legs: Legs, yaw_rad: f32) -> bool {
-        self.legs = legs;
-        self.yaw_rad = yaw_rad;
-        self.segment = None;
-        self.next(t_us, from)
-    }
-
-    /// Plans the next leg from `from`; `false` when there is none.
-    fn next(&mut self, t_us: u64, from: &Reference) -> bool {
-        while let Some((goal, speed)) = self.legs.pop_front() {
-            let d = (goal - from.pos_ned_m).norm();
-            if let Ok(s) = Segment::plan(t_us, from, goal, self.yaw_rad, leg_duration_s(d, speed)) {
-                self.segment = Some(s);
-                return true;
-            }
-        }
-        false
-    }
-
-    /// The reference at `t_us` and whether every leg is done.
-    pub fn at(&mut self, t_us: u64) -> Option<(Reference, bool)> {
-        let seg = self.segment?;
-        if seg.finished(t_us) {
-            let end = seg.goal();
-            if self.next(t_us, &end) {
-                return self.segment.map(|s| (s.eval(t_us), false));
-            }
-            return Some((end, true));
-        }
-        Some((seg.eval(t_us), false))
-    }
-
-    /// The leg flown is the last one (or the route has ended).
-    pub fn on_last_leg(&self) -> bool {
-        self.segment.is_some() && self.legs.is_empty()
-    }
-
-    /// Where the route ends (the last leg's goal), if under way.
-    pub fn goal(&self) -> Option<Vector3<f32>> {
-        self.legs
-            .back()
-            .map(|l| l.0)
-            .or(self.segment.map(|s| s.goal().pos_ned_m))
-    }
-}
+// An automatic mode's legs are planned by the flight stack's commander.
+pub use fc_loop::commander::{leg_duration_s, Legs, Route};
 
 #[cfg(test)]
 mod tests {
@@ -508,39 +433,5 @@ mod tests {
             assert!((lo..=hi).contains(&(p.get)(&NavSettings::default())), "{}", p.id);
         }
         assert_eq!(nav_index_of(b"NOPE"), None);
-    }
-
-    #[test]
-    fn a_route_flies_its_legs_in_turn_at_their_peak_speeds() {
-        let mut r = Route::new();
-        let from = Reference::at_rest(Vector3::new(3.0, 4.0, -1.0), 0.0);
-        let mut legs = Legs::new();
-        legs.push_back((Vector3::new(3.0, 4.0, -2.0), 0.5)).unwrap();
-        legs.push_back((Vector3::new(0.0, 0.0, -2.0), 1.0)).unwrap();
-        assert!(r.start(0, &from, legs, 0.0));
-        assert_eq!(r.goal(), Some(Vector3::new(0.0, 0.0, -2.0)));
-        let mut t = 0;
-        let mut peak = [0.0f32; 2];
-        let mut leg = 0;
-        loop {
-            let (re, done) = r.at(t).unwrap();
-            if done {
-                assert!((re.pos_ned_m - Vector3::new(0.0, 0.0, -2.0)).norm() < 1e-4);
-                break;
-            }
-            if re.pos_ned_m[2] <= -2.0 + 1e-4 && re.vel_ned_mps[2].abs() < 1e-4 && leg == 0 && t > 0 {
-                leg = 1;
-            }
-            peak[leg] = peak[leg].max(re.vel_ned_mps.norm());
-            t += 10_000;
-            assert!(t < 20_000_000, "never done");
-        }
-        // 1 m up at 0.5 m/s: 4.375 s; 5 m across at 1 m/s: 10.9 s.
-        // A goal 2 km away is not planned.
-        let mut far = Legs::new();
-        far.push_back((Vector3::new(2000.0, 0.0, -1.0), 1.0)).unwrap();
-        assert!(!Route::new().start(0, &from, far, 0.0));
-        assert!((peak[0] - 0.5).abs() < 0.01 && (peak[1] - 1.0).abs() < 0.01, "{peak:?}");
-        assert!((15_000_000..15_500_000).contains(&t), "{t}");
     }
 }

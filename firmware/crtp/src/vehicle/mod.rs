@@ -4,7 +4,7 @@
 //! sensors.
 //!
 //! It is two parts, as the flight loop is: [`CrtpShared`], everything but the
-//! controller (the packets, the modes, the supervisor, the loop), and the
+//! controller (the packets, the commander, the supervisor, the loop), and the
 //! controller. In-process ([`CrtpVehicle`]) they step together. An image
 //! that runs the IMU, the controller and the link at three interrupt
 //! priorities keeps them apart: the IMU task takes each sample's estimator
@@ -58,6 +58,7 @@ use fc_core::control::Setpoint;
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
 use fc_loop::baro::Barometer;
+use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{ParamType, Refusal, Settings, PARAMS};
 use fc_loop::{run_job, FcConfig, Job, Loop, Mutex, ParamPlan, StepAnswer};
@@ -65,6 +66,7 @@ use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use nalgebra::{Vector3, Vector4};
 
+mod command;
 mod ports;
 mod split;
 mod step;
@@ -78,6 +80,11 @@ pub use split::{fly_step, pass_step, run_work};
 pub const SETPOINT_LEVEL_MS: u64 = 500;
 /// A generic set-point older than this stops the motors, ms.
 pub const SETPOINT_STOP_MS: u64 = 2000;
+/// The watchdog of a stream of generic set-points (the Crazyflie's).
+pub const SETPOINT_WATCHDOG: Watchdog = Watchdog {
+    level_ms: SETPOINT_LEVEL_MS,
+    stop_ms: SETPOINT_STOP_MS,
+};
 /// Tilt beyond which an armed vehicle is tumbled: motors off, rad (60°).
 pub const TUMBLE_TILT_RAD: f32 = core::f32::consts::FRAC_PI_3;
 /// cos([`TUMBLE_TILT_RAD`]): the supervisor compares the body z axis' down
@@ -116,23 +123,6 @@ pub trait CrtpSink {
     fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
         None
     }
-}
-
-/// How the vehicle flies now.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Mode {
-    /// Motors off (armed or not): no set-point, stopped, landed.
-    Idle,
-    /// The high-level commander's segment (`landing`: stop at its end).
-    High { seg: Segment, landing: bool },
-    /// A generic set-point received at `last_us`; a velocity set-point
-    /// moves `sp`'s position at its velocity. `handover_us`: when control
-    /// returns to the high-level commander (notify set-point stop).
-    Generic {
-        sp: Setpoint<f32>,
-        last_us: u64,
-        handover_us: Option<u64>,
-    },
 }
 
 /// Console text, cut into packets of up to 30 bytes as the Crazyflie's
@@ -224,7 +214,7 @@ enum Written {
 pub struct ImuStep {
     /// The loop's job for the controller (`None`: no session, not flown).
     pub job: Option<Job>,
-    /// A set-point is flown (a mode other than idle gave one).
+    /// A set-point is flown (the commander, not idle, gave one).
     pub setpoint: bool,
 }
 
@@ -371,7 +361,8 @@ pub struct CrtpShared {
     armed: bool,
     tumbled: bool,
     locked: bool,
-    mode: Mode,
+    /// The set-point flown and its source.
+    commander: Commander,
     log: LogBlocks,
     console: heapless::Deque<Packet, CONSOLE_QUEUE>,
     /// Log blocks sampled at their step, waiting for the link.
@@ -413,7 +404,7 @@ impl CrtpShared {
             armed: false,
             tumbled: false,
             locked: false,
-            mode: Mode::Idle,
+            commander: Commander::new(),
             log: LogBlocks::new(),
             console: heapless::Deque::new(),
             sampled: heapless::Deque::new(),
@@ -517,7 +508,7 @@ impl CrtpShared {
             }
             (ControllerWork::Reset, Err(_)) => {
                 self.counters.refused = self.counters.refused.wrapping_add(1);
-                self.mode = Mode::Idle;
+                self.commander.stop();
                 self.say(format_args!("controller reset failed"));
                 None
             }
@@ -555,7 +546,7 @@ impl CrtpShared {
 
     /// The motors turn (armed and flying a set-point).
     pub fn flying(&self) -> bool {
-        self.armed && self.mode != Mode::Idle
+        self.armed && !self.commander.is_idle()
     }
 
     /// The flight loop (estimator, set-point, counters).

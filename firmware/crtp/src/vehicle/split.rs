@@ -41,7 +41,7 @@ where
 
 /// Answers `step` without a controller: the controller's task's step while
 /// its controller is lent to a re-design ([`ControllerWork::designs`]),
-/// which runs only disarmed with no mode flown (a take-off is refused while
+/// which runs only disarmed with nothing flown (a take-off is refused while
 /// one is under way). The loop records the step as one the controller did
 /// not fly; the motors stay off. Returns the inputs applied (zero).
 pub fn pass_step<M: Mutex, C: CycleClock>(v: &mut M, step: ImuStep, clock: &C) -> Vector4<f32>

@@ -1,9 +1,9 @@
-//! The IMU step's shared half: the estimator, the set-point of the mode
-//! in force, the supervisor (failsafes, tumble, the set-point watchdog).
+//! The IMU step's shared half: the estimator, the commander's set-point,
+//! the supervisor (failsafes, tumble, the end of a landing).
 
 use super::{
-    CrtpShared, CycleClock, Fix, ImuSample, ImuStep, Job, Mode, Reference, Segment, Setpoint, Vector3, Vector4,
-    COS_TUMBLE_TILT, FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US, SETPOINT_LEVEL_MS, SETPOINT_STOP_MS,
+    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Job, Reference, Setpoint, Vector4, COS_TUMBLE_TILT,
+    FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US, SETPOINT_WATCHDOG,
 };
 
 impl CrtpShared {
@@ -61,7 +61,7 @@ impl CrtpShared {
     /// answer): the inputs to apply, zero unless armed and flying a
     /// set-point.
     pub fn imu_end(&mut self, step: &ImuStep, u: Option<[f32; 4]>) -> Vector4<f32> {
-        let on = self.armed && self.mode != Mode::Idle && step.setpoint;
+        let on = self.armed && !self.commander.is_idle() && step.setpoint;
         self.u = match u {
             Some(u) if on => Vector4::from(u),
             _ => Vector4::zeros(),
@@ -69,57 +69,21 @@ impl CrtpShared {
         self.u
     }
 
-    /// The set-point to fly at `t_us`, `dt_s` after the last step (the mode
-    /// advanced: hand-over, watchdog, velocity), `None` while idle.
+    /// The set-point to fly at `t_us`, `dt_s` after the last step (the
+    /// commander advanced: hand-over, watchdog, velocity), `None` while idle.
     pub(in crate::vehicle) fn setpoint_now(&mut self, t_us: u64, dt_s: f32) -> Option<Setpoint<f32>> {
-        if let Mode::Generic {
-            sp,
-            last_us,
-            handover_us,
-        } = self.mode
-        {
-            let age_ms = t_us.saturating_sub(last_us) / 1000;
-            if handover_us.is_some_and(|h| t_us >= h) {
-                self.hold_from(&Reference::from(&sp), t_us);
-            } else if age_ms > SETPOINT_STOP_MS {
-                self.mode = Mode::Idle;
-                self.say(format_args!("set-points stopped: motors off"));
-            }
+        let (sp, event) = self.commander.setpoint_now(t_us, dt_s, &SETPOINT_WATCHDOG);
+        if event == Some(Event::StreamStopped) {
+            self.say(format_args!("set-points stopped: motors off"));
         }
-        let r = match &mut self.mode {
-            Mode::Idle => return None,
-            Mode::High { seg, .. } => seg.eval(t_us),
-            Mode::Generic { sp, last_us, .. } => {
-                if t_us.saturating_sub(*last_us) / 1000 > SETPOINT_LEVEL_MS {
-                    // Level and still where it is.
-                    sp.vel_ned_mps = Vector3::zeros();
-                    sp.acc_ned_mps2 = Vector3::zeros();
-                    sp.yaw_rate_radps = 0.0;
-                } else {
-                    // A velocity set-point moves its position.
-                    sp.pos_ned_m += sp.vel_ned_mps * dt_s;
-                    sp.yaw_rad += sp.yaw_rate_radps * dt_s;
-                }
-                Reference::from(&*sp)
-            }
-        };
-        Some(r.setpoint())
-    }
-
-    /// Holds `from` (brought to rest over half a second) under the
-    /// high-level commander.
-    pub(in crate::vehicle) fn hold_from(&mut self, from: &Reference, t_us: u64) {
-        self.mode = match Segment::plan(t_us, from, from.pos_ned_m, from.yaw_rad, 0.5) {
-            Ok(seg) => Mode::High { seg, landing: false },
-            Err(_) => Mode::Idle,
-        };
+        sp
     }
 
     /// The IMU's silence, tumble detection and the end of a landing.
     pub(in crate::vehicle) fn supervise(&mut self, t_us: u64) {
         if !self.imu.silent() {
             self.failsafe = false;
-        } else if self.flying() && !matches!(self.mode, Mode::High { landing: true, .. }) {
+        } else if self.flying() && !self.commander.is_landing() {
             // Every command while silent is overruled by the descent.
             self.failsafe_descent(t_us);
         }
@@ -131,14 +95,11 @@ impl CrtpShared {
         let cos_tilt = 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]);
         if self.flying() && cos_tilt < COS_TUMBLE_TILT {
             self.tumbled = true;
-            self.mode = Mode::Idle;
+            self.commander.stop();
             self.say(format_args!("tumbled: motors off"));
         }
-        if let Mode::High { seg, landing: true } = self.mode {
-            if seg.finished(t_us) && fc_loop::land::on_ground(&est, seg.goal().pos_ned_m[2]) {
-                self.mode = Mode::Idle;
-                self.say(format_args!("landed: motors off"));
-            }
+        if self.commander.landed(t_us, &est) {
+            self.say(format_args!("landed: motors off"));
         }
     }
 
@@ -152,24 +113,12 @@ impl CrtpShared {
             self.say(format_args!("IMU silent for more than {ms} ms: failsafe descent"));
         }
         let here = self.reference();
-        let height_m = (-here.pos_ned_m[2]).max(0.0);
-        let goal = Vector3::new(here.pos_ned_m[0], here.pos_ned_m[1], 0.0);
-        let dur_s = (height_m / FAILSAFE_DESCENT_MPS).max(0.5);
-        self.mode = match Segment::plan(t_us, &here, goal, here.yaw_rad, dur_s) {
-            Ok(seg) => Mode::High { seg, landing: true },
-            Err(_) => Mode::Idle,
-        };
+        self.commander.descend(&here, t_us, FAILSAFE_DESCENT_MPS);
     }
 
     /// What is flown now, as a reference (the estimate at rest when idle).
     pub(in crate::vehicle) fn reference(&self) -> Reference {
-        match &self.mode {
-            Mode::High { seg, .. } => seg.eval(self.now_us),
-            Mode::Generic { sp, .. } => Reference::from(sp),
-            Mode::Idle => match self.lp.navigator().estimate() {
-                Some(e) => Reference::at_rest(e.pos_ned_m, e.euler()[2]),
-                None => Reference::at_rest(Vector3::zeros(), 0.0),
-            },
-        }
+        let est = self.lp.navigator().estimate();
+        self.commander.reference(self.now_us, est.as_ref())
     }
 }

@@ -13,9 +13,7 @@ impl CrtpShared {
             return match (kind, d.get(1..5)) {
                 (0, Some(ms)) => {
                     let ms = u32::from_le_bytes([ms[0], ms[1], ms[2], ms[3]]);
-                    if let Mode::Generic { handover_us, .. } = &mut self.mode {
-                        *handover_us = Some(self.now_us + u64::from(ms) * 1000);
-                    }
+                    self.commander.notify_stop(self.now_us, ms);
                     Ok(())
                 }
                 (0, None) => Err(short(p)),
@@ -26,7 +24,7 @@ impl CrtpShared {
             return Err(unsupported(p));
         }
         if kind == 0 {
-            self.mode = Mode::Idle;
+            self.commander.stop();
             return Ok(());
         }
         let vals = [f32_at(d, 1), f32_at(d, 5), f32_at(d, 9), f32_at(d, 13)];
@@ -42,9 +40,9 @@ impl CrtpShared {
         }
         let here = self.reference();
         let deg = core::f32::consts::PI / 180.0;
-        let mut sp = match (kind, self.mode) {
-            (_, Mode::Generic { sp, .. }) => sp,
-            _ => Setpoint::hold(here.pos_ned_m, here.yaw_rad),
+        let mut sp = match self.commander.streamed() {
+            Some(sp) => *sp,
+            None => Setpoint::hold(here.pos_ned_m, here.yaw_rad),
         };
         match kind {
             // Position: x, y, z (m), yaw (deg).
@@ -69,17 +67,9 @@ impl CrtpShared {
             }
             _ => return Err(unsupported(p)),
         }
-        if !self.armed {
+        if !self.stream(sp) {
             return Err(CrtpError::Refused { port: p.port() });
         }
-        if !matches!(self.mode, Mode::Generic { .. }) && !self.take_control() {
-            return Err(CrtpError::Refused { port: p.port() });
-        }
-        self.mode = Mode::Generic {
-            sp,
-            last_us: self.now_us,
-            handover_us: None,
-        };
         Ok(())
     }
 
@@ -87,7 +77,7 @@ impl CrtpShared {
         // roll, pitch, yaw rate (f32 each), thrust (u16).
         match u16_at(p.payload(), 12) {
             Some(0) => {
-                self.mode = Mode::Idle;
+                self.commander.stop();
                 Ok(())
             }
             Some(_) => Err(unsupported(p)),

@@ -13,7 +13,7 @@ impl CrtpShared {
         match cmd {
             0 => Ok(()),
             3 => {
-                self.mode = Mode::Idle;
+                self.commander.stop();
                 Ok(())
             }
             // TAKEOFF_2 / LAND_2: group, height, yaw, use current yaw, duration.
@@ -83,10 +83,9 @@ impl CrtpShared {
                 return Err(CrtpError::BadValue { port: p.port() });
             }
         };
-        if !self.take_control() {
+        if !self.plan(seg, landing) {
             return Err(CrtpError::Refused { port: p.port() });
         }
-        self.mode = Mode::High { seg, landing };
         Ok(())
     }
 }

@@ -3,6 +3,7 @@
 
 use crate::vehicle::*;
 use fc_loop::arming::{self, ArmingState};
+use fc_loop::commander::Priority;
 
 impl CrtpShared {
     pub(in crate::vehicle) fn can_fly(&self) -> bool {
@@ -15,11 +16,8 @@ impl CrtpShared {
 
     /// The supervisor's state bits (cflib's `Supervisor.STATES` order).
     pub fn supervisor_bits(&self) -> u16 {
-        let high = matches!(self.mode, Mode::High { .. });
-        let finished = match self.mode {
-            Mode::High { seg, .. } => seg.finished(self.now_us),
-            _ => true,
-        };
+        let high = self.commander.priority() == Priority::Planned;
+        let finished = self.commander.segment().is_none_or(|seg| seg.finished(self.now_us));
         let bits = [
             self.can_fly() && !self.armed,
             self.armed,
@@ -43,7 +41,7 @@ impl CrtpShared {
     pub(in crate::vehicle) fn request_arming(&mut self, arm: bool) -> bool {
         if !arm {
             self.armed = false;
-            self.mode = Mode::Idle;
+            self.commander.stop();
             self.say(format_args!("disarmed"));
             return true;
         }
@@ -66,25 +64,8 @@ impl CrtpShared {
             return false;
         }
         self.armed = true;
-        self.mode = Mode::Idle;
+        self.commander.stop();
         self.say(format_args!("armed"));
-        true
-    }
-
-    /// Starts flying `mode` from idle: the controller's state forgotten (no
-    /// state wound up on the ground; [`ControllerWork::Reset`]).
-    pub(in crate::vehicle) fn take_control(&mut self) -> bool {
-        if !self.armed {
-            self.say(format_args!("not armed"));
-            return false;
-        }
-        if self.busy() {
-            self.say(format_args!("controller design under way"));
-            return false;
-        }
-        if self.mode == Mode::Idle {
-            self.work = WorkState::Queued(ControllerWork::Reset);
-        }
         true
     }
 
@@ -139,7 +120,7 @@ impl CrtpShared {
 
     /// Motors off and locked until restarted, as the Crazyflie's emergency stop.
     pub(in crate::vehicle) fn emergency_stop(&mut self) {
-        self.mode = Mode::Idle;
+        self.commander.stop();
         self.armed = false;
         self.locked = true;
         self.say(format_args!("emergency stop: locked"));

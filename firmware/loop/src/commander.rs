@@ -1,0 +1,455 @@
+//! The commander: which set-point the vehicle flies and where it comes
+//! from, for every protocol, as the Crazyflie's `commander.c` does it. A
+//! client's stream of set-points ([`Source::Streamed`]: CRTP's generic
+//! set-points) ranks above the planner's segments ([`Source::Planned`]:
+//! the high-level commander's take-off, land and go-to, a hold, a failsafe
+//! descent), and a stream is watched ([`Watchdog`]): silent, it is first
+//! held level where it is, then stopped. A stream hands back to the planner
+//! when its client says so ([`Commander::notify_stop`]).
+//!
+//! The protocols' adapters decode into its calls; the vehicle asks it for
+//! the set-point of every step ([`Commander::setpoint_now`]) and for the
+//! end of a landing ([`Commander::landed`]). Whether a command may take
+//! control (armed, no design under way) is the vehicle's to say before it
+//! calls.
+//!
+//! An automatic mode's legs at given speeds ([`Route`]: MAVLink's
+//! take-off, land, return and mission) are planned here too.
+
+use crate::planner::{Reference, Segment};
+use fc_core::control::{Setpoint, StateEstimate};
+use nalgebra::Vector3;
+
+/// A stream's set-point older than `level_ms` is flown level and still
+/// where it is; older than `stop_ms`, the stream stops (the Crazyflie's
+/// `COMMANDER_WDT_TIMEOUT_STABILIZE` and `_SHUTDOWN`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Watchdog {
+    /// After this long without a set-point, level and still, ms.
+    pub level_ms: u64,
+    /// After this long without a set-point, stopped (motors off), ms.
+    pub stop_ms: u64,
+}
+
+/// Where the set-point flown comes from, lowest priority first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Priority {
+    /// Nothing is flown: the motors are off.
+    Idle,
+    /// The planner's segment.
+    Planned,
+    /// A client's stream of set-points.
+    Streamed,
+}
+
+/// What the commander flies now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Source {
+    /// Nothing: no set-point, stopped, landed.
+    Idle,
+    /// A planner segment; `landing`: the motors stop at its end, on the
+    /// ground ([`Commander::landed`]).
+    Planned {
+        /// The segment.
+        seg: Segment,
+        /// It is a landing.
+        landing: bool,
+    },
+    /// A client's set-point received at `last_us`; a velocity set-point
+    /// moves its position at its velocity. `handover_us`: when control
+    /// returns to the planner (the client's "notify set-point stop").
+    Streamed {
+        /// The set-point, moved by its velocity since it came.
+        sp: Setpoint<f32>,
+        /// When it came, µs.
+        last_us: u64,
+        /// When control returns to the planner, µs.
+        handover_us: Option<u64>,
+    },
+}
+
+/// Something a step of the commander did that the vehicle should say.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event {
+    /// A silent stream was stopped by its watchdog: motors off.
+    StreamStopped,
+}
+
+/// The set-point source in force (see the module's documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Commander {
+    source: Source,
+}
+
+impl Default for Commander {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Commander {
+    /// Idle.
+    pub const fn new() -> Self {
+        Self { source: Source::Idle }
+    }
+
+    /// What is flown now.
+    pub fn source(&self) -> &Source {
+        &self.source
+    }
+
+    /// The priority of what is flown now.
+    pub fn priority(&self) -> Priority {
+        match self.source {
+            Source::Idle => Priority::Idle,
+            Source::Planned { .. } => Priority::Planned,
+            Source::Streamed { .. } => Priority::Streamed,
+        }
+    }
+
+    /// Nothing is flown.
+    pub fn is_idle(&self) -> bool {
+        self.source == Source::Idle
+    }
+
+    /// A landing segment is flown.
+    pub fn is_landing(&self) -> bool {
+        matches!(self.source, Source::Planned { landing: true, .. })
+    }
+
+    /// The planner's segment, if one is flown.
+    pub fn segment(&self) -> Option<&Segment> {
+        match &self.source {
+            Source::Planned { seg, .. } => Some(seg),
+            _ => None,
+        }
+    }
+
+    /// The stream's set-point, if a stream is flown.
+    pub fn streamed(&self) -> Option<&Setpoint<f32>> {
+        match &self.source {
+            Source::Streamed { sp, .. } => Some(sp),
+            _ => None,
+        }
+    }
+
+    /// Stops: nothing flown, motors off.
+    pub fn stop(&mut self) {
+        self.source = Source::Idle;
+    }
+
+    /// Flies `sp`, a client's set-point received at `now_us`, above any
+    /// segment (the watchdog restarts).
+    pub fn stream(&mut self, sp: Setpoint<f32>, now_us: u64) {
+        self.source = Source::Streamed {
+            sp,
+            last_us: now_us,
+            handover_us: None,
+        };
+    }
+
+    /// The stream's client stops streaming: `after_ms` after `now_us`,
+    /// control returns to the planner, which holds where the stream was.
+    /// Nothing if no stream is flown.
+    pub fn notify_stop(&mut self, now_us: u64, after_ms: u32) {
+        if let Source::Streamed { handover_us, .. } = &mut self.source {
+            *handover_us = Some(now_us + u64::from(after_ms) * 1000);
+        }
+    }
+
+    /// Flies the planner's segment `seg` (`landing`: stopped on the ground
+    /// at its end).
+    pub fn plan(&mut self, seg: Segment, landing: bool) {
+        self.source = Source::Planned { seg, landing };
+    }
+
+    /// Holds `from`, brought to rest over half a second, under the planner
+    /// (idle if it cannot be planned).
+    pub fn hold_from(&mut self, from: &Reference, t_us: u64) {
+        self.source = match Segment::plan(t_us, from, from.pos_ned_m, from.yaw_rad, 0.5) {
+            Ok(seg) => Source::Planned { seg, landing: false },
+            Err(_) => Source::Idle,
+        };
+    }
+
+    /// Straight down from `here` to the frame's z = 0 (the floor of a
+    /// motion-capture or Lighthouse frame) at `mps`, at least half a
+    /// second, landed as a landing is (idle if it cannot be planned).
+    pub fn descend(&mut self, here: &Reference, t_us: u64, mps: f32) {
+        let height_m = (-here.pos_ned_m[2]).max(0.0);
+        let goal = Vector3::new(here.pos_ned_m[0], here.pos_ned_m[1], 0.0);
+        let dur_s = (height_m / mps).max(0.5);
+        self.source = match Segment::plan(t_us, here, goal, here.yaw_rad, dur_s) {
+            Ok(seg) => Source::Planned { seg, landing: true },
+            Err(_) => Source::Idle,
+        };
+    }
+
+    /// The set-point to fly at `t_us`, `dt_s` after the last step (at most
+    /// 0.1 s), `None` while idle; a stream is handed over, watched by `wd`
+    /// and moved by its velocity first. The event is what the step did
+    /// that the vehicle should say.
+    pub fn setpoint_now(&mut self, t_us: u64, dt_s: f32, wd: &Watchdog) -> (Option<Setpoint<f32>>, Option<Event>) {
+        let mut event = None;
+        if let Source::Streamed {
+            sp,
+            last_us,
+            handover_us,
+        } = self.source
+        {
+            let age_ms = t_us.saturating_sub(last_us) / 1000;
+            if handover_us.is_some_and(|h| t_us >= h) {
+                self.hold_from(&Reference::from(&sp), t_us);
+            } else if age_ms > wd.stop_ms {
+                self.source = Source::Idle;
+                event = Some(Event::StreamStopped);
+            }
+        }
+        let r = match &mut self.source {
+            Source::Idle => return (None, event),
+            Source::Planned { seg, .. } => seg.eval(t_us),
+            Source::Streamed { sp, last_us, .. } => {
+                if t_us.saturating_sub(*last_us) / 1000 > wd.level_ms {
+                    // Level and still where it is.
+                    sp.vel_ned_mps = Vector3::zeros();
+                    sp.acc_ned_mps2 = Vector3::zeros();
+                    sp.yaw_rate_radps = 0.0;
+                } else {
+                    // A velocity set-point moves its position.
+                    sp.pos_ned_m += sp.vel_ned_mps * dt_s;
+                    sp.yaw_rad += sp.yaw_rate_radps * dt_s;
+                }
+                Reference::from(&*sp)
+            }
+        };
+        (Some(r.setpoint()), event)
+    }
+
+    /// What is flown at `now_us`, as a reference; idle, `est` at rest
+    /// (the origin without one).
+    pub fn reference(&self, now_us: u64, est: Option<&StateEstimate<f32>>) -> Reference {
+        match &self.source {
+            Source::Planned { seg, .. } => seg.eval(now_us),
+            Source::Streamed { sp, .. } => Reference::from(sp),
+            Source::Idle => match est {
+                Some(e) => Reference::at_rest(e.pos_ned_m, e.euler()[2]),
+                None => Reference::at_rest(Vector3::zeros(), 0.0),
+            },
+        }
+    }
+
+    /// A landing segment has ended at `t_us` with `est` on its goal's
+    /// ground ([`crate::land::on_ground`]): the commander is idle now and
+    /// `true` is returned.
+    pub fn landed(&mut self, t_us: u64, est: &StateEstimate<f32>) -> bool {
+        match self.source {
+            Source::Planned { seg, landing: true }
+                if seg.finished(t_us) && crate::land::on_ground(est, seg.goal().pos_ned_m[2]) =>
+            {
+                self.source = Source::Idle;
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// Duration of a rest-to-rest segment of length `d` whose peak speed is `v`
+/// (the septic's peak is 35/16 · d / T), at least 0.5 s.
+pub fn leg_duration_s(d_m: f32, v_mps: f32) -> f32 {
+    (35.0 / 16.0 * d_m / v_mps.max(0.01)).max(0.5)
+}
+
+/// The legs of an automatic mode still to fly, each a goal (NED, m) and
+/// its speed, m/s.
+pub type Legs = heapless::Deque<(Vector3<f32>, f32), 3>;
+
+/// An automatic mode under way: the segment flown, the legs after it.
+#[derive(Debug, Clone, Default)]
+pub struct Route {
+    segment: Option<Segment>,
+    legs: Legs,
+    yaw_rad: f32,
+}
+
+impl Route {
+    /// Nothing to fly.
+    pub const fn new() -> Self {
+        Self {
+            segment: None,
+            legs: heapless::Deque::new(),
+            yaw_rad: 0.0,
+        }
+    }
+
+    /// From `from` at `t_us` through `legs` in turn, holding heading `yaw`;
+    /// `false` (nothing to fly) if no leg could be planned (a goal not
+    /// finite or farther than the planner's 1 km).
+    pub fn start(&mut self, t_us: u64, from: &Reference, legs: Legs, yaw_rad: f32) -> bool {
+        self.legs = legs;
+        self.yaw_rad = yaw_rad;
+        self.segment = None;
+        self.next(t_us, from)
+    }
+
+    /// Plans the next leg from `from`; `false` when there is none.
+    fn next(&mut self, t_us: u64, from: &Reference) -> bool {
+        while let Some((goal, speed)) = self.legs.pop_front() {
+            let d = (goal - from.pos_ned_m).norm();
+            if let Ok(s) = Segment::plan(t_us, from, goal, self.yaw_rad, leg_duration_s(d, speed)) {
+                self.segment = Some(s);
+                return true;
+            }
+        }
+        false
+    }
+
+    /// The reference at `t_us` and whether every leg is done.
+    pub fn at(&mut self, t_us: u64) -> Option<(Reference, bool)> {
+        let seg = self.segment?;
+        if seg.finished(t_us) {
+            let end = seg.goal();
+            if self.next(t_us, &end) {
+                return self.segment.map(|s| (s.eval(t_us), false));
+            }
+            return Some((end, true));
+        }
+        Some((seg.eval(t_us), false))
+    }
+
+    /// The leg flown is the last one (or the route has ended).
+    pub fn on_last_leg(&self) -> bool {
+        self.segment.is_some() && self.legs.is_empty()
+    }
+
+    /// Where the route ends (the last leg's goal), if under way.
+    pub fn goal(&self) -> Option<Vector3<f32>> {
+        self.legs
+            .back()
+            .map(|l| l.0)
+            .or(self.segment.map(|s| s.goal().pos_ned_m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const WD: Watchdog = Watchdog {
+        level_ms: 500,
+        stop_ms: 2000,
+    };
+
+    fn moving() -> Setpoint<f32> {
+        let mut sp = Setpoint::hold(Vector3::new(1.0, 2.0, -1.0), 0.0);
+        sp.vel_ned_mps = Vector3::new(1.0, 0.0, 0.0);
+        sp
+    }
+
+    #[test]
+    fn a_stream_moves_by_its_velocity_then_levels_then_stops() {
+        let mut c = Commander::new();
+        assert_eq!(c.setpoint_now(0, 0.001, &WD), (None, None));
+        c.stream(moving(), 0);
+        assert_eq!(c.priority(), Priority::Streamed);
+        // 100 steps of 1 ms at 1 m/s north: 0.1 m.
+        let mut sp = None;
+        for k in 1..=100u64 {
+            sp = c.setpoint_now(k * 1000, 0.001, &WD).0;
+        }
+        let sp = sp.unwrap();
+        assert!((sp.pos_ned_m[0] - 1.1).abs() < 1e-4, "{}", sp.pos_ned_m);
+        // Silent past 500 ms: level and still, where it was.
+        let (sp, ev) = c.setpoint_now(601_000, 0.001, &WD);
+        let sp = sp.unwrap();
+        assert_eq!((sp.vel_ned_mps, ev), (Vector3::zeros(), None));
+        let held = sp.pos_ned_m;
+        let sp = c.setpoint_now(1_500_000, 0.001, &WD).0.unwrap();
+        assert_eq!(sp.pos_ned_m, held);
+        // Past 2 s: stopped, said once.
+        assert_eq!(
+            c.setpoint_now(2_001_000, 0.001, &WD),
+            (None, Some(Event::StreamStopped))
+        );
+        assert!(c.is_idle());
+        assert_eq!(c.setpoint_now(2_002_000, 0.001, &WD), (None, None));
+    }
+
+    #[test]
+    fn a_stream_hands_over_to_a_hold_where_it_was() {
+        let mut c = Commander::new();
+        c.stream(Setpoint::hold(Vector3::new(0.5, 0.0, -1.0), 0.3), 0);
+        c.notify_stop(10_000, 100);
+        assert_eq!(c.priority(), Priority::Streamed);
+        assert!(c.setpoint_now(109_000, 0.001, &WD).0.is_some());
+        assert_eq!(c.priority(), Priority::Streamed);
+        let sp = c.setpoint_now(110_000, 0.001, &WD).0.unwrap();
+        assert_eq!(c.priority(), Priority::Planned);
+        assert!(!c.is_landing());
+        assert!((sp.pos_ned_m - Vector3::new(0.5, 0.0, -1.0)).norm() < 1e-6);
+        assert!((sp.yaw_rad - 0.3).abs() < 1e-6);
+        // Nothing to hand over without a stream.
+        let mut idle = Commander::new();
+        idle.notify_stop(0, 0);
+        assert!(idle.is_idle());
+    }
+
+    #[test]
+    fn a_descent_lands_on_the_floor_then_idles() {
+        let mut c = Commander::new();
+        let here = Reference::at_rest(Vector3::new(1.0, 1.0, -0.5), 0.0);
+        c.descend(&here, 0, 0.5);
+        assert!(c.is_landing());
+        // 0.5 m at 0.5 m/s: 1 s; its goal is z = 0.
+        let seg = *c.segment().unwrap();
+        assert_eq!(seg.goal().pos_ned_m, Vector3::new(1.0, 1.0, 0.0));
+        assert!(!seg.finished(999_000) && seg.finished(1_000_000));
+        let est = StateEstimate {
+            pos_ned_m: Vector3::new(1.0, 1.0, -0.01),
+            vel_ned_mps: Vector3::zeros(),
+            att: nalgebra::Vector4::new(1.0, 0.0, 0.0, 0.0),
+            rates_frd_radps: Vector3::zeros(),
+        };
+        // Not before the segment's end, even on the ground.
+        assert!(!c.landed(500_000, &est));
+        assert!(c.landed(1_000_000, &est));
+        assert!(c.is_idle());
+        // Idle, the reference is the estimate at rest.
+        let r = c.reference(2_000_000, Some(&est));
+        assert_eq!((r.pos_ned_m, r.vel_ned_mps), (est.pos_ned_m, Vector3::zeros()));
+    }
+
+    #[test]
+    fn a_route_flies_its_legs_in_turn_at_their_peak_speeds() {
+        let mut r = Route::new();
+        let from = Reference::at_rest(Vector3::new(3.0, 4.0, -1.0), 0.0);
+        let mut legs = Legs::new();
+        legs.push_back((Vector3::new(3.0, 4.0, -2.0), 0.5)).unwrap();
+        legs.push_back((Vector3::new(0.0, 0.0, -2.0), 1.0)).unwrap();
+        assert!(r.start(0, &from, legs, 0.0));
+        assert_eq!(r.goal(), Some(Vector3::new(0.0, 0.0, -2.0)));
+        let mut t = 0;
+        let mut peak = [0.0f32; 2];
+        let mut leg = 0;
+        loop {
+            let (re, done) = r.at(t).unwrap();
+            if done {
+                assert!((re.pos_ned_m - Vector3::new(0.0, 0.0, -2.0)).norm() < 1e-4);
+                break;
+            }
+            if re.pos_ned_m[2] <= -2.0 + 1e-4 && re.vel_ned_mps[2].abs() < 1e-4 && leg == 0 && t > 0 {
+                leg = 1;
+            }
+            peak[leg] = peak[leg].max(re.vel_ned_mps.norm());
+            t += 10_000;
+            assert!(t < 20_000_000, "never done");
+        }
+        // 1 m up at 0.5 m/s: 4.375 s; 5 m across at 1 m/s: 10.9 s.
+        // A goal 2 km away is not planned.
+        let mut far = Legs::new();
+        far.push_back((Vector3::new(2000.0, 0.0, -1.0), 1.0)).unwrap();
+        assert!(!Route::new().start(0, &from, far, 0.0));
+        assert!((peak[0] - 0.5).abs() < 0.01 && (peak[1] - 1.0).abs() < 0.01, "{peak:?}");
+        assert!((15_000_000..15_500_000).contains(&t), "{t}");
+    }
+}
