@@ -219,6 +219,9 @@ pub struct Loop {
     selections: u32,
     /// The estimator of `Imu` steps (sensor flights).
     nav: Navigator,
+    /// A barometer as the estimator's height fix (its reference is the
+    /// session's).
+    baro: baro::Barometer,
     /// The estimator's failsafe flew the last `Imu` step.
     nav_failsafe: bool,
     /// When the controller runs under the `Imu` steps.
@@ -268,6 +271,7 @@ impl Loop {
             u: Vector4::zeros(),
             selections: 0,
             nav: Navigator::bmi088(),
+            baro: baro::Barometer::new(),
             nav_failsafe: false,
             schedule: schedule::Schedule::new(),
             last_control_us: None,
@@ -340,6 +344,7 @@ impl Loop {
         self.last_valid_us = None;
         self.last_pos = None;
         self.nav.reset();
+        self.baro.reset();
         self.nav_failsafe = false;
         self.schedule.reset();
         self.last_control_us = None;
@@ -363,6 +368,23 @@ impl Loop {
     /// Queues a position fix for the next `Imu` step, as a `Fix` message does.
     pub fn push_fix(&mut self, fix: &Fix) {
         self.nav.push_fix(fix);
+    }
+
+    /// A barometer's altitude `alt_m` (m above sea level) read at `t_us`,
+    /// fused as a height fix before the next `Imu` step
+    /// ([`baro::Barometer`]: at most every [`baro::PERIOD_US`], its first
+    /// reading of the session referenced to the estimated height then).
+    /// `true` if it was fused; a reading that is not a measurement, or one
+    /// before the estimator has a position, is not.
+    pub fn push_baro(&mut self, t_us: u64, alt_m: f32) -> bool {
+        let est_down_m = self.nav.estimate().map(|e| e.pos_ned_m[2]);
+        match self.baro.fix(t_us, alt_m, est_down_m) {
+            Some(fix) => {
+                self.nav.push_fix(&fix);
+                true
+            }
+            None => false,
+        }
     }
 
     /// The parameters in force.

@@ -57,7 +57,6 @@ use fc_core::control::AnyController;
 use fc_core::control::Setpoint;
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
-use fc_loop::baro::Barometer;
 use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{ParamType, Refusal, Settings, PARAMS};
@@ -385,8 +384,7 @@ pub struct CrtpShared {
     sensors: Result<(), SensorDown>,
     /// A failsafe descent began in this silence of the IMU.
     failsafe: bool,
-    /// The board's barometer as a height fix, and the fixes it gave.
-    baro: Barometer,
+    /// Barometer fixes fused.
     baro_fixes: u32,
 }
 
@@ -418,7 +416,6 @@ impl CrtpShared {
             imu: ImuGuard::new(),
             sensors: Ok(()),
             failsafe: false,
-            baro: Barometer::new(),
             baro_fixes: 0,
         }
     }
@@ -445,18 +442,14 @@ impl CrtpShared {
     /// BMP388's pressure through [`fc_loop::baro::pressure_altitude_m`]) at
     /// `t_us`: fused as a height fix before the next IMU step, at most at
     /// 50 Hz, its first reading referenced to the estimated height then
-    /// ([`Barometer`]). `true` if it was fused; a reading that is not a
+    /// ([`Loop::push_baro`]). `true` if it was fused; a reading that is not a
     /// measurement, or one before the estimator has a position, is not.
     pub fn baro(&mut self, t_us: u64, alt_m: f32) -> bool {
-        let est_down_m = self.lp.navigator().estimate().map(|e| e.pos_ned_m[2]);
-        match self.baro.fix(t_us, alt_m, est_down_m) {
-            Some(fix) => {
-                self.lp.push_fix(&fix);
-                self.baro_fixes = self.baro_fixes.wrapping_add(1);
-                true
-            }
-            None => false,
+        let fused = self.lp.push_baro(t_us, alt_m);
+        if fused {
+            self.baro_fixes = self.baro_fixes.wrapping_add(1);
         }
+        fused
     }
 
     /// Barometer fixes fused since start-up ([`CrtpShared::baro`]).

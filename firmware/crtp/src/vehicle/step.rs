@@ -25,7 +25,6 @@ impl CrtpShared {
             // A host that started again: a new time line.
             self.lp.open_session();
             self.imu.restart();
-            self.baro.reset();
         }
         let (sample, _) = self.imu.take(t_us, imu);
         // The interval a velocity set-point moves over (at most 0.1 s).

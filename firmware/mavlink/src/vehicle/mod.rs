@@ -41,7 +41,6 @@ use fc_core::estimate::Fix;
 use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
-use fc_loop::baro::Barometer;
 use fc_loop::nav::NavMode;
 use fc_loop::planner::Reference;
 use fc_loop::schedule::Schedule;
@@ -189,9 +188,6 @@ pub struct MavVehicle {
     home: Option<Home>,
     /// Time of the last fix taken, µs.
     last_fix_us: Option<u64>,
-    /// The `HIL_SENSOR` barometer: its reference (the first reading
-    /// referenced to the estimated height then) and rate.
-    baro: Barometer,
     /// Magnetic heading minus true heading (the declination, and whatever
     /// the simulator's field adds), rad: the first reading referenced to
     /// the estimated heading then.
@@ -273,7 +269,6 @@ impl MavVehicle {
             home_ned_m: Vector3::zeros(),
             home: None,
             last_fix_us: None,
-            baro: Barometer::new(),
             mag_ref_rad: None,
             mag_due: Schedule::new(),
             last_sensor_us: None,

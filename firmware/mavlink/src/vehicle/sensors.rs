@@ -35,7 +35,6 @@ impl MavVehicle {
             self.flight.open_session();
             self.home = None;
             self.last_fix_us = None;
-            self.baro.reset();
             self.mag_ref_rad = None;
             self.mag_due.reset();
             for (k, st) in self.streams.iter_mut().enumerate() {
@@ -84,12 +83,9 @@ impl MavVehicle {
     /// then (a barometer's altitude is above sea level, and drifts with the
     /// weather: what is fused is its change).
     pub(in crate::vehicle) fn on_baro(&mut self, t_us: u64, alt_m: f32) {
-        let est_down_m = self.flight.navigator().estimate().map(|e| e.pos_ned_m[2]);
-        let Some(fix) = self.baro.fix(t_us, alt_m, est_down_m) else {
-            return;
-        };
-        self.flight.push_fix(&fix);
-        self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
+        if self.flight.push_baro(t_us, alt_m) {
+            self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
+        }
     }
 
     /// A magnetometer reading (`HIL_SENSOR`, all three axes flagged): its
