@@ -224,6 +224,20 @@ def connect():
     return scf
 
 
+def read_back(cf, name, want, within_s=5.0):
+    """`name`'s value once it reads `want`, or its last read after `within_s`
+    s of wall time. A write that re-designs is answered once the design is
+    done: tens of ms of the vehicle's time, which on an image in QEMU, in
+    lockstep with the plant on a loaded machine, is over half a second of
+    wall time."""
+    end = time.monotonic() + within_s
+    while True:
+        value = float(cf.param.get_value(name))
+        if abs(value - want) < 1e-6 or time.monotonic() > end:
+            return value
+        time.sleep(0.05)
+
+
 def estimator_settled(scf):
     """cflib's own recipe (its autonomous examples): kalman.varP* spread under 1e-3."""
     lg = LogConfig('kalman', 10)
@@ -254,8 +268,7 @@ def session_high_level(sil_host, truth):
               f'{sum(len(g) for g in cf.log.toc.toc.values())} log variables')
         before = float(cf.param.get_value('mpc.W_POS'))
         cf.param.set_value('mpc.W_POS', before * 2)
-        time.sleep(0.3)
-        after = float(cf.param.get_value('mpc.W_POS'))
+        after = read_back(cf, 'mpc.W_POS', before * 2)
         check(abs(after - 2 * before) < 1e-6, f'param mpc.W_POS set to {2 * before} reads back {after}')
         cf.param.set_value('veh.MASS', -1.0)
         time.sleep(0.3)
