@@ -33,6 +33,7 @@ pub mod arming;
 pub mod baro;
 pub mod commander;
 pub mod land;
+pub mod modes;
 pub mod nav;
 pub mod params;
 pub mod planner;

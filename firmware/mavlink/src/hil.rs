@@ -242,7 +242,7 @@ pub fn actuator_controls(time_us: u64, motors: &[f32; 4], armed: bool) -> HIL_AC
 }
 
 /// This flight controller's `HEARTBEAT`: a quadrotor with PX4's autopilot id and
-/// mode encoding (`custom_mode`, [`crate::modes::FlightMode::custom_mode`]),
+/// mode encoding (`custom_mode`, [`crate::modes::Px4Mode::custom_mode`]),
 /// HIL enabled, armed or not.
 pub fn heartbeat(armed: bool, custom_mode: u32) -> HEARTBEAT_DATA {
     HEARTBEAT_DATA {

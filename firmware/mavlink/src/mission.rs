@@ -53,39 +53,8 @@ pub struct Item {
     pub z: f32,
 }
 
-/// What an item flies, in the local frame (NED about the origin, m).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Step {
-    /// Fly to `ned`, hold `hold_s`, reached within `accept_m` (0: the
-    /// vehicle's `NAV_ACC_RAD`).
-    Goto {
-        /// Where, NED, m.
-        ned: Vector3<f32>,
-        /// Hold there, s.
-        hold_s: f32,
-        /// Acceptance radius, m (0: the default).
-        accept_m: f32,
-    },
-    /// Climb where it is to `up_m` above home.
-    Takeoff {
-        /// Height above home, m.
-        up_m: f32,
-    },
-    /// Land where it is.
-    Land,
-    /// Return to launch.
-    Return,
-    /// Hold where it is, s.
-    Delay {
-        /// How long, s.
-        s: f32,
-    },
-    /// The automatic modes' horizontal speed from now on, m/s.
-    Speed {
-        /// m/s.
-        mps: f32,
-    },
-}
+/// What an item flies, in the local frame: the flight stack's mission step.
+pub use fc_loop::modes::Step;
 
 impl Item {
     /// From the message.

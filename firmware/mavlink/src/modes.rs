@@ -1,28 +1,26 @@
-//! PX4's flight modes as this vehicle flies them, so that a ground station's
-//! PX4 mode table (MAVSDK's, QGroundControl's, MAVProxy's) applies unchanged:
-//! the mode is `HEARTBEAT.custom_mode` in PX4's encoding (`px4_custom_mode.h`:
-//! the main mode in bits 16–23, the sub mode in bits 24–31) and is asked for
-//! with `MAV_CMD_DO_SET_MODE` (`param1` `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`,
+//! PX4's numbers for the flight stack's modes ([`fc_loop::modes`], which
+//! decides what each flies), so that a ground station's PX4 mode table
+//! (MAVSDK's, QGroundControl's, MAVProxy's) applies unchanged: the mode is
+//! `HEARTBEAT.custom_mode` in PX4's encoding (`px4_custom_mode.h`: the main
+//! mode in bits 16–23, the sub mode in bits 24–31) and is asked for with
+//! `MAV_CMD_DO_SET_MODE` (`param1` `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`,
 //! `param2` the main mode, `param3` the sub mode). Without that flag
-//! `param1` alone is read as PX4 reads it ([`FlightMode::from_base_mode`]).
+//! `param1` alone is read as PX4 reads it ([`Px4Mode::from_base_mode`]).
+//! The automatic modes' settings are PX4's parameters here
+//! ([`NAV_PARAMS`]).
 //!
-//! | mode | PX4 (main, sub) | what it flies |
-//! |---|---|---|
-//! | Position | POSCTL (3, 0) | holds where it was when entered; a joystick (`MANUAL_CONTROL`) moves it ([`joystick_velocity`]) |
-//! | Hold | AUTO (4) LOITER (3) | the same (PX4's loiter) |
-//! | Takeoff | AUTO TAKEOFF (2) | straight up to [`NavSettings::takeoff_alt_m`] above home, then Hold |
-//! | Land | AUTO LAND (6) | straight down to the ground it armed on at [`NavSettings::land_mps`], then disarms |
-//! | Return | AUTO RTL (5) | up to [`NavSettings::rtl_alt_m`] above home (if lower), over home at [`NavSettings::cruise_mps`], then Land |
-//! | Offboard | OFFBOARD (6, 0) | the ground station's `SET_POSITION_TARGET_LOCAL_NED`; entered only while they stream, Hold when they stop for [`NavSettings::offboard_loss_s`] |
-//! | Mission | AUTO MISSION (4) | the uploaded mission ([`crate::mission`]), item by item; then Hold |
-//!
-//! Each leg of an automatic mode is one planner segment
-//! ([`fc_loop::planner::Segment`], rest to rest), its duration chosen so that
-//! its peak speed is the mode's speed.
+//! | mode | PX4 (main, sub) |
+//! |---|---|
+//! | Position | POSCTL (3, 0) |
+//! | Hold | AUTO (4) LOITER (3) |
+//! | Takeoff | AUTO TAKEOFF (2) |
+//! | Land | AUTO LAND (6) |
+//! | Return | AUTO RTL (5) |
+//! | Offboard | OFFBOARD (6, 0) |
+//! | Mission | AUTO MISSION (4) |
 
 use crate::params::Refusal;
 use mavlink::dialects::common::MavModeFlag;
-use nalgebra::Vector3;
 
 /// PX4's main and sub mode numbers (`px4_custom_mode.h`).
 pub mod px4 {
@@ -44,39 +42,25 @@ pub mod px4 {
     pub const SUB_LAND: u8 = 6;
 }
 
-/// A flight mode (see the module's table).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FlightMode {
-    /// Position control: hold where it is.
-    Position,
-    /// Hold (PX4's AUTO LOITER).
-    Hold,
-    /// Climb to the takeoff height, then Hold.
-    Takeoff,
-    /// Descend to the ground, then disarm.
-    Land,
-    /// Return to home and land.
-    Return,
-    /// Fly the ground station's set-points.
-    Offboard,
-    /// Fly the uploaded mission.
-    Mission,
+/// PX4's encoding of the flight stack's modes ([`FlightMode`]): the
+/// numbers a PX4 ground station sends and reads.
+pub trait Px4Mode: Sized {
+    /// PX4's (main, sub) mode.
+    fn px4(self) -> (u8, u8);
+    /// `HEARTBEAT.custom_mode` in PX4's encoding.
+    fn custom_mode(self) -> u32;
+    /// The mode PX4's (main, sub) names, if this vehicle flies it (the
+    /// sub mode counts only under AUTO, as in PX4).
+    fn from_px4(main: u8, sub: u8) -> Option<Self>;
+    /// The mode a `DO_SET_MODE` without `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`
+    /// asks for, as PX4's commander reads its `base_mode`: AUTO is the
+    /// mission, manual input with GUIDED is position control. Manual input
+    /// alone (PX4's manual or stabilized) is not flown here.
+    fn from_base_mode(base: MavModeFlag) -> Option<Self>;
 }
 
-impl FlightMode {
-    /// Every mode.
-    pub const ALL: [FlightMode; 7] = [
-        FlightMode::Position,
-        FlightMode::Hold,
-        FlightMode::Takeoff,
-        FlightMode::Land,
-        FlightMode::Return,
-        FlightMode::Offboard,
-        FlightMode::Mission,
-    ];
-
-    /// PX4's (main, sub) mode.
-    pub const fn px4(self) -> (u8, u8) {
+impl Px4Mode for FlightMode {
+    fn px4(self) -> (u8, u8) {
         use px4::*;
         match self {
             FlightMode::Position => (MAIN_POSCTL, 0),
@@ -89,15 +73,12 @@ impl FlightMode {
         }
     }
 
-    /// `HEARTBEAT.custom_mode` in PX4's encoding.
-    pub const fn custom_mode(self) -> u32 {
+    fn custom_mode(self) -> u32 {
         let (main, sub) = self.px4();
-        ((main as u32) << 16) | ((sub as u32) << 24)
+        (u32::from(main) << 16) | (u32::from(sub) << 24)
     }
 
-    /// The mode PX4's (main, sub) names, if this vehicle flies it (the
-    /// sub mode counts only under AUTO, as in PX4).
-    pub fn from_px4(main: u8, sub: u8) -> Option<Self> {
+    fn from_px4(main: u8, sub: u8) -> Option<Self> {
         use px4::*;
         match (main, sub) {
             (MAIN_POSCTL, _) => Some(FlightMode::Position),
@@ -113,11 +94,7 @@ impl FlightMode {
         }
     }
 
-    /// The mode a `DO_SET_MODE` without `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`
-    /// asks for, as PX4's commander reads its `base_mode`: AUTO is the
-    /// mission, manual input with GUIDED is position control. Manual input
-    /// alone (PX4's manual or stabilized) is not flown here.
-    pub fn from_base_mode(base: MavModeFlag) -> Option<Self> {
+    fn from_base_mode(base: MavModeFlag) -> Option<Self> {
         if base.contains(MavModeFlag::MAV_MODE_FLAG_AUTO_ENABLED) {
             Some(FlightMode::Mission)
         } else if base
@@ -126,76 +103,6 @@ impl FlightMode {
             Some(FlightMode::Position)
         } else {
             None
-        }
-    }
-
-    /// The name QGroundControl shows for it.
-    pub const fn name(self) -> &'static str {
-        match self {
-            FlightMode::Position => "Position",
-            FlightMode::Hold => "Hold",
-            FlightMode::Takeoff => "Takeoff",
-            FlightMode::Land => "Land",
-            FlightMode::Return => "Return",
-            FlightMode::Offboard => "Offboard",
-            FlightMode::Mission => "Mission",
-        }
-    }
-}
-
-impl core::fmt::Display for FlightMode {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// The automatic modes' settings, under PX4's parameter names. The defaults
-/// are PX4's where a room-sized vehicle can fly them, and smaller where it
-/// cannot (PX4's are for an outdoor multicopter: a 60 m return height, 5
-/// m/s cruise).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NavSettings {
-    /// `MIS_TAKEOFF_ALT`: takeoff height above home, m (PX4: 2.5).
-    pub takeoff_alt_m: f32,
-    /// `RTL_RETURN_ALT`: the least height a return flies home at, m (PX4: 60).
-    pub rtl_alt_m: f32,
-    /// `MPC_XY_CRUISE`: horizontal speed of the automatic modes, m/s (PX4: 5).
-    pub cruise_mps: f32,
-    /// `MPC_Z_V_AUTO_UP`: climb speed, m/s (PX4: 3).
-    pub climb_mps: f32,
-    /// `MPC_LAND_SPEED`: descent speed of a landing, m/s (PX4: 0.7).
-    pub land_mps: f32,
-    /// `COM_OF_LOSS_T`: set-points silent this long end Offboard, s (PX4: 1).
-    pub offboard_loss_s: f32,
-    /// `NAV_ACC_RAD`: a mission waypoint is reached within this, m, unless
-    /// the item gives its own (PX4: 10, for outdoor flight).
-    pub acc_rad_m: f32,
-    /// `MPC_VEL_MANUAL`: horizontal speed of a full joystick deflection in
-    /// Position mode, m/s (PX4: 10).
-    pub manual_mps: f32,
-    /// `MPC_Z_VEL_MAX_UP`: vertical speed of full throttle up or down in
-    /// Position mode, m/s (PX4: 3).
-    pub manual_z_mps: f32,
-    /// `MPC_MAN_Y_MAX`: heading rate of a full yaw deflection, °/s (PX4: 150).
-    pub manual_yaw_dps: f32,
-    /// `COM_RC_LOSS_T`: a joystick silent this long is lost (then Land), s (PX4: 0.5).
-    pub manual_loss_s: f32,
-}
-
-impl Default for NavSettings {
-    fn default() -> Self {
-        Self {
-            takeoff_alt_m: 2.5,
-            rtl_alt_m: 2.0,
-            cruise_mps: 1.0,
-            climb_mps: 0.5,
-            land_mps: 0.5,
-            offboard_loss_s: 1.0,
-            acc_rad_m: 0.1,
-            manual_mps: 1.0,
-            manual_z_mps: 0.5,
-            manual_yaw_dps: 60.0,
-            manual_loss_s: 0.5,
         }
     }
 }
@@ -309,17 +216,16 @@ pub const NAV_PARAMS: [NavParam; 11] = [
     ),
 ];
 
-impl NavSettings {
-    /// Writes parameter `index` of [`NAV_PARAMS`]: refused outside its range.
-    pub fn set(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
-        let p = NAV_PARAMS.get(index).ok_or(Refusal::Unknown)?;
-        let (lo, hi) = p.range;
-        if !(value.is_finite() && (lo..=hi).contains(&value)) {
-            return Err(Refusal::Range { lo, hi });
-        }
-        *(p.field)(self) = value;
-        Ok(())
+/// Writes parameter `index` of [`NAV_PARAMS`] in `nav`: refused outside
+/// its range.
+pub fn set_nav(nav: &mut NavSettings, index: usize, value: f32) -> Result<(), Refusal> {
+    let p = NAV_PARAMS.get(index).ok_or(Refusal::Unknown)?;
+    let (lo, hi) = p.range;
+    if !(value.is_finite() && (lo..=hi).contains(&value)) {
+        return Err(Refusal::Range { lo, hi });
     }
+    *(p.field)(nav) = value;
+    Ok(())
 }
 
 /// The index in [`NAV_PARAMS`] of the parameter named `id` (NUL-padded).
@@ -328,32 +234,10 @@ pub fn nav_index_of(id: &[u8]) -> Option<usize> {
     NAV_PARAMS.iter().position(|p| p.id.as_bytes() == &id[..len])
 }
 
-/// A joystick's deflection in [−1000, 1000] (`MANUAL_CONTROL` x, y, r; z in
-/// [0, 1000], 500 centred) as PX4's Position mode reads it: the set-point's
-/// velocity (north, east, down, m/s, turned by heading `yaw_rad`) and
-/// heading rate (rad/s), each axis with a 5 % dead band and full scale at
-/// the [`NavSettings`]' speeds.
-pub fn joystick_velocity(nav: &NavSettings, x: i16, y: i16, z: i16, r: i16, yaw_rad: f32) -> (Vector3<f32>, f32) {
-    let axis = |v: i16, centre: f32, half: f32| {
-        let a = ((f32::from(v) - centre) / half).clamp(-1.0, 1.0);
-        if a.abs() < 0.05 {
-            0.0
-        } else {
-            (a - 0.05 * a.signum()) / 0.95
-        }
-    };
-    let (fwd, right) = (
-        axis(x, 0.0, 1000.0) * nav.manual_mps,
-        axis(y, 0.0, 1000.0) * nav.manual_mps,
-    );
-    let up = axis(z, 500.0, 500.0) * nav.manual_z_mps;
-    let (s, c) = (libm::sinf(yaw_rad), libm::cosf(yaw_rad));
-    let v = Vector3::new(c * fwd - s * right, s * fwd + c * right, -up);
-    (v, axis(r, 0.0, 1000.0) * nav.manual_yaw_dps.to_radians())
-}
-
-// An automatic mode's legs are planned by the flight stack's commander.
+// An automatic mode's legs are planned by the flight stack's commander;
+// the modes are the flight stack's.
 pub use fc_loop::commander::{leg_duration_s, Legs, Route};
+pub use fc_loop::modes::{joystick_velocity, FlightMode, NavSettings};
 
 #[cfg(test)]
 mod tests {
@@ -398,33 +282,13 @@ mod tests {
     }
 
     #[test]
-    fn the_joystick_maps_as_px4s_position_mode() {
-        let nav = NavSettings::default();
-        // Centred (throttle at 500) and inside the dead band: nothing.
-        assert_eq!(joystick_velocity(&nav, 40, -40, 520, 0, 0.0), (Vector3::zeros(), 0.0));
-        // Full forward, heading north: 1 m/s north; heading east: east.
-        let (v, _) = joystick_velocity(&nav, 1000, 0, 500, 0, 0.0);
-        assert!((v - Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-6, "{v}");
-        let (v, _) = joystick_velocity(&nav, 1000, 0, 500, 0, core::f32::consts::FRAC_PI_2);
-        assert!((v - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-6, "{v}");
-        // Full right and full throttle: east and up; full yaw: 60 °/s.
-        let (v, r) = joystick_velocity(&nav, 0, 1000, 1000, 1000, 0.0);
-        assert!((v - Vector3::new(0.0, 1.0, -0.5)).norm() < 1e-6 && (r - 60f32.to_radians()).abs() < 1e-6);
-        // Half way out of the dead band is half speed, continuously from 0 at its edge.
-        let (v, _) = joystick_velocity(&nav, 525, 0, 500, 0, 0.0);
-        assert!((v[0] - 0.5).abs() < 1e-6, "{v}");
-        let (v, _) = joystick_velocity(&nav, -32768, 0, 0, 0, 0.0);
-        assert!((v - Vector3::new(-1.0, 0.0, 0.5)).norm() < 1e-6, "clamped: {v}");
-    }
-
-    #[test]
     fn nav_parameters_are_named_as_px4_and_checked() {
         let mut s = NavSettings::default();
         let i = nav_index_of(b"MIS_TAKEOFF_ALT\0").unwrap();
-        s.set(i, 1.5).unwrap();
+        set_nav(&mut s, i, 1.5).unwrap();
         assert_eq!(s.takeoff_alt_m, 1.5);
-        assert_eq!(s.set(i, -1.0), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
-        assert_eq!(s.set(i, f32::NAN), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
+        assert_eq!(set_nav(&mut s, i, -1.0), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
+        assert_eq!(set_nav(&mut s, i, f32::NAN), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
         assert_eq!(s.takeoff_alt_m, 1.5);
         for (k, p) in NAV_PARAMS.iter().enumerate() {
             assert!(p.id.len() <= 16);

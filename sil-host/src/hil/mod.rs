@@ -353,7 +353,7 @@ pub fn arm_command(arm: bool) -> MavMessage {
 
 /// `MAV_CMD_DO_SET_MODE` to PX4's Offboard, as MAVSDK sends it.
 pub fn offboard_command() -> MavMessage {
-    let (main, sub) = fc_mavlink::modes::FlightMode::Offboard.px4();
+    let (main, sub) = fc_mavlink::modes::Px4Mode::px4(fc_mavlink::modes::FlightMode::Offboard);
     MavMessage::COMMAND_LONG(common::COMMAND_LONG_DATA {
         param1: f32::from(common::MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits()),
         param2: f32::from(main),
@@ -502,7 +502,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         true,
         &MavMessage::HEARTBEAT(fc_mavlink::hil::heartbeat(
             false,
-            fc_mavlink::modes::FlightMode::Position.custom_mode(),
+            fc_mavlink::modes::Px4Mode::custom_mode(fc_mavlink::modes::FlightMode::Position),
         )),
         &mut sim,
         &mut gcs_signing,

@@ -3,11 +3,10 @@
 //! `AUTOPILOT_VERSION`.
 
 use super::{
-    Command, FlightMode, MavCmd, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavSeverity, MavSink,
-    MavVehicle, NavMode, Peer, Setpoint, AUTOPILOT_VERSION_DATA, AUTOPILOT_VERSION_ID, COMMAND_ACK_DATA,
+    missions, Command, FlightMode, MavCmd, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavSeverity,
+    MavSink, MavVehicle, Peer, Px4Mode, AUTOPILOT_VERSION_DATA, AUTOPILOT_VERSION_ID, COMMAND_ACK_DATA,
     FLIGHT_SW_VERSION, MIN_INTERVAL_US, STREAMS,
 };
-use fc_loop::arming::{self, ArmRefusal, ArmingState};
 
 /// `param2` of a disarm that is obeyed in the air too (MAVLink's magic number).
 pub(super) const FORCE: f32 = 21196.0;
@@ -44,20 +43,22 @@ impl MavVehicle {
         // The message a request asks for, sent after its acknowledgement.
         let mut then_send = None;
         let result = match c.command {
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 1.0 => match self.arm() {
-                Ok(()) => {
-                    self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
-                    MavResult::MAV_RESULT_ACCEPTED
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 1.0 => {
+                match self.modes.arm(&mut self.flight, self.mixer.is_some()) {
+                    Ok(()) => {
+                        self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    Err(why) => {
+                        self.say(
+                            out,
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            format_args!("arming refused: {why}"),
+                        )?;
+                        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+                    }
                 }
-                Err(why) => {
-                    self.say(
-                        out,
-                        MavSeverity::MAV_SEVERITY_WARNING,
-                        format_args!("arming refused: {why}"),
-                    )?;
-                    MavResult::MAV_RESULT_TEMPORARILY_REJECTED
-                }
-            },
+            }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 0.0 && self.in_air() && p[1] != FORCE => {
                 self.say(
                     out,
@@ -67,10 +68,10 @@ impl MavVehicle {
                 MavResult::MAV_RESULT_DENIED
             }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 0.0 => {
-                if self.armed {
+                if self.modes.armed() {
                     self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("disarmed"))?;
                 }
-                self.disarm();
+                self.modes.disarm();
                 MavResult::MAV_RESULT_ACCEPTED
             }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => MavResult::MAV_RESULT_DENIED,
@@ -175,7 +176,11 @@ impl MavVehicle {
         out: &mut S,
     ) -> Result<MavResult, S::Error> {
         let t_us = self.last_sensor_us.unwrap_or(0);
-        match self.set_mode(mode, t_us, alt_amsl_m) {
+        // Above sea level to above the local frame's origin (the
+        // simulator's first position); NaN without one.
+        let up_m = self.home.map_or(f32::NAN, |h| alt_amsl_m - h.alt_mm as f32 * 1e-3);
+        let mut flown = missions::flown(&mut self.mission, self.home);
+        match self.modes.set_mode(mode, t_us, up_m, &mut self.flight, &mut flown) {
             Ok(()) => Ok(MavResult::MAV_RESULT_ACCEPTED),
             Err(why) => {
                 self.say(
@@ -186,56 +191,5 @@ impl MavVehicle {
                 Ok(MavResult::MAV_RESULT_DENIED)
             }
         }
-    }
-
-    pub(in crate::vehicle) fn disarm(&mut self) {
-        self.armed = false;
-        if !matches!(self.mode, FlightMode::Position | FlightMode::Offboard) {
-            self.mode = FlightMode::Hold;
-        }
-    }
-
-    /// Arms if the estimator navigates; the controller is designed afresh.
-    /// Where it arms is home; it holds there (or, in Offboard, flies the
-    /// streamed set-point; an automatic mode becomes Hold).
-    pub(in crate::vehicle) fn arm(&mut self) -> Result<(), ArmRefusal> {
-        if self.armed {
-            return Ok(());
-        }
-        // The one arming check (fc_loop::arming). PX4's HIL gives no
-        // battery reading, and nothing here locks or sees a tumble.
-        let estimate = self.flight.navigator().estimate();
-        let nav = match (self.flight.navigator().mode(), estimate) {
-            (NavMode::Navigating, None) => NavMode::Failsafe,
-            (mode, _) => mode,
-        };
-        arming::check(&ArmingState {
-            sensor_down: None,
-            battery_v: None,
-            battery_floor_v: 0.0,
-            locked: false,
-            tumbled: false,
-            nav,
-            started: self.mixer.is_some(),
-        })?;
-        let est = estimate.ok_or(ArmRefusal::EstimatorFailsafe)?;
-        self.flight
-            .try_select(self.flight.settings().controller)
-            .map_err(|_| ArmRefusal::DesignFailed)?;
-        let yaw = fc_core::quat_to_euler(&est.att)[2];
-        match (self.mode, self.offboard) {
-            (FlightMode::Offboard, Some((sp, _))) => {
-                self.flight.set_setpoint(&sp);
-            }
-            (mode, _) => {
-                self.flight.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
-                if mode != FlightMode::Position {
-                    self.mode = FlightMode::Hold;
-                }
-            }
-        }
-        self.home_ned_m = est.pos_ned_m;
-        self.armed = true;
-        Ok(())
     }
 }

@@ -32,8 +32,8 @@
 //! and answered where MAVLink expects an answer (`MAV_RESULT_UNSUPPORTED`).
 
 use crate::hil::{self, Home, StateFixSigmas};
-use crate::mission::{Mission, Step, MISSION_CAPACITY};
-use crate::modes::{joystick_velocity, nav_index_of, FlightMode, Legs, NavSettings, Route, NAV_PARAMS};
+use crate::mission::Mission;
+use crate::modes::{nav_index_of, set_nav, FlightMode, NavSettings, Px4Mode, NAV_PARAMS};
 use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
 use fc_core::control::Setpoint;
@@ -41,8 +41,8 @@ use fc_core::estimate::Fix;
 use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
+use fc_loop::modes::ModeCommander;
 use fc_loop::nav::NavMode;
-use fc_loop::planner::Reference;
 use fc_loop::schedule::Schedule;
 use fc_loop::{FcConfig, FlightLoop, StepAnswer};
 use hal_shim::CycleClock;
@@ -121,7 +121,7 @@ pub struct VehicleCounters {
 }
 
 /// Height above the arming point from which the vehicle is in the air, m.
-pub const IN_AIR_M: f32 = 0.15;
+pub use fc_loop::modes::IN_AIR_M;
 
 /// `AUTOPILOT_VERSION` (148), sent when asked for.
 const AUTOPILOT_VERSION_ID: u32 = 148;
@@ -159,31 +159,14 @@ pub struct MavVehicle {
     flight: FlightLoop,
     /// `None` until started.
     mixer: Option<Mixer<f32>>,
-    armed: bool,
-    /// Simulated time of the last ground-station `HEARTBEAT`, µs.
-    gcs_seen_us: Option<u64>,
-    /// The flight mode ([`crate::modes`]).
-    mode: FlightMode,
-    /// The automatic modes' settings (PX4's parameters).
-    nav: NavSettings,
-    /// The automatic mode's route.
-    route: Route,
+    /// The flight mode, arming, home and what each mode flies
+    /// ([`fc_loop::modes`]); its times are simulated µs.
+    modes: ModeCommander,
     /// The mission store and its transfers.
     mission: Mission,
-    /// The mission item flown (Mission mode).
-    mission_phase: Option<MissionPhase>,
-    /// A mission's `DO_CHANGE_SPEED`, for the rest of it.
-    mission_cruise_mps: Option<f32>,
-    /// The last offboard set-point, and when it came (simulated µs).
-    offboard: Option<(Setpoint<f32>, u64)>,
     /// The last streamed acceleration and its sender's time
     /// (`time_boot_ms`), for the jerk the message has no field for.
     offboard_acc: Option<(Vector3<f32>, u32)>,
-    /// The joystick's last `MANUAL_CONTROL` (x, y, z, r), and when it came.
-    manual: Option<([i16; 4], u64)>,
-    /// Where it armed (estimated), NED about the origin, m: the home a
-    /// return flies to (the origin until it arms).
-    home_ned_m: Vector3<f32>,
     /// The simulator's first position: the origin of the local frame.
     home: Option<Home>,
     /// Time of the last fix taken, µs.
@@ -218,20 +201,6 @@ fn boot_ms(t_us: u64) -> u32 {
     (t_us / 1000) as u32
 }
 
-/// The mission item flown.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum MissionPhase {
-    /// Flying to `goal` (NED, m); reached within `accept_m`, then held `hold_s`.
-    Flying {
-        seq: u16,
-        goal: Vector3<f32>,
-        accept_m: f32,
-        hold_s: f32,
-    },
-    /// Holding until `until_us`.
-    Holding { seq: u16, until_us: u64 },
-}
-
 /// A command, from `COMMAND_LONG` or `COMMAND_INT` (its x and y as f32).
 struct Command {
     command: MavCmd,
@@ -255,18 +224,9 @@ impl MavVehicle {
         Self {
             flight: FlightLoop::unstarted_with(FcConfig::default(), settings),
             mixer: None,
-            armed: false,
-            gcs_seen_us: None,
-            mode: FlightMode::Position,
-            nav: NavSettings::default(),
-            route: Route::new(),
+            modes: ModeCommander::new(),
             mission: Mission::new(),
-            mission_phase: None,
-            mission_cruise_mps: None,
-            offboard: None,
             offboard_acc: None,
-            manual: None,
-            home_ned_m: Vector3::zeros(),
             home: None,
             last_fix_us: None,
             mag_ref_rad: None,
@@ -292,7 +252,7 @@ impl MavVehicle {
 
     /// Armed (the motors turn).
     pub fn armed(&self) -> bool {
-        self.armed
+        self.modes.armed()
     }
 
     /// The settings in force (the parameters' values).
@@ -379,7 +339,7 @@ impl MavVehicle {
                 self.on_command(&c, out)
             }
             MavMessage::SETUP_SIGNING(m) if self.for_me(m.target_system) => {
-                let armed = self.armed;
+                let armed = self.modes.armed();
                 let Some(s) = out.signing() else {
                     return Ok(());
                 };
@@ -402,7 +362,8 @@ impl MavVehicle {
                 }
             }
             MavMessage::MANUAL_CONTROL(m) if self.for_me(m.target) => {
-                self.manual = Some(([m.x, m.y, m.z, m.r], self.last_sensor_us.unwrap_or(0)));
+                self.modes
+                    .manual([m.x, m.y, m.z, m.r], self.last_sensor_us.unwrap_or(0));
                 Ok(())
             }
             MavMessage::MISSION_COUNT(_)
@@ -414,20 +375,19 @@ impl MavVehicle {
             | MavMessage::MISSION_SET_CURRENT(_)
             | MavMessage::MISSION_ACK(_) => {
                 let t_us = self.last_sensor_us.unwrap_or(0);
-                if self.mode == FlightMode::Mission
-                    && !matches!(
-                        msg,
-                        MavMessage::MISSION_REQUEST_LIST(_)
-                            | MavMessage::MISSION_REQUEST_INT(_)
-                            | MavMessage::MISSION_REQUEST(_)
-                            | MavMessage::MISSION_ACK(_)
-                    )
-                {
-                    // The mission flown is not changed under it: Hold first.
-                    let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN);
+                let reads = matches!(
+                    msg,
+                    MavMessage::MISSION_REQUEST_LIST(_)
+                        | MavMessage::MISSION_REQUEST_INT(_)
+                        | MavMessage::MISSION_REQUEST(_)
+                        | MavMessage::MISSION_ACK(_)
+                );
+                if !reads {
+                    let mut flown = missions::flown(&mut self.mission, self.home);
+                    self.modes.mission_changing(t_us, &mut self.flight, &mut flown);
                 }
-                self.mission
-                    .handle(msg, t_us, self.home.as_ref(), self.home_ned_m[2], out)?;
+                let home_down_m = self.modes.home_ned_m()[2];
+                self.mission.handle(msg, t_us, self.home.as_ref(), home_down_m, out)?;
                 Ok(())
             }
             MavMessage::PARAM_REQUEST_LIST(m) if self.for_me(m.target_system) => {
@@ -455,7 +415,7 @@ impl MavVehicle {
             MavMessage::PARAM_SET(m) if self.for_me(m.target_system) => self.on_param_set(m, out),
             MavMessage::HEARTBEAT(h) => {
                 if h.mavtype == MavType::MAV_TYPE_GCS {
-                    self.gcs_seen_us = Some(self.last_sensor_us.unwrap_or(0));
+                    self.modes.ground_station_heard(self.last_sensor_us.unwrap_or(0));
                 }
                 Ok(())
             }
@@ -473,12 +433,12 @@ impl MavVehicle {
 
     /// The flight mode.
     pub fn mode(&self) -> FlightMode {
-        self.mode
+        self.modes.mode()
     }
 
     /// The automatic modes' settings (PX4's parameters).
     pub fn nav_settings(&self) -> &NavSettings {
-        &self.nav
+        self.modes.nav()
     }
 
     /// A `STATUSTEXT` naming parameter `id` and why it was refused.
@@ -490,16 +450,21 @@ impl MavVehicle {
 
     /// Sends a `STATUSTEXT` (cut at 50 characters).
     fn say<S: MavSink>(&self, out: &mut S, severity: MavSeverity, text: core::fmt::Arguments) -> Result<(), S::Error> {
-        let mut t = Text { buf: [0; 50], len: 0 };
-        let _ = core::fmt::write(&mut t, text);
-        out.send(
-            Peer::GroundStation,
-            &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
-                severity,
-                text: t.buf.into(),
-            }),
-        )
+        say(out, severity, text)
     }
+}
+
+/// Sends a `STATUSTEXT` (cut at 50 characters) to the ground station.
+fn say<S: MavSink>(out: &mut S, severity: MavSeverity, text: core::fmt::Arguments) -> Result<(), S::Error> {
+    let mut t = Text { buf: [0; 50], len: 0 };
+    let _ = core::fmt::write(&mut t, text);
+    out.send(
+        Peer::GroundStation,
+        &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+            severity,
+            text: t.buf.into(),
+        }),
+    )
 }
 
 #[cfg(test)]

@@ -4,8 +4,8 @@
 //! `STATUSTEXT`).
 
 use super::{
-    nav_index_of, params, MavMessage, MavParamType, MavSeverity, MavSink, MavVehicle, Peer, Refusal, NAV_PARAMS,
-    PARAMS, PARAM_SET_DATA, PARAM_VALUE_DATA,
+    nav_index_of, params, set_nav, MavMessage, MavParamType, MavSeverity, MavSink, MavVehicle, Peer, Refusal,
+    NAV_PARAMS, PARAMS, PARAM_SET_DATA, PARAM_VALUE_DATA,
 };
 
 /// Every parameter served: the flight loop's ([`PARAMS`]), then the
@@ -41,7 +41,7 @@ impl MavVehicle {
             );
         };
         let r = match i.checked_sub(PARAMS.len()) {
-            Some(k) => self.nav.set(k, m.param_value),
+            Some(k) => set_nav(self.modes.nav_mut(), k, m.param_value),
             None => self.apply(i, m.param_value),
         };
         if let Err(why) = r {
@@ -73,7 +73,7 @@ impl MavVehicle {
         let (mut taken, mut refused) = (0, 0);
         for k in 0..NAV_PARAMS.len() {
             if let Some(v) = p.param((PARAMS.len() + k) as u16)? {
-                match self.nav.set(k, v) {
+                match set_nav(self.modes.nav_mut(), k, v) {
                     Ok(()) => taken += 1,
                     Err(_) => refused += 1,
                 }
@@ -85,7 +85,7 @@ impl MavVehicle {
     /// Sets parameter `index` to `value`: checked, and applied to the
     /// controller (re-designed while disarmed), the mixer and the failsafe.
     pub fn apply(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
-        self.flight.apply_param(index, value, !self.armed)?;
+        self.flight.apply_param(index, value, !self.modes.armed())?;
         self.mixer = Some(self.flight.settings().mixer()?);
         Ok(())
     }
@@ -96,7 +96,7 @@ impl MavVehicle {
             index.checked_sub(PARAMS.len()).and_then(|k| NAV_PARAMS.get(k)),
         ) {
             (Some(p), _) => (p.get)(self.flight.settings()),
-            (None, Some(p)) => (p.get)(&self.nav),
+            (None, Some(p)) => (p.get)(self.modes.nav()),
             (None, None) => return Ok(()),
         };
         out.send(

@@ -59,7 +59,7 @@ impl MavVehicle {
         self.counters.steps = self.counters.steps.wrapping_add(1);
         let u = Vector4::from(answer.u.unwrap_or([0.0; 4]));
         let cmd = self.mixer.map(|m| m.commands(&u));
-        let armed = self.armed && cmd.is_some();
+        let armed = self.modes.armed() && cmd.is_some();
         self.motors = match cmd {
             Some(c) if armed => c.commands,
             _ => [0.0; 4],
@@ -69,7 +69,7 @@ impl MavVehicle {
         }
         out.send(
             Peer::Simulator,
-            &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.armed)),
+            &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.modes.armed())),
         )?;
         self.watch_ground_station(s.time_us, out)?;
         self.mission.tick(s.time_us, out)?;

@@ -3,8 +3,9 @@
 
 use super::{
     autopilot_version, boot_ms, hil, EstimatorStatusFlags, MavMessage, MavSink, MavSysStatusSensor, MavVehicle,
-    MavVtolState, NavMode, Peer, ATTITUDE_DATA, ATTITUDE_QUATERNION_DATA, AUTOPILOT_VERSION_ID, ESTIMATOR_STATUS_DATA,
-    EXTENDED_SYS_STATE_DATA, GLOBAL_POSITION_INT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA,
+    MavVtolState, NavMode, Peer, Px4Mode, ATTITUDE_DATA, ATTITUDE_QUATERNION_DATA, AUTOPILOT_VERSION_ID,
+    ESTIMATOR_STATUS_DATA, EXTENDED_SYS_STATE_DATA, GLOBAL_POSITION_INT_DATA, HOME_POSITION_DATA,
+    LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA,
 };
 
 /// The telemetry streams and their default intervals, µs of simulated
@@ -51,7 +52,7 @@ impl MavVehicle {
         let est = self.flight.navigator().estimate();
         let time_boot_ms = boot_ms(t_us);
         Some(match id {
-            0 => MavMessage::HEARTBEAT(hil::heartbeat(self.armed, self.mode.custom_mode())),
+            0 => MavMessage::HEARTBEAT(hil::heartbeat(self.modes.armed(), self.modes.mode().custom_mode())),
             1 => MavMessage::SYS_STATUS(self.sys_status()),
             30 => {
                 let e = est?;
@@ -101,7 +102,7 @@ impl MavVehicle {
                     lat,
                     lon,
                     alt,
-                    relative_alt: ((self.home_ned_m[2] - e.pos_ned_m[2]) * 1e3) as i32,
+                    relative_alt: ((self.modes.home_ned_m()[2] - e.pos_ned_m[2]) * 1e3) as i32,
                     vx: cm(e.vel_ned_mps[0]),
                     vy: cm(e.vel_ned_mps[1]),
                     vz: cm(e.vel_ned_mps[2]),
@@ -110,14 +111,14 @@ impl MavVehicle {
             }
             242 => {
                 let h = self.home?;
-                let (latitude, longitude, altitude) = h.geodetic(&self.home_ned_m.cast());
+                let (latitude, longitude, altitude) = h.geodetic(&self.modes.home_ned_m().cast());
                 MavMessage::HOME_POSITION(HOME_POSITION_DATA {
                     latitude,
                     longitude,
                     altitude,
-                    x: self.home_ned_m[0],
-                    y: self.home_ned_m[1],
-                    z: self.home_ned_m[2],
+                    x: self.modes.home_ned_m()[0],
+                    y: self.modes.home_ned_m()[1],
+                    z: self.modes.home_ned_m()[2],
                     q: [1.0, 0.0, 0.0, 0.0],
                     approach_x: 0.0,
                     approach_y: 0.0,

@@ -1,0 +1,581 @@
+//! The flight modes a ground station commands, as PX4's commander and
+//! navigator fly them, for any protocol that commands by mode:
+//! [`ModeCommander`] holds the mode, arming and home, decides whether a mode
+//! may be entered ([`ModeRefusal`]), and each step sets the flight loop's
+//! set-point from what the mode flies and its failsafes, saying what
+//! happened as a [`ModeEvent`]. The protocol's adapter (fc-mavlink) only
+//! decodes into its calls and encodes its events; PX4's numbers for the
+//! modes are the adapter's.
+//!
+//! | mode | what it flies |
+//! |---|---|
+//! | Position | holds where it was when entered; a joystick ([`ModeCommander::manual`]) moves it ([`joystick_velocity`]); a joystick heard and then silent for `manual_loss_s` → Land |
+//! | Hold | the same, without a joystick (PX4's loiter) |
+//! | Takeoff | straight up to [`NavSettings::takeoff_alt_m`] above home, then Hold |
+//! | Land | straight down to the ground it armed on at [`NavSettings::land_mps`], then disarms |
+//! | Return | up to [`NavSettings::rtl_alt_m`] above home (if lower), over home at [`NavSettings::cruise_mps`], then down and disarmed |
+//! | Offboard | a client's streamed set-points ([`ModeCommander::offboard`]); entered only while they stream, Hold when they stop for [`NavSettings::offboard_loss_s`] |
+//! | Mission | the uploaded mission ([`MissionItems`]), item by item; then Hold |
+//!
+//! Each leg of an automatic mode is one planner segment
+//! ([`crate::planner::Segment`], rest to rest, [`Route`]), its duration
+//! chosen so that its peak speed is the mode's speed. A ground station
+//! heard and then silent for `gcs_loss_ms` (the settings' `FS_GCS_MS`)
+//! while armed → Land ([`ModeCommander::watch_ground_station`]).
+
+use crate::arming::{self, ArmRefusal, ArmingState};
+use crate::commander::{Legs, Route};
+use crate::nav::NavMode;
+use crate::planner::Reference;
+use crate::{FlightLoop, Loop};
+use fc_core::control::Setpoint;
+use nalgebra::Vector3;
+
+mod mission;
+mod settings;
+#[cfg(test)]
+mod tests;
+
+use mission::MissionPhase;
+pub use mission::{MissionItems, Step};
+pub use settings::{joystick_velocity, NavSettings};
+
+/// Height above the arming point from which the vehicle is in the air, m.
+pub const IN_AIR_M: f32 = 0.15;
+
+/// A flight mode (see the module's table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FlightMode {
+    /// Position control: hold where it is, moved by a joystick.
+    Position,
+    /// Hold (PX4's AUTO LOITER).
+    Hold,
+    /// Climb to the takeoff height, then Hold.
+    Takeoff,
+    /// Descend to the ground, then disarm.
+    Land,
+    /// Return to home and land.
+    Return,
+    /// Fly the ground station's set-points.
+    Offboard,
+    /// Fly the uploaded mission.
+    Mission,
+}
+
+impl FlightMode {
+    /// Every mode.
+    pub const ALL: [FlightMode; 7] = [
+        FlightMode::Position,
+        FlightMode::Hold,
+        FlightMode::Takeoff,
+        FlightMode::Land,
+        FlightMode::Return,
+        FlightMode::Offboard,
+        FlightMode::Mission,
+    ];
+
+    /// The name QGroundControl shows for it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            FlightMode::Position => "Position",
+            FlightMode::Hold => "Hold",
+            FlightMode::Takeoff => "Takeoff",
+            FlightMode::Land => "Land",
+            FlightMode::Return => "Return",
+            FlightMode::Offboard => "Offboard",
+            FlightMode::Mission => "Mission",
+        }
+    }
+}
+
+impl core::fmt::Display for FlightMode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Why a mode was not entered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModeRefusal {
+    /// Offboard without a fresh streamed set-point.
+    NotStreaming,
+    /// Mission with no mission uploaded.
+    NoMission,
+    /// An automatic mode that needs the motors turning.
+    Disarmed,
+    /// An automatic mode without an estimated position.
+    NoPosition,
+    /// A leg's goal is not finite or out of the planner's reach.
+    OutOfRange,
+}
+
+impl core::fmt::Display for ModeRefusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            ModeRefusal::NotStreaming => "no set-points streaming",
+            ModeRefusal::NoMission => "no mission",
+            ModeRefusal::Disarmed => "disarmed",
+            ModeRefusal::NoPosition => "no position",
+            ModeRefusal::OutOfRange => "goal out of range",
+        })
+    }
+}
+
+/// Something a step did that the ground station should hear of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModeEvent {
+    /// The takeoff height is reached: Hold.
+    TakeoffDone,
+    /// A landing (Land, a return's last leg) ended on the ground: disarmed.
+    Landed,
+    /// Offboard's set-points stopped: Hold.
+    OffboardLost,
+    /// The joystick went silent in Position mode: Land.
+    JoystickLost,
+    /// The ground station went silent while armed: Land.
+    GroundStationLost,
+    /// Mission item `seq` is done (the next one is current).
+    ItemReached(u16),
+    /// The mission's last item is done: Hold.
+    MissionDone,
+    /// Mission item `seq` cannot be flown by this vehicle: Hold.
+    ItemNotFlyable(u16),
+    /// Mission item `seq` is out of the planner's reach: Hold.
+    ItemOutOfRange(u16),
+}
+
+impl ModeEvent {
+    /// A failsafe (rather than news of a plan going as planned).
+    pub fn is_failsafe(self) -> bool {
+        matches!(self, ModeEvent::JoystickLost | ModeEvent::GroundStationLost)
+    }
+}
+
+impl core::fmt::Display for ModeEvent {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ModeEvent::TakeoffDone => f.write_str("takeoff done: hold"),
+            ModeEvent::Landed => f.write_str("landed: disarmed"),
+            ModeEvent::OffboardLost => f.write_str("offboard set-points lost: hold"),
+            ModeEvent::JoystickLost => f.write_str("joystick lost: landing"),
+            ModeEvent::GroundStationLost => f.write_str("ground station lost: landing"),
+            ModeEvent::ItemReached(seq) => write!(f, "mission item {seq} reached"),
+            ModeEvent::MissionDone => f.write_str("mission done: hold"),
+            ModeEvent::ItemNotFlyable(seq) => write!(f, "mission item {seq} cannot be flown: hold"),
+            ModeEvent::ItemOutOfRange(seq) => write!(f, "mission item {seq} out of range: hold"),
+        }
+    }
+}
+
+/// PX4's landed state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LandedState {
+    /// Disarmed, or armed on the ground.
+    OnGround,
+    /// Climbing in Takeoff.
+    Takeoff,
+    /// Armed and in the air.
+    InAir,
+    /// Coming down to land, in the air.
+    Landing,
+}
+
+/// A vehicle commanded by mode (see the module's documentation). Times are
+/// the flight loop's (simulated or board) µs.
+#[derive(Debug, Clone)]
+pub struct ModeCommander {
+    mode: FlightMode,
+    armed: bool,
+    /// The automatic modes' settings.
+    nav: NavSettings,
+    /// The automatic mode's route.
+    route: Route,
+    /// The mission item flown (Mission mode).
+    phase: Option<MissionPhase>,
+    /// A mission's speed change, for the rest of it, m/s.
+    mission_cruise_mps: Option<f32>,
+    /// The last streamed set-point, and when it came.
+    offboard: Option<(Setpoint<f32>, u64)>,
+    /// The joystick's last deflection (x, y, z, r), and when it came.
+    manual: Option<([i16; 4], u64)>,
+    /// When a ground station was last heard.
+    gcs_seen_us: Option<u64>,
+    /// Where it armed (estimated), NED about the origin, m: the home a
+    /// return flies to (the origin until it arms).
+    home_ned_m: Vector3<f32>,
+}
+
+impl Default for ModeCommander {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ModeCommander {
+    /// Disarmed in Position mode, home at the origin, default settings.
+    pub const fn new() -> Self {
+        Self {
+            mode: FlightMode::Position,
+            armed: false,
+            nav: NavSettings {
+                takeoff_alt_m: 2.5,
+                rtl_alt_m: 2.0,
+                cruise_mps: 1.0,
+                climb_mps: 0.5,
+                land_mps: 0.5,
+                offboard_loss_s: 1.0,
+                acc_rad_m: 0.1,
+                manual_mps: 1.0,
+                manual_z_mps: 0.5,
+                manual_yaw_dps: 60.0,
+                manual_loss_s: 0.5,
+            },
+            route: Route::new(),
+            phase: None,
+            mission_cruise_mps: None,
+            offboard: None,
+            manual: None,
+            gcs_seen_us: None,
+            home_ned_m: Vector3::new(0.0, 0.0, 0.0),
+        }
+    }
+
+    /// The mode.
+    pub fn mode(&self) -> FlightMode {
+        self.mode
+    }
+
+    /// Armed (the motors turn).
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// Where it armed, NED about the origin, m.
+    pub fn home_ned_m(&self) -> Vector3<f32> {
+        self.home_ned_m
+    }
+
+    /// The automatic modes' settings.
+    pub fn nav(&self) -> &NavSettings {
+        &self.nav
+    }
+
+    /// The automatic modes' settings, to change (the adapter checks each
+    /// value against its parameter's range).
+    pub fn nav_mut(&mut self) -> &mut NavSettings {
+        &mut self.nav
+    }
+
+    /// The last streamed set-point and when it came, if any.
+    pub fn streamed(&self) -> Option<(Setpoint<f32>, u64)> {
+        self.offboard
+    }
+
+    fn offboard_loss_us(&self) -> u64 {
+        (self.nav.offboard_loss_s * 1e6) as u64
+    }
+
+    /// A client's set-point at `t_us`: kept for Offboard, and flown at once
+    /// in Offboard while armed (as PX4 does, a stream outside Offboard only
+    /// makes Offboard possible).
+    pub fn offboard(&mut self, sp: Setpoint<f32>, t_us: u64, lp: &mut Loop) {
+        self.offboard = Some((sp, t_us));
+        if self.mode == FlightMode::Offboard && self.armed {
+            lp.set_setpoint(&sp);
+        }
+    }
+
+    /// A joystick's deflection (see [`joystick_velocity`]) at `t_us`.
+    pub fn manual(&mut self, sticks: [i16; 4], t_us: u64) {
+        self.manual = Some((sticks, t_us));
+    }
+
+    /// A ground station was heard at `t_us`.
+    pub fn ground_station_heard(&mut self, t_us: u64) {
+        self.gcs_seen_us = Some(t_us);
+    }
+
+    /// Armed and more than [`IN_AIR_M`] above where it armed (estimated):
+    /// disarming would drop it.
+    pub fn in_air(&self, lp: &Loop) -> bool {
+        let down = lp.navigator().estimate().map(|e| e.pos_ned_m[2]);
+        self.armed && down.is_some_and(|d| d < self.home_ned_m[2] - IN_AIR_M)
+    }
+
+    /// A landing is flown: Land, or a return's last leg (straight down over
+    /// home).
+    fn landing(&self) -> bool {
+        self.mode == FlightMode::Land || (self.mode == FlightMode::Return && self.route.on_last_leg())
+    }
+
+    /// PX4's landed state: on the ground, taking off, in the air, landing.
+    pub fn landed_state(&self, lp: &Loop) -> LandedState {
+        match (self.armed, self.in_air(lp)) {
+            (false, _) => LandedState::OnGround,
+            (true, _) if self.mode == FlightMode::Takeoff => LandedState::Takeoff,
+            (true, true) if self.landing() => LandedState::Landing,
+            (true, true) => LandedState::InAir,
+            (true, false) => LandedState::OnGround,
+        }
+    }
+
+    /// Arms if the estimator navigates and the vehicle is `started`; the
+    /// controller is designed afresh (no state wound up on the ground).
+    /// Where it arms is home; it holds there (or, in Offboard, flies the
+    /// streamed set-point; an automatic mode becomes Hold). Nothing else is
+    /// monitored here: PX4's HIL gives no battery reading, and nothing locks
+    /// or sees a tumble.
+    pub fn arm(&mut self, flight: &mut FlightLoop, started: bool) -> Result<(), ArmRefusal> {
+        if self.armed {
+            return Ok(());
+        }
+        let estimate = flight.navigator().estimate();
+        let nav = match (flight.navigator().mode(), estimate) {
+            (NavMode::Navigating, None) => NavMode::Failsafe,
+            (mode, _) => mode,
+        };
+        arming::check(&ArmingState {
+            sensor_down: None,
+            battery_v: None,
+            battery_floor_v: 0.0,
+            locked: false,
+            tumbled: false,
+            nav,
+            started,
+        })?;
+        let est = estimate.ok_or(ArmRefusal::EstimatorFailsafe)?;
+        flight
+            .try_select(flight.settings().controller)
+            .map_err(|_| ArmRefusal::DesignFailed)?;
+        let yaw = fc_core::quat_to_euler(&est.att)[2];
+        match (self.mode, self.offboard) {
+            (FlightMode::Offboard, Some((sp, _))) => {
+                flight.set_setpoint(&sp);
+            }
+            (mode, _) => {
+                flight.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
+                if mode != FlightMode::Position {
+                    self.mode = FlightMode::Hold;
+                }
+            }
+        }
+        self.home_ned_m = est.pos_ned_m;
+        self.armed = true;
+        Ok(())
+    }
+
+    /// Disarms (an automatic mode becomes Hold).
+    pub fn disarm(&mut self) {
+        self.armed = false;
+        if !matches!(self.mode, FlightMode::Position | FlightMode::Offboard) {
+            self.mode = FlightMode::Hold;
+        }
+    }
+
+    /// Enters `mode` at `t_us`, or says why not. `takeoff_up_m` is a
+    /// takeoff's height above the origin (NaN: [`NavSettings::takeoff_alt_m`]
+    /// above home).
+    pub fn set_mode<M: MissionItems + ?Sized>(
+        &mut self,
+        mode: FlightMode,
+        t_us: u64,
+        takeoff_up_m: f32,
+        lp: &mut Loop,
+        mission: &mut M,
+    ) -> Result<(), ModeRefusal> {
+        let est = lp.navigator().estimate();
+        let here = est.map(|e| e.pos_ned_m);
+        let yaw = est.map_or(0.0, |e| fc_core::quat_to_euler(&e.att)[2]);
+        match mode {
+            FlightMode::Position | FlightMode::Hold => {
+                if let (true, Some(p)) = (self.armed, here) {
+                    lp.set_setpoint(&Setpoint::hold(p, yaw));
+                }
+            }
+            FlightMode::Offboard => {
+                let fresh = self
+                    .offboard
+                    .filter(|&(_, at)| t_us.saturating_sub(at) <= self.offboard_loss_us());
+                let Some((sp, _)) = fresh else {
+                    return Err(ModeRefusal::NotStreaming);
+                };
+                if self.armed {
+                    lp.set_setpoint(&sp);
+                }
+            }
+            FlightMode::Mission => {
+                if mission.is_empty() {
+                    return Err(ModeRefusal::NoMission);
+                }
+                if !self.armed {
+                    return Err(ModeRefusal::Disarmed);
+                }
+                if usize::from(mission.current()) >= mission.len() {
+                    mission.set_current(0);
+                }
+                self.phase = None;
+                self.mission_cruise_mps = None;
+            }
+            FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
+                if !self.armed {
+                    return Err(ModeRefusal::Disarmed);
+                }
+                let Some(p) = here else {
+                    return Err(ModeRefusal::NoPosition);
+                };
+                let ground = self.home_ned_m[2];
+                let mut legs = Legs::new();
+                let _ = match mode {
+                    FlightMode::Takeoff => {
+                        let up = if takeoff_up_m.is_finite() {
+                            takeoff_up_m
+                        } else {
+                            self.nav.takeoff_alt_m - ground
+                        };
+                        legs.push_back((Vector3::new(p[0], p[1], -up), self.nav.climb_mps))
+                    }
+                    FlightMode::Land => legs.push_back((Vector3::new(p[0], p[1], ground), self.nav.land_mps)),
+                    _ => {
+                        // Return: up to RTL_RETURN_ALT (if lower), over home, down.
+                        let cruise = p[2].min(ground - self.nav.rtl_alt_m);
+                        let h = self.home_ned_m;
+                        let _ = legs.push_back((Vector3::new(p[0], p[1], cruise), self.nav.climb_mps));
+                        let _ = legs.push_back((Vector3::new(h[0], h[1], cruise), self.nav.cruise_mps));
+                        legs.push_back((Vector3::new(h[0], h[1], ground), self.nav.land_mps))
+                    }
+                };
+                let from = Reference::from(lp.setpoint());
+                if !self.route.start(t_us, &from, legs, lp.setpoint().yaw_rad) {
+                    return Err(ModeRefusal::OutOfRange);
+                }
+            }
+        }
+        if mode != FlightMode::Mission {
+            self.phase = None;
+        }
+        self.mode = mode;
+        Ok(())
+    }
+
+    /// The mission is about to change (an upload, a clear, a new current
+    /// item): the mission flown is not changed under it, Hold first.
+    pub fn mission_changing<M: MissionItems + ?Sized>(&mut self, t_us: u64, lp: &mut Loop, mission: &mut M) {
+        if self.mode == FlightMode::Mission {
+            let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
+        }
+    }
+
+    /// The ground-station failsafe (`gcs_loss_ms`, 0: off): armed, a ground
+    /// station was heard, and it has been silent that long → Land (where it
+    /// is, then disarmed on the ground). Set-points do not count; a
+    /// heartbeat again does not cancel it (as PX4's data-link loss).
+    pub fn watch_ground_station<M: MissionItems + ?Sized>(
+        &mut self,
+        t_us: u64,
+        gcs_loss_ms: u32,
+        lp: &mut Loop,
+        mission: &mut M,
+    ) -> Option<ModeEvent> {
+        let limit_us = u64::from(gcs_loss_ms) * 1000;
+        let lost = self.gcs_seen_us.is_some_and(|t| t_us.saturating_sub(t) > limit_us);
+        if self.armed
+            && self.mode != FlightMode::Land
+            && limit_us > 0
+            && lost
+            && self.set_mode(FlightMode::Land, t_us, f32::NAN, lp, mission).is_ok()
+        {
+            self.gcs_seen_us = None;
+            return Some(ModeEvent::GroundStationLost);
+        }
+        None
+    }
+
+    /// Each step (at `t_us`, `dt_s` after the last): what the mode flies
+    /// into the loop's set-point (a takeoff then holds; a landing disarms
+    /// on the ground), its failsafes (Offboard's loss of set-points, then
+    /// Hold; Position's lost joystick, then Land) and the mission's items.
+    /// Each event is handed to `say` as it happens; its error ends the step.
+    pub fn fly<M: MissionItems + ?Sized, E>(
+        &mut self,
+        t_us: u64,
+        dt_s: f32,
+        lp: &mut Loop,
+        mission: &mut M,
+        say: &mut impl FnMut(ModeEvent) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if !self.armed {
+            return Ok(());
+        }
+        match self.mode {
+            FlightMode::Position => self.fly_joystick(t_us, dt_s, lp, mission, say),
+            FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
+                let Some((r, done)) = self.route.at(t_us) else {
+                    return Ok(());
+                };
+                lp.set_setpoint(&r.setpoint());
+                if self.mode == FlightMode::Takeoff && done {
+                    self.mode = FlightMode::Hold;
+                    return say(ModeEvent::TakeoffDone);
+                }
+                // Landed (crate::land): landing, on the ground it armed on
+                // and not moving up or down.
+                let on_ground = lp
+                    .navigator()
+                    .estimate()
+                    .is_some_and(|e| crate::land::on_ground(&e, self.home_ned_m[2]));
+                if self.landing() && on_ground {
+                    self.disarm();
+                    return say(ModeEvent::Landed);
+                }
+                Ok(())
+            }
+            FlightMode::Mission => self.fly_mission(t_us, lp, mission, say),
+            FlightMode::Offboard => {
+                let lost = self
+                    .offboard
+                    .is_none_or(|(_, at)| t_us.saturating_sub(at) > self.offboard_loss_us());
+                if lost {
+                    let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
+                    return say(ModeEvent::OffboardLost);
+                }
+                Ok(())
+            }
+            FlightMode::Hold => Ok(()),
+        }
+    }
+
+    /// Position mode's step: the joystick moves the set-point
+    /// ([`joystick_velocity`]); a joystick heard and then silent for
+    /// `manual_loss_s` is lost: Land, as for a lost ground station.
+    fn fly_joystick<M: MissionItems + ?Sized, E>(
+        &mut self,
+        t_us: u64,
+        dt_s: f32,
+        lp: &mut Loop,
+        mission: &mut M,
+        say: &mut impl FnMut(ModeEvent) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let Some(([x, y, z, r], at)) = self.manual else {
+            return Ok(());
+        };
+        if t_us.saturating_sub(at) as f32 * 1e-6 > self.nav.manual_loss_s {
+            self.manual = None;
+            if self.set_mode(FlightMode::Land, t_us, f32::NAN, lp, mission).is_ok() {
+                return say(ModeEvent::JoystickLost);
+            }
+            return Ok(());
+        }
+        let mut sp = *lp.setpoint();
+        let (v, yaw_rate) = joystick_velocity(&self.nav, x, y, z, r, sp.yaw_rad);
+        let dt = dt_s.clamp(0.0, 0.1);
+        sp.pos_ned_m += v * dt;
+        // Not below the ground it armed on (throttle down on the ground).
+        sp.pos_ned_m[2] = sp.pos_ned_m[2].min(self.home_ned_m[2]);
+        sp.yaw_rad = fc_core::control::wrap_pi(sp.yaw_rad + yaw_rate * dt);
+        sp.vel_ned_mps = v;
+        sp.acc_ned_mps2 = Vector3::zeros();
+        sp.yaw_rate_radps = yaw_rate;
+        lp.set_setpoint(&sp);
+        Ok(())
+    }
+}
