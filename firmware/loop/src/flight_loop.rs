@@ -2,8 +2,9 @@
 //! the host and for images that run them in one task.
 
 use crate::{
-    apply_plan, fallback_controller, install, params, run_job, select, start_front_end, AnyController, ByteLink,
-    ControlError, ControllerSpec, CycleClock, Exclusive, FcConfig, Framed, ImuSample, Job, Loop, Outbox, ToFc,
+    apply_plan, fallback_controller, install, params, run_job, select, stabilize, start_front_end, Actuation,
+    AnyController, ByteLink, ControlError, ControllerSpec, CycleClock, Exclusive, FcConfig, Framed, ImuSample, Job,
+    Loop, Outbox, ToFc,
 };
 
 /// The flight controller's state between steps.
@@ -115,22 +116,21 @@ impl FlightLoop {
         start_front_end(&mut self.lp, &mut self.ctrl)
     }
 
-    /// One IMU sample `imu` taken at `t_us`, as an `Imu` message of
-    /// sequence `seq` is handled (answers to `out`): for front ends that
-    /// need nothing else of the protocol (the image links only this path).
-    pub fn imu_step<O: Outbox, C: CycleClock>(
+    /// One stabilizer step on the IMU sample `imu` taken at `t_us` (the
+    /// `seq`-th): the estimator and the controller, in one call
+    /// ([`Loop::imu_job`], then [`stabilize`](crate::stabilize)); returns
+    /// what the motors get, `None` before the session opens. For a front
+    /// end whose estimator and controller run in one task.
+    pub fn stabilize<C: CycleClock>(
         &mut self,
         seq: u32,
         t_us: u64,
         imu: &ImuSample,
-        out: &mut O,
         clock: &C,
         now_us: u64,
-    ) -> Result<(), O::Error> {
-        match self.lp.imu_job(seq, t_us, imu, clock, now_us) {
-            Some(job) => self.run(job, out, clock),
-            None => Ok(()),
-        }
+    ) -> Option<Actuation> {
+        let step = self.lp.imu_job(seq, t_us, imu, clock, now_us)?;
+        Some(stabilize(&mut Exclusive(&mut self.lp), &mut self.ctrl, &step, clock))
     }
 
     /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole

@@ -76,6 +76,43 @@ impl ControlJob {
     }
 }
 
+/// What one flown step gives the motors' side: the inputs and what the
+/// step cost. No wire message in between: a protocol adapter mixes `u`
+/// for its motors; our own protocol answers it as `Actuator` and
+/// `Telemetry` ([`Loop::answers`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Actuation {
+    /// The inputs to apply `[U1 N, U2 N, U3 N, U4 N·m]`: the controller's,
+    /// or the last ones held when it was not due or failed (hover thrust
+    /// while the estimator aligns).
+    pub u: [f32; 4],
+    /// The loop is in a failsafe (its sensor timer, or the estimator's).
+    pub failsafe: bool,
+    /// Cycles from the step's start to its end (0: not flown).
+    pub cycles: u32,
+    /// The MPC's QP iterations this step (0 for the other controllers).
+    pub qp_iterations: u16,
+}
+
+/// The controller's half of one stabilizer step (the estimator's half,
+/// [`Loop::imu_job`], made `step`: the estimate, the commander's set-point,
+/// whether the controller is due): the previews, the controller's update,
+/// its result recorded in the loop `lp` (locked only for those moments);
+/// returns what the motors get. The supervisor and the mixer are the
+/// vehicle's, after it.
+pub fn stabilize<M: Mutex<T = Loop>, C: CycleClock>(
+    lp: &mut M,
+    ctrl: &mut AnyController<f32>,
+    step: &Step,
+    clock: &C,
+) -> Actuation {
+    let result = step.control.map(|c| {
+        lp.lock(|l| l.apply_previews(ctrl));
+        c.fly(ctrl)
+    });
+    lp.lock(|l| l.record(step, result, clock))
+}
+
 /// A design's inputs, copied out of the [`Loop`] so that the design (which
 /// takes milliseconds to tens of them) runs without it.
 #[derive(Debug, Clone, Copy)]
@@ -138,11 +175,8 @@ pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
 ) -> Result<(), O::Error> {
     match job {
         Job::Step(step) => {
-            let result = step.control.map(|c| {
-                lp.lock(|l| l.apply_previews(ctrl));
-                c.fly(ctrl)
-            });
-            let answers = lp.lock(|l| l.finish(&step, result, clock));
+            let a = stabilize(lp, ctrl, &step, clock);
+            let answers = lp.lock(|l| l.answers(&step, &a));
             answers.iter().try_for_each(|m| out.send(m))
         }
         Job::Select(spec) => {

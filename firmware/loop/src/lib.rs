@@ -46,8 +46,8 @@ mod wire;
 
 pub use flight_loop::FlightLoop;
 pub use jobs::{
-    apply_plan, fallback_controller, install, run_job, select, start_front_end, ControlJob, Design, Job, ParamPlan,
-    Step,
+    apply_plan, fallback_controller, install, run_job, select, stabilize, start_front_end, Actuation, ControlJob,
+    Design, Job, ParamPlan, Step,
 };
 pub use wire::{fix_from_wire, fix_to_wire, param_answer, setpoint_from_wire, setpoint_to_wire, Framed};
 
@@ -141,30 +141,6 @@ pub const BOOT_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Lqr, Att
 /// The controller that flies when neither a new selection nor the previous
 /// one can be designed: the tuned Euler PD (no design step, cannot fail).
 pub const FALLBACK_CONTROLLER: ControllerSpec = ControllerSpec::new(Family::Pd, AttitudeForm::Euler);
-
-/// The flight loop's answers to one step, kept: what a protocol adapter
-/// needs of them (the inputs to apply, the step's cycle count), without
-/// a wire message in between.
-#[derive(Debug, Default, Clone, Copy, PartialEq)]
-pub struct StepAnswer {
-    /// The inputs `[U1 N, U2 N, U3 N, U4 N·m]` of the step (`None`: no
-    /// `Actuator` answer, the step was not flown).
-    pub u: Option<[f32; 4]>,
-    /// The cycles the step took (its `Telemetry`).
-    pub cycles: u32,
-}
-
-impl Outbox for StepAnswer {
-    type Error = core::convert::Infallible;
-    fn send(&mut self, msg: &FromFc) -> Result<(), Self::Error> {
-        match msg {
-            FromFc::Actuator { u, .. } => self.u = Some(*u),
-            FromFc::Telemetry { cycles, .. } => self.cycles = *cycles,
-            _ => {}
-        }
-        Ok(())
-    }
-}
 
 /// Where the flight loop's answers go: encoded into frames on a
 /// [`ByteLink`] ([`Framed`]), or to a front end that translates them.
@@ -428,8 +404,8 @@ impl Loop {
 
     /// An `Imu` message's estimator half ([`Loop::on_imu`]) as a front end
     /// that speaks another protocol takes it: `None` (counted as
-    /// unexpected) before the session opens, else the job for the
-    /// controller.
+    /// unexpected) before the session opens, else the step for the
+    /// controller's half ([`stabilize`]).
     pub fn imu_job<C: CycleClock>(
         &mut self,
         seq: u32,
@@ -437,13 +413,13 @@ impl Loop {
         imu: &ImuSample,
         clock: &C,
         now_us: u64,
-    ) -> Option<Job> {
+    ) -> Option<Step> {
         if !self.session {
             self.counters.unexpected = self.counters.unexpected.wrapping_add(1);
             return None;
         }
         self.counters.ok = self.counters.ok.wrapping_add(1);
-        Some(Job::Step(self.on_imu(seq, t_us, imu, clock, now_us)))
+        Some(self.on_imu(seq, t_us, imu, clock, now_us))
     }
 
     /// A design's inputs under the settings in force.
@@ -639,14 +615,27 @@ impl Loop {
     }
 
     /// Records the controller's result for `step` (`None`: it did not run)
-    /// and returns the step's answers: the output now held, the telemetry,
-    /// and the estimator's state for an `Imu` step.
+    /// and returns the step's answers on our protocol: the output now held,
+    /// the telemetry, and the estimator's state for an `Imu` step.
     pub fn finish<C: CycleClock>(
         &mut self,
         step: &Step,
         result: Option<Result<ControlOutput<f32>, ControlError>>,
         clock: &C,
     ) -> Answers {
+        let a = self.record(step, result, clock);
+        self.answers(step, &a)
+    }
+
+    /// Records the controller's result for `step` (`None`: it did not run;
+    /// an error is counted and the last output held) and returns what the
+    /// step gives the motors' side.
+    pub fn record<C: CycleClock>(
+        &mut self,
+        step: &Step,
+        result: Option<Result<ControlOutput<f32>, ControlError>>,
+        clock: &C,
+    ) -> Actuation {
         let mut iterations = 0u16;
         if let (Some(job), Some(r)) = (&step.control, result) {
             match r {
@@ -658,21 +647,30 @@ impl Loop {
                 Err(_) => self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1),
             }
         }
-        let cycles = step.t0.map_or(0, |t0| clock.since(t0));
-        let failsafe = self.failsafe || self.nav_failsafe;
+        Actuation {
+            u: [self.u[0], self.u[1], self.u[2], self.u[3]],
+            failsafe: self.failsafe || self.nav_failsafe,
+            cycles: step.t0.map_or(0, |t0| clock.since(t0)),
+            qp_iterations: iterations,
+        }
+    }
+
+    /// `step`'s answers on our protocol, from what it gave
+    /// ([`Loop::record`]).
+    pub fn answers(&self, step: &Step, a: &Actuation) -> Answers {
         let mut answers = Answers::new();
         // Four pushes into a Vec of four: none fails.
         let _ = answers.push(FromFc::Actuator {
             seq: step.seq,
-            u: [self.u[0], self.u[1], self.u[2], self.u[3]],
-            failsafe,
+            u: a.u,
+            failsafe: a.failsafe,
         });
         let _ = answers.push(FromFc::Telemetry {
             seq: step.seq,
-            cycles,
-            qp_iterations: iterations,
+            cycles: a.cycles,
+            qp_iterations: a.qp_iterations,
             counters: self.counters,
-            failsafe,
+            failsafe: a.failsafe,
         });
         if step.nav {
             let (nav, bias) = self.nav_messages(step.seq);

@@ -60,7 +60,7 @@ use fc_core::model::airframe::Mixer;
 use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{ParamType, Refusal, Settings, PARAMS};
-use fc_loop::{run_job, FcConfig, Job, Loop, Mutex, ParamPlan, StepAnswer};
+use fc_loop::{FcConfig, Loop, Mutex, ParamPlan};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use nalgebra::{Vector3, Vector4};
@@ -211,8 +211,8 @@ enum Written {
 /// controller's side ([`fly_step`]).
 #[derive(Debug, Clone, Copy)]
 pub struct ImuStep {
-    /// The loop's job for the controller (`None`: no session, not flown).
-    pub job: Option<Job>,
+    /// The loop's step for the controller (`None`: no session, not flown).
+    pub job: Option<fc_loop::Step>,
     /// A set-point is flown (the commander, not idle, gave one).
     pub setpoint: bool,
 }

@@ -2,8 +2,8 @@
 //! from the link's): [`fly_step`], [`pass_step`], [`run_work`].
 
 use super::{
-    run_job, AnyController, BorrowMut, ControllerWork, CrtpShared, CycleClock, FromFc, ImuStep, Job, Loop, Mutex,
-    ParamPlan, Refusal, StepAnswer, Vector4,
+    AnyController, BorrowMut, ControllerWork, CrtpShared, CycleClock, FromFc, ImuStep, Loop, Mutex, ParamPlan, Refusal,
+    Vector4,
 };
 use fc_core::control::Controller;
 
@@ -32,11 +32,8 @@ pub fn fly_step<M: Mutex, C: CycleClock>(
 where
     M::T: BorrowMut<CrtpShared>,
 {
-    let mut answer = StepAnswer::default();
-    if let Some(job) = step.job {
-        let _ = run_job(&mut LoopOf(v), ctrl, job, &mut answer, clock);
-    }
-    v.lock(|v| v.borrow_mut().imu_end(&step, answer.u))
+    let u = step.job.map(|s| fc_loop::stabilize(&mut LoopOf(v), ctrl, &s, clock).u);
+    v.lock(|v| v.borrow_mut().imu_end(&step, u))
 }
 
 /// Answers `step` without a controller: the controller's task's step while
@@ -48,8 +45,8 @@ pub fn pass_step<M: Mutex, C: CycleClock>(v: &mut M, step: ImuStep, clock: &C) -
 where
     M::T: BorrowMut<CrtpShared>,
 {
-    if let Some(Job::Step(s)) = step.job {
-        let _ = LoopOf(v).lock(|l| l.finish(&s, None, clock));
+    if let Some(s) = step.job {
+        LoopOf(v).lock(|l| l.record(&s, None, clock));
     }
     v.lock(|v| v.borrow_mut().imu_end(&step, None))
 }

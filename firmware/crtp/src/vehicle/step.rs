@@ -2,7 +2,7 @@
 //! the supervisor (failsafes, tumble, the end of a landing).
 
 use super::{
-    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Job, Reference, Setpoint, Vector4, COS_TUMBLE_TILT,
+    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Reference, Setpoint, Vector4, COS_TUMBLE_TILT,
     FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US, SETPOINT_WATCHDOG,
 };
 
@@ -42,12 +42,9 @@ impl CrtpShared {
         // Nothing to step on before the first good sample.
         let job = sample
             .and_then(|imu| self.lp.imu_job(self.seq, t_us, &imu, clock, t_us))
-            .map(|job| match job {
-                // The estimator's state goes out in log blocks, not with every
-                // step's answer (our protocol's `Nav`): not built.
-                Job::Step(step) => Job::Step(fc_loop::Step { nav: false, ..step }),
-                other => other,
-            });
+            // The estimator's state goes out in log blocks, not with every
+            // step's answer (our protocol's `Nav`): not built.
+            .map(|step| fc_loop::Step { nav: false, ..step });
         // The controller changes nothing the supervisor reads.
         self.supervise(t_us);
         ImuStep {

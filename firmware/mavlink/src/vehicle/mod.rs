@@ -44,7 +44,7 @@ use fc_core::model::airframe::MixerError;
 use fc_loop::modes::ModeCommander;
 use fc_loop::nav::NavMode;
 use fc_loop::schedule::Schedule;
-use fc_loop::{FcConfig, FlightLoop, StepAnswer};
+use fc_loop::{FcConfig, FlightLoop};
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
 use nalgebra::{Vector3, Vector4};

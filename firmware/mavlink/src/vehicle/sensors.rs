@@ -3,7 +3,7 @@
 //! simulator's true state).
 
 use super::{
-    hil, CycleClock, Fix, Home, MavMessage, MavSink, MavVehicle, Peer, StateFixSigmas, StepAnswer, Vector3, Vector4,
+    hil, CycleClock, Fix, Home, MavMessage, MavSink, MavVehicle, Peer, StateFixSigmas, Vector3, Vector4,
     BARO_PERIOD_US, HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA, MAG_SIGMA_RAD, STREAMS,
 };
 
@@ -29,7 +29,6 @@ impl MavVehicle {
             self.counters.sensors_refused = self.counters.sensors_refused.wrapping_add(1);
             return Ok(());
         };
-        let mut answer = StepAnswer::default();
         if self.last_sensor_us.is_none_or(|t| s.time_us < t) {
             // The first sample, or a simulator that started again: a new time line.
             self.flight.open_session();
@@ -52,12 +51,10 @@ impl MavVehicle {
             self.on_mag(s.time_us, &mag);
         }
         self.seq = self.seq.wrapping_add(1);
-        let _ = self
-            .flight
-            .imu_step(self.seq, s.time_us, &s.imu, &mut answer, clock, now_us);
-        self.cycles = (answer.cycles, clock.hz());
+        let flown = self.flight.stabilize(self.seq, s.time_us, &s.imu, clock, now_us);
+        self.cycles = (flown.map_or(0, |a| a.cycles), clock.hz());
         self.counters.steps = self.counters.steps.wrapping_add(1);
-        let u = Vector4::from(answer.u.unwrap_or([0.0; 4]));
+        let u = Vector4::from(flown.map_or([0.0; 4], |a| a.u));
         let cmd = self.mixer.map(|m| m.commands(&u));
         let armed = self.modes.armed() && cmd.is_some();
         self.motors = match cmd {
