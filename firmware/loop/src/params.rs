@@ -20,6 +20,8 @@ use fc_core::control::{ControllerSpec, SpecError, Tuning};
 use fc_core::model::airframe::{Mixer, MixerError, MotorUnit, RotorLayout, Spin};
 use fc_core::model::VehicleParams;
 
+pub use crate::modes::NavSettings;
+
 /// The rotor layouts a parameter can choose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Airframe {
@@ -76,6 +78,8 @@ pub struct Settings {
     pub gcs_loss_ms: u32,
     /// Period of the position fixes taken from `HIL_STATE_QUATERNION`, ms.
     pub fix_period_ms: u32,
+    /// The automatic modes' settings ([`crate::modes`]).
+    pub nav: NavSettings,
 }
 
 impl Settings {
@@ -96,6 +100,7 @@ impl Settings {
             failsafe_descent: 0.85,
             gcs_loss_ms: 5_000,
             fix_period_ms: 10,
+            nav: NavSettings::default(),
         }
     }
 
@@ -323,6 +328,24 @@ pub struct Param {
     /// Its true type: what CRTP's param TOC declares, and what a write
     /// must be (an integer's setter refuses a fraction).
     pub ty: ParamType,
+    /// Served in CRTP's param TOC too ([`Param::crtp_name`]); every
+    /// parameter is served by MAVLink and our own protocol. The ones CRTP
+    /// serves come first ([`CRTP_PARAMS`]).
+    pub crtp: bool,
+}
+
+impl Param {
+    /// Its MAVLink (and our protocol's) name: [`Param::id`].
+    pub const fn mavlink_name(&self) -> &'static str {
+        self.id
+    }
+
+    /// Its CRTP group and name, if CRTP serves it: the MAVLink name split
+    /// at its first `_` (`VEH_MASS` → `veh.MASS`; cflib shows the group in
+    /// lower case), or group `fc` for a name without one.
+    pub fn crtp_name(&self) -> Option<(&'static str, &'static str)> {
+        self.crtp.then(|| self.id.split_once('_').unwrap_or(("fc", self.id)))
+    }
 }
 
 /// A parameter's true type.
@@ -400,6 +423,33 @@ macro_rules! real {
             },
             redesign: $redesign,
             ty: ParamType::F32,
+            crtp: true,
+        }
+    };
+}
+
+/// `value` within `[lo, hi]` (NaN is not), else refused with the range.
+#[inline(never)]
+fn ranged(value: f32, lo: f32, hi: f32) -> Result<f32, Refusal> {
+    within(value, lo, hi).map(|()| value)
+}
+
+/// An automatic mode's setting ([`NavSettings`], PX4's name): a real
+/// checked against its range when written; MAVLink's only (CRTP flies no
+/// modes).
+macro_rules! nav {
+    ($id:literal, $doc:literal, $lo:expr, $hi:expr, $f:ident) => {
+        Param {
+            id: $id,
+            doc: $doc,
+            get: |s| s.nav.$f,
+            set: |s, v| {
+                s.nav.$f = ranged(v, $lo, $hi)?;
+                Ok(())
+            },
+            redesign: false,
+            ty: ParamType::F32,
+            crtp: false,
         }
     };
 }
@@ -413,7 +463,7 @@ fn pwm(s: &Settings) -> (u16, u16) {
 }
 
 /// Every parameter, in `param_index` order.
-pub const PARAMS: [Param; 52] = [
+pub const PARAMS: [Param; 63] = [
     real!("VEH_MASS", "mass, kg", true, vehicle.mass_kg),
     real!(
         "VEH_IXX",
@@ -480,6 +530,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U8,
+        crtp: true,
     },
     real!("MOT_HUB_M", "distance of each hub from the centre, m", false, hub_m),
     Param {
@@ -492,6 +543,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U8,
+        crtp: true,
     },
     Param {
         id: "MOT_UNIT",
@@ -512,6 +564,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U8,
+        crtp: true,
     },
     Param {
         id: "MOT_PWM_MIN",
@@ -526,6 +579,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U16,
+        crtp: true,
     },
     Param {
         id: "MOT_PWM_MAX",
@@ -540,6 +594,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U16,
+        crtp: true,
     },
     Param {
         id: "CTL_ID",
@@ -552,6 +607,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: true,
         ty: ParamType::U8,
+        crtp: true,
     },
     Param {
         id: "CTL_FF",
@@ -571,6 +627,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: true,
         ty: ParamType::U8,
+        crtp: true,
     },
     Param {
         id: "FS_TIMEOUT_MS",
@@ -582,6 +639,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U16,
+        crtp: true,
     },
     real!(
         "FS_DESCENT",
@@ -599,6 +657,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U16,
+        crtp: true,
     },
     Param {
         id: "HIL_FIX_MS",
@@ -610,6 +669,7 @@ pub const PARAMS: [Param; 52] = [
         },
         redesign: false,
         ty: ParamType::U16,
+        crtp: true,
     },
     real!("PD_X_P", "PD north loop, (m/s^2)/m", true, tuning.pd_position[0].kp),
     real!("PD_X_D", "PD north loop, (m/s^2)/(m/s)", true, tuning.pd_position[0].kd),
@@ -719,8 +779,94 @@ pub const PARAMS: [Param; 52] = [
         "MPC moment-disturbance estimate time constant, s (0 preset)",
         true,
         tuning.mpc_moment_tau_s
+    ), // The automatic modes (PX4's names; MAVLink only).
+    nav!(
+        "MIS_TAKEOFF_ALT",
+        "takeoff height above home, m",
+        0.2,
+        100.0,
+        takeoff_alt_m
+    ),
+    nav!(
+        "RTL_RETURN_ALT",
+        "least height of a return home, m",
+        0.2,
+        500.0,
+        rtl_alt_m
+    ),
+    nav!(
+        "MPC_XY_CRUISE",
+        "horizontal speed of the automatic modes, m/s",
+        0.1,
+        20.0,
+        cruise_mps
+    ),
+    nav!(
+        "MPC_Z_V_AUTO_UP",
+        "climb speed of the automatic modes, m/s",
+        0.1,
+        8.0,
+        climb_mps
+    ),
+    nav!("MPC_LAND_SPEED", "descent speed of a landing, m/s", 0.1, 4.0, land_mps),
+    nav!(
+        "COM_OF_LOSS_T",
+        "offboard set-points silent this long end offboard, s",
+        0.1,
+        60.0,
+        offboard_loss_s
+    ),
+    nav!(
+        "NAV_ACC_RAD",
+        "a mission waypoint is reached within this, m",
+        0.01,
+        100.0,
+        acc_rad_m
+    ),
+    nav!(
+        "MPC_VEL_MANUAL",
+        "horizontal speed of a full joystick deflection, m/s",
+        0.1,
+        20.0,
+        manual_mps
+    ),
+    nav!(
+        "MPC_Z_VEL_MAX_UP",
+        "vertical speed of full joystick throttle, m/s",
+        0.1,
+        8.0,
+        manual_z_mps
+    ),
+    nav!(
+        "MPC_MAN_Y_MAX",
+        "heading rate of a full yaw deflection, deg/s",
+        1.0,
+        400.0,
+        manual_yaw_dps
+    ),
+    nav!(
+        "COM_RC_LOSS_T",
+        "a joystick silent this long is lost (then land), s",
+        0.1,
+        60.0,
+        manual_loss_s
     ),
 ];
+
+/// How many of [`PARAMS`] CRTP serves: the first ones (its param TOC's
+/// ids are their indexes); none after them is served.
+pub const CRTP_PARAMS: usize = {
+    let mut n = 0;
+    while n < PARAMS.len() && PARAMS[n].crtp {
+        n += 1;
+    }
+    let mut i = n;
+    while i < PARAMS.len() {
+        assert!(!PARAMS[i].crtp, "CRTP's parameters come first");
+        i += 1;
+    }
+    n
+};
 
 /// The index of the parameter named `id` (a MAVLink `param_id`: up to 16
 /// bytes, NUL-padded when shorter).

@@ -818,3 +818,37 @@ fn every_parameter_takes_what_its_type_says() {
     let ctl = params::index_of(b"CTL_ID").unwrap();
     assert_eq!(PARAMS[ctl].ty, ParamType::U8);
 }
+
+/// The one table: every name is unique and fits MAVLink's 16 bytes; CRTP
+/// serves the first [`params::CRTP_PARAMS`] under their split names and
+/// none of the automatic modes' (PX4's names, MAVLink only); a mode's
+/// setting refuses a value out of its range, NaN included, and keeps the
+/// one in force.
+#[test]
+fn one_parameter_table_names_each_for_every_protocol_and_checks_the_modes() {
+    use params::{Refusal, Settings, CRTP_PARAMS, PARAMS};
+    for (i, p) in PARAMS.iter().enumerate() {
+        assert!(p.mavlink_name().len() <= 16, "{}", p.id);
+        assert_eq!(params::index_of(p.mavlink_name().as_bytes()), Some(i), "{}", p.id);
+        assert_eq!(p.crtp_name().is_some(), i < CRTP_PARAMS, "{}", p.id);
+    }
+    assert_eq!(
+        PARAMS[params::index_of(b"VEH_MASS").unwrap()].crtp_name(),
+        Some(("VEH", "MASS"))
+    );
+    // The modes' settings: the eleven after CRTP's, unknown to it.
+    let modes = PARAMS.len() - CRTP_PARAMS;
+    assert_eq!((CRTP_PARAMS, modes), (52, 11));
+    let s = Settings::os4();
+    let i = params::index_of(b"MIS_TAKEOFF_ALT\0").unwrap();
+    assert_eq!(i, CRTP_PARAMS);
+    assert_eq!(params::write(&s, i, 1.5).unwrap().nav.takeoff_alt_m, 1.5);
+    let range = Refusal::Range { lo: 0.2, hi: 100.0 };
+    assert_eq!(params::write(&s, i, -1.0), Err(range));
+    assert_eq!(params::write(&s, i, f32::NAN), Err(range));
+    // Each default is within its range: written back as it is, taken.
+    for (k, p) in PARAMS.iter().enumerate().skip(CRTP_PARAMS) {
+        assert_eq!(params::write(&s, k, (p.get)(&s)), Ok(s), "{}", p.id);
+    }
+    assert_eq!(params::index_of(b"NOPE"), None);
+}

@@ -6,8 +6,8 @@
 //! `MAV_CMD_DO_SET_MODE` (`param1` `MAV_MODE_FLAG_CUSTOM_MODE_ENABLED`,
 //! `param2` the main mode, `param3` the sub mode). Without that flag
 //! `param1` alone is read as PX4 reads it ([`Px4Mode::from_base_mode`]).
-//! The automatic modes' settings are PX4's parameters here
-//! ([`NAV_PARAMS`]).
+//! The automatic modes' settings are PX4's parameters, in the flight
+//! stack's one table ([`fc_loop::params::PARAMS`]).
 //!
 //! | mode | PX4 (main, sub) |
 //! |---|---|
@@ -19,7 +19,6 @@
 //! | Offboard | OFFBOARD (6, 0) |
 //! | Mission | AUTO MISSION (4) |
 
-use crate::params::Refusal;
 use mavlink::dialects::common::MavModeFlag;
 
 /// PX4's main and sub mode numbers (`px4_custom_mode.h`).
@@ -107,133 +106,6 @@ impl Px4Mode for FlightMode {
     }
 }
 
-/// One of [`NavSettings`]' parameters.
-#[derive(Clone, Copy)]
-pub struct NavParam {
-    /// Its PX4 name.
-    pub id: &'static str,
-    /// What it is, with its unit.
-    pub doc: &'static str,
-    /// Accepted range.
-    pub range: (f32, f32),
-    /// Its value.
-    pub get: fn(&NavSettings) -> f32,
-    /// Where it is written.
-    pub field: fn(&mut NavSettings) -> &mut f32,
-}
-
-impl core::fmt::Debug for NavParam {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.debug_struct("NavParam").field("id", &self.id).finish()
-    }
-}
-
-macro_rules! nav {
-    ($id:literal, $doc:literal, $lo:expr, $hi:expr, $f:ident) => {
-        NavParam {
-            id: $id,
-            doc: $doc,
-            range: ($lo, $hi),
-            get: |s| s.$f,
-            field: |s| &mut s.$f,
-        }
-    };
-}
-
-/// The automatic modes' parameters, served after the flight loop's
-/// ([`crate::params::PARAMS`]) in `param_index` order.
-pub const NAV_PARAMS: [NavParam; 11] = [
-    nav!(
-        "MIS_TAKEOFF_ALT",
-        "takeoff height above home, m",
-        0.2,
-        100.0,
-        takeoff_alt_m
-    ),
-    nav!(
-        "RTL_RETURN_ALT",
-        "least height of a return home, m",
-        0.2,
-        500.0,
-        rtl_alt_m
-    ),
-    nav!(
-        "MPC_XY_CRUISE",
-        "horizontal speed of the automatic modes, m/s",
-        0.1,
-        20.0,
-        cruise_mps
-    ),
-    nav!(
-        "MPC_Z_V_AUTO_UP",
-        "climb speed of the automatic modes, m/s",
-        0.1,
-        8.0,
-        climb_mps
-    ),
-    nav!("MPC_LAND_SPEED", "descent speed of a landing, m/s", 0.1, 4.0, land_mps),
-    nav!(
-        "COM_OF_LOSS_T",
-        "offboard set-points silent this long end offboard, s",
-        0.1,
-        60.0,
-        offboard_loss_s
-    ),
-    nav!(
-        "NAV_ACC_RAD",
-        "a mission waypoint is reached within this, m",
-        0.01,
-        100.0,
-        acc_rad_m
-    ),
-    nav!(
-        "MPC_VEL_MANUAL",
-        "horizontal speed of a full joystick deflection, m/s",
-        0.1,
-        20.0,
-        manual_mps
-    ),
-    nav!(
-        "MPC_Z_VEL_MAX_UP",
-        "vertical speed of full joystick throttle, m/s",
-        0.1,
-        8.0,
-        manual_z_mps
-    ),
-    nav!(
-        "MPC_MAN_Y_MAX",
-        "heading rate of a full yaw deflection, deg/s",
-        1.0,
-        400.0,
-        manual_yaw_dps
-    ),
-    nav!(
-        "COM_RC_LOSS_T",
-        "a joystick silent this long is lost (then land), s",
-        0.1,
-        60.0,
-        manual_loss_s
-    ),
-];
-
-/// Writes parameter `index` of [`NAV_PARAMS`] in `nav`: refused outside
-/// its range.
-pub fn set_nav(nav: &mut NavSettings, index: usize, value: f32) -> Result<(), Refusal> {
-    let p = NAV_PARAMS.get(index).ok_or(Refusal::Unknown)?;
-    let (lo, hi) = p.range;
-    if !(value.is_finite() && (lo..=hi).contains(&value)) {
-        return Err(Refusal::Range { lo, hi });
-    }
-    *(p.field)(nav) = value;
-    Ok(())
-}
-
-/// The index in [`NAV_PARAMS`] of the parameter named `id` (NUL-padded).
-pub fn nav_index_of(id: &[u8]) -> Option<usize> {
-    let len = id.iter().position(|&b| b == 0).unwrap_or(id.len());
-    NAV_PARAMS.iter().position(|p| p.id.as_bytes() == &id[..len])
-}
-
 // An automatic mode's legs are planned by the flight stack's commander;
 // the modes are the flight stack's.
 pub use fc_loop::commander::{leg_duration_s, Legs, Route};
@@ -279,23 +151,5 @@ mod tests {
         assert_eq!(base(64), None);
         assert_eq!(base(80), None);
         assert_eq!(base(0), None);
-    }
-
-    #[test]
-    fn nav_parameters_are_named_as_px4_and_checked() {
-        let mut s = NavSettings::default();
-        let i = nav_index_of(b"MIS_TAKEOFF_ALT\0").unwrap();
-        set_nav(&mut s, i, 1.5).unwrap();
-        assert_eq!(s.takeoff_alt_m, 1.5);
-        assert_eq!(set_nav(&mut s, i, -1.0), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
-        assert_eq!(set_nav(&mut s, i, f32::NAN), Err(Refusal::Range { lo: 0.2, hi: 100.0 }));
-        assert_eq!(s.takeoff_alt_m, 1.5);
-        for (k, p) in NAV_PARAMS.iter().enumerate() {
-            assert!(p.id.len() <= 16);
-            assert_eq!(nav_index_of(p.id.as_bytes()), Some(k));
-            let (lo, hi) = p.range;
-            assert!((lo..=hi).contains(&(p.get)(&NavSettings::default())), "{}", p.id);
-        }
-        assert_eq!(nav_index_of(b"NOPE"), None);
     }
 }

@@ -146,7 +146,7 @@ macro_rules! crtp_app {
                     .map(|s| cx.local.store.insert(s));
                 if let Some(st) = store.as_deref_mut() {
                     let (mut taken, mut refused) = (0u16, 0u16);
-                    for i in 0..fc_loop::params::PARAMS.len() {
+                    for i in 0..fc_loop::params::CRTP_PARAMS {
                         if let Ok(Some(value)) = fc_storage::Persist::param(st, i as u16) {
                             match vehicle.write_param(i, value) {
                                 Ok(_) => taken += 1,

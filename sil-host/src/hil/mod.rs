@@ -426,12 +426,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 res.storage = Some(sum);
                 store = Some(st);
             }
-            let mut v = MavVehicle::new(settings, SYSTEM_ID)
+            let v = MavVehicle::new(settings, SYSTEM_ID)
                 .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?;
-            if let (Some(st), Some(sum)) = (store.as_mut(), res.storage.as_mut()) {
-                let (taken, refused) = v.restore_nav(st).map_err(|e| anyhow::anyhow!("--storage: {e}"))?;
-                sum.params_loaded += taken;
-                sum.params_refused += refused;
+            if let Some(sum) = res.storage.as_ref() {
                 eprintln!(
                     "px4-hil: storage: {} parameter(s) taken, {} refused; signing key: {}",
                     sum.params_loaded,

@@ -59,7 +59,7 @@ use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
 use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
-use fc_loop::params::{ParamType, Refusal, Settings, PARAMS};
+use fc_loop::params::{ParamType, Refusal, Settings, CRTP_PARAMS, PARAMS};
 use fc_loop::{FcConfig, Loop, Mutex, ParamPlan};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
@@ -291,7 +291,7 @@ impl CrtpVehicle {
     /// client's write is: checked, applied, re-designing only while the
     /// motors are off. Returns the value in force.
     pub fn write_param(&mut self, index: usize, value: f32) -> Result<f32, Refusal> {
-        let param = PARAMS.get(index).ok_or(Refusal::Unknown)?;
+        let param = PARAMS[..CRTP_PARAMS].get(index).ok_or(Refusal::Unknown)?;
         if let Written::Later = self.shared.param_write(index, value, Reply::Caller)? {
             if let Some((r, _)) = self.run_pending() {
                 r?;
@@ -464,7 +464,9 @@ impl CrtpShared {
     /// `None` when a re-design was queued ([`CrtpShared::take_work`]), whose
     /// answer [`CrtpShared::work_done`] gives.
     pub fn sim_param(&mut self, index: u16, value: f32) -> Option<FromFc> {
-        let r = match PARAMS.get(usize::from(index)) {
+        // The parameters CRTP does not serve (the automatic modes') are
+        // not this vehicle's.
+        let r = match PARAMS[..CRTP_PARAMS].get(usize::from(index)) {
             None => Err(Refusal::Unknown),
             Some(_) => self.param_write(usize::from(index), value, Reply::Sim(index)),
         };

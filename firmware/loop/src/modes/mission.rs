@@ -85,6 +85,7 @@ impl ModeCommander {
         mission: &mut M,
         say: &mut impl FnMut(ModeEvent) -> Result<(), E>,
     ) -> Result<(), E> {
+        let nav = lp.settings().nav;
         for _ in 0..=mission.len() {
             match self.phase {
                 None => {
@@ -98,13 +99,13 @@ impl ModeCommander {
                     let mut legs = Legs::new();
                     let (goal, accept_m, hold_s) = match step {
                         Ok(Step::Goto { ned, hold_s, accept_m }) => {
-                            let cruise = self.mission_cruise_mps.unwrap_or(self.nav.cruise_mps);
+                            let cruise = self.mission_cruise_mps.unwrap_or(nav.cruise_mps);
                             let _ = legs.push_back((ned, cruise));
                             (ned, accept_m, hold_s)
                         }
                         Ok(Step::Takeoff { up_m }) => {
                             let goal = Vector3::new(sp.pos_ned_m[0], sp.pos_ned_m[1], self.home_ned_m[2] - up_m);
-                            let _ = legs.push_back((goal, self.nav.climb_mps));
+                            let _ = legs.push_back((goal, nav.climb_mps));
                             (goal, 0.0, 0.0)
                         }
                         Ok(Step::Delay { s }) => {
@@ -156,7 +157,7 @@ impl ModeCommander {
                         return Ok(());
                     };
                     lp.set_setpoint(&r.setpoint());
-                    let accept = if accept_m > 0.0 { accept_m } else { self.nav.acc_rad_m };
+                    let accept = if accept_m > 0.0 { accept_m } else { nav.acc_rad_m };
                     let near = lp
                         .navigator()
                         .estimate()

@@ -186,8 +186,6 @@ pub enum LandedState {
 pub struct ModeCommander {
     mode: FlightMode,
     armed: bool,
-    /// The automatic modes' settings.
-    nav: NavSettings,
     /// The automatic mode's route.
     route: Route,
     /// The mission item flown (Mission mode).
@@ -217,19 +215,6 @@ impl ModeCommander {
         Self {
             mode: FlightMode::Position,
             armed: false,
-            nav: NavSettings {
-                takeoff_alt_m: 2.5,
-                rtl_alt_m: 2.0,
-                cruise_mps: 1.0,
-                climb_mps: 0.5,
-                land_mps: 0.5,
-                offboard_loss_s: 1.0,
-                acc_rad_m: 0.1,
-                manual_mps: 1.0,
-                manual_z_mps: 0.5,
-                manual_yaw_dps: 60.0,
-                manual_loss_s: 0.5,
-            },
             route: Route::new(),
             phase: None,
             mission_cruise_mps: None,
@@ -255,24 +240,14 @@ impl ModeCommander {
         self.home_ned_m
     }
 
-    /// The automatic modes' settings.
-    pub fn nav(&self) -> &NavSettings {
-        &self.nav
-    }
-
-    /// The automatic modes' settings, to change (the adapter checks each
-    /// value against its parameter's range).
-    pub fn nav_mut(&mut self) -> &mut NavSettings {
-        &mut self.nav
-    }
-
     /// The last streamed set-point and when it came, if any.
     pub fn streamed(&self) -> Option<(Setpoint<f32>, u64)> {
         self.offboard
     }
 
-    fn offboard_loss_us(&self) -> u64 {
-        (self.nav.offboard_loss_s * 1e6) as u64
+    /// How long Offboard's set-points may be silent, µs (`COM_OF_LOSS_T`).
+    fn offboard_loss_us(nav: &NavSettings) -> u64 {
+        (nav.offboard_loss_s * 1e6) as u64
     }
 
     /// A client's set-point at `t_us`: kept for Offboard, and flown at once
@@ -383,6 +358,7 @@ impl ModeCommander {
         lp: &mut Loop,
         mission: &mut M,
     ) -> Result<(), ModeRefusal> {
+        let nav = lp.settings().nav;
         let est = lp.navigator().estimate();
         let here = est.map(|e| e.pos_ned_m);
         let yaw = est.map_or(0.0, |e| fc_core::quat_to_euler(&e.att)[2]);
@@ -395,7 +371,7 @@ impl ModeCommander {
             FlightMode::Offboard => {
                 let fresh = self
                     .offboard
-                    .filter(|&(_, at)| t_us.saturating_sub(at) <= self.offboard_loss_us());
+                    .filter(|&(_, at)| t_us.saturating_sub(at) <= Self::offboard_loss_us(&nav));
                 let Some((sp, _)) = fresh else {
                     return Err(ModeRefusal::NotStreaming);
                 };
@@ -430,18 +406,18 @@ impl ModeCommander {
                         let up = if takeoff_up_m.is_finite() {
                             takeoff_up_m
                         } else {
-                            self.nav.takeoff_alt_m - ground
+                            nav.takeoff_alt_m - ground
                         };
-                        legs.push_back((Vector3::new(p[0], p[1], -up), self.nav.climb_mps))
+                        legs.push_back((Vector3::new(p[0], p[1], -up), nav.climb_mps))
                     }
-                    FlightMode::Land => legs.push_back((Vector3::new(p[0], p[1], ground), self.nav.land_mps)),
+                    FlightMode::Land => legs.push_back((Vector3::new(p[0], p[1], ground), nav.land_mps)),
                     _ => {
                         // Return: up to RTL_RETURN_ALT (if lower), over home, down.
-                        let cruise = p[2].min(ground - self.nav.rtl_alt_m);
+                        let cruise = p[2].min(ground - nav.rtl_alt_m);
                         let h = self.home_ned_m;
-                        let _ = legs.push_back((Vector3::new(p[0], p[1], cruise), self.nav.climb_mps));
-                        let _ = legs.push_back((Vector3::new(h[0], h[1], cruise), self.nav.cruise_mps));
-                        legs.push_back((Vector3::new(h[0], h[1], ground), self.nav.land_mps))
+                        let _ = legs.push_back((Vector3::new(p[0], p[1], cruise), nav.climb_mps));
+                        let _ = legs.push_back((Vector3::new(h[0], h[1], cruise), nav.cruise_mps));
+                        legs.push_back((Vector3::new(h[0], h[1], ground), nav.land_mps))
                     }
                 };
                 let from = Reference::from(lp.setpoint());
@@ -506,6 +482,7 @@ impl ModeCommander {
         if !self.armed {
             return Ok(());
         }
+        let nav = lp.settings().nav;
         match self.mode {
             FlightMode::Position => self.fly_joystick(t_us, dt_s, lp, mission, say),
             FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
@@ -533,7 +510,7 @@ impl ModeCommander {
             FlightMode::Offboard => {
                 let lost = self
                     .offboard
-                    .is_none_or(|(_, at)| t_us.saturating_sub(at) > self.offboard_loss_us());
+                    .is_none_or(|(_, at)| t_us.saturating_sub(at) > Self::offboard_loss_us(&nav));
                 if lost {
                     let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
                     return say(ModeEvent::OffboardLost);
@@ -558,7 +535,8 @@ impl ModeCommander {
         let Some(([x, y, z, r], at)) = self.manual else {
             return Ok(());
         };
-        if t_us.saturating_sub(at) as f32 * 1e-6 > self.nav.manual_loss_s {
+        let nav = lp.settings().nav;
+        if t_us.saturating_sub(at) as f32 * 1e-6 > nav.manual_loss_s {
             self.manual = None;
             if self.set_mode(FlightMode::Land, t_us, f32::NAN, lp, mission).is_ok() {
                 return say(ModeEvent::JoystickLost);
@@ -566,7 +544,7 @@ impl ModeCommander {
             return Ok(());
         }
         let mut sp = *lp.setpoint();
-        let (v, yaw_rate) = joystick_velocity(&self.nav, x, y, z, r, sp.yaw_rad);
+        let (v, yaw_rate) = joystick_velocity(&nav, x, y, z, r, sp.yaw_rad);
         let dt = dt_s.clamp(0.0, 0.1);
         sp.pos_ned_m += v * dt;
         // Not below the ground it armed on (throttle down on the ground).

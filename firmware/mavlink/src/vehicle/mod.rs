@@ -33,7 +33,7 @@
 
 use crate::hil::{self, Home, StateFixSigmas};
 use crate::mission::Mission;
-use crate::modes::{nav_index_of, set_nav, FlightMode, NavSettings, Px4Mode, NAV_PARAMS};
+use crate::modes::{FlightMode, NavSettings, Px4Mode};
 use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
 use fc_core::control::Setpoint;
@@ -438,7 +438,7 @@ impl MavVehicle {
 
     /// The automatic modes' settings (PX4's parameters).
     pub fn nav_settings(&self) -> &NavSettings {
-        self.modes.nav()
+        &self.flight.settings().nav
     }
 
     /// A `STATUSTEXT` naming parameter `id` and why it was refused.

@@ -3,7 +3,6 @@
 //! on a refused write), its telemetry rates, and a fuzzer of ≥ 10⁶ frames.
 
 use super::*;
-use crate::modes::NAV_PARAMS;
 use crate::{encode, MavHeader, MavReader, MAX_FRAME};
 use core::convert::Infallible;
 use fc_core::model::VehicleParams;
@@ -273,7 +272,7 @@ fn parameters_answer_as_the_protocol_says_and_redesigns_wait_for_disarm() {
         target_component: 1,
     });
     v.handle(&list, &mut out, &Still, 0).unwrap();
-    assert_eq!(out.count("PARAM_VALUE"), PARAMS.len() + NAV_PARAMS.len());
+    assert_eq!(out.count("PARAM_VALUE"), PARAMS.len());
     // PX4's own names for the automatic modes, after the loop's.
     v.handle(&param_set("MIS_TAKEOFF_ALT", 1.5), &mut out, &Still, 0)
         .unwrap();
@@ -1621,9 +1620,14 @@ fn parameters_and_the_signing_key_are_stored_and_boot_again() {
     v.handle(&param_set("PD_ROLL_P", want), &mut sink, &Still, 0).unwrap();
     // Refused: not stored.
     v.handle(&param_set("CTL_ID", 99.0), &mut sink, &Still, 0).unwrap();
-    let nav = NAV_PARAMS[0];
-    let nav_value = (nav.get)(&NavSettings::default()) * 0.5;
-    v.handle(&param_set(nav.id, nav_value), &mut sink, &Still, 0).unwrap();
+    // An automatic mode's setting, in the one table: stored under the key
+    // it had when the modes' settings were a table of their own after the
+    // loop's 52 (so a store written then still boots).
+    let nav = params::index_of(b"MIS_TAKEOFF_ALT").unwrap();
+    assert_eq!(nav, 52);
+    let nav_value = NavSettings::default().takeoff_alt_m * 0.5;
+    v.handle(&param_set("MIS_TAKEOFF_ALT", nav_value), &mut sink, &Still, 0)
+        .unwrap();
     let setup = MavMessage::SETUP_SIGNING(SETUP_SIGNING_DATA {
         target_system: 1,
         target_component: 1,
@@ -1638,16 +1642,16 @@ fn parameters_and_the_signing_key_are_stored_and_boot_again() {
     assert_eq!(st.param(gain as u16), Ok(Some(want)));
     let ctl = params::index_of(b"CTL_ID").unwrap() as u16;
     assert_eq!(Persist::param(st, ctl), Ok(None));
-    assert_eq!(st.param((PARAMS.len()) as u16), Ok(Some(nav_value)));
+    assert_eq!(st.param(nav as u16), Ok(Some(nav_value)));
     assert_eq!(st.signing(), Ok(Some(([7; 32], 5_000))));
     // Power off and on: the bytes are all that is left.
     let bytes = *sink.store.into_flash().bytes();
     let (mut st, boot) = Store::open(RamFlash::<4096>::holding(&bytes), 0..4096).unwrap();
     assert_eq!(boot, fc_storage::Boot::Found);
     let loaded = load_settings(&mut st, Settings::os4()).unwrap();
-    assert_eq!((loaded.taken, loaded.refused.0), (1, 0));
+    assert_eq!((loaded.taken, loaded.refused.0), (2, 0));
     let mut v = MavVehicle::new(loaded.settings, 1).unwrap();
-    assert_eq!(v.restore_nav(&mut st), Ok((1, 0)));
+    assert_eq!(v.nav_settings().takeoff_alt_m, nav_value);
     let mut sent = Sent::default();
     v.handle(
         &MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
@@ -1664,7 +1668,7 @@ fn parameters_and_the_signing_key_are_stored_and_boot_again() {
         _ => None,
     });
     assert!(
-        values.contains(&(gain, want)) && values.contains(&(PARAMS.len(), nav_value)),
+        values.contains(&(gain, want)) && values.contains(&(nav, nav_value)),
         "{values:?}"
     );
 }

@@ -248,9 +248,6 @@ mod app {
                 }
             }
         }
-        if let Ok((t, r)) = v.restore_nav(st) {
-            (taken, refused) = (taken + t, refused + r);
-        }
         let key = match st.signing() {
             Ok(Some((key, ts))) if key != [0; 32] => {
                 *signing = Signing::with_key(key, ts);

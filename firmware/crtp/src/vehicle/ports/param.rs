@@ -117,13 +117,17 @@ pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 18] = [
 /// A deck's attached flag: `PARAM_UINT8 | PARAM_RONLY`, as the firmware's deck drivers declare it.
 const DECK: u8 = param_types::U8 | param_types::RONLY;
 
-/// Entries in the param TOC.
-pub const PARAM_COUNT: usize = PARAMS.len() + EXTRA_PARAMS.len();
+/// Entries in the param TOC: the flight stack's parameters CRTP serves
+/// ([`CRTP_PARAMS`], the same ids as their [`PARAMS`] indexes), then
+/// [`EXTRA_PARAMS`].
+pub const PARAM_COUNT: usize = CRTP_PARAMS + EXTRA_PARAMS.len();
 
 /// Group and name of param `id`, its type byte, and what it is.
 pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
-    if let Some(p) = PARAMS.get(id) {
-        let (group, name) = p.id.split_once('_').unwrap_or(("fc", p.id));
+    if let Some((group, name, p)) = PARAMS[..CRTP_PARAMS]
+        .get(id)
+        .and_then(|p| p.crtp_name().map(|(g, n)| (g, n, p)))
+    {
         return Some((
             Name {
                 group,
@@ -136,7 +140,7 @@ pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
             None,
         ));
     }
-    let &(group, name, t, extra) = EXTRA_PARAMS.get(id - PARAMS.len())?;
+    let &(group, name, t, extra) = EXTRA_PARAMS.get(id.checked_sub(CRTP_PARAMS)?)?;
     Some((
         Name {
             group,
@@ -390,7 +394,7 @@ impl CrtpShared {
         let index = usize::from(id);
         let known = param_entry(index).is_some();
         // Persistent: the flight parameters (the TOC's extended flag).
-        let persistent = index < PARAMS.len();
+        let persistent = index < CRTP_PARAMS;
         match cmd {
             // Extended type: 1, persistent (status 0 first, protocol 11+).
             7 if known => {
