@@ -503,8 +503,9 @@ def session_persistent(sil_host):
     stored, read back after a restart with the same file, cleared."""
     print('session 5: persistent parameters (cflib persistent_store / get_state / clear, sil-host --storage)')
     if QEMU:
-        # The images keep no storage yet (QEMU models no flash controller).
-        print('  (not on the images: they have no settings store yet)')
+        # The images keep their settings in a RAM stand-in for flash (QEMU
+        # models no flash controller), which a restart of QEMU loses.
+        print('  (not on the images: their settings store is a RAM stand-in in QEMU, lost on restart)')
         return
     store = pathlib.Path('target/cflib-persistent.bin').resolve()
     store.unlink(missing_ok=True)
