@@ -194,6 +194,9 @@ impl ModeCommander {
     ) -> Result<(), E> {
         self.phase = None;
         mission.set_current(seq.saturating_add(1));
-        say(ModeEvent::ItemReached(seq))
+        say(ModeEvent::ItemReached {
+            seq,
+            next: mission.current(),
+        })
     }
 }

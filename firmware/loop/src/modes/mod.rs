@@ -134,8 +134,14 @@ pub enum ModeEvent {
     JoystickLost,
     /// The ground station went silent while armed: Land.
     GroundStationLost,
-    /// Mission item `seq` is done (the next one is current).
-    ItemReached(u16),
+    /// Mission item `seq` is done; item `next` is current now (as the
+    /// mission store has it: never past its end).
+    ItemReached {
+        /// The item done.
+        seq: u16,
+        /// The item current now.
+        next: u16,
+    },
     /// The mission's last item is done: Hold.
     MissionDone,
     /// Mission item `seq` cannot be flown by this vehicle: Hold.
@@ -159,7 +165,7 @@ impl core::fmt::Display for ModeEvent {
             ModeEvent::OffboardLost => f.write_str("offboard set-points lost: hold"),
             ModeEvent::JoystickLost => f.write_str("joystick lost: landing"),
             ModeEvent::GroundStationLost => f.write_str("ground station lost: landing"),
-            ModeEvent::ItemReached(seq) => write!(f, "mission item {seq} reached"),
+            ModeEvent::ItemReached { seq, .. } => write!(f, "mission item {seq} reached"),
             ModeEvent::MissionDone => f.write_str("mission done: hold"),
             ModeEvent::ItemNotFlyable(seq) => write!(f, "mission item {seq} cannot be flown: hold"),
             ModeEvent::ItemOutOfRange(seq) => write!(f, "mission item {seq} out of range: hold"),

@@ -102,10 +102,9 @@ impl MavVehicle {
         dt_s: f32,
         out: &mut S,
     ) -> Result<(), S::Error> {
-        let items = self.mission.items().len() as u16;
         let mut flown = missions::flown(&mut self.mission, self.home);
         self.modes.fly(t_us, dt_s, &mut self.flight, &mut flown, &mut |e| {
-            missions::tell(out, e, items)
+            missions::tell(out, e)
         })
     }
 
@@ -122,7 +121,7 @@ impl MavVehicle {
             .modes
             .watch_ground_station(now_us, limit_ms, &mut self.flight, &mut flown)
         {
-            Some(e) => missions::tell(out, e, 0),
+            Some(e) => missions::tell(out, e),
             None => Ok(()),
         }
     }

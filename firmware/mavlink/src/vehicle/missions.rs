@@ -35,20 +35,18 @@ impl MissionItems for Flown<'_> {
 }
 
 /// A mode's event for the ground station: a mission item reached is
-/// `MISSION_ITEM_REACHED` and the next item's `MISSION_CURRENT` (`items`:
-/// how many there are), the rest a `STATUSTEXT` saying it.
-pub(in crate::vehicle) fn tell<S: MavSink>(out: &mut S, event: ModeEvent, items: u16) -> Result<(), S::Error> {
+/// `MISSION_ITEM_REACHED` and the current item's `MISSION_CURRENT`, the
+/// rest a `STATUSTEXT` saying it.
+pub(in crate::vehicle) fn tell<S: MavSink>(out: &mut S, event: ModeEvent) -> Result<(), S::Error> {
     let severity = match event {
-        ModeEvent::ItemReached(seq) => {
+        ModeEvent::ItemReached { seq, next } => {
             out.send(
                 Peer::GroundStation,
                 &MavMessage::MISSION_ITEM_REACHED(MISSION_ITEM_REACHED_DATA { seq }),
             )?;
-            // The next one current, as the store has it (never past the end).
-            let current = seq.saturating_add(1).min(items);
             return out.send(
                 Peer::GroundStation,
-                &MavMessage::MISSION_CURRENT(MISSION_CURRENT_DATA { seq: current }),
+                &MavMessage::MISSION_CURRENT(MISSION_CURRENT_DATA { seq: next }),
             );
         }
         e if e.is_failsafe() => MavSeverity::MAV_SEVERITY_CRITICAL,
