@@ -456,8 +456,10 @@ fn a_redesigning_write_is_answered_once_the_controllers_side_has_designed() {
     // the controller's task passes its steps meanwhile, motors off.
     let step = core.imu_begin(3_002_000, Some(&imu), &[], &clock);
     assert!(step.job.is_some(), "a step the controller would fly");
-    let u = pass_step(&mut Exclusive(&mut *core), step, &clock);
-    assert_eq!(u, Vector4::zeros(), "nothing flown without a controller");
+    let p = pass_step(&mut Exclusive(&mut *core), step, &clock);
+    assert_eq!(p.u, Vector4::zeros(), "nothing flown without a controller");
+    assert_eq!(p.thrusts_n, Vector4::zeros());
+    assert_eq!(p.motors.commands, [0.0; 4]);
     assert_eq!(core.motors(), [0.0; 4]);
     // The controller's side designs; the answer is queued for the link.
     let (r, answer) = run_work(&mut Exclusive(&mut *core), ctrl, work);

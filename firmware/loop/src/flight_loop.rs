@@ -1,10 +1,11 @@
 //! [`FlightLoop`]: the flight loop and its controller in one piece, for
 //! the host and for images that run them in one task.
 
+use crate::power::Stabilized;
 use crate::{
-    apply_plan, fallback_controller, install, params, run_job, select, stabilize, start_front_end, Actuation,
-    AnyController, ByteLink, ControlError, ControllerSpec, CycleClock, Exclusive, FcConfig, Framed, ImuSample, Job,
-    Loop, Outbox, ToFc,
+    apply_plan, fallback_controller, install, params, run_job, select, stabilize, start_front_end, AnyController,
+    ByteLink, ControlError, ControllerSpec, CycleClock, Exclusive, FcConfig, Framed, ImuSample, Job, Loop, Outbox,
+    ToFc,
 };
 
 /// The flight controller's state between steps.
@@ -110,17 +111,18 @@ impl FlightLoop {
 
     /// For a protocol front end (MAVLink, CRTP): checks the settings,
     /// designs their controller in place ([`FlightLoop::start`]), opens the
-    /// session (set-points may come before samples) and returns the mixer
-    /// the settings give for the front end's motors.
-    pub fn start_front_end(&mut self) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
+    /// session (set-points may come before samples) and sets the mixer the
+    /// settings give for the front end's motors ([`Loop::mixer`]).
+    pub fn start_front_end(&mut self) -> Result<(), params::Refusal> {
         start_front_end(&mut self.lp, &mut self.ctrl)
     }
 
     /// One stabilizer step on the IMU sample `imu` taken at `t_us` (the
-    /// `seq`-th): the estimator and the controller, in one call
-    /// ([`Loop::imu_job`], then [`stabilize`](crate::stabilize)); returns
-    /// what the motors get, `None` before the session opens. For a front
-    /// end whose estimator and controller run in one task.
+    /// `seq`-th), in one call: the estimator ([`Loop::imu_job`]), the
+    /// controller ([`stabilize`](crate::stabilize)), the supervisor's gate
+    /// `fly` (the vehicle's supervisor lets this step fly) and the mixer
+    /// ([`Loop::power`]). For a front end whose estimator and controller
+    /// run in one task.
     pub fn stabilize<C: CycleClock>(
         &mut self,
         seq: u32,
@@ -128,9 +130,16 @@ impl FlightLoop {
         imu: &ImuSample,
         clock: &C,
         now_us: u64,
-    ) -> Option<Actuation> {
-        let step = self.lp.imu_job(seq, t_us, imu, clock, now_us)?;
-        Some(stabilize(&mut Exclusive(&mut self.lp), &mut self.ctrl, &step, clock))
+        fly: bool,
+    ) -> Stabilized {
+        let actuation = self
+            .lp
+            .imu_job(seq, t_us, imu, clock, now_us)
+            .map(|step| stabilize(&mut Exclusive(&mut self.lp), &mut self.ctrl, &step, clock));
+        Stabilized {
+            actuation,
+            power: self.lp.power(fly, actuation.map(|a| a.u)),
+        }
     }
 
     /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole

@@ -98,8 +98,8 @@ pub struct Actuation {
 /// [`Loop::imu_job`], made `step`: the estimate, the commander's set-point,
 /// whether the controller is due): the previews, the controller's update,
 /// its result recorded in the loop `lp` (locked only for those moments);
-/// returns what the motors get. The supervisor and the mixer are the
-/// vehicle's, after it.
+/// returns the controller's inputs. The supervisor's gate and the mixer
+/// follow ([`Loop::power`]).
 pub fn stabilize<M: Mutex<T = Loop>, C: CycleClock>(
     lp: &mut M,
     ctrl: &mut AnyController<f32>,
@@ -234,16 +234,15 @@ pub fn select<M: Mutex<T = Loop>>(
 /// Starts a protocol front end's loop `lp` with its controller `ctrl`
 /// ([`FlightLoop::start_front_end`](crate::FlightLoop::start_front_end)): the settings checked, their
 /// controller designed in place, the session opened (set-points may come
-/// before samples); returns the mixer the settings give for its motors.
-pub fn start_front_end(
-    lp: &mut Loop,
-    ctrl: &mut AnyController<f32>,
-) -> Result<fc_core::model::airframe::Mixer<f32>, params::Refusal> {
+/// before samples), the mixer the settings give for its motors set
+/// ([`Loop::mixer`]).
+pub fn start_front_end(lp: &mut Loop, ctrl: &mut AnyController<f32>) -> Result<(), params::Refusal> {
     lp.settings.check()?;
     let spec = lp.settings.controller;
     install(&mut Exclusive(&mut *lp), ctrl, spec).map_err(params::Refusal::Design)?;
     lp.open_session();
-    lp.settings.mixer()
+    lp.mixer = Some(lp.settings.mixer()?);
+    Ok(())
 }
 
 /// The controller a loop flies before its first design: the tuned Euler
@@ -262,7 +261,7 @@ pub fn apply_plan<M: Mutex<T = Loop>>(
     match plan {
         ParamPlan::Unchanged => Ok(()),
         ParamPlan::Set(next) => {
-            lp.lock(|l| l.settings = next);
+            lp.lock(|l| l.set_settings(next));
             Ok(())
         }
         ParamPlan::Redesign(next) => {
@@ -280,7 +279,7 @@ pub fn apply_plan<M: Mutex<T = Loop>>(
                         if next.controller != old.controller {
                             l.selections = l.selections.wrapping_add(1);
                         }
-                        l.settings = next;
+                        l.set_settings(next);
                     });
                     Ok(())
                 }

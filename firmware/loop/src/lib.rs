@@ -37,6 +37,7 @@ pub mod modes;
 pub mod nav;
 pub mod params;
 pub mod planner;
+pub mod power;
 pub mod schedule;
 pub mod telemetry;
 
@@ -206,6 +207,9 @@ pub struct Loop {
     /// Time of the controller's last update, µs, on the time base's clock
     /// (its next update is told the interval: [`Controller::elapsed`]).
     last_control_us: Option<u64>,
+    /// The mixer `settings` give, once a protocol front end started the
+    /// loop ([`start_front_end`]; [`power`]).
+    mixer: Option<fc_core::model::airframe::Mixer<f32>>,
 }
 
 /// Preview set-points a [`Loop`] holds between two controller steps, by
@@ -252,6 +256,7 @@ impl Loop {
             nav_failsafe: false,
             schedule: schedule::Schedule::new(),
             last_control_us: None,
+            mixer: None,
         }
     }
 
@@ -369,6 +374,19 @@ impl Loop {
         &self.settings
     }
 
+    /// Puts `next` (checked by [`params::write`]) in force; a started
+    /// front end's mixer follows it (`MOT_FRAME` changes it without a
+    /// design).
+    fn set_settings(&mut self, next: params::Settings) {
+        self.settings = next;
+        if self.mixer.is_some() {
+            // A checked write mixes; were it not to, the old mixer stays.
+            if let Ok(m) = next.mixer() {
+                self.mixer = Some(m);
+            }
+        }
+    }
+
     /// What writing `value` to parameter `index` does: the whole settings
     /// checked; a change of the vehicle, the controller or its gains and
     /// weights needs a re-design, which only `allow_redesign` permits.
@@ -395,7 +413,7 @@ impl Loop {
         match plan {
             ParamPlan::Unchanged => None,
             ParamPlan::Set(next) => {
-                self.settings = next;
+                self.set_settings(next);
                 None
             }
             ParamPlan::Redesign(next) => Some(next),

@@ -398,11 +398,11 @@ macro_rules! crtp_app {
                         break;
                     };
                     let flown = ctrl.is_some();
-                    let u = match ctrl.as_deref_mut() {
+                    let power = match ctrl.as_deref_mut() {
                         Some(c) => fly_step(&mut v, c, step, clock),
                         None => pass_step(&mut v, step, clock),
                     };
-                    v.lock(|v| outputs.drive(v, &u));
+                    v.lock(|v| outputs.drive(v, &power));
                     // The step is flown when its outputs are driven.
                     let done = ticks_now();
                     crate::WATCHDOG.controller_step();
@@ -411,7 +411,7 @@ macro_rules! crtp_app {
                         Some(seq) => {
                             let answer = FromFc::Actuator {
                                 seq,
-                                u: [u[0], u[1], u[2], u[3]],
+                                u: power.u.into(),
                                 failsafe: false,
                             };
                             sim_tx.lock(|tx| send(tx, &answer))

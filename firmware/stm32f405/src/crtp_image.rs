@@ -24,10 +24,10 @@ use fc_core::estimate::ImuSample;
 use fc_crtp::supervisor::ImuCounters;
 use fc_crtp::syslink::SyslinkCounters;
 use fc_crtp::vehicle::CrtpShared;
+use fc_loop::power::Power;
 use fc_proto::{encode, FromFc, MAX_FRAME};
 use hal_shim::stm32f405::{rx_overruns, Port, TxTimeout, Usart};
 use hal_shim::ByteLink;
-use nalgebra::Vector4;
 
 /// syslink's rate on the Crazyflie 2.1.
 pub const SYSLINK_BAUD: u32 = 1_000_000;
@@ -40,9 +40,10 @@ pub const FIXES: usize = 4;
 /// A board's outputs of every step: its motors (none on the plain
 /// STM32F405, whose simulator flies the inputs), its LEDs.
 pub trait Outputs {
-    /// Applies the inputs `u` `[U1 N, U2 N, U3 N, U4 N·m]` of a step of
-    /// the vehicle `v` (zero: motors off).
-    fn drive(&mut self, v: &CrtpShared, u: &Vector4<f32>);
+    /// Applies what a step of the vehicle `v` gives the motors, `power`
+    /// (its rotor thrusts, zero with the motors off; the motors armed or
+    /// not are `v`'s).
+    fn drive(&mut self, v: &CrtpShared, power: &Power);
     /// After the step is answered, off its deadline and with the vehicle
     /// unlocked: what the outputs show besides the motors (LEDs) and their
     /// log lines, for a vehicle `armed` whose navigator is in `nav` on a

@@ -229,7 +229,12 @@ impl<T: RealField + Copy> Mixer<T> {
     /// The motor commands for `u`, each rotor's speed clamped to `[0, Ωmax]`
     /// (a non-finite input commands zero and is reported as clamped).
     pub fn commands(&self, u: &Vector4<T>) -> MotorCommands<T> {
-        let f = self.thrusts(u);
+        self.commands_for(&self.thrusts(u))
+    }
+
+    /// The motor commands for the rotor thrusts `f` (N, as
+    /// [`Mixer::thrusts`] gives them), as [`Mixer::commands`] clamps them.
+    pub fn commands_for(&self, f: &Vector4<T>) -> MotorCommands<T> {
         let f_max = self.kf * self.omega_max * self.omega_max;
         let mut clamped = false;
         let commands = core::array::from_fn(|i| {

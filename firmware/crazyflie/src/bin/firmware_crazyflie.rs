@@ -47,7 +47,7 @@ mod target {
     use fc_crtp::vehicle::{CrtpShared, CrtpVehicle};
     use fc_loop::nav::NavMode;
     use fc_loop::params::{Airframe, Settings};
-    use nalgebra::Vector4;
+    use fc_loop::power::Power;
 
     /// Hub distance from the centre, m (Bitcraze's `ARM_LENGTH`).
     const HUB_M: f32 = 0.046;
@@ -109,11 +109,11 @@ mod target {
     }
 
     impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
-        fn drive(&mut self, v: &CrtpShared, u: &Vector4<f32>) {
-            // The vehicle's mixer follows every parameter write (`MOT_FRAME`
+        fn drive(&mut self, v: &CrtpShared, power: &Power) {
+            // The loop's mixer follows every parameter write (`MOT_FRAME`
             // changes it without a design).
             let out = match (v.armed(), v.mixer()) {
-                (true, Some(mixer)) => motors::output(&CF21_LEGACY_PROPELLERS, mixer.thrusts(u).into(), v.battery_v()),
+                (true, Some(_)) => motors::output(&CF21_LEGACY_PROPELLERS, power.thrusts_n.into(), v.battery_v()),
                 _ => MotorOutput::OFF,
             };
             motors::set(self.tim2, self.tim4, &out);

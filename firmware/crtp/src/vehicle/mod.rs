@@ -60,6 +60,7 @@ use fc_core::model::airframe::Mixer;
 use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{ParamType, Refusal, Settings, CRTP_PARAMS, PARAMS};
+use fc_loop::power::Power;
 use fc_loop::{FcConfig, Loop, Mutex, ParamPlan};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
@@ -276,8 +277,7 @@ impl CrtpVehicle {
 
     /// Checks the settings and designs the controller in place.
     pub fn start(&mut self) -> Result<(), Refusal> {
-        self.shared.mixer = Some(fc_loop::start_front_end(&mut self.shared.lp, &mut self.ctrl)?);
-        Ok(())
+        fc_loop::start_front_end(&mut self.shared.lp, &mut self.ctrl)
     }
 
     /// The shared part and the controller apart, for an image that runs
@@ -306,9 +306,9 @@ impl CrtpVehicle {
     /// Returns the inputs to apply (zero: motors off).
     pub fn imu_step<C: CycleClock>(&mut self, t_us: u64, imu: &ImuSample, fixes: &[Fix], clock: &C) -> Vector4<f32> {
         let step = self.shared.imu_begin(t_us, Some(imu), fixes, clock);
-        let u = fly_step(&mut fc_loop::Exclusive(&mut self.shared), &mut self.ctrl, step, clock);
+        let power = fly_step(&mut fc_loop::Exclusive(&mut self.shared), &mut self.ctrl, step, clock);
         self.shared.sample_logs();
-        u
+        power.u
     }
 
     /// Handles one packet; answers go to `out`, a re-designing write's
@@ -356,7 +356,6 @@ pub struct CrtpShared {
     /// A persistent-parameter request, for the link's owner to answer.
     persist: Option<PersistRequest>,
     defaults: Settings,
-    mixer: Option<Mixer<f32>>,
     armed: bool,
     tumbled: bool,
     locked: bool,
@@ -398,7 +397,6 @@ impl CrtpShared {
             reply: None,
             persist: None,
             defaults: settings,
-            mixer: None,
             armed: false,
             tumbled: false,
             locked: false,
@@ -507,25 +505,19 @@ impl CrtpShared {
                 self.say(format_args!("controller reset failed"));
                 None
             }
-            (ControllerWork::Param { reply, .. }, r) => {
-                let r = r.and_then(|()| {
-                    self.mixer = Some(self.lp.settings().mixer()?);
-                    Ok(())
-                });
-                match reply {
-                    Reply::Crtp(request) => {
-                        if r.is_ok() {
-                            self.counters.handled = self.counters.handled.wrapping_add(1);
-                        } else {
-                            self.counters.refused = self.counters.refused.wrapping_add(1);
-                        }
-                        self.reply = Some(self.written_reply(request, r.err()));
-                        None
+            (ControllerWork::Param { reply, .. }, r) => match reply {
+                Reply::Crtp(request) => {
+                    if r.is_ok() {
+                        self.counters.handled = self.counters.handled.wrapping_add(1);
+                    } else {
+                        self.counters.refused = self.counters.refused.wrapping_add(1);
                     }
-                    Reply::Sim(index) => Some(fc_loop::param_answer(self.lp.settings(), *index, r.err())),
-                    Reply::Caller => None,
+                    self.reply = Some(self.written_reply(request, r.err()));
+                    None
                 }
-            }
+                Reply::Sim(index) => Some(fc_loop::param_answer(self.lp.settings(), *index, r.err())),
+                Reply::Caller => None,
+            },
         }
     }
 
@@ -569,13 +561,13 @@ impl CrtpShared {
     /// mixed when asked (the log, a test), not in the step.
     pub fn motors(&self) -> [f32; 4] {
         // Off, the step's inputs are zero: so are their commands.
-        self.mixer.as_ref().map_or([0.0; 4], |m| m.commands(&self.u).commands)
+        self.lp.mixer().map_or([0.0; 4], |m| m.commands(&self.u).commands)
     }
 
-    /// The mixer of the parameters in force (`None` until started): the
-    /// rotors' thrusts of a step's inputs, for a board's motors.
+    /// The mixer of the parameters in force (`None` until started; the
+    /// loop's, [`fc_loop::Loop::mixer`]).
     pub fn mixer(&self) -> Option<&Mixer<f32>> {
-        self.mixer.as_ref()
+        self.lp.mixer()
     }
 
     /// The battery voltage the nRF51 last reported, V; 0 until it reports

@@ -2,8 +2,8 @@
 //! from the link's): [`fly_step`], [`pass_step`], [`run_work`].
 
 use super::{
-    AnyController, BorrowMut, ControllerWork, CrtpShared, CycleClock, FromFc, ImuStep, Loop, Mutex, ParamPlan, Refusal,
-    Vector4,
+    AnyController, BorrowMut, ControllerWork, CrtpShared, CycleClock, FromFc, ImuStep, Loop, Mutex, ParamPlan, Power,
+    Refusal,
 };
 use fc_core::control::Controller;
 
@@ -22,13 +22,9 @@ where
 
 /// Flies `step` on the controller `ctrl` (the controller's task), the
 /// vehicle `v` locked only to take the step's inputs and record its
-/// result; returns the inputs to apply `[U1 N, U2 N, U3 N, U4 N·m]`.
-pub fn fly_step<M: Mutex, C: CycleClock>(
-    v: &mut M,
-    ctrl: &mut AnyController<f32>,
-    step: ImuStep,
-    clock: &C,
-) -> Vector4<f32>
+/// result, then to pass the supervisor's gate and the mixer
+/// ([`CrtpShared::imu_end`]); returns what the motors get.
+pub fn fly_step<M: Mutex, C: CycleClock>(v: &mut M, ctrl: &mut AnyController<f32>, step: ImuStep, clock: &C) -> Power
 where
     M::T: BorrowMut<CrtpShared>,
 {
@@ -40,8 +36,8 @@ where
 /// its controller is lent to a re-design ([`ControllerWork::designs`]),
 /// which runs only disarmed with nothing flown (a take-off is refused while
 /// one is under way). The loop records the step as one the controller did
-/// not fly; the motors stay off. Returns the inputs applied (zero).
-pub fn pass_step<M: Mutex, C: CycleClock>(v: &mut M, step: ImuStep, clock: &C) -> Vector4<f32>
+/// not fly; the motors stay off. Returns what the motors get (nothing).
+pub fn pass_step<M: Mutex, C: CycleClock>(v: &mut M, step: ImuStep, clock: &C) -> Power
 where
     M::T: BorrowMut<CrtpShared>,
 {

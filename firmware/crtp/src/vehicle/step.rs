@@ -2,7 +2,7 @@
 //! the supervisor (failsafes, tumble, the end of a landing).
 
 use super::{
-    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Reference, Setpoint, Vector4, COS_TUMBLE_TILT,
+    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Power, Reference, Setpoint, COS_TUMBLE_TILT,
     FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US, SETPOINT_WATCHDOG,
 };
 
@@ -54,15 +54,13 @@ impl CrtpShared {
     }
 
     /// The end of an IMU step whose controller answered `u` (`None`: no
-    /// answer): the inputs to apply, zero unless armed and flying a
-    /// set-point.
-    pub fn imu_end(&mut self, step: &ImuStep, u: Option<[f32; 4]>) -> Vector4<f32> {
-        let on = self.armed && !self.commander.is_idle() && step.setpoint;
-        self.u = match u {
-            Some(u) if on => Vector4::from(u),
-            _ => Vector4::zeros(),
-        };
-        self.u
+    /// answer): the supervisor's gate (armed and flying a set-point) and
+    /// the mixer ([`fc_loop::Loop::power`]); returns what the motors get.
+    pub fn imu_end(&mut self, step: &ImuStep, u: Option<[f32; 4]>) -> Power {
+        let fly = self.armed && !self.commander.is_idle() && step.setpoint;
+        let power = self.lp.power(fly, u);
+        self.u = power.u;
+        power
     }
 
     /// The set-point to fly at `t_us`, `dt_s` after the last step (the

@@ -44,7 +44,8 @@ impl MavVehicle {
         let mut then_send = None;
         let result = match c.command {
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 1.0 => {
-                match self.modes.arm(&mut self.flight, self.mixer.is_some()) {
+                let started = self.flight.mixer().is_some();
+                match self.modes.arm(&mut self.flight, started) {
                     Ok(()) => {
                         self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
                         MavResult::MAV_RESULT_ACCEPTED

@@ -38,7 +38,6 @@ use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
 use fc_core::control::Setpoint;
 use fc_core::estimate::Fix;
-use fc_core::model::airframe::Mixer;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
 use fc_loop::modes::ModeCommander;
@@ -47,7 +46,7 @@ use fc_loop::schedule::Schedule;
 use fc_loop::{FcConfig, FlightLoop};
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
-use nalgebra::{Vector3, Vector4};
+use nalgebra::Vector3;
 
 mod commands;
 mod flight;
@@ -157,8 +156,6 @@ impl core::fmt::Write for Text {
 /// The flight controller behind MAVLink (see the module's documentation).
 pub struct MavVehicle {
     flight: FlightLoop,
-    /// `None` until started.
-    mixer: Option<Mixer<f32>>,
     /// The flight mode, arming, home and what each mode flies
     /// ([`fc_loop::modes`]); its times are simulated µs.
     modes: ModeCommander,
@@ -223,7 +220,6 @@ impl MavVehicle {
     pub fn unstarted(settings: Settings, system_id: u8) -> Self {
         Self {
             flight: FlightLoop::unstarted_with(FcConfig::default(), settings),
-            mixer: None,
             modes: ModeCommander::new(),
             mission: Mission::new(),
             offboard_acc: None,
@@ -246,8 +242,7 @@ impl MavVehicle {
     /// Checks the settings and designs the controller in place; the
     /// session is open from then on (set-points may come before samples).
     pub fn start(&mut self) -> Result<(), Refusal> {
-        self.mixer = Some(self.flight.start_front_end()?);
-        Ok(())
+        self.flight.start_front_end()
     }
 
     /// Armed (the motors turn).

@@ -61,9 +61,8 @@ impl MavVehicle {
     /// Sets parameter `index` to `value`: checked, and applied to the
     /// controller (re-designed while disarmed), the mixer and the failsafe.
     pub fn apply(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
-        self.flight.apply_param(index, value, !self.modes.armed())?;
-        self.mixer = Some(self.flight.settings().mixer()?);
-        Ok(())
+        // The loop's mixer follows its settings.
+        self.flight.apply_param(index, value, !self.modes.armed())
     }
 
     pub(in crate::vehicle) fn send_param<S: MavSink>(&self, index: usize, out: &mut S) -> Result<(), S::Error> {

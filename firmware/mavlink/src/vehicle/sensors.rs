@@ -3,8 +3,8 @@
 //! simulator's true state).
 
 use super::{
-    hil, CycleClock, Fix, Home, MavMessage, MavSink, MavVehicle, Peer, StateFixSigmas, Vector3, Vector4,
-    BARO_PERIOD_US, HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA, MAG_SIGMA_RAD, STREAMS,
+    hil, CycleClock, Fix, Home, MavMessage, MavSink, MavVehicle, Peer, StateFixSigmas, Vector3, BARO_PERIOD_US,
+    HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA, MAG_SIGMA_RAD, STREAMS,
 };
 
 impl MavVehicle {
@@ -51,17 +51,15 @@ impl MavVehicle {
             self.on_mag(s.time_us, &mag);
         }
         self.seq = self.seq.wrapping_add(1);
-        let flown = self.flight.stabilize(self.seq, s.time_us, &s.imu, clock, now_us);
-        self.cycles = (flown.map_or(0, |a| a.cycles), clock.hz());
+        // The supervisor lets every armed step fly (the modes' failsafes
+        // are set-points: Hold, Land).
+        let flown = self
+            .flight
+            .stabilize(self.seq, s.time_us, &s.imu, clock, now_us, self.modes.armed());
+        self.cycles = (flown.actuation.map_or(0, |a| a.cycles), clock.hz());
         self.counters.steps = self.counters.steps.wrapping_add(1);
-        let u = Vector4::from(flown.map_or([0.0; 4], |a| a.u));
-        let cmd = self.mixer.map(|m| m.commands(&u));
-        let armed = self.modes.armed() && cmd.is_some();
-        self.motors = match cmd {
-            Some(c) if armed => c.commands,
-            _ => [0.0; 4],
-        };
-        if armed && cmd.is_some_and(|c| c.clamped) {
+        self.motors = flown.power.motors.commands;
+        if flown.power.on && flown.power.motors.clamped {
             self.counters.clamped_steps = self.counters.clamped_steps.wrapping_add(1);
         }
         out.send(

@@ -201,7 +201,7 @@ impl MavVehicle {
                     | S::MAV_SYS_STATUS_PREARM_CHECK,
             );
         }
-        if self.mixer.is_none() {
+        if self.flight.mixer().is_none() {
             healthy.remove(S::MAV_SYS_STATUS_PREARM_CHECK);
         }
         // There is no fence, so none is breached: a clear health bit reads

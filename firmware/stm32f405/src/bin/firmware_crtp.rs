@@ -40,15 +40,15 @@ impl BoardOutputs {
 
 #[cfg(target_os = "none")]
 impl fc_stm32f405::crtp_image::Outputs for BoardOutputs {
-    fn drive(&mut self, v: &fc_crtp::vehicle::CrtpShared, u: &nalgebra::Vector4<f32>) {
+    fn drive(&mut self, v: &fc_crtp::vehicle::CrtpShared, power: &fc_loop::power::Power) {
         use hal_shim::ActuatorOutput;
         match (v.armed(), v.mixer()) {
-            (true, Some(mixer)) => {
+            (true, Some(_)) => {
                 // Each rotor's thrust (the layout's mixer) as its speed,
                 // √(T / kf), over Ωmax: the duty.
                 let p = v.flight_loop().vehicle();
-                let duty = mixer
-                    .thrusts(u)
+                let duty = power
+                    .thrusts_n
                     .map(|t| libm::sqrtf(t.max(0.0) / p.kf_ns2) / p.omega_max_radps);
                 self.pwm.apply(duty.into());
             }

@@ -265,10 +265,8 @@ impl CrtpShared {
                 self.work = WorkState::Queued(ControllerWork::Param { next, reply });
                 Ok(Written::Later)
             }
-            None => {
-                self.mixer = Some(self.lp.settings().mixer()?);
-                Ok(Written::Now)
-            }
+            // The loop's mixer follows its settings.
+            None => Ok(Written::Now),
         }
     }
 

@@ -57,7 +57,7 @@ impl CrtpShared {
             locked: self.locked,
             tumbled: self.tumbled,
             nav: self.lp.navigator().mode(),
-            started: self.mixer.is_some(),
+            started: self.lp.mixer().is_some(),
         };
         if let Err(why) = arming::check(&state) {
             self.say(format_args!("arming refused: {why}"));
