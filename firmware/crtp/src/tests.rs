@@ -956,6 +956,61 @@ fn integer_parameters_are_typed_as_integers_in_the_toc() {
     assert_eq!(read(&mut v, ctl), before);
 }
 
+/// The Crazyflie's names for the flight stack's parameters come from the
+/// one table (`Param::crazyflie_alias`): `stabilizer.controller` is
+/// `ctl.ID` and `pid_attitude.roll_kp` is `pd.ROLL_P`, each in the table
+/// entry's type; a write under either name is read back under the other.
+/// No name is in the TOC twice.
+#[test]
+fn crazyflie_names_are_the_tables_parameters() {
+    use crate::vehicle::param_types;
+    let find = |g: &[u8], n: &[u8]| {
+        (0..PARAM_COUNT)
+            .find(|&i| param_entry(i).is_some_and(|(name, _, _)| name.is(g, n)))
+            .unwrap() as u16
+    };
+    let (ctl, controller) = (find(b"ctl", b"ID"), find(b"stabilizer", b"controller"));
+    let (roll_p, roll_kp) = (find(b"pd", b"ROLL_P"), find(b"pid_attitude", b"roll_kp"));
+    let ty = |i: u16| param_entry(usize::from(i)).unwrap().1;
+    assert_eq!(ty(controller), param_types::U8);
+    assert_eq!(ty(roll_kp), param_types::FLOAT);
+    for (g, n) in [
+        ("pid_attitude", "roll_kd"),
+        ("pid_attitude", "pitch_kp"),
+        ("pid_attitude", "yaw_kd"),
+    ] {
+        find(g.as_bytes(), n.as_bytes());
+    }
+    let names: Vec<_> = (0..PARAM_COUNT)
+        .map(|i| {
+            let (n, _, _) = param_entry(i).unwrap();
+            (n.group.to_ascii_lowercase(), n.name)
+        })
+        .collect();
+    for (i, n) in names.iter().enumerate() {
+        assert!(!names[..i].contains(n), "{n:?} twice");
+    }
+
+    let mut v = at_rest(3000);
+    let read = |v: &mut CrtpVehicle, i: u16| ask(v, pk(Port::Param, 1, &i.to_le_bytes())).payload()[3..].to_vec();
+    let write = |v: &mut CrtpVehicle, i: u16, value: &[u8]| {
+        let mut d = i.to_le_bytes().to_vec();
+        d.extend_from_slice(value);
+        ask(v, pk(Port::Param, 2, &d))
+    };
+    assert_eq!(read(&mut v, controller), read(&mut v, ctl));
+    let gain = 123.5f32.to_le_bytes();
+    write(&mut v, roll_kp, &gain);
+    assert_eq!(
+        read(&mut v, roll_p),
+        gain,
+        "written as pid_attitude.roll_kp, read as pd.ROLL_P"
+    );
+    let gain = 99.25f32.to_le_bytes();
+    write(&mut v, roll_p, &gain);
+    assert_eq!(read(&mut v, roll_kp), gain);
+}
+
 /// The log variables read, by name, what they say: the estimate in the
 /// Crazyflie's world frame (x forward, y left, z up) and its variances,
 /// the heading counter-clockwise in degrees, the set-point, the battery

@@ -4,6 +4,12 @@
 //! with its unit, how to read and write it in [`Settings`], and whether a
 //! change re-designs the controller (allowed only while disarmed).
 //!
+//! Each entry carries its names for every protocol: the MAVLink name
+//! ([`Param::mavlink_name`]), the CRTP group and name cflib shows
+//! ([`Param::crtp_name`], for the first [`CRTP_PARAMS`]) and, for a few, the
+//! Crazyflie firmware's own name, which CRTP serves too
+//! ([`Param::crtp_alias`]: `pid_attitude.roll_kp` is `PD_ROLL_P`).
+//!
 //! Each parameter has a true type ([`ParamType`]): a real, or a whole
 //! number (choices, bit masks, milliseconds) that CRTP's param TOC declares
 //! as `uint8_t` or `uint16_t`. MAVLink carries every value as a
@@ -46,6 +52,11 @@ pub struct Param {
     /// parameter is served by MAVLink and our own protocol. The ones CRTP
     /// serves come first ([`CRTP_PARAMS`]).
     pub crtp: bool,
+    /// The Crazyflie firmware's own name for it, `group.name`
+    /// (`pid_attitude.roll_kp`), which CRTP serves as a second entry so
+    /// that cfclient's tabs and scripts written for a Crazyflie find it
+    /// ([`Param::crtp_alias`]); empty: none.
+    pub crazyflie_alias: &'static str,
 }
 
 impl Param {
@@ -59,6 +70,25 @@ impl Param {
     /// lower case), or group `fc` for a name without one.
     pub fn crtp_name(&self) -> Option<(&'static str, &'static str)> {
         self.crtp.then(|| self.id.split_once('_').unwrap_or(("fc", self.id)))
+    }
+
+    /// Its Crazyflie group and name, if it has one and CRTP serves it
+    /// ([`Param::crazyflie_alias`]; [`CRTP_ALIASED`]).
+    pub fn crtp_alias(&self) -> Option<(&'static str, &'static str)> {
+        if self.crtp {
+            self.crazyflie_alias.split_once('.')
+        } else {
+            None
+        }
+    }
+
+    /// The same parameter, also served under the Crazyflie's name `alias`
+    /// (`group.name`).
+    const fn aliased(self, alias: &'static str) -> Self {
+        Self {
+            crazyflie_alias: alias,
+            ..self
+        }
     }
 }
 
@@ -138,6 +168,7 @@ macro_rules! real {
             redesign: $redesign,
             ty: ParamType::F32,
             crtp: true,
+            crazyflie_alias: "",
         }
     };
 }
@@ -164,6 +195,7 @@ macro_rules! nav {
             redesign: false,
             ty: ParamType::F32,
             crtp: false,
+            crazyflie_alias: "",
         }
     };
 }
@@ -245,6 +277,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U8,
         crtp: true,
+        crazyflie_alias: "",
     },
     real!("MOT_HUB_M", "distance of each hub from the centre, m", false, hub_m),
     Param {
@@ -258,6 +291,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U8,
         crtp: true,
+        crazyflie_alias: "",
     },
     Param {
         id: "MOT_UNIT",
@@ -279,6 +313,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U8,
         crtp: true,
+        crazyflie_alias: "",
     },
     Param {
         id: "MOT_PWM_MIN",
@@ -294,6 +329,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U16,
         crtp: true,
+        crazyflie_alias: "",
     },
     Param {
         id: "MOT_PWM_MAX",
@@ -309,6 +345,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U16,
         crtp: true,
+        crazyflie_alias: "",
     },
     Param {
         id: "CTL_ID",
@@ -322,6 +359,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: true,
         ty: ParamType::U8,
         crtp: true,
+        crazyflie_alias: "stabilizer.controller",
     },
     Param {
         id: "CTL_FF",
@@ -342,6 +380,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: true,
         ty: ParamType::U8,
         crtp: true,
+        crazyflie_alias: "",
     },
     Param {
         id: "FS_TIMEOUT_MS",
@@ -354,6 +393,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U16,
         crtp: true,
+        crazyflie_alias: "",
     },
     real!(
         "FS_DESCENT",
@@ -372,6 +412,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U16,
         crtp: true,
+        crazyflie_alias: "",
     },
     Param {
         id: "HIL_FIX_MS",
@@ -384,6 +425,7 @@ pub const PARAMS: [Param; 63] = [
         redesign: false,
         ty: ParamType::U16,
         crtp: true,
+        crazyflie_alias: "",
     },
     real!("PD_X_P", "PD north loop, (m/s^2)/m", true, tuning.pd_position[0].kp),
     real!("PD_X_D", "PD north loop, (m/s^2)/(m/s)", true, tuning.pd_position[0].kd),
@@ -396,32 +438,37 @@ pub const PARAMS: [Param; 63] = [
         "PD roll loop, (rad/s^2)/rad",
         true,
         tuning.pd_attitude[0].kp
-    ),
+    )
+    .aliased("pid_attitude.roll_kp"),
     real!(
         "PD_ROLL_D",
         "PD roll loop, (rad/s^2)/(rad/s)",
         true,
         tuning.pd_attitude[0].kd
-    ),
+    )
+    .aliased("pid_attitude.roll_kd"),
     real!(
         "PD_PITCH_P",
         "PD pitch loop, (rad/s^2)/rad",
         true,
         tuning.pd_attitude[1].kp
-    ),
+    )
+    .aliased("pid_attitude.pitch_kp"),
     real!(
         "PD_PITCH_D",
         "PD pitch loop, (rad/s^2)/(rad/s)",
         true,
         tuning.pd_attitude[1].kd
-    ),
-    real!("PD_YAW_P", "PD yaw loop, (rad/s^2)/rad", true, tuning.pd_attitude[2].kp),
+    )
+    .aliased("pid_attitude.pitch_kd"),
+    real!("PD_YAW_P", "PD yaw loop, (rad/s^2)/rad", true, tuning.pd_attitude[2].kp).aliased("pid_attitude.yaw_kp"),
     real!(
         "PD_YAW_D",
         "PD yaw loop, (rad/s^2)/(rad/s)",
         true,
         tuning.pd_attitude[2].kd
-    ),
+    )
+    .aliased("pid_attitude.yaw_kd"),
     real!(
         "LQR_W_POS",
         "LQR position weights, multiple of the preset's",
@@ -580,6 +627,54 @@ pub const CRTP_PARAMS: usize = {
         i += 1;
     }
     n
+};
+
+/// The parameters CRTP serves, the first [`CRTP_PARAMS`] of [`PARAMS`]
+/// (their CRTP ids are their indexes).
+pub fn crtp_params() -> &'static [Param] {
+    &PARAMS[..CRTP_PARAMS]
+}
+
+/// How many of [`PARAMS`] CRTP serves under a Crazyflie name too
+/// ([`Param::crtp_alias`]).
+pub const CRTP_ALIASES: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < PARAMS.len() {
+        let a = PARAMS[i].crazyflie_alias.as_bytes();
+        if !a.is_empty() {
+            assert!(PARAMS[i].crtp, "an alias is CRTP's");
+            // `group.name`: one dot, neither part empty.
+            let mut dots = 0;
+            let mut k = 0;
+            while k < a.len() {
+                if a[k] == b'.' {
+                    assert!(k > 0 && k + 1 < a.len(), "an alias is group.name");
+                    dots += 1;
+                }
+                k += 1;
+            }
+            assert!(dots == 1, "an alias is group.name");
+            n += 1;
+        }
+        i += 1;
+    }
+    n
+};
+
+/// The indexes of the parameters CRTP serves under a Crazyflie name too,
+/// in table order: CRTP's param TOC lists them after [`CRTP_PARAMS`].
+pub const CRTP_ALIASED: [usize; CRTP_ALIASES] = {
+    let mut out = [0; CRTP_ALIASES];
+    let (mut n, mut i) = (0, 0);
+    while i < PARAMS.len() {
+        if !PARAMS[i].crazyflie_alias.is_empty() {
+            out[n] = i;
+            n += 1;
+        }
+        i += 1;
+    }
+    out
 };
 
 /// The index of the parameter named `id` (a MAVLink `param_id`: up to 16

@@ -836,6 +836,26 @@ fn one_parameter_table_names_each_for_every_protocol_and_checks_the_modes() {
         PARAMS[params::index_of(b"VEH_MASS").unwrap()].crtp_name(),
         Some(("VEH", "MASS"))
     );
+    // The Crazyflie's names, beside the table's: CTL_ID and the PD's
+    // attitude gains (the Crazyflie's `stabilizer.controller` and
+    // `pid_attitude` group).
+    let aliased: Vec<_> = params::CRTP_ALIASED
+        .iter()
+        .map(|&i| (PARAMS[i].id, PARAMS[i].crtp_alias().unwrap()))
+        .collect();
+    assert_eq!(
+        aliased,
+        [
+            ("CTL_ID", ("stabilizer", "controller")),
+            ("PD_ROLL_P", ("pid_attitude", "roll_kp")),
+            ("PD_ROLL_D", ("pid_attitude", "roll_kd")),
+            ("PD_PITCH_P", ("pid_attitude", "pitch_kp")),
+            ("PD_PITCH_D", ("pid_attitude", "pitch_kd")),
+            ("PD_YAW_P", ("pid_attitude", "yaw_kp")),
+            ("PD_YAW_D", ("pid_attitude", "yaw_kd")),
+        ]
+    );
+    assert_eq!(params::crtp_params().len(), CRTP_PARAMS);
     // The modes' settings: the eleven after CRTP's, unknown to it.
     let modes = PARAMS.len() - CRTP_PARAMS;
     assert_eq!((CRTP_PARAMS, modes), (52, 11));

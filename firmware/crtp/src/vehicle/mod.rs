@@ -22,10 +22,12 @@
 //!   version, device type name; the legacy arming and recovery commands.
 //! - log (5): TOC v2 of [`LOG_VARS`], blocks ([`crate::log`]).
 //! - param (2): TOC v2 of [`fc_loop::params::PARAMS`] (group = the name's
-//!   prefix in lower case: `MPC_W_POS` is `mpc.W_POS`) and of
-//!   [`EXTRA_PARAMS`] (the Crazyflie names cflib's helpers and examples
-//!   use); read, write (answered with the value in force), set by name,
-//!   default values, extended types; persistent storage refused.
+//!   prefix in lower case: `MPC_W_POS` is `mpc.W_POS`), the same
+//!   parameters again under the Crazyflie names the table gives them
+//!   ([`fc_loop::params::Param::crtp_alias`]), and [`EXTRA_PARAMS`] (the
+//!   other Crazyflie names cflib's helpers and examples use); read, write
+//!   (answered with the value in force), set by name, default values,
+//!   extended types, persistent storage.
 //! - mem (4): no memories. console (0): what a user should see.
 //! - high-level commander (8): takeoff, land, go_to (absolute, relative,
 //!   linear), stop — [`crate::planner`] segments flown as position,
@@ -59,7 +61,7 @@ use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
 use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
-use fc_loop::params::{ParamType, Refusal, Settings, CRTP_PARAMS, PARAMS};
+use fc_loop::params::{crtp_params, ParamType, Refusal, Settings, CRTP_ALIASED, CRTP_ALIASES, CRTP_PARAMS, PARAMS};
 use fc_loop::power::Power;
 use fc_loop::{FcConfig, Loop, Mutex, ParamPlan};
 use fc_proto::FromFc;
@@ -291,7 +293,7 @@ impl CrtpVehicle {
     /// client's write is: checked, applied, re-designing only while the
     /// motors are off. Returns the value in force.
     pub fn write_param(&mut self, index: usize, value: f32) -> Result<f32, Refusal> {
-        let param = PARAMS[..CRTP_PARAMS].get(index).ok_or(Refusal::Unknown)?;
+        let param = crtp_params().get(index).ok_or(Refusal::Unknown)?;
         if let Written::Later = self.shared.param_write(index, value, Reply::Caller)? {
             if let Some((r, _)) = self.run_pending() {
                 r?;
@@ -464,7 +466,7 @@ impl CrtpShared {
     pub fn sim_param(&mut self, index: u16, value: f32) -> Option<FromFc> {
         // The parameters CRTP does not serve (the automatic modes') are
         // not this vehicle's.
-        let r = match PARAMS[..CRTP_PARAMS].get(usize::from(index)) {
+        let r = match crtp_params().get(usize::from(index)) {
             None => Err(Refusal::Unknown),
             Some(_) => self.param_write(usize::from(index), value, Reply::Sim(index)),
         };

@@ -1,6 +1,7 @@
 //! Port param (2): the param TOC of [`fc_loop::params::PARAMS`] (each in
-//! its true type) and of [`EXTRA_PARAMS`]; read, write, set by name,
-//! default values, extended types, persistent storage.
+//! its true type, and again under its Crazyflie name where the table gives
+//! one, [`fc_loop::params::CRTP_ALIASED`]) and of [`EXTRA_PARAMS`]; read,
+//! write, set by name, default values, extended types, persistent storage.
 
 use crate::vehicle::*;
 
@@ -21,89 +22,34 @@ pub mod param_types {
     pub const TYPE: u8 = 0x0F;
 }
 
-/// A parameter under a Crazyflie name, beside [`PARAMS`].
+/// A TOC entry under a Crazyflie name that is not one of [`PARAMS`]'
+/// own entries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Extra {
+    /// The [`PARAMS`] index of a parameter under its Crazyflie name
+    /// ([`Param::crtp_alias`](fc_loop::params::Param::crtp_alias):
+    /// `stabilizer.controller` is `CTL_ID`, `pid_attitude.*` the PD's
+    /// attitude gains).
+    Alias(usize),
     /// `kalman.resetEstimation`: 1 restarts the estimator (on the ground).
     ResetEstimation,
-    /// `stabilizer.controller`: our controller id (`CTL_ID`).
-    Controller,
     /// `stabilizer.estimator`: 2, the Kalman filter (the only one here).
     Estimator,
     /// `commander.enHighLevel`: 1, the high-level commander is always on.
     EnHighLevel,
-    /// `pid_attitude.*`: the PD controller's attitude gain [`PARAMS`] index.
-    Alias(usize),
     /// `deck.bc*`: read-only, 0: no expansion deck is attached. cfclient's
     /// flight tab reads them to offer height hold and command-based flight.
     Deck,
 }
 
-/// The index in [`PARAMS`] of the parameter named `id` (a compile-time
-/// lookup: a name that is not there does not build).
-const fn param_index(id: &str) -> usize {
-    let mut i = 0;
-    while i < PARAMS.len() {
-        let (a, b) = (PARAMS[i].id.as_bytes(), id.as_bytes());
-        if a.len() == b.len() {
-            let mut k = 0;
-            while k < a.len() && a[k] == b[k] {
-                k += 1;
-            }
-            if k == a.len() {
-                return i;
-            }
-        }
-        i += 1;
-    }
-    panic!("no such parameter")
-}
-
-/// `CTL_ID`'s index.
-const CTL_ID: usize = param_index("CTL_ID");
-
-/// The Crazyflie-named parameters after [`PARAMS`] in the param TOC.
-pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 18] = [
+/// The Crazyflie-named entries that are not the flight stack's
+/// parameters, last in the param TOC: a command, the fixed choices of a
+/// Crazyflie (the Kalman estimator, the high-level commander) and the
+/// decks, none attached.
+pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 11] = [
     ("kalman", "resetEstimation", param_types::U8, Extra::ResetEstimation),
-    ("stabilizer", "controller", param_types::U8, Extra::Controller),
     ("stabilizer", "estimator", param_types::U8, Extra::Estimator),
     ("commander", "enHighLevel", param_types::U8, Extra::EnHighLevel),
-    (
-        "pid_attitude",
-        "roll_kp",
-        param_types::FLOAT,
-        Extra::Alias(param_index("PD_ROLL_P")),
-    ),
-    (
-        "pid_attitude",
-        "roll_kd",
-        param_types::FLOAT,
-        Extra::Alias(param_index("PD_ROLL_D")),
-    ),
-    (
-        "pid_attitude",
-        "pitch_kp",
-        param_types::FLOAT,
-        Extra::Alias(param_index("PD_PITCH_P")),
-    ),
-    (
-        "pid_attitude",
-        "pitch_kd",
-        param_types::FLOAT,
-        Extra::Alias(param_index("PD_PITCH_D")),
-    ),
-    (
-        "pid_attitude",
-        "yaw_kp",
-        param_types::FLOAT,
-        Extra::Alias(param_index("PD_YAW_P")),
-    ),
-    (
-        "pid_attitude",
-        "yaw_kd",
-        param_types::FLOAT,
-        Extra::Alias(param_index("PD_YAW_D")),
-    ),
     ("deck", "bcFlow", DECK, Extra::Deck),
     ("deck", "bcFlow2", DECK, Extra::Deck),
     ("deck", "bcZRanger", DECK, Extra::Deck),
@@ -118,13 +64,14 @@ pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 18] = [
 const DECK: u8 = param_types::U8 | param_types::RONLY;
 
 /// Entries in the param TOC: the flight stack's parameters CRTP serves
-/// ([`CRTP_PARAMS`], the same ids as their [`PARAMS`] indexes), then
+/// ([`CRTP_PARAMS`], the same ids as their [`PARAMS`] indexes), those of
+/// them with a Crazyflie name under it ([`CRTP_ALIASES`]), then
 /// [`EXTRA_PARAMS`].
-pub const PARAM_COUNT: usize = CRTP_PARAMS + EXTRA_PARAMS.len();
+pub const PARAM_COUNT: usize = CRTP_PARAMS + CRTP_ALIASES + EXTRA_PARAMS.len();
 
 /// Group and name of param `id`, its type byte, and what it is.
 pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
-    if let Some((group, name, p)) = PARAMS[..CRTP_PARAMS]
+    if let Some((group, name, p)) = crtp_params()
         .get(id)
         .and_then(|p| p.crtp_name().map(|(g, n)| (g, n, p)))
     {
@@ -140,7 +87,21 @@ pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
             None,
         ));
     }
-    let &(group, name, t, extra) = EXTRA_PARAMS.get(id.checked_sub(CRTP_PARAMS)?)?;
+    let k = id.checked_sub(CRTP_PARAMS)?;
+    if let Some(&i) = CRTP_ALIASED.get(k) {
+        let (group, name) = PARAMS[i].crtp_alias()?;
+        return Some((
+            Name {
+                group,
+                name,
+                lower_group: false,
+            },
+            // Its true type; the Crazyflie's own entry persists, not this one.
+            toc_type(PARAMS[i].ty),
+            Some(Extra::Alias(i)),
+        ));
+    }
+    let &(group, name, t, extra) = EXTRA_PARAMS.get(k - CRTP_ALIASES)?;
     Some((
         Name {
             group,
@@ -209,7 +170,6 @@ impl CrtpShared {
         Some(match extra {
             None => (PARAMS[id].get)(s),
             Some(Extra::ResetEstimation) => 0.0,
-            Some(Extra::Controller) => (PARAMS[CTL_ID].get)(s),
             Some(Extra::Estimator) => 2.0,
             Some(Extra::EnHighLevel) => 1.0,
             Some(Extra::Alias(i)) => (PARAMS[i].get)(s),
@@ -222,7 +182,6 @@ impl CrtpShared {
         let (_, _, extra) = param_entry(id)?;
         Some(match extra {
             None => (PARAMS[id].get)(&self.defaults),
-            Some(Extra::Controller) => (PARAMS[CTL_ID].get)(&self.defaults),
             Some(Extra::Alias(i)) => (PARAMS[i].get)(&self.defaults),
             Some(_) => self.param_value(id)?,
         })
@@ -239,7 +198,6 @@ impl CrtpShared {
         }
         let index = match extra {
             None => id,
-            Some(Extra::Controller) => CTL_ID,
             Some(Extra::Alias(i)) => i,
             Some(Extra::ResetEstimation) if value == 0.0 => return Ok(Written::Now),
             Some(Extra::ResetEstimation) if self.flying() => return Err(Refusal::Armed),
