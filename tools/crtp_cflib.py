@@ -224,14 +224,18 @@ def connect():
     return scf
 
 
-def read_back(cf, name, want, within_s=5.0):
+def read_back(cf, name, want, within_s=5.0, ask=False):
     """`name`'s value once it reads `want`, or its last read after `within_s`
     s of wall time. A write that re-designs is answered once the design is
     done: tens of ms of the vehicle's time, which on an image in QEMU, in
     lockstep with the plant on a loaded machine, is over half a second of
-    wall time."""
+    wall time. cflib's value is the one it last heard: `ask` asks the
+    vehicle again each time (a write under another name)."""
     end = time.monotonic() + within_s
     while True:
+        if ask:
+            cf.param.request_param_update(name)
+            time.sleep(0.05)
         value = float(cf.param.get_value(name))
         if abs(value - want) < 1e-6 or time.monotonic() > end:
             return value
@@ -288,6 +292,18 @@ def session_high_level(sil_host, truth):
         time.sleep(0.3)
         check(elem.ctype == 'uint8_t' and ctl.isdigit() and not sent and cf.param.get_value('ctl.ID') == ctl,
               f'ctl.ID is a {elem.ctype} ({ctl}); cflib refuses 5.05, the vehicle refuses 250: reads back {ctl}')
+        # The Crazyflie's own names are the same parameters (the table's
+        # aliases): stabilizer.controller is ctl.ID, pid_attitude.* the PD's
+        # attitude gains; a write under one name reads back under the other.
+        kd = float(cf.param.get_value('pd.YAW_D'))
+        cf.param.set_value('pid_attitude.yaw_kd', kd * 2)
+        alias = read_back(cf, 'pd.YAW_D', kd * 2, ask=True)
+        cf.param.set_value('pd.YAW_D', kd)
+        restored = read_back(cf, 'pid_attitude.yaw_kd', kd, ask=True)
+        check(cf.param.get_value('stabilizer.controller') == ctl
+              and alias == 2 * kd and restored == kd,
+              f'stabilizer.controller reads ctl.ID ({ctl}); pid_attitude.yaw_kd = {2 * kd:g} '
+              f'reads back as pd.YAW_D = {alias:g}, and back to {restored:g}')
         # cflib's persistent parameters: stored where the vehicle keeps them
         # (in QEMU a RAM stand-in, which its boot log names), then cleared;
         # in process without --storage there is nowhere to keep them (EIO).
