@@ -1,5 +1,5 @@
 //! The board's part of the supervisor. The vehicle's own
-//! (`fc_crtp::vehicle::CrtpShared` with `fc_crtp::supervisor`) decides:
+//! (`fc_crtp::vehicle::CrtpShared` with `fc_loop::supervisor`) decides:
 //! arming (estimator aligned, battery above 3.2 V, not tumbled or locked,
 //! the board's sensors up), tumble (beyond 60°: motors off), every IMU
 //! sample (a bad or missing one replaced by the last good one for 10 ms,
@@ -18,7 +18,7 @@
 //! chip and the motors stop.
 
 use crate::SensorError;
-use fc_crtp::supervisor::SensorDown;
+use fc_loop::supervisor::SensorDown;
 
 /// `e` as the vehicle's arming refusal names it: the part and what went
 /// wrong, in a few words.
@@ -48,7 +48,7 @@ pub fn sensors_up(imu: Result<(), SensorError>, baro: Result<(), SensorError>) -
 mod tests {
     use super::*;
     use embedded_hal::i2c::ErrorKind;
-    use fc_crtp::supervisor::{ImuGuard, ImuOutcome, IMU_TIMEOUT_US};
+    use fc_loop::supervisor::{ImuGuard, ImuOutcome, IMU_TIMEOUT_US};
 
     #[test]
     fn a_sensor_that_did_not_start_is_named_with_what_went_wrong() {

@@ -8,7 +8,6 @@ pub mod log;
 /// The high-level commander's planner (it lives with the flight loop, which both protocols drive).
 pub mod persist;
 pub use fc_loop::planner;
-pub mod supervisor;
 pub mod syslink;
 pub mod toc;
 pub mod vehicle;

@@ -688,7 +688,7 @@ fn ask_said(v: &mut CrtpVehicle, p: Packet) -> (Packet, String) {
 /// and that lands with the motors off.
 #[test]
 fn a_silent_imu_in_flight_is_held_for_10_ms_then_a_failsafe_descent() {
-    use crate::supervisor::SensorDown;
+    use fc_loop::supervisor::SensorDown;
     let mut v = at_rest(3000);
     v.set_sensors(Err(SensorDown {
         device: "BMI088 gyroscope",
@@ -806,15 +806,6 @@ fn the_barometer_is_fused_as_its_change_from_the_first_reading() {
     assert!((down(&v) + 0.2).abs() < 0.1, "{}", down(&v));
     assert!(!v.baro(6_200_000, f32::NAN));
     assert!(!v.baro(6_300_000, 50_000.0), "50 km is not a measurement");
-}
-
-/// The supervisor's tumble threshold, held as a cosine, is the cosine of
-/// its angle (60°).
-#[test]
-fn the_tumble_cosine_is_the_tumble_angles() {
-    use crate::vehicle::{COS_TUMBLE_TILT, TUMBLE_TILT_RAD};
-    let exact = f64::from(TUMBLE_TILT_RAD).cos();
-    assert!((f64::from(COS_TUMBLE_TILT) - exact).abs() < 1e-7, "{exact}");
 }
 
 /// A sink whose owner keeps parameters (the RAM stand-in store).

@@ -39,6 +39,7 @@ pub mod params;
 pub mod planner;
 pub mod power;
 pub mod schedule;
+pub mod supervisor;
 pub mod telemetry;
 
 mod flight_loop;

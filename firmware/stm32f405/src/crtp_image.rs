@@ -21,10 +21,10 @@ use crate::watchdog::{self, FeedRule, Seen};
 use core::cell::Cell;
 use core::sync::atomic::{AtomicBool, Ordering};
 use fc_core::estimate::ImuSample;
-use fc_crtp::supervisor::ImuCounters;
 use fc_crtp::syslink::SyslinkCounters;
 use fc_crtp::vehicle::CrtpShared;
 use fc_loop::power::Power;
+use fc_loop::supervisor::ImuCounters;
 use fc_proto::{encode, FromFc, MAX_FRAME};
 use hal_shim::stm32f405::{rx_overruns, Port, TxTimeout, Usart};
 use hal_shim::ByteLink;
@@ -194,7 +194,7 @@ pub struct SimulatorOnly;
 impl SimulatorOnly {
     /// The bus and the sensors' start-up result: none to start, the
     /// simulator's taken as up.
-    pub fn started() -> (Self, Result<(), fc_crtp::supervisor::SensorDown>) {
+    pub fn started() -> (Self, Result<(), fc_loop::supervisor::SensorDown>) {
         (SimulatorOnly, Ok(()))
     }
 }

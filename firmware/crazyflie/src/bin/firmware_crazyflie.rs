@@ -167,7 +167,7 @@ mod target {
 
     /// The simulator's sensors (QEMU).
     #[cfg(feature = "qemu")]
-    pub fn imu_bus() -> (ImuBus, Result<(), fc_crtp::supervisor::SensorDown>) {
+    pub fn imu_bus() -> (ImuBus, Result<(), fc_loop::supervisor::SensorDown>) {
         fc_stm32f405::crtp_image::SimulatorOnly::started()
     }
 
@@ -203,8 +203,8 @@ mod sensors {
     use fc_crazyflie::sensor_bus;
     use fc_crazyflie::supervisor::sensors_up;
     use fc_crazyflie::SensorError;
-    use fc_crtp::supervisor::SensorDown;
     use fc_loop::baro::pressure_altitude_m;
+    use fc_loop::supervisor::SensorDown;
     use nalgebra::Vector3;
     use stm32f4::stm32f405::{exti, i2c1};
 

@@ -50,7 +50,6 @@
 use crate::log::{self, LogBlocks};
 use crate::persist::PersistRequest;
 use crate::planner::{Reference, Segment};
-use crate::supervisor::{ImuCounters, ImuGuard, SensorDown, BATTERY_FLOOR_V, FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US};
 use crate::toc::{self, Name};
 use crate::{f32_at, frames, u16_at, CrtpCounters, CrtpError, Packet, Port};
 use core::borrow::BorrowMut;
@@ -63,6 +62,7 @@ use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{crtp_params, ParamType, Refusal, Settings, CRTP_ALIASED, CRTP_ALIASES, CRTP_PARAMS, PARAMS};
 use fc_loop::power::Power;
+use fc_loop::supervisor::{ImuCounters, ImuGuard, SensorDown, BATTERY_FLOOR_V, FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US};
 use fc_loop::{FcConfig, Loop, Mutex, ParamPlan};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
@@ -87,13 +87,6 @@ pub const SETPOINT_WATCHDOG: Watchdog = Watchdog {
     level_ms: SETPOINT_LEVEL_MS,
     stop_ms: SETPOINT_STOP_MS,
 };
-/// Tilt beyond which an armed vehicle is tumbled: motors off, rad (60°).
-pub const TUMBLE_TILT_RAD: f32 = core::f32::consts::FRAC_PI_3;
-/// cos([`TUMBLE_TILT_RAD`]): the supervisor compares the body z axis' down
-/// component with it every step, so it is not computed there (libm's
-/// `cosf` works in f64, which the Cortex-M4 has no unit for: ≈ 1 000
-/// instructions a step).
-pub const COS_TUMBLE_TILT: f32 = 0.5;
 /// 1σ of an external position (the Crazyflie's `locSrv.extPosStdDev`), m.
 pub const EXTPOS_SIGMA_M: f32 = 0.01;
 /// 1σ of an external pose's heading (`locSrv.extQuatStdDev`), rad.
@@ -428,7 +421,7 @@ impl CrtpShared {
     }
 
     /// The IMU samples that were not good, by kind
-    /// ([`crate::supervisor::ImuGuard`]).
+    /// ([`fc_loop::supervisor::ImuGuard`]).
     pub fn imu_counters(&self) -> ImuCounters {
         self.imu.counters()
     }

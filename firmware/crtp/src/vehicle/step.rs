@@ -2,8 +2,8 @@
 //! the supervisor (failsafes, tumble, the end of a landing).
 
 use super::{
-    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Power, Reference, Setpoint, COS_TUMBLE_TILT,
-    FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US, SETPOINT_WATCHDOG,
+    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Power, Reference, Setpoint, FAILSAFE_DESCENT_MPS,
+    IMU_TIMEOUT_US, SETPOINT_WATCHDOG,
 };
 
 impl CrtpShared {
@@ -11,7 +11,7 @@ impl CrtpShared {
     /// none) with the fixes of the host's own position source (`heading`:
     /// they carry one), the IMU task's half: the sample checked (a bad or
     /// missing one replaced by the last good one,
-    /// [`crate::supervisor::ImuGuard`]), the set-point of this instant, one
+    /// [`fc_loop::supervisor::ImuGuard`]), the set-point of this instant, one
     /// estimator step, the supervisor's checks; returns the controller's
     /// step ([`fly_step`](super::fly_step) flies it).
     pub fn imu_begin<C: CycleClock>(
@@ -84,10 +84,7 @@ impl CrtpShared {
         let Some(est) = self.lp.navigator().estimate() else {
             return;
         };
-        let q = est.att;
-        // The body z axis' down component: cos(tilt).
-        let cos_tilt = 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]);
-        if self.flying() && cos_tilt < COS_TUMBLE_TILT {
+        if self.flying() && fc_loop::supervisor::tumbled(&est.att) {
             self.tumbled = true;
             self.commander.stop();
             self.say(format_args!("tumbled: motors off"));

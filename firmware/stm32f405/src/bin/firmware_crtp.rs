@@ -81,7 +81,7 @@ type ImuBus = fc_stm32f405::crtp_image::SimulatorOnly;
 
 /// No sensors to start: the simulator's are taken as up.
 #[cfg(target_os = "none")]
-fn imu_bus() -> (ImuBus, Result<(), fc_crtp::supervisor::SensorDown>) {
+fn imu_bus() -> (ImuBus, Result<(), fc_loop::supervisor::SensorDown>) {
     fc_stm32f405::crtp_image::SimulatorOnly::started()
 }
 

@@ -1,11 +1,16 @@
-//! What the CRTP vehicle's supervisor checks besides its modes (tumble,
-//! emergency stop; [`crate::vehicle`]): whether the board's sensors started,
-//! whether the battery is above its floor, and every IMU sample.
+//! The supervisor's checks of a vehicle that flies from its own board's
+//! sensors (the Crazyflie's `supervisor.c`; the CRTP vehicle,
+//! `fc_crtp::vehicle`, runs them; PX4's HIL samples come checked by the
+//! simulator): whether the board's sensors started, whether the battery is
+//! above its floor, every IMU sample, and tumble. What passes goes to the
+//! motors through [`crate::power`].
 //!
 //! - **Arming** is refused while a sensor the board reported down
-//!   ([`SensorDown`], [`crate::vehicle::CrtpShared::set_sensors`]) or the
-//!   battery is below [`BATTERY_FLOOR_V`], as well as for the vehicle's own
-//!   reasons (aligning, tumbled, locked).
+//!   ([`SensorDown`]) or the battery is below [`BATTERY_FLOOR_V`], as well
+//!   as for the vehicle's own reasons (aligning, tumbled, locked;
+//!   [`crate::arming`]).
+//! - **Tumble**: an armed vehicle tilted beyond [`TUMBLE_TILT_RAD`]
+//!   ([`tumbled`]) stops its motors.
 //! - **Every IMU sample** goes through an [`ImuGuard`]: a sample the board
 //!   could not read (`None`: a bus error, a frozen part) or one that is not
 //!   finite or beyond any MEMS IMU's range is not flown; the last good one
@@ -35,6 +40,22 @@ pub const GYRO_LIMIT_RADPS: f32 = 40.0;
 pub const ACCEL_LIMIT_MPS2: f32 = 300.0;
 /// The failsafe descent's rate, m/s.
 pub const FAILSAFE_DESCENT_MPS: f32 = 0.3;
+/// Tilt beyond which an armed vehicle is tumbled: motors off, rad (60°).
+pub const TUMBLE_TILT_RAD: f32 = core::f32::consts::FRAC_PI_3;
+/// cos([`TUMBLE_TILT_RAD`]): the supervisor compares the body z axis' down
+/// component with it every step, so it is not computed there (libm's
+/// `cosf` works in f64, which the Cortex-M4 has no unit for: ≈ 1 000
+/// instructions a step).
+pub const COS_TUMBLE_TILT: f32 = 0.5;
+
+/// The attitude `q` (body FRD → NED, scalar first) tilted beyond
+/// [`TUMBLE_TILT_RAD`]: its body z axis' down component, cos(tilt), below
+/// [`COS_TUMBLE_TILT`].
+#[inline]
+pub fn tumbled(q: &fc_core::model::Quat<f32>) -> bool {
+    let cos_tilt = 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]);
+    cos_tilt < COS_TUMBLE_TILT
+}
 
 /// A sensor the board could not start, as the vehicle's console and its
 /// arming refusal name it (the driver's full error goes to the board's log).
@@ -171,7 +192,37 @@ impl ImuGuard {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Vector3;
+    use nalgebra::{Vector3, Vector4};
+
+    /// The tumble threshold, held as a cosine, is the cosine of its angle
+    /// (60°).
+    #[test]
+    fn the_tumble_cosine_is_the_tumble_angles() {
+        let exact = f64::from(TUMBLE_TILT_RAD).cos();
+        assert!((f64::from(COS_TUMBLE_TILT) - exact).abs() < 1e-7, "{exact}");
+    }
+
+    /// Tilted about any horizontal axis (a rotation by `tilt` about
+    /// (cos a, sin a, 0): q = [cos(tilt/2), sin(tilt/2) cos a, sin(tilt/2)
+    /// sin a, 0]), a vehicle is tumbled beyond 60°, whatever its heading.
+    #[test]
+    fn tumbled_beyond_sixty_degrees_about_any_axis() {
+        for deg in [0.0f32, 30.0, 59.0, 61.0, 90.0, 180.0] {
+            for a in [0.0f32, 0.7, 2.0, 4.0] {
+                let h = deg.to_radians() / 2.0;
+                let q = Vector4::new(h.cos(), h.sin() * a.cos(), h.sin() * a.sin(), 0.0);
+                assert_eq!(tumbled(&q), deg > 60.0, "{deg}° about {a} rad");
+                // A heading (about z) changes nothing.
+                let yawed = Vector4::new(
+                    q[0] * 0.6 - q[3] * 0.8,
+                    q[1] * 0.6 - q[2] * 0.8,
+                    q[2] * 0.6 + q[1] * 0.8,
+                    q[3] * 0.6 + q[0] * 0.8,
+                );
+                assert_eq!(tumbled(&yawed), deg > 60.0, "{deg}° about {a} rad, yawed");
+            }
+        }
+    }
 
     fn sample(gx: f32) -> ImuSample {
         ImuSample {
