@@ -909,6 +909,13 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
     assert_eq!(state(kept.ask(&mut v, misc(4))), not_stored);
 }
 
+/// The param TOC id of `group.name` (cflib compares the group in lower case).
+fn find(g: &[u8], n: &[u8]) -> u16 {
+    (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(name, _, _)| name.is(g, n)))
+        .unwrap() as u16
+}
+
 /// The param TOC declares each parameter's true type: `ctl.ID` is a
 /// `uint8_t` and `fs.TIMEOUT_MS` a `uint16_t` (cflib then writes whole
 /// numbers, and refuses "5.05" itself), both read and written in their
@@ -917,11 +924,6 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
 #[test]
 fn integer_parameters_are_typed_as_integers_in_the_toc() {
     use crate::vehicle::param_types;
-    let find = |g: &[u8], n: &[u8]| {
-        (0..PARAM_COUNT)
-            .find(|&i| param_entry(i).is_some_and(|(name, _, _)| name.is(g, n)))
-            .unwrap() as u16
-    };
     let (ctl, fs, w_pos) = (find(b"ctl", b"ID"), find(b"fs", b"TIMEOUT_MS"), find(b"mpc", b"W_POS"));
     let ty = |i: u16| param_entry(usize::from(i)).unwrap().1;
     assert_eq!(ty(ctl), param_types::U8 | param_types::EXTENDED);
@@ -955,11 +957,6 @@ fn integer_parameters_are_typed_as_integers_in_the_toc() {
 #[test]
 fn crazyflie_names_are_the_tables_parameters() {
     use crate::vehicle::param_types;
-    let find = |g: &[u8], n: &[u8]| {
-        (0..PARAM_COUNT)
-            .find(|&i| param_entry(i).is_some_and(|(name, _, _)| name.is(g, n)))
-            .unwrap() as u16
-    };
     let (ctl, controller) = (find(b"ctl", b"ID"), find(b"stabilizer", b"controller"));
     let (roll_p, roll_kp) = (find(b"pd", b"ROLL_P"), find(b"pid_attitude", b"roll_kp"));
     let ty = |i: u16| param_entry(usize::from(i)).unwrap().1;
