@@ -3,7 +3,7 @@
 //! rotor thrusts and motor commands of the inputs that fly.
 //!
 //! What decides the gate is the vehicle's supervisor: armed, in a mode or
-//! under a set-point that flies, not tumbled ([`crate::modes`],
+//! under a set-point that flies, not tumbled ([`crate::supervisor`], [`crate::modes`],
 //! [`crate::commander`]). The mixer is the one the [`Loop`]'s settings give
 //! ([`Loop::mixer`]), built when a protocol front end starts
 //! ([`start_front_end`](crate::start_front_end)) and again whenever a
