@@ -110,8 +110,11 @@ class Flight:
                    f"heartbeat every {0.5 / slow:.3f} simulated s (SET_MESSAGE_INTERVAL): {ack.fields_json}")
         # The vehicle's own values, scaled: FS_GCS_MS takes whole
         # milliseconds, the others tenths of a second.
-        for name, digits in (("FS_GCS_MS", 0), ("COM_RC_LOSS_T", 1), ("COM_OF_LOSS_T", 1)):
-            value = float(round(await param.get_param_float(name) * slow, digits))
+        # Each within the range the vehicle takes (refused beyond it): a
+        # machine 12x slower than real time would ask for more than a
+        # minute of FS_GCS_MS.
+        for name, digits, most in (("FS_GCS_MS", 0, 60000.0), ("COM_RC_LOSS_T", 1, 60.0), ("COM_OF_LOSS_T", 1, 60.0)):
+            value = min(float(round(await param.get_param_float(name) * slow, digits)), most)
             await param.set_param_float(name, value)
             self.check(abs(await param.get_param_float(name) - value) < 1e-3, f"{name} lengthened to {value}")
 
