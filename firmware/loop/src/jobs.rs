@@ -94,6 +94,36 @@ pub struct Actuation {
     pub qp_iterations: u16,
 }
 
+/// A front end's vehicle state that holds its flight [`Loop`] (all but the
+/// controller): what [`LoopOf`] locks the loop through.
+pub trait HoldsLoop {
+    /// The flight loop.
+    fn flight_loop_mut(&mut self) -> &mut Loop;
+}
+
+/// The [`Loop`] inside a front end's locked vehicle state `V` (the
+/// [`Mutex`] `M` holds a `V`): what [`stabilize`] and [`apply_plan`] lock
+/// when the vehicle, not the bare loop, is the resource an image shares.
+pub struct LoopOf<'a, M, V: ?Sized>(&'a mut M, core::marker::PhantomData<fn() -> *const V>);
+
+impl<'a, M, V: ?Sized> LoopOf<'a, M, V> {
+    /// The loop inside `m`.
+    pub fn new(m: &'a mut M) -> Self {
+        Self(m, core::marker::PhantomData)
+    }
+}
+
+impl<M: Mutex, V: HoldsLoop + ?Sized> Mutex for LoopOf<'_, M, V>
+where
+    M::T: core::borrow::BorrowMut<V>,
+{
+    type T = Loop;
+    fn lock<R>(&mut self, f: impl FnOnce(&mut Loop) -> R) -> R {
+        self.0
+            .lock(|v| f(core::borrow::BorrowMut::<V>::borrow_mut(v).flight_loop_mut()))
+    }
+}
+
 /// The controller's half of one stabilizer step (the estimator's half,
 /// [`Loop::imu_job`], made `step`: the estimate, the commander's set-point,
 /// whether the controller is due): the previews, the controller's update,

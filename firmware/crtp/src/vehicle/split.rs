@@ -6,18 +6,20 @@ use super::{
     Refusal,
 };
 use fc_core::control::Controller;
+use fc_loop::LoopOf;
 
-/// The [`Loop`] inside a locked [`CrtpShared`], as [`run_job`] locks it.
-struct LoopOf<'a, M>(&'a mut M);
+impl fc_loop::HoldsLoop for CrtpShared {
+    fn flight_loop_mut(&mut self) -> &mut Loop {
+        &mut self.lp
+    }
+}
 
-impl<M: Mutex> Mutex for LoopOf<'_, M>
+/// The [`Loop`] inside a locked [`CrtpShared`], as [`fc_loop::stabilize`] locks it.
+fn loop_of<M: Mutex>(v: &mut M) -> LoopOf<'_, M, CrtpShared>
 where
     M::T: BorrowMut<CrtpShared>,
 {
-    type T = Loop;
-    fn lock<R>(&mut self, f: impl FnOnce(&mut Loop) -> R) -> R {
-        self.0.lock(|v| f(&mut v.borrow_mut().lp))
-    }
+    LoopOf::new(v)
 }
 
 /// Flies `step` on the controller `ctrl` (the controller's task), the
@@ -28,7 +30,7 @@ pub fn fly_step<M: Mutex, C: CycleClock>(v: &mut M, ctrl: &mut AnyController<f32
 where
     M::T: BorrowMut<CrtpShared>,
 {
-    let u = step.job.map(|s| fc_loop::stabilize(&mut LoopOf(v), ctrl, &s, clock).u);
+    let u = step.job.map(|s| fc_loop::stabilize(&mut loop_of(v), ctrl, &s, clock).u);
     v.lock(|v| v.borrow_mut().imu_end(&step, u))
 }
 
@@ -42,7 +44,7 @@ where
     M::T: BorrowMut<CrtpShared>,
 {
     if let Some(s) = step.job {
-        LoopOf(v).lock(|l| l.record(&s, None, clock));
+        loop_of(v).lock(|l| l.record(&s, None, clock));
     }
     v.lock(|v| v.borrow_mut().imu_end(&step, None))
 }
@@ -63,7 +65,7 @@ where
             ctrl.reset();
             Ok(())
         }
-        ControllerWork::Param { next, .. } => fc_loop::apply_plan(&mut LoopOf(v), ctrl, ParamPlan::Redesign(next)),
+        ControllerWork::Param { next, .. } => fc_loop::apply_plan(&mut loop_of(v), ctrl, ParamPlan::Redesign(next)),
     };
     let answer = v.lock(|v| v.borrow_mut().work_done(&work, r));
     (r, answer)
