@@ -27,7 +27,7 @@ use crate::arming::{self, ArmRefusal, ArmingState};
 use crate::commander::{Legs, Route};
 use crate::nav::NavMode;
 use crate::planner::Reference;
-use crate::{FlightLoop, Loop};
+use crate::{AnyController, Exclusive, Loop};
 use fc_core::control::Setpoint;
 use nalgebra::Vector3;
 
@@ -301,17 +301,17 @@ impl ModeCommander {
     }
 
     /// Arms if the estimator navigates and the vehicle is `started`; the
-    /// controller is designed afresh (no state wound up on the ground).
+    /// controller `ctrl` of the loop `lp` is designed afresh (no state wound up on the ground).
     /// Where it arms is home; it holds there (or, in Offboard, flies the
     /// streamed set-point; an automatic mode becomes Hold). Nothing else is
     /// monitored here: PX4's HIL gives no battery reading, and nothing locks
     /// or sees a tumble.
-    pub fn arm(&mut self, flight: &mut FlightLoop, started: bool) -> Result<(), ArmRefusal> {
+    pub fn arm(&mut self, lp: &mut Loop, ctrl: &mut AnyController<f32>, started: bool) -> Result<(), ArmRefusal> {
         if self.armed {
             return Ok(());
         }
-        let estimate = flight.navigator().estimate();
-        let nav = match (flight.navigator().mode(), estimate) {
+        let estimate = lp.navigator().estimate();
+        let nav = match (lp.navigator().mode(), estimate) {
             (NavMode::Navigating, None) => NavMode::Failsafe,
             (mode, _) => mode,
         };
@@ -325,16 +325,15 @@ impl ModeCommander {
             started,
         })?;
         let est = estimate.ok_or(ArmRefusal::EstimatorFailsafe)?;
-        flight
-            .try_select(flight.settings().controller)
-            .map_err(|_| ArmRefusal::DesignFailed)?;
+        let spec = lp.settings().controller;
+        crate::select(&mut Exclusive(&mut *lp), ctrl, spec).map_err(|_| ArmRefusal::DesignFailed)?;
         let yaw = fc_core::quat_to_euler(&est.att)[2];
         match (self.mode, self.offboard) {
             (FlightMode::Offboard, Some((sp, _))) => {
-                flight.set_setpoint(&sp);
+                lp.set_setpoint(&sp);
             }
             (mode, _) => {
-                flight.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
+                lp.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
                 if mode != FlightMode::Position {
                     self.mode = FlightMode::Hold;
                 }

@@ -48,7 +48,7 @@ impl MissionItems for Delays {
 
 #[test]
 fn a_mode_that_cannot_be_flown_is_refused_with_its_reason_and_nothing_changes() {
-    let mut flight = FlightLoop::new(FcConfig::default()).unwrap();
+    let mut flight = crate::FlightLoop::new(FcConfig::default()).unwrap();
     let mut m = ModeCommander::new();
     let mut none = Delays { n: 0, current: 0 };
     let mut two = Delays { n: 2, current: 0 };
@@ -95,7 +95,8 @@ fn a_mode_that_cannot_be_flown_is_refused_with_its_reason_and_nothing_changes() 
     });
     assert_eq!((r, said, m.mode()), (Ok(()), 0, FlightMode::Offboard));
     // Arming needs an estimate: none yet.
-    assert!(m.arm(&mut flight, true).is_err());
+    let (lp, ctrl) = flight.split();
+    assert!(m.arm(lp, ctrl, true).is_err());
     assert!(!m.armed());
 }
 

@@ -3,8 +3,8 @@
 //! `AUTOPILOT_VERSION`.
 
 use super::{
-    missions, Command, FlightMode, MavCmd, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavSeverity,
-    MavSink, MavVehicle, Peer, Px4Mode, AUTOPILOT_VERSION_DATA, AUTOPILOT_VERSION_ID, COMMAND_ACK_DATA,
+    missions, AnyController, Command, FlightMode, MavCmd, MavMessage, MavModeFlag, MavProtocolCapability, MavResult,
+    MavSeverity, MavShared, MavSink, Peer, Px4Mode, AUTOPILOT_VERSION_DATA, AUTOPILOT_VERSION_ID, COMMAND_ACK_DATA,
     FLIGHT_SW_VERSION, MIN_INTERVAL_US, STREAMS,
 };
 
@@ -37,15 +37,20 @@ pub fn autopilot_version(system_id: u8) -> AUTOPILOT_VERSION_DATA {
     }
 }
 
-impl MavVehicle {
-    pub(in crate::vehicle) fn on_command<S: MavSink>(&mut self, c: &Command, out: &mut S) -> Result<(), S::Error> {
+impl MavShared {
+    pub(in crate::vehicle) fn on_command<S: MavSink>(
+        &mut self,
+        ctrl: &mut AnyController<f32>,
+        c: &Command,
+        out: &mut S,
+    ) -> Result<(), S::Error> {
         let p = &c.params;
         // The message a request asks for, sent after its acknowledgement.
         let mut then_send = None;
         let result = match c.command {
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 1.0 => {
-                let started = self.flight.mixer().is_some();
-                match self.modes.arm(&mut self.flight, started) {
+                let started = self.lp.mixer().is_some();
+                match self.modes.arm(&mut self.lp, ctrl, started) {
                     Ok(()) => {
                         self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
                         MavResult::MAV_RESULT_ACCEPTED
@@ -181,7 +186,7 @@ impl MavVehicle {
         // simulator's first position); NaN without one.
         let up_m = self.home.map_or(f32::NAN, |h| alt_amsl_m - h.alt_mm as f32 * 1e-3);
         let mut flown = missions::flown(&mut self.mission, self.home);
-        match self.modes.set_mode(mode, t_us, up_m, &mut self.flight, &mut flown) {
+        match self.modes.set_mode(mode, t_us, up_m, &mut self.lp, &mut flown) {
             Ok(()) => Ok(MavResult::MAV_RESULT_ACCEPTED),
             Err(why) => {
                 self.say(

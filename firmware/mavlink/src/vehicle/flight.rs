@@ -3,7 +3,7 @@
 //! ground-station failsafe and landed state through them.
 
 use super::{
-    missions, MavFrame, MavLandedState, MavSeverity, MavSink, MavVehicle, PositionTargetTypemask, Setpoint, Vector3,
+    missions, MavFrame, MavLandedState, MavSeverity, MavShared, MavSink, PositionTargetTypemask, Setpoint, Vector3,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use fc_loop::modes::LandedState;
@@ -92,7 +92,7 @@ pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32
     Some(sp)
 }
 
-impl MavVehicle {
+impl MavShared {
     /// Each step, what the mode flies ([`fc_loop::modes::ModeCommander::fly`]),
     /// after the ground-station failsafe; what happens is told to the
     /// ground station.
@@ -103,9 +103,8 @@ impl MavVehicle {
         out: &mut S,
     ) -> Result<(), S::Error> {
         let mut flown = missions::flown(&mut self.mission, self.home);
-        self.modes.fly(t_us, dt_s, &mut self.flight, &mut flown, &mut |e| {
-            missions::tell(out, e)
-        })
+        self.modes
+            .fly(t_us, dt_s, &mut self.lp, &mut flown, &mut |e| missions::tell(out, e))
     }
 
     /// The ground-station failsafe (`FS_GCS_MS`,
@@ -115,11 +114,11 @@ impl MavVehicle {
         now_us: u64,
         out: &mut S,
     ) -> Result<(), S::Error> {
-        let limit_ms = self.flight.settings().gcs_loss_ms;
+        let limit_ms = self.lp.settings().gcs_loss_ms;
         let mut flown = missions::flown(&mut self.mission, self.home);
         match self
             .modes
-            .watch_ground_station(now_us, limit_ms, &mut self.flight, &mut flown)
+            .watch_ground_station(now_us, limit_ms, &mut self.lp, &mut flown)
         {
             Some(e) => missions::tell(out, e),
             None => Ok(()),
@@ -129,12 +128,12 @@ impl MavVehicle {
     /// Armed and more than [`super::IN_AIR_M`] above where it armed (estimated):
     /// disarming would drop it.
     pub(in crate::vehicle) fn in_air(&self) -> bool {
-        self.modes.in_air(&self.flight)
+        self.modes.in_air(&self.lp)
     }
 
     /// PX4's landed state: on the ground, taking off, in the air, landing.
     pub fn landed_state(&self) -> MavLandedState {
-        match self.modes.landed_state(&self.flight) {
+        match self.modes.landed_state(&self.lp) {
             LandedState::OnGround => MavLandedState::MAV_LANDED_STATE_ON_GROUND,
             LandedState::Takeoff => MavLandedState::MAV_LANDED_STATE_TAKEOFF,
             LandedState::InAir => MavLandedState::MAV_LANDED_STATE_IN_AIR,
@@ -156,9 +155,9 @@ impl MavVehicle {
         // in Offboard, as PX4 does. A masked heading keeps the one held:
         // armed, the set-point's; on the ground, the vehicle's own, so a
         // take-off in Offboard keeps the heading it has.
-        let held_yaw = match (self.modes.armed(), self.flight.navigator().estimate()) {
+        let held_yaw = match (self.modes.armed(), self.lp.navigator().estimate()) {
             (false, Some(e)) => fc_core::quat_to_euler(&e.att)[2],
-            _ => self.flight.setpoint().yaw_rad,
+            _ => self.lp.setpoint().yaw_rad,
         };
         let sp = setpoint_from_target(m, held_yaw).filter(|sp| sp.is_valid());
         match sp {
@@ -169,7 +168,7 @@ impl MavVehicle {
                     self.offboard_acc = Some((sp.acc_ned_mps2, m.time_boot_ms));
                 }
                 let t_us = self.last_sensor_us.unwrap_or(0);
-                self.modes.offboard(sp, t_us, &mut self.flight);
+                self.modes.offboard(sp, t_us, &mut self.lp);
                 Ok(())
             }
             None => {

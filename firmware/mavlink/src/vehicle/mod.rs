@@ -1,6 +1,12 @@
 //! The flight controller as a MAVLink vehicle: [`MavVehicle`] takes the
 //! messages of a simulator (PX4's HIL interface) and of a ground station,
-//! runs the flight loop ([`fc_loop::FlightLoop`]) on them, and answers.
+//! runs the flight loop ([`fc_loop::Loop`] and its controller) on them,
+//! and answers. It is two parts, as the CRTP vehicle is: [`MavShared`]
+//! (everything but the controller) and the controller. In one process
+//! they step together; an image that runs the estimator, the controller
+//! and the link as tasks of their own splits them ([`MavVehicle::split`]):
+//! [`MavShared::sensor_begin`], [`fly_sensor_step`],
+//! [`MavShared::sensor_end`], and [`MavShared::handle`] for the rest.
 //!
 //! - `HIL_SENSOR` → one estimator step (the controller on its schedule),
 //!   answered by one `HIL_ACTUATOR_CONTROLS` (lockstep): the motor
@@ -36,6 +42,7 @@ use crate::mission::Mission;
 use crate::modes::{FlightMode, NavSettings, Px4Mode};
 use crate::params::{self, Refusal, Settings, PARAMS};
 use crate::MavMessage;
+use fc_core::control::AnyController;
 use fc_core::control::Setpoint;
 use fc_core::estimate::Fix;
 #[cfg(test)]
@@ -43,7 +50,7 @@ use fc_core::model::airframe::MixerError;
 use fc_loop::modes::ModeCommander;
 use fc_loop::nav::NavMode;
 use fc_loop::schedule::Schedule;
-use fc_loop::{FcConfig, FlightLoop};
+use fc_loop::{Exclusive, FcConfig, Loop};
 use hal_shim::CycleClock;
 use mavlink::dialects::common::*;
 use nalgebra::Vector3;
@@ -62,6 +69,7 @@ pub use flight::{setpoint_from_target, streamed_jerk, JERK_GAP_MAX_MS, JERK_MAX_
 #[cfg(test)]
 use parameters::param_id;
 pub use parameters::{param_index_of, PARAM_COUNT};
+pub use sensors::{fly_sensor_step, SensorStep};
 pub use streams::{MIN_INTERVAL_US, STREAMS};
 
 /// Who a message is for.
@@ -153,9 +161,90 @@ impl core::fmt::Write for Text {
     }
 }
 
-/// The flight controller behind MAVLink (see the module's documentation).
+/// The flight controller behind MAVLink (see the module's documentation):
+/// its state ([`MavShared`]) and its controller, stepped together. An
+/// image that runs the estimator and the controller in tasks of their own
+/// splits it ([`MavVehicle::split`]).
 pub struct MavVehicle {
-    flight: FlightLoop,
+    shared: MavShared,
+    /// The running controller.
+    ctrl: AnyController<f32>,
+}
+
+impl core::ops::Deref for MavVehicle {
+    type Target = MavShared;
+    fn deref(&self) -> &MavShared {
+        &self.shared
+    }
+}
+
+impl core::ops::DerefMut for MavVehicle {
+    fn deref_mut(&mut self) -> &mut MavShared {
+        &mut self.shared
+    }
+}
+
+impl MavVehicle {
+    /// A vehicle with `settings` (checked; the controller designed), MAVLink
+    /// system `system_id`, disarmed, its estimator waiting for samples.
+    pub fn new(settings: Settings, system_id: u8) -> Result<Self, Refusal> {
+        let mut v = Self::unstarted(settings, system_id);
+        v.start()?;
+        Ok(v)
+    }
+
+    /// The vehicle with nothing designed yet (motors off until
+    /// [`MavVehicle::start`] succeeds). The firmware constructs it this way,
+    /// in its static home, so that the design does not run beneath a stack
+    /// copy of the whole vehicle (its controller is ≈ 7 KiB).
+    pub fn unstarted(settings: Settings, system_id: u8) -> Self {
+        Self {
+            ctrl: fc_loop::fallback_controller(settings.vehicle),
+            shared: MavShared::unstarted(settings, system_id),
+        }
+    }
+
+    /// Checks the settings and designs the controller in place; the
+    /// session is open from then on (set-points may come before samples).
+    pub fn start(&mut self) -> Result<(), Refusal> {
+        fc_loop::start_front_end(&mut self.shared.lp, &mut self.ctrl)
+    }
+
+    /// The vehicle's state and its controller apart, for an image that
+    /// steps them in tasks of their own ([`MavShared::sensor_begin`],
+    /// [`fly_sensor_step`], [`MavShared::sensor_end`]).
+    pub fn split(&mut self) -> (&mut MavShared, &mut AnyController<f32>) {
+        (&mut self.shared, &mut self.ctrl)
+    }
+
+    /// Handles one message ([`MavShared::handle`] with this vehicle's
+    /// controller); answers go to `out`. `now_us` is the caller's clock
+    /// (only a free-running loop uses it).
+    pub fn handle<S: MavSink, C: CycleClock>(
+        &mut self,
+        msg: &MavMessage,
+        out: &mut S,
+        clock: &C,
+        now_us: u64,
+    ) -> Result<(), S::Error> {
+        self.shared.handle(&mut self.ctrl, msg, out, clock, now_us)
+    }
+
+    /// Sets parameter `index` to `value`: checked, and applied to the
+    /// controller (re-designed while disarmed), the mixer and the failsafe.
+    pub fn apply(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
+        self.shared.apply(&mut self.ctrl, index, value)
+    }
+}
+
+/// The MAVLink vehicle without its controller: the modes, the mission, the
+/// streams and the flight loop ([`Loop`]). An image's tasks share it: the
+/// estimator's half of a sample ([`MavShared::sensor_begin`]), the
+/// controller's ([`fly_sensor_step`]) and the step's end
+/// ([`MavShared::sensor_end`]) lock it in turn, and the link's task
+/// handles a ground station's messages on it ([`MavShared::handle`]).
+pub struct MavShared {
+    lp: Loop,
     /// The flight mode, arming, home and what each mode flies
     /// ([`fc_loop::modes`]); its times are simulated µs.
     modes: ModeCommander,
@@ -204,22 +293,17 @@ struct Command {
     params: [f32; 7],
 }
 
-impl MavVehicle {
-    /// A vehicle with `settings` (checked; the controller designed), MAVLink
-    /// system `system_id`, disarmed, its estimator waiting for samples.
-    pub fn new(settings: Settings, system_id: u8) -> Result<Self, Refusal> {
-        let mut v = Self::unstarted(settings, system_id);
-        v.start()?;
-        Ok(v)
+impl fc_loop::HoldsLoop for MavShared {
+    fn flight_loop_mut(&mut self) -> &mut Loop {
+        &mut self.lp
     }
+}
 
-    /// The vehicle with nothing designed yet (motors off until
-    /// [`MavVehicle::start`] succeeds). The firmware constructs it this way,
-    /// in its static home, so that the design does not run beneath a stack
-    /// copy of the whole vehicle (its controller is ≈ 7 KiB).
-    pub fn unstarted(settings: Settings, system_id: u8) -> Self {
+impl MavShared {
+    /// The state with nothing designed yet ([`MavVehicle::unstarted`]).
+    fn unstarted(settings: Settings, system_id: u8) -> Self {
         Self {
-            flight: FlightLoop::unstarted_with(FcConfig::default(), settings),
+            lp: Loop::unstarted_with(FcConfig::default(), settings),
             modes: ModeCommander::new(),
             mission: Mission::new(),
             offboard_acc: None,
@@ -239,12 +323,6 @@ impl MavVehicle {
         }
     }
 
-    /// Checks the settings and designs the controller in place; the
-    /// session is open from then on (set-points may come before samples).
-    pub fn start(&mut self) -> Result<(), Refusal> {
-        self.flight.start_front_end()
-    }
-
     /// Armed (the motors turn).
     pub fn armed(&self) -> bool {
         self.modes.armed()
@@ -252,12 +330,12 @@ impl MavVehicle {
 
     /// The settings in force (the parameters' values).
     pub fn settings(&self) -> &Settings {
-        self.flight.settings()
+        self.lp.settings()
     }
 
     /// The flight loop (its estimator, set-point, counters).
-    pub fn flight_loop(&self) -> &FlightLoop {
-        &self.flight
+    pub fn flight_loop(&self) -> &Loop {
+        &self.lp
     }
 
     /// What was done with what arrived.
@@ -282,19 +360,29 @@ impl MavVehicle {
         self.link_errors = refused;
     }
 
-    /// Handles one message from system `from_system`; answers go to `out`.
-    /// `now_us` is the caller's clock (only a free-running loop uses it).
+    /// Handles one message; answers go to `out`. `ctrl` is the vehicle's
+    /// controller: a `HIL_SENSOR` steps it (the three halves of
+    /// [`MavShared::sensor_begin`] in one call), arming and a parameter
+    /// write design it. `now_us` is the caller's clock (only a
+    /// free-running loop uses it).
     // MISSION_REQUEST and MISSION_SET_CURRENT are deprecated, and sent.
     #[allow(deprecated)]
     pub fn handle<S: MavSink, C: CycleClock>(
         &mut self,
+        ctrl: &mut AnyController<f32>,
         msg: &MavMessage,
         out: &mut S,
         clock: &C,
         now_us: u64,
     ) -> Result<(), S::Error> {
         match msg {
-            MavMessage::HIL_SENSOR(m) => self.on_sensor(m, out, clock, now_us),
+            MavMessage::HIL_SENSOR(m) => {
+                let Some(step) = self.sensor_begin(m, clock, now_us) else {
+                    return Ok(());
+                };
+                let flown = fly_sensor_step(&mut Exclusive(&mut *self), ctrl, &step, clock);
+                self.sensor_end(&step, flown, clock, out)
+            }
             MavMessage::HIL_STATE_QUATERNION(m) => {
                 self.on_state(m);
                 Ok(())
@@ -304,7 +392,7 @@ impl MavVehicle {
                     command: m.command,
                     params: [m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7],
                 };
-                self.on_command(&c, out)
+                self.on_command(ctrl, &c, out)
             }
             MavMessage::COMMAND_INT(m) if self.for_me(m.target_system) => {
                 // x and y are integers (degrees × 1e7 in global frames);
@@ -313,7 +401,7 @@ impl MavVehicle {
                     command: m.command,
                     params: [m.param1, m.param2, m.param3, m.param4, m.x as f32, m.y as f32, m.z],
                 };
-                self.on_command(&c, out)
+                self.on_command(ctrl, &c, out)
             }
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_setpoint(m, out),
             // PX4's receiver turns SET_MODE into DO_SET_MODE (base mode,
@@ -331,7 +419,7 @@ impl MavVehicle {
                         0.0,
                     ],
                 };
-                self.on_command(&c, out)
+                self.on_command(ctrl, &c, out)
             }
             MavMessage::SETUP_SIGNING(m) if self.for_me(m.target_system) => {
                 let armed = self.modes.armed();
@@ -379,7 +467,7 @@ impl MavVehicle {
                 );
                 if !reads {
                     let mut flown = missions::flown(&mut self.mission, self.home);
-                    self.modes.mission_changing(t_us, &mut self.flight, &mut flown);
+                    self.modes.mission_changing(t_us, &mut self.lp, &mut flown);
                 }
                 let home_down_m = self.modes.home_ned_m()[2];
                 self.mission.handle(msg, t_us, self.home.as_ref(), home_down_m, out)?;
@@ -407,7 +495,7 @@ impl MavVehicle {
                     ),
                 }
             }
-            MavMessage::PARAM_SET(m) if self.for_me(m.target_system) => self.on_param_set(m, out),
+            MavMessage::PARAM_SET(m) if self.for_me(m.target_system) => self.on_param_set(ctrl, m, out),
             MavMessage::HEARTBEAT(h) => {
                 if h.mavtype == MavType::MAV_TYPE_GCS {
                     self.modes.ground_station_heard(self.last_sensor_us.unwrap_or(0));
@@ -433,7 +521,7 @@ impl MavVehicle {
 
     /// The automatic modes' settings (PX4's parameters).
     pub fn nav_settings(&self) -> &NavSettings {
-        &self.flight.settings().nav
+        &self.lp.settings().nav
     }
 
     /// A `STATUSTEXT` naming parameter `id` and why it was refused.

@@ -4,8 +4,8 @@
 //! the value in force and a `STATUSTEXT`).
 
 use super::{
-    params, MavMessage, MavParamType, MavSeverity, MavSink, MavVehicle, Peer, Refusal, PARAMS, PARAM_SET_DATA,
-    PARAM_VALUE_DATA,
+    params, AnyController, Exclusive, MavMessage, MavParamType, MavSeverity, MavShared, MavSink, Peer, Refusal, PARAMS,
+    PARAM_SET_DATA, PARAM_VALUE_DATA,
 };
 
 /// Every parameter served ([`PARAMS`]).
@@ -21,9 +21,10 @@ pub(super) fn param_id(index: usize) -> &'static str {
     PARAMS.get(index).map_or("?", |p| p.mavlink_name())
 }
 
-impl MavVehicle {
+impl MavShared {
     pub(in crate::vehicle) fn on_param_set<S: MavSink>(
         &mut self,
+        ctrl: &mut AnyController<f32>,
         m: &PARAM_SET_DATA,
         out: &mut S,
     ) -> Result<(), S::Error> {
@@ -36,7 +37,7 @@ impl MavVehicle {
                 Refusal::Unknown,
             );
         };
-        let r = self.apply(i, m.param_value);
+        let r = self.apply(ctrl, i, m.param_value);
         if let Err(why) = r {
             self.counters.params_refused = self.counters.params_refused.wrapping_add(1);
             let id = param_id(i);
@@ -59,17 +60,19 @@ impl MavVehicle {
     }
 
     /// Sets parameter `index` to `value`: checked, and applied to the
-    /// controller (re-designed while disarmed), the mixer and the failsafe.
-    pub fn apply(&mut self, index: usize, value: f32) -> Result<(), Refusal> {
+    /// controller `ctrl` (re-designed while disarmed), the mixer and the
+    /// failsafe.
+    pub fn apply(&mut self, ctrl: &mut AnyController<f32>, index: usize, value: f32) -> Result<(), Refusal> {
         // The loop's mixer follows its settings.
-        self.flight.apply_param(index, value, !self.modes.armed())
+        let plan = self.lp.plan_param(index, value, !self.modes.armed())?;
+        fc_loop::apply_plan(&mut Exclusive(&mut self.lp), ctrl, plan)
     }
 
     pub(in crate::vehicle) fn send_param<S: MavSink>(&self, index: usize, out: &mut S) -> Result<(), S::Error> {
         let Some(p) = PARAMS.get(index) else {
             return Ok(());
         };
-        let value = (p.get)(self.flight.settings());
+        let value = (p.get)(self.lp.settings());
         out.send(
             Peer::GroundStation,
             &MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {

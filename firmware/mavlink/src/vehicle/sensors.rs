@@ -3,11 +3,42 @@
 //! simulator's true state).
 
 use super::{
-    hil, CycleClock, Fix, Home, MavMessage, MavSink, MavVehicle, Peer, StateFixSigmas, Vector3, BARO_PERIOD_US,
-    HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA, MAG_SIGMA_RAD, STREAMS,
+    hil, AnyController, CycleClock, Fix, Home, MavMessage, MavShared, MavSink, Peer, StateFixSigmas, Vector3,
+    BARO_PERIOD_US, HIL_SENSOR_DATA, HIL_STATE_QUATERNION_DATA, MAG_SIGMA_RAD, STREAMS,
 };
+use core::borrow::BorrowMut;
+use fc_loop::{Actuation, LoopOf, Mutex, Step};
 
-impl MavVehicle {
+/// A `HIL_SENSOR`'s step between its halves: what the estimator's half
+/// ([`MavShared::sensor_begin`]) hands the controller's.
+#[derive(Debug, Clone, Copy)]
+pub struct SensorStep {
+    /// The sample's time (`time_usec`), µs.
+    t_us: u64,
+    /// Since the last sample, s.
+    dt_s: f32,
+    /// The loop's step (`None`: nothing to step on yet).
+    job: Option<Step>,
+}
+
+/// Flies `step` on the controller `ctrl` (an image's controller task), the
+/// vehicle `v` locked only to take the step's inputs and record its result
+/// ([`fc_loop::stabilize`]); returns the controller's result for
+/// [`MavShared::sensor_end`] (`None`: not due).
+pub fn fly_sensor_step<M: Mutex, C: CycleClock>(
+    v: &mut M,
+    ctrl: &mut AnyController<f32>,
+    step: &SensorStep,
+    clock: &C,
+) -> Option<Actuation>
+where
+    M::T: BorrowMut<MavShared>,
+{
+    step.job
+        .map(|j| fc_loop::stabilize(&mut LoopOf::<_, MavShared>::new(v), ctrl, &j, clock))
+}
+
+impl MavShared {
     /// Flies `truth` (the simulator's true state, NED about home: the
     /// origin of `HIL_STATE_QUATERNION`'s first fix) in place of the
     /// estimate, from the estimator's alignment on: the controller alone,
@@ -15,23 +46,23 @@ impl MavVehicle {
     /// only (`truth-state`); the images fly their estimate.
     #[cfg(feature = "truth-state")]
     pub fn fly_truth(&mut self, truth: fc_core::control::StateEstimate<f32>) {
-        self.flight.navigator_mut().set_truth(Some(truth));
+        self.lp.navigator_mut().set_truth(Some(truth));
     }
 
-    pub(in crate::vehicle) fn on_sensor<S: MavSink, C: CycleClock>(
-        &mut self,
-        m: &HIL_SENSOR_DATA,
-        out: &mut S,
-        clock: &C,
-        now_us: u64,
-    ) -> Result<(), S::Error> {
+    /// The estimator's half of a `HIL_SENSOR` (`m`): the sample checked (a
+    /// refused one is counted and steps nothing), a simulator that started
+    /// again opens a new time line, the barometer and magnetometer fused,
+    /// one estimator step ([`Loop::imu_job`](fc_loop::Loop::imu_job)).
+    /// Returns the controller's step ([`fly_sensor_step`] flies it, then
+    /// [`MavShared::sensor_end`] answers it); `None`: refused.
+    pub fn sensor_begin<C: CycleClock>(&mut self, m: &HIL_SENSOR_DATA, clock: &C, now_us: u64) -> Option<SensorStep> {
         let Ok(s) = hil::imu_from_hil_sensor(m) else {
             self.counters.sensors_refused = self.counters.sensors_refused.wrapping_add(1);
-            return Ok(());
+            return None;
         };
         if self.last_sensor_us.is_none_or(|t| s.time_us < t) {
             // The first sample, or a simulator that started again: a new time line.
-            self.flight.open_session();
+            self.lp.open_session();
             self.home = None;
             self.last_fix_us = None;
             self.mag_ref_rad = None;
@@ -51,25 +82,42 @@ impl MavVehicle {
             self.on_mag(s.time_us, &mag);
         }
         self.seq = self.seq.wrapping_add(1);
-        // The supervisor lets every armed step fly (the modes' failsafes
-        // are set-points: Hold, Land).
-        let flown = self
-            .flight
-            .stabilize(self.seq, s.time_us, &s.imu, clock, now_us, self.modes.armed());
-        self.cycles = (flown.actuation.map_or(0, |a| a.cycles), clock.hz());
+        Some(SensorStep {
+            t_us: s.time_us,
+            dt_s,
+            job: self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us),
+        })
+    }
+
+    /// The end of a sample's step whose controller gave `flown` (`None`:
+    /// not due): the supervisor's gate (every armed step flies: the modes'
+    /// failsafes are set-points, Hold and Land) and the mixer
+    /// ([`Loop::power`](fc_loop::Loop::power)), the simulator answered
+    /// (`HIL_ACTUATOR_CONTROLS`), then the ground-station failsafe, the
+    /// mission, the mode's set-point for the next step and the telemetry due.
+    pub fn sensor_end<S: MavSink, C: CycleClock>(
+        &mut self,
+        step: &SensorStep,
+        flown: Option<Actuation>,
+        clock: &C,
+        out: &mut S,
+    ) -> Result<(), S::Error> {
+        let power = self.lp.power(self.modes.armed(), flown.map(|a| a.u));
+        self.cycles = (flown.map_or(0, |a| a.cycles), clock.hz());
         self.counters.steps = self.counters.steps.wrapping_add(1);
-        self.motors = flown.power.motors.commands;
-        if flown.power.on && flown.power.motors.clamped {
+        self.motors = power.motors.commands;
+        if power.on && power.motors.clamped {
             self.counters.clamped_steps = self.counters.clamped_steps.wrapping_add(1);
         }
+        let t_us = step.t_us;
         out.send(
             Peer::Simulator,
-            &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(s.time_us, &self.motors, self.modes.armed())),
+            &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(t_us, &self.motors, self.modes.armed())),
         )?;
-        self.watch_ground_station(s.time_us, out)?;
-        self.mission.tick(s.time_us, out)?;
-        self.fly_mode(s.time_us, dt_s, out)?;
-        self.telemetry(s.time_us, out)
+        self.watch_ground_station(t_us, out)?;
+        self.mission.tick(t_us, out)?;
+        self.fly_mode(t_us, step.dt_s, out)?;
+        self.telemetry(t_us, out)
     }
 
     /// A barometric altitude (`HIL_SENSOR`, flagged): fused as the height
@@ -78,7 +126,7 @@ impl MavVehicle {
     /// then (a barometer's altitude is above sea level, and drifts with the
     /// weather: what is fused is its change).
     pub(in crate::vehicle) fn on_baro(&mut self, t_us: u64, alt_m: f32) {
-        if self.flight.push_baro(t_us, alt_m) {
+        if self.lp.push_baro(t_us, alt_m) {
             self.counters.baro_fixes = self.counters.baro_fixes.wrapping_add(1);
         }
     }
@@ -89,7 +137,7 @@ impl MavVehicle {
     /// The first reading is referenced to the estimated heading then, which
     /// removes the declination (no world magnetic model on board).
     pub(in crate::vehicle) fn on_mag(&mut self, t_us: u64, mag_frd: &Vector3<f32>) {
-        let Some(est) = self.flight.navigator().estimate() else {
+        let Some(est) = self.lp.navigator().estimate() else {
             return;
         };
         let e = est.euler();
@@ -105,7 +153,7 @@ impl MavVehicle {
             yaw_sigma_rad: MAG_SIGMA_RAD,
             ..Fix::EMPTY
         };
-        self.flight.push_fix(&fix);
+        self.lp.push_fix(&fix);
         self.counters.mag_fixes = self.counters.mag_fixes.wrapping_add(1);
     }
 
@@ -116,7 +164,7 @@ impl MavVehicle {
         }
         let home = *self.home.get_or_insert(Home::of(m));
         self.reported_ned_m = Some(home.ned_m(m.lat, m.lon, m.alt));
-        let period_us = u64::from(self.flight.settings().fix_period_ms) * 1000;
+        let period_us = u64::from(self.lp.settings().fix_period_ms) * 1000;
         if self.last_fix_us.is_some_and(|t| m.time_usec < t + period_us) {
             return;
         }
@@ -124,7 +172,7 @@ impl MavVehicle {
             Ok(mut f) => {
                 // A mocap gives position and heading, not velocity.
                 f.vel_ned_mps = None;
-                self.flight.push_fix(&f);
+                self.lp.push_fix(&f);
                 self.last_fix_us = Some(m.time_usec);
             }
             Err(_) => self.counters.states_refused = self.counters.states_refused.wrapping_add(1),

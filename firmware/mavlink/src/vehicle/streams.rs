@@ -2,7 +2,7 @@
 //! (`SET_MESSAGE_INTERVAL` changes it), built from the flight stack's state.
 
 use super::{
-    autopilot_version, boot_ms, hil, EstimatorStatusFlags, MavMessage, MavSink, MavSysStatusSensor, MavVehicle,
+    autopilot_version, boot_ms, hil, EstimatorStatusFlags, MavMessage, MavShared, MavSink, MavSysStatusSensor,
     MavVtolState, NavMode, Peer, Px4Mode, ATTITUDE_DATA, ATTITUDE_QUATERNION_DATA, AUTOPILOT_VERSION_ID,
     ESTIMATOR_STATUS_DATA, EXTENDED_SYS_STATE_DATA, GLOBAL_POSITION_INT_DATA, HOME_POSITION_DATA,
     LOCAL_POSITION_NED_DATA, SYS_STATUS_DATA,
@@ -26,7 +26,7 @@ pub const STREAMS: [(u32, u64); 10] = [
 /// The shortest interval a stream may be set to, µs (the IMU's step).
 pub const MIN_INTERVAL_US: u64 = 1_000;
 
-impl MavVehicle {
+impl MavShared {
     /// Sends the telemetry due at simulated time `t_us` ([`STREAMS`], at
     /// their intervals).
     pub(in crate::vehicle) fn telemetry<S: MavSink>(&mut self, t_us: u64, out: &mut S) -> Result<(), S::Error> {
@@ -49,7 +49,7 @@ impl MavVehicle {
     /// Message `id` as of `t_us`, if this vehicle sends it (and has what it
     /// carries: an estimate, a home).
     pub(in crate::vehicle) fn message(&self, id: u32, t_us: u64) -> Option<MavMessage> {
-        let est = self.flight.navigator().estimate();
+        let est = self.lp.navigator().estimate();
         let time_boot_ms = boot_ms(t_us);
         Some(match id {
             0 => MavMessage::HEARTBEAT(hil::heartbeat(self.modes.armed(), self.modes.mode().custom_mode())),
@@ -144,7 +144,7 @@ impl MavVehicle {
     /// `mag_ratio`; no height-above-ground or airspeed source: 0).
     pub(in crate::vehicle) fn estimator_status(&self, t_us: u64) -> ESTIMATOR_STATUS_DATA {
         use EstimatorStatusFlags as F;
-        let nav = self.flight.navigator();
+        let nav = self.lp.navigator();
         let sig = nav.estimator().sigmas();
         let navigating = nav.mode() == NavMode::Navigating;
         let mut flags = F::empty();
@@ -191,7 +191,7 @@ impl MavVehicle {
             present |= S::MAV_SYS_STATUS_SENSOR_GPS;
         }
         let mut healthy = present;
-        let navigating = self.flight.navigator().mode() == NavMode::Navigating && !self.flight.failsafe();
+        let navigating = self.lp.navigator().mode() == NavMode::Navigating && !self.lp.failsafe();
         if !navigating {
             healthy.remove(
                 S::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
@@ -201,7 +201,7 @@ impl MavVehicle {
                     | S::MAV_SYS_STATUS_PREARM_CHECK,
             );
         }
-        if self.flight.mixer().is_none() {
+        if self.lp.mixer().is_none() {
             healthy.remove(S::MAV_SYS_STATUS_PREARM_CHECK);
         }
         // There is no fence, so none is breached: a clear health bit reads
@@ -226,7 +226,7 @@ impl MavVehicle {
             errors_count1: self.counters.sensors_refused.min(u32::from(u16::MAX)) as u16,
             errors_count2: self.counters.params_refused.min(u32::from(u16::MAX)) as u16,
             errors_count3: self.counters.commands_refused.min(u32::from(u16::MAX)) as u16,
-            errors_count4: self.flight.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
+            errors_count4: self.lp.counters().invalid_values.min(u32::from(u16::MAX)) as u16,
             battery_remaining: -1,
         }
     }

@@ -1672,3 +1672,46 @@ fn parameters_and_the_signing_key_are_stored_and_boot_again() {
         "{values:?}"
     );
 }
+
+/// `firmware-mavlink` steps a `HIL_SENSOR` in three halves on the split
+/// vehicle (its estimator's task, its controller's, the step's end) and
+/// hands every other message to the link's task: through alignment, a
+/// re-designing parameter write, arming (which designs) and a take-off,
+/// every message the halves send is the one [`MavVehicle::handle`] sends,
+/// in the same order, and the motors run.
+#[test]
+fn the_images_halves_send_what_one_call_sends() {
+    let mut whole = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut parts = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let (mut a, mut b) = (Sent::default(), Sent::default());
+    let mut script: Vec<MavMessage> = (0..2_000).flat_map(|k| at_rest(k * 1000)).collect();
+    let w_pos = PARAMS[param_index_of(b"LQR_W_POS").unwrap()].get;
+    script.extend([
+        param_set("LQR_W_POS", 1.1 * w_pos(whole.settings())),
+        set_mode(FlightMode::Hold),
+        command(1.0, 0.0),
+        command_of(MavCmd::MAV_CMD_NAV_TAKEOFF, [f32::NAN; 7]),
+    ]);
+    script.extend((2_000..3_000).flat_map(|k| at_rest(k * 1000)));
+    for m in &script {
+        whole.handle(m, &mut a, &Still, 0).unwrap();
+        let (shared, ctrl) = parts.split();
+        match m {
+            MavMessage::HIL_SENSOR(s) => {
+                if let Some(step) = shared.sensor_begin(s, &Still, 0) {
+                    let flown = fly_sensor_step(&mut Exclusive(&mut *shared), ctrl, &step, &Still);
+                    shared.sensor_end(&step, flown, &Still, &mut b).unwrap();
+                }
+            }
+            m => shared.handle(ctrl, m, &mut b, &Still, 0).unwrap(),
+        }
+    }
+    assert_eq!(a.count("HIL_ACTUATOR_CONTROLS"), 3_000);
+    assert_eq!(a.0, b.0);
+    assert!(
+        parts.armed() && parts.motors().iter().all(|&m| m > 0.1),
+        "{:?}",
+        parts.motors()
+    );
+    assert_eq!(parts.mode(), FlightMode::Takeoff);
+}
