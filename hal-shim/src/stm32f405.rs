@@ -56,7 +56,9 @@ impl Port {
         }
     }
 
-    /// Runs `f` on its receive queue, in a critical section.
+    /// Runs `f` on its receive queue, in a critical section. Inlined, so
+    /// that an image that names one port constant links only its queue.
+    #[inline(always)]
     fn with_queue<R>(self, f: impl FnOnce(&mut heapless::deque::DequeView<u8>) -> R) -> R {
         critical_section::with(|cs| match self {
             Port::Usart1 => f(RX1.borrow_ref_mut(cs).as_mut_view()),
@@ -90,6 +92,7 @@ fn rcc() -> &'static pac::rcc::RegisterBlock {
 /// lockstep step's twenty preview frames, arrives whole). On silicon the
 /// sender does not wait: bytes arriving during the pause overrun (ORE) and
 /// are counted ([`rx_overruns`]), so the loss is seen, not silent.
+#[inline(always)]
 pub fn usart_isr(port: Port) {
     let u = port.regs();
     loop {
@@ -122,6 +125,7 @@ pub fn usart_isr(port: Port) {
 /// [`usart_isr`] moved there) into `buf`, never waiting; returns how many.
 /// What [`Usart::read`] does, for code that receives in the port's own
 /// interrupt while another owner transmits.
+#[inline(always)]
 pub fn read_queued(port: Port, buf: &mut [u8]) -> usize {
     port.with_queue(|q| {
         let mut n = 0;
@@ -143,6 +147,12 @@ pub fn read_queued(port: Port, buf: &mut [u8]) -> usize {
 /// corrupts the frame it belonged to; the protocol counts that frame as bad).
 pub fn rx_overruns(port: Port) -> u32 {
     critical_section::with(|cs| RX_OVERRUNS.borrow(cs).get()[port as usize])
+}
+
+/// True if received bytes are waiting in `port`'s queue.
+#[inline(always)]
+pub fn rx_waiting(port: Port) -> bool {
+    !port.with_queue(|q| q.is_empty())
 }
 
 /// True if received bytes are waiting in any port's queue.

@@ -215,11 +215,15 @@ macro_rules! board_runtime {
             hal_shim::stm32f405::systick_isr();
         }
 
-        /// Every device interrupt lands here; a USART's moves bytes into its queue.
+        /// Every device interrupt an image does not bind lands here;
+        /// USART1's (the link [`bring_up`](crate::board::bring_up) starts
+        /// in every image) moves bytes into its queue. USART6 is started
+        /// only by the CRTP images, whose task binds it, so an image that
+        /// does not use it links no queue for it.
         #[cortex_m_rt::exception]
         unsafe fn DefaultHandler(irqn: i16) {
-            if let Some(port) = hal_shim::stm32f405::Port::of_irq(irqn) {
-                hal_shim::stm32f405::usart_isr(port);
+            if hal_shim::stm32f405::Port::of_irq(irqn) == Some(hal_shim::stm32f405::Port::Usart1) {
+                hal_shim::stm32f405::usart_isr(hal_shim::stm32f405::Port::Usart1);
             }
         }
 
