@@ -14,20 +14,33 @@
 //! as it grows (checked every 1 000 samples).
 //!
 //! An RTIC 2 application, its tasks ordered as the other images' are (the
-//! sample first, then the vehicle, then the link's housekeeping):
+//! sample and the estimator first, then the controller, then the link):
 //!
 //! | priority | task | interrupt | work |
 //! |---|---|---|---|
-//! | 3 | `usart1_bytes` | USART1 receive | the link's bytes into their queue (the simulator's `HIL_SENSOR` is the sample's arrival), the vehicle's task pended |
-//! | 2 | `vehicle` | CAN2_RX0 (pended) | decodes the queued frames; a `HIL_SENSOR` steps the estimator and the controller and is answered, a ground station's message is handled ([`MavVehicle::handle`]) |
-//! | 1 | `housekeeping` | CAN2_RX1 (pended) | the signing timestamp kept on landing, the log |
+//! | 4 | `usart1_bytes` | USART1 receive | the link's bytes into their queue, the link's task pended |
+//! | 3 | `estimator` | CAN2_SCE (pended) | a `HIL_SENSOR` (the sample): the estimator's half of its step ([`MavShared::sensor_begin`]), handed to the controller's task |
+//! | 2 | `controller` | CAN2_RX0 (pended) | flies the step ([`fly_sensor_step`]), then its end ([`MavShared::sensor_end`]): the motors, the simulator's answer, the modes' set-point, the telemetry due |
+//! | 1 | `link` | CAN2_RX1 (pended) | decodes the queued frames: a `HIL_SENSOR` goes to the estimator's task, a ground station's message is handled ([`MavShared::handle`]); the signing timestamp kept on landing; the log |
 //!
-//! The simulator's samples and the ground station's messages share USART1,
-//! so one task decodes both: the sample's estimator and controller steps
-//! are one call of the vehicle (the CRTP images split them, their samples
-//! coming on a port of their own).
+//! The simulator's samples and the ground station's messages share
+//! USART1, so the link's task decodes both, as PX4's MAVLink receiver
+//! does: a sample is handed up to the estimator's task, which preempts the
+//! link at once, and the controller's task runs before the next frame is
+//! decoded, so the steps and the messages keep the order they came in.
+//! The vehicle's state ([`MavShared`]) is locked for the estimator's half,
+//! for a step's inputs and result, for the step's end (which writes the
+//! step's answer and telemetry to USART1) and for a ground station's
+//! message; the controller's step runs with it unlocked. A message that
+//! designs the controller (arming, a re-designing parameter) holds the
+//! controller meanwhile, so the steps wait for the design, as PX4's HIL
+//! lockstep waits for its answer.
 //!
-//! [`MavVehicle::handle`]: fc_mavlink::vehicle::MavVehicle::handle
+//! [`MavShared::sensor_begin`]: fc_mavlink::vehicle::MavShared::sensor_begin
+//! [`MavShared::sensor_end`]: fc_mavlink::vehicle::MavShared::sensor_end
+//! [`MavShared::handle`]: fc_mavlink::vehicle::MavShared::handle
+//! [`MavShared`]: fc_mavlink::vehicle::MavShared
+//! [`fly_sensor_step`]: fc_mavlink::vehicle::fly_sensor_step
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -37,25 +50,30 @@ fc_stm32f405::board_runtime!();
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32f4::stm32f405, peripherals = false)]
 mod app {
+    use fc_core::control::AnyController;
+    use fc_mavlink::common::HIL_SENSOR_DATA;
     use fc_mavlink::params::Settings;
     use fc_mavlink::signing::{Signing, SIMULATOR_UNSIGNED};
-    use fc_mavlink::vehicle::{MavSink, MavVehicle, Peer, VehicleCounters};
+    use fc_mavlink::vehicle::{fly_sensor_step, MavShared, MavSink, MavVehicle, Peer, SensorStep, VehicleCounters};
     use fc_mavlink::{encode_signed, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
     use fc_stm32f405::board;
     use fc_stm32f405::flash::Kept;
     use fc_storage::Persist;
-    use hal_shim::stm32f405::{read_queued, rx_pending, usart_isr, Port, SysTickClock, TxTimeout, Usart};
+    use hal_shim::stm32f405::{read_queued, rx_waiting, usart_isr, Port, SysTickClock, TxTimeout, Usart};
     use hal_shim::ByteLink;
     use stm32f4::stm32f405::Interrupt;
 
     /// This vehicle's MAVLink system id (component: MAV_COMP_ID_AUTOPILOT1).
     const SYSTEM_ID: u8 = 1;
 
-    /// Reads of 64 bytes the vehicle's task takes per run; more waiting
-    /// pends it again, so the link's task below it is not starved.
+    /// Reads of 64 bytes the link's task takes per run; more waiting pends
+    /// it again.
     const READS: usize = 16;
 
-    /// Whether the vehicle is armed, as the vehicle's task last saw it:
+    /// USART1 transmits that timed out (the controller's and the link's).
+    static TX_ERRORS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+
+    /// Whether the vehicle is armed, as the link's task last saw it:
     /// the settings store refuses writes then.
     static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
@@ -95,23 +113,29 @@ mod app {
         }
     }
 
-    /// The vehicle's task's, locked by the housekeeping task below it only
-    /// to read what it logs and to keep a landing's signing timestamp.
+    /// The tasks' resources (see the module's documentation).
     #[shared]
     struct Shared {
-        /// The vehicle, in static RAM.
-        v: &'static mut MavVehicle,
+        /// The vehicle's state, in static RAM.
+        v: &'static mut MavShared,
+        /// Its controller, in static RAM.
+        ctrl: &'static mut AnyController<f32>,
         /// The link: its transmitter, signing, the store.
         link: Link,
-        /// USART1's frames decoded and checked (signatures included).
-        reader: MavReader,
+        /// A `HIL_SENSOR` for the estimator's task.
+        sample: Option<HIL_SENSOR_DATA>,
+        /// A step for the controller's task.
+        step: Option<SensorStep>,
     }
 
     #[local]
     struct Local {
-        clock: SysTickClock,
+        /// USART1's frames decoded and checked (signatures included).
+        reader: MavReader,
+        estimator_clock: SysTickClock,
+        controller_clock: SysTickClock,
+        link_clock: SysTickClock,
         signing_us: u64,
-        tx_errors: u32,
         last: (bool, VehicleCounters, u32, usize),
     }
 
@@ -119,14 +143,14 @@ mod app {
     fn init(_: init::Context) -> (Shared, Local) {
         fc_stm32f405::stack::paint();
         let (clock, usart) = board::bring_up();
-        let Some(v) = the_vehicle() else {
+        let Some(vehicle) = the_vehicle() else {
             board::fail("vehicle already taken");
         };
-        if v.start().is_err() {
+        if vehicle.start().is_err() {
             board::fail("boot parameters refused or design failed");
         }
         defmt::info!(
-            "up: MAVLink 2, system {=u8}, waiting on USART1; static RAM {=usize} bytes; tasks: bytes (3), vehicle (2), housekeeping (1)",
+            "up: MAVLink 2, system {=u8}, waiting on USART1; static RAM {=usize} bytes; tasks: bytes (4), estimator (3), controller (2), link (1)",
             SYSTEM_ID,
             fc_stm32f405::stack::static_ram()
         );
@@ -135,27 +159,32 @@ mod app {
             fc_stm32f405::flash::open_settings(&ARMED, |_| {}).and_then(|k| cortex_m::singleton!(: Kept = k));
         let mut signing = Signing::new();
         if let Some(st) = store.as_deref_mut() {
-            restore(v, st, &mut signing);
+            restore(vehicle, st, &mut signing);
         }
         // The simulator's samples share USART1 with the ground station:
         // they pass unsigned (fc_mavlink::signing::SIMULATOR_UNSIGNED).
         signing.also_accept_unsigned(&SIMULATOR_UNSIGNED);
         let signing_us = board::now_us(&clock);
+        let (v, ctrl) = vehicle.split();
         (
             Shared {
                 v,
+                ctrl,
                 link: Link {
                     usart,
                     seq: 0,
                     signing,
                     store,
                 },
-                reader: MavReader::new(SYSTEM_ID),
+                sample: None,
+                step: None,
             },
             Local {
-                clock,
+                reader: MavReader::new(SYSTEM_ID),
+                estimator_clock: clock,
+                controller_clock: clock,
+                link_clock: clock,
                 signing_us,
-                tx_errors: 0,
                 last: (false, VehicleCounters::default(), 0, 0),
             },
         )
@@ -168,59 +197,100 @@ mod app {
         }
     }
 
-    /// USART1's bytes into their queue; the vehicle's task takes them.
-    #[task(binds = USART1, priority = 3)]
+    /// USART1's bytes into their queue; the link's task takes them.
+    #[task(binds = USART1, priority = 4)]
     fn usart1_bytes(_: usart1_bytes::Context) {
         usart_isr(Port::Usart1);
-        rtic::pend(Interrupt::CAN2_RX0);
-    }
-
-    /// The vehicle: the queued frames decoded and handled in order (a
-    /// `HIL_SENSOR` is a step, answered), at most [`READS`] reads a run.
-    #[task(binds = CAN2_RX0, priority = 2, shared = [v, link, reader], local = [clock, signing_us, tx_errors])]
-    fn vehicle(cx: vehicle::Context) {
-        let vehicle::LocalResources {
-            clock,
-            signing_us,
-            tx_errors,
-            ..
-        } = cx.local;
-        let now_us = board::now_us(clock);
-        // The housekeeping task, below this one, cannot run before it ends.
-        (cx.shared.v, cx.shared.link, cx.shared.reader).lock(|v, link, reader| {
-            link.signing.advance_us(now_us.saturating_sub(*signing_us));
-            *signing_us = now_us;
-            let mut buf = [0u8; 64];
-            for _ in 0..READS {
-                let n = read_queued(Port::Usart1, &mut buf);
-                if n == 0 {
-                    break;
-                }
-                for &b in &buf[..n.min(buf.len())] {
-                    if let Some(Ok((_, msg))) = reader.push_signed(b, &mut link.signing) {
-                        if v.handle(&msg, link, &*clock, now_us).is_err() {
-                            *tx_errors = tx_errors.wrapping_add(1);
-                            defmt::warn!("USART1 transmit timed out ({=u32} so far)", *tx_errors);
-                        }
-                    }
-                }
-            }
-            v.set_link_errors(reader.counters().refused());
-        });
-        if rx_pending() {
-            rtic::pend(Interrupt::CAN2_RX0);
-        }
         rtic::pend(Interrupt::CAN2_RX1);
     }
 
-    /// The link's housekeeping: on landing the signing timestamp is kept,
-    /// so that after a reset the vehicle's signatures go on from there;
-    /// then what changed is logged.
-    #[task(binds = CAN2_RX1, priority = 1, shared = [v, link, reader], local = [last])]
-    fn housekeeping(cx: housekeeping::Context) {
-        let (mut v, mut link, mut reader) = (cx.shared.v, cx.shared.link, cx.shared.reader);
-        let (armed, counters) = v.lock(|v| (v.armed(), v.counters()));
-        let frames = reader.lock(|r| r.counters());
+    /// The estimator's half of the sample the link's task handed up; its
+    /// step goes to the controller's task.
+    #[task(binds = CAN2_SCE, priority = 3, shared = [v, sample, step], local = [estimator_clock])]
+    fn estimator(cx: estimator::Context) {
+        let clock = &*cx.local.estimator_clock;
+        let (mut v, mut sample, mut slot) = (cx.shared.v, cx.shared.sample, cx.shared.step);
+        let Some(m) = sample.lock(Option::take) else {
+            return;
+        };
+        let now_us = board::now_us(clock);
+        if let Some(step) = v.lock(|v| v.sensor_begin(&m, clock, now_us)) {
+            if slot.lock(|s| s.replace(step)).is_some() {
+                count_dropped("step");
+            }
+            rtic::pend(Interrupt::CAN2_RX0);
+        }
+    }
+
+    /// The controller's step, then the step's end: the motors, the
+    /// simulator's answer, the modes, the telemetry.
+    #[task(binds = CAN2_RX0, priority = 2, shared = [v, ctrl, link, step], local = [controller_clock])]
+    fn controller(cx: controller::Context) {
+        let clock = &*cx.local.controller_clock;
+        let (mut v, mut ctrl, mut link, mut slot) = (cx.shared.v, cx.shared.ctrl, cx.shared.link, cx.shared.step);
+        let Some(step) = slot.lock(Option::take) else {
+            return;
+        };
+        let flown = ctrl.lock(|c| fly_sensor_step(&mut v, c, &step, clock));
+        if (&mut v, &mut link)
+            .lock(|v, link| v.sensor_end(&step, flown, clock, link))
+            .is_err()
+        {
+            count_tx_error();
+        }
+    }
+
+    /// The link: the queued frames decoded in order, at most [`READS`]
+    /// reads a run (a sample handed to the estimator's task, a ground
+    /// station's message handled); then the signing timestamp kept on
+    /// landing, so that after a reset the vehicle's signatures go on from
+    /// there, and what changed logged.
+    #[task(binds = CAN2_RX1, priority = 1, shared = [v, ctrl, link, sample], local = [reader, link_clock, signing_us, last])]
+    fn link(cx: link::Context) {
+        let link::LocalResources {
+            reader,
+            link_clock: clock,
+            signing_us,
+            last,
+            ..
+        } = cx.local;
+        let (mut v, mut ctrl, mut link, mut sample) = (cx.shared.v, cx.shared.ctrl, cx.shared.link, cx.shared.sample);
+        let now_us = board::now_us(clock);
+        link.lock(|l| l.signing.advance_us(now_us.saturating_sub(*signing_us)));
+        *signing_us = now_us;
+        let mut buf = [0u8; 64];
+        for _ in 0..READS {
+            let n = read_queued(Port::Usart1, &mut buf);
+            if n == 0 {
+                break;
+            }
+            for &b in &buf[..n.min(buf.len())] {
+                // Locked a byte at a time: a step the last frame started
+                // runs to its end before the next frame is decoded.
+                let Some(Ok((_, msg))) = link.lock(|l| reader.push_signed(b, &mut l.signing)) else {
+                    continue;
+                };
+                if let MavMessage::HIL_SENSOR(m) = msg {
+                    if sample.lock(|s| s.replace(m)).is_some() {
+                        count_dropped("sample");
+                    }
+                    rtic::pend(Interrupt::CAN2_SCE);
+                } else if (&mut v, &mut ctrl, &mut link)
+                    .lock(|v, c, link| v.handle(c, &msg, link, &*clock, now_us))
+                    .is_err()
+                {
+                    count_tx_error();
+                }
+            }
+        }
+        let frames = reader.counters();
+        let (armed, counters) = v.lock(|v| {
+            v.set_link_errors(frames.refused());
+            (v.armed(), v.counters())
+        });
+        if rx_waiting(Port::Usart1) {
+            rtic::pend(Interrupt::CAN2_RX1);
+        }
         if ARMED.swap(armed, core::sync::atomic::Ordering::Relaxed) && !armed {
             link.lock(|link| {
                 if let (Some(st), Some(key)) = (link.store.as_deref_mut(), link.signing.key()) {
@@ -233,7 +303,19 @@ mod app {
                 }
             });
         }
-        log_changes(armed, &counters, &frames, cx.local.last);
+        log_changes(armed, &counters, &frames, last);
+    }
+
+    /// Counts a transmit that timed out, and says so.
+    fn count_tx_error() {
+        let n = TX_ERRORS.fetch_add(1, core::sync::atomic::Ordering::Relaxed) + 1;
+        defmt::warn!("USART1 transmit timed out ({=u32} so far)", n);
+    }
+
+    /// Says that a hand-over between the tasks found its slot full (the
+    /// task above had not taken the last one: never, as they preempt).
+    fn count_dropped(what: &str) {
+        defmt::warn!("{=str} dropped: the task above had not taken the last", what);
     }
 
     /// Takes the settings kept in `st` at boot: the parameters (each
