@@ -365,6 +365,8 @@ pub struct CrtpShared {
     seq: u32,
     /// Inputs of the last step `[U1 N, U2 N, U3 N, U4 N·m]` (zero: motors off).
     u: Vector4<f32>,
+    /// The motor commands of the last step (the mixer's unit; zero: off).
+    motors: [f32; 4],
     /// A position source with heading has been seen (pose, or the host's).
     heading_seen: bool,
     /// The battery voltage the radio chip last reported, V; `None` until
@@ -402,6 +404,7 @@ impl CrtpShared {
             now_us: 0,
             seq: 0,
             u: Vector4::zeros(),
+            motors: [0.0; 4],
             heading_seen: false,
             vbat_v: None,
             pm_state: 0,
@@ -552,11 +555,10 @@ impl CrtpShared {
         self.u
     }
 
-    /// The motor commands of the last step (the mixer's unit; zero off),
-    /// mixed when asked (the log, a test), not in the step.
+    /// The motor commands of the last step (the mixer's unit; zero off):
+    /// the step's [`Power`].
     pub fn motors(&self) -> [f32; 4] {
-        // Off, the step's inputs are zero: so are their commands.
-        self.lp.mixer().map_or([0.0; 4], |m| m.commands(&self.u).commands)
+        self.motors
     }
 
     /// The mixer of the parameters in force (`None` until started; the

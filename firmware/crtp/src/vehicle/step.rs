@@ -60,6 +60,7 @@ impl CrtpShared {
         let fly = self.armed && !self.commander.is_idle() && step.setpoint;
         let power = self.lp.power(fly, u);
         self.u = power.u;
+        self.motors = power.motors.commands;
         power
     }
 
