@@ -1,11 +1,9 @@
 //! [`FlightLoop`]: the flight loop and its controller in one piece, for
 //! the host and for images that run them in one task.
 
-use crate::power::Stabilized;
 use crate::{
-    apply_plan, fallback_controller, install, params, run_job, select, stabilize, start_front_end, AnyController,
-    ByteLink, ControlError, ControllerSpec, CycleClock, Exclusive, FcConfig, Framed, ImuSample, Job, Loop, Outbox,
-    ToFc,
+    apply_param, fallback_controller, install, params, run_job, start_front_end, AnyController, ByteLink, ControlError,
+    ControllerSpec, CycleClock, Exclusive, FcConfig, Framed, Job, Loop, Outbox, ToFc,
 };
 
 /// The flight controller's state between steps.
@@ -117,46 +115,13 @@ impl FlightLoop {
         start_front_end(&mut self.lp, &mut self.ctrl)
     }
 
-    /// One stabilizer step on the IMU sample `imu` taken at `t_us` (the
-    /// `seq`-th), in one call: the estimator ([`Loop::imu_job`]), the
-    /// controller ([`stabilize`](crate::stabilize)), the supervisor's gate
-    /// `fly` (the vehicle's supervisor lets this step fly) and the mixer
-    /// ([`Loop::power`]). For a front end whose estimator and controller
-    /// run in one task.
-    pub fn stabilize<C: CycleClock>(
-        &mut self,
-        seq: u32,
-        t_us: u64,
-        imu: &ImuSample,
-        clock: &C,
-        now_us: u64,
-        fly: bool,
-    ) -> Stabilized {
-        let actuation = self
-            .lp
-            .imu_job(seq, t_us, imu, clock, now_us)
-            .map(|step| stabilize(&mut Exclusive(&mut self.lp), &mut self.ctrl, &step, clock));
-        Stabilized {
-            actuation,
-            power: self.lp.power(fly, actuation.map(|a| a.u)),
-        }
-    }
-
     /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
     /// settings checked; a change of the vehicle, the controller or its
     /// gains and weights re-designs it, which only `allow_redesign` permits
     /// (a front end says whether the vehicle is disarmed). A refusal leaves
     /// everything as it was.
     pub fn apply_param(&mut self, index: usize, value: f32, allow_redesign: bool) -> Result<(), params::Refusal> {
-        let plan = self.lp.plan_param(index, value, allow_redesign)?;
-        apply_plan(&mut Exclusive(&mut self.lp), &mut self.ctrl, plan)
-    }
-
-    /// Designs `spec` in place of the running controller (as a `Select`
-    /// does); on failure the running one keeps flying and the error is
-    /// returned. Not in flight: a design takes milliseconds to tens of them.
-    pub fn try_select(&mut self, spec: ControllerSpec) -> Result<(), ControlError> {
-        select(&mut Exclusive(&mut self.lp), &mut self.ctrl, spec)
+        apply_param(&mut self.lp, &mut self.ctrl, index, value, allow_redesign)
     }
 
     /// Reads what the link has (bounded), handles every complete frame,

@@ -275,6 +275,22 @@ pub fn start_front_end(lp: &mut Loop, ctrl: &mut AnyController<f32>) -> Result<(
     Ok(())
 }
 
+/// Sets parameter `index` ([`params::PARAMS`]) of the loop `lp` to
+/// `value` ([`Loop::plan_param`], then [`apply_plan`] on its controller
+/// `ctrl`): the whole settings checked; a change that re-designs is
+/// allowed only when `allow_redesign` (a front end says whether the
+/// vehicle is disarmed). A refusal leaves everything as it was.
+pub fn apply_param(
+    lp: &mut Loop,
+    ctrl: &mut AnyController<f32>,
+    index: usize,
+    value: f32,
+    allow_redesign: bool,
+) -> Result<(), params::Refusal> {
+    let plan = lp.plan_param(index, value, allow_redesign)?;
+    apply_plan(&mut Exclusive(lp), ctrl, plan)
+}
+
 /// The controller a loop flies before its first design: the tuned Euler
 /// PD ([`FALLBACK_CONTROLLER`], which needs no design) for `vehicle`.
 pub fn fallback_controller(vehicle: VehicleParams<f32>) -> AnyController<f32> {

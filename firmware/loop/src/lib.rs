@@ -48,8 +48,8 @@ mod wire;
 
 pub use flight_loop::FlightLoop;
 pub use jobs::{
-    apply_plan, fallback_controller, install, run_job, select, stabilize, start_front_end, Actuation, ControlJob,
-    Design, HoldsLoop, Job, LoopOf, ParamPlan, Step,
+    apply_param, apply_plan, fallback_controller, install, run_job, select, stabilize, start_front_end, Actuation,
+    ControlJob, Design, HoldsLoop, Job, LoopOf, ParamPlan, Step,
 };
 pub use wire::{fix_from_wire, fix_to_wire, param_answer, setpoint_from_wire, setpoint_to_wire, Framed};
 

@@ -43,16 +43,6 @@ impl Power {
     };
 }
 
-/// One stabilizer step in one call ([`FlightLoop::stabilize`](crate::FlightLoop::stabilize)).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Stabilized {
-    /// The controller's side of the step (`None`: no step, before the
-    /// session opens or the first good sample).
-    pub actuation: Option<crate::Actuation>,
-    /// What the motors get.
-    pub power: Power,
-}
-
 /// The supervisor's gate and the mixer: the inputs `u` (`None`: the
 /// controller gave none) flown through `mixer` when `fly` (the supervisor
 /// lets this step fly) and there is a mixer; [`Power::OFF`] otherwise.

@@ -4,7 +4,7 @@
 //! the value in force and a `STATUSTEXT`).
 
 use super::{
-    params, AnyController, Exclusive, MavMessage, MavParamType, MavSeverity, MavShared, MavSink, Peer, Refusal, PARAMS,
+    params, AnyController, MavMessage, MavParamType, MavSeverity, MavShared, MavSink, Peer, Refusal, PARAMS,
     PARAM_SET_DATA, PARAM_VALUE_DATA,
 };
 
@@ -64,8 +64,7 @@ impl MavShared {
     /// failsafe.
     pub fn apply(&mut self, ctrl: &mut AnyController<f32>, index: usize, value: f32) -> Result<(), Refusal> {
         // The loop's mixer follows its settings.
-        let plan = self.lp.plan_param(index, value, !self.modes.armed())?;
-        fc_loop::apply_plan(&mut Exclusive(&mut self.lp), ctrl, plan)
+        fc_loop::apply_param(&mut self.lp, ctrl, index, value, !self.modes.armed())
     }
 
     pub(in crate::vehicle) fn send_param<S: MavSink>(&self, index: usize, out: &mut S) -> Result<(), S::Error> {
