@@ -151,22 +151,6 @@ impl FlightLoop {
         Ok(())
     }
 
-    /// Handles one decoded message as if it had arrived on the link at
-    /// `now_us`, its answers to `out`: the entry of front ends that speak
-    /// another protocol (MAVLink) and translate into this one.
-    pub fn handle_message<O: Outbox, C: CycleClock>(
-        &mut self,
-        msg: ToFc,
-        out: &mut O,
-        clock: &C,
-        now_us: u64,
-    ) -> Result<(), O::Error> {
-        match self.lp.on_message(msg, out, clock, now_us)? {
-            Some(job) => self.run(job, out, clock),
-            None => Ok(()),
-        }
-    }
-
     /// Runs a job of the loop on this controller.
     fn run<O: Outbox, C: CycleClock>(&mut self, job: Job, out: &mut O, clock: &C) -> Result<(), O::Error> {
         run_job(&mut Exclusive(&mut self.lp), &mut self.ctrl, job, out, clock)
