@@ -155,11 +155,6 @@ pub fn rx_waiting(port: Port) -> bool {
     !port.with_queue(|q| q.is_empty())
 }
 
-/// True if received bytes are waiting in any port's queue.
-pub fn rx_pending() -> bool {
-    !(Port::Usart1.with_queue(|q| q.is_empty()) && Port::Usart6.with_queue(|q| q.is_empty()))
-}
-
 /// A USART as a byte link ([`Port`]). Reception is interrupt-driven into a
 /// queue (1 KiB for USART1, 256 B for USART6; [`usart_isr`]); reads never wait; writes wait for TXE at
 /// most a bounded number of polls per byte.
