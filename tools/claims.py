@@ -37,8 +37,6 @@ TOLERANCES = [
     (r"^budget_", 0.0, 0.0, "a budget (firmware/stm32f405/src/budgets.rs) is stated exactly"),
     (r"_mean_icount$", 0.01, 0.0,
      "a lockstep QEMU flight's mean step: the host's timing moves where its samples pre-empt a step"),
-    (r"redesign_answer_worst_icount$", 0.10, 0.0,
-     "the design's length plus where the host's sample lands in it, shown rounded"),
     (r"_worst_icount$", 0.10, 0.0,
      "a lockstep QEMU flight's worst step: one host-timed pre-emption moves it by up to ~5 %"),
     (r"instructions", 0.005, 0.0,

@@ -570,6 +570,33 @@ fn a_redesign_delays_the_controller_task_not_the_samples() {
         "a sample waited for the design: {timing}\n{all}"
     );
     assert!(answer > 10 * deadline, "the design took no time? {timing}");
+    // The design's own length (the image logs a job that outlasts a step's
+    // deadline): deterministic, unlike the answer, which counts from where
+    // the host's sample landed in the design. The sample came after the
+    // write, so its answer waited at most the design and its own step.
+    let design: u64 = log
+        .iter()
+        .rev()
+        .find_map(|l| {
+            l.split_once("job: a parameter write took ")?
+                .1
+                .split(' ')
+                .next()?
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("no design logged:\n{all}"));
+    println!("the re-design: {design} instructions");
+    measure(
+        "qemu_tasks_redesign_design_instructions",
+        design as f64,
+        "instructions",
+        "qemu::a_redesign_delays_the_controller_task_not_the_samples",
+    );
+    assert!(
+        answer <= design + deadline,
+        "the answer waited {answer} instructions, more than the design ({design}) and a step"
+    );
     assert_eq!(
         (missed, jobs, answers, tx, imu_missed, passed),
         (1, 0, 0, 0, 0, 0),

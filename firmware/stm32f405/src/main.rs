@@ -34,7 +34,8 @@
 //! Time is SysTick at 168 MHz, widened in software; under QEMU's
 //! `-icount shift=0` one instruction is one nanosecond of virtual time, so
 //! SysTick counts 0.168 per instruction. It logs through defmt: boot, the
-//! handshake, controller selections, failsafe entries and exits, link
+//! handshake, controller selections, a design's length (a job that outlasts
+//! a step's deadline), failsafe entries and exits, link
 //! errors and the timing — over semihosting by default (QEMU; `sil-host fly
 //! --target qemu --firmware-log` decodes it), over RTT with the `log-rtt`
 //! feature. On the host this file compiles to an empty program so that
@@ -53,7 +54,7 @@ mod app {
     use fc_proto::{encode, Counters, FromFc, ToFc, MAX_FRAME, PROTOCOL_VERSION};
     use fc_stm32f405::board;
     use fc_stm32f405::log_changes;
-    use fc_stm32f405::timing::{StepTiming, Timing};
+    use fc_stm32f405::timing::{instructions, StepTiming, Timing, DEADLINE_TICKS};
     use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, PwmActuators, SysTickClock, TxTimeout, Usart};
     use hal_shim::{ActuatorOutput, ByteLink};
     use heapless::spsc::{Consumer, Producer, Queue};
@@ -117,7 +118,7 @@ mod app {
             Shared {
                 lp,
                 tx,
-                timing: Timing::new(fc_stm32f405::timing::DEADLINE_TICKS),
+                timing: Timing::new(DEADLINE_TICKS),
             },
             Local {
                 last: Last((false, false, Counters::default(), 0)),
@@ -204,8 +205,22 @@ mod app {
         let mut lp = ByRef(lp);
         while let Some((job, entry)) = jobs_out.dequeue() {
             let step = matches!(job, Job::Step(_));
+            let what = match job {
+                Job::Step(_) => "step",
+                Job::Select(_) => "controller selection",
+                Job::Param { .. } => "parameter write",
+            };
+            let start = ticks_now();
             let mut out = Transmit(&mut tx, None, None);
             let sent = run_job(&mut lp, ctrl, job, &mut out, clock);
+            // A job that is not a step and outlasts a step's deadline is a
+            // design: its length is logged (the steps it delays are counted
+            // as late below). Its own instructions, from the job's start,
+            // not from a sample's arrival, which the host times.
+            let took = ticks_now().saturating_sub(start);
+            if !step && took > DEADLINE_TICKS {
+                defmt::info!("job: a {=str} took {=u64} instructions", what, instructions(took));
+            }
             // The step is flown when its first answer (`Actuator`) goes to
             // the transmitter; its inputs then go to the motors.
             let done = out.1.unwrap_or_else(ticks_now);
