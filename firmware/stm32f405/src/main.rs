@@ -204,22 +204,24 @@ mod app {
         let (lp, mut tx, mut timing) = (cx.shared.lp, cx.shared.tx, cx.shared.timing);
         let mut lp = ByRef(lp);
         while let Some((job, entry)) = jobs_out.dequeue() {
-            let step = matches!(job, Job::Step(_));
-            let what = match job {
-                Job::Step(_) => "step",
-                Job::Select(_) => "controller selection",
-                Job::Param { .. } => "parameter write",
+            // A job that is not a step, named for its log line, and when it
+            // started: one that outlasts a step's deadline is a design, and
+            // its length is logged (the steps it delays are counted as late
+            // below). Its own instructions, from the job's start, not from
+            // a sample's arrival, which the host times. A step reads no
+            // clock here.
+            let other = match job {
+                Job::Step(_) => None,
+                Job::Select(_) => Some(("controller selection", ticks_now())),
+                Job::Param { .. } => Some(("parameter write", ticks_now())),
             };
-            let start = ticks_now();
             let mut out = Transmit(&mut tx, None, None);
             let sent = run_job(&mut lp, ctrl, job, &mut out, clock);
-            // A job that is not a step and outlasts a step's deadline is a
-            // design: its length is logged (the steps it delays are counted
-            // as late below). Its own instructions, from the job's start,
-            // not from a sample's arrival, which the host times.
-            let took = ticks_now().saturating_sub(start);
-            if !step && took > DEADLINE_TICKS {
-                defmt::info!("job: a {=str} took {=u64} instructions", what, instructions(took));
+            if let Some((what, start)) = other {
+                let took = ticks_now().saturating_sub(start);
+                if took > DEADLINE_TICKS {
+                    defmt::info!("job: a {=str} took {=u64} instructions", what, instructions(took));
+                }
             }
             // The step is flown when its first answer (`Actuator`) goes to
             // the transmitter; its inputs then go to the motors.
@@ -228,7 +230,7 @@ mod app {
                 drive(motors, &lp.lock(|lp| *lp.vehicle()), u);
             }
             timing.lock(|t| {
-                if step {
+                if other.is_none() {
                     t.flown(entry, done);
                 }
                 if sent.is_err() {
