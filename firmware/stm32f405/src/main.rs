@@ -212,9 +212,10 @@ mod app {
             // clock here.
             let other = match job {
                 Job::Step(_) => None,
-                Job::Select(_) => Some(("controller selection", ticks_now())),
-                Job::Param { .. } => Some(("parameter write", ticks_now())),
-            };
+                Job::Select(_) => Some("controller selection"),
+                Job::Param { .. } => Some("parameter write"),
+            }
+            .map(|what| (what, ticks_now()));
             let mut out = Transmit(&mut tx, None, None);
             let sent = run_job(&mut lp, ctrl, job, &mut out, clock);
             if let Some((what, start)) = other {
