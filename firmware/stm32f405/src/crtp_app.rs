@@ -120,6 +120,8 @@ macro_rules! crtp_app {
                 syslink: Syslink<DOWNLINK>,
                 last: Last,
                 logged: StepTiming,
+                /// The stack's high-water mark last logged, bytes.
+                stack_logged: usize,
                 tx_errors: u32,
                 sample_clock: SysTickClock,
                 control_clock: SysTickClock,
@@ -132,6 +134,7 @@ macro_rules! crtp_app {
                 store: Option<$crate::flash::Kept> = None,
             ])]
             fn init(cx: init::Context) -> (Shared, Local) {
+                $crate::stack::paint();
                 let (clock, sim_tx) = board::bring_up();
                 let outputs = crate::BoardOutputs::start();
                 let Some(vehicle) = crate::vehicle() else {
@@ -201,6 +204,7 @@ macro_rules! crtp_app {
                         syslink,
                         last: Last::default(),
                         logged: StepTiming::default(),
+                        stack_logged: 0,
                         tx_errors: 0,
                         sample_clock: clock,
                         control_clock: clock,
@@ -443,7 +447,7 @@ macro_rules! crtp_app {
             /// re-design one asks for run at once), the log blocks and answers
             /// that fell due, the simulator's queued answers, then what changed in
             /// the log.
-            #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, tx_errors])]
+            #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, stack_logged, tx_errors])]
             fn link(cx: link::Context) {
                 let link::LocalResources {
                     radio,
@@ -452,6 +456,7 @@ macro_rules! crtp_app {
                     answers_out,
                     last,
                     logged,
+                    stack_logged,
                     tx_errors,
                     ..
                 } = cx.local;
@@ -487,7 +492,12 @@ macro_rules! crtp_app {
                 let (armed, imu) = vehicle.v.lock(|v| (v.armed(), v.imu_counters()));
                 let sc = sim.lock(|c| *c);
                 log_changes(armed, imu, &syslink.counters(), &sc, last);
-                timing.lock(|t| t.snapshot()).log_if_due(logged);
+                let now = timing.lock(|t| t.snapshot());
+                if now.due(logged) {
+                    // The scan reads the free stack: with the timing line only.
+                    $crate::stack::log_if_grown(stack_logged);
+                }
+                now.log_if_due(logged);
             }
 
             /// The vehicle as the link's task locks it: the controller work a

@@ -80,6 +80,8 @@ mod app {
     struct Local {
         last: Last,
         logged: StepTiming,
+        /// The stack's high-water mark last logged, bytes.
+        stack_logged: usize,
         ctrl: &'static mut AnyController<f32>,
         jobs_in: Producer<'static, (Job, u64)>,
         jobs_out: Consumer<'static, (Job, u64)>,
@@ -97,6 +99,7 @@ mod app {
         answers: Queue<FromFc, ANSWERS> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
+        fc_stm32f405::stack::paint();
         let (clock, tx) = board::bring_up();
         let Some(fc) = flight_loop() else {
             board::fail("flight loop already taken");
@@ -123,6 +126,7 @@ mod app {
             Local {
                 last: Last((false, false, Counters::default(), 0)),
                 logged: StepTiming::default(),
+                stack_logged: 0,
                 ctrl,
                 jobs_in,
                 jobs_out,
@@ -243,12 +247,13 @@ mod app {
     }
 
     /// The link: the queued answers out, then what changed in the log.
-    #[task(binds = CAN2_RX1, priority = 1, shared = [lp, tx, timing], local = [answers_out, last, logged])]
+    #[task(binds = CAN2_RX1, priority = 1, shared = [lp, tx, timing], local = [answers_out, last, logged, stack_logged])]
     fn link(cx: link::Context) {
         let link::LocalResources {
             answers_out,
             last,
             logged,
+            stack_logged,
             ..
         } = cx.local;
         let (mut lp, mut tx, mut timing) = (cx.shared.lp, cx.shared.tx, cx.shared.timing);
@@ -259,6 +264,10 @@ mod app {
         }
         lp.lock(|lp| log_changes(lp, &mut last.0));
         let now = timing.lock(|t| t.snapshot());
+        if now.due(logged) {
+            // The scan reads the free stack: with the timing line only.
+            fc_stm32f405::stack::log_if_grown(stack_logged);
+        }
         now.log_if_due(logged);
     }
 

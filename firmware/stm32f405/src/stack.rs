@@ -43,6 +43,21 @@ pub fn high_water() -> usize {
     top - a
 }
 
+/// Logs the high-water mark ([`high_water`]) when it has grown past
+/// `logged` (the mark last logged), as `stack: high-water N bytes of M`
+/// (M: [`capacity`]); `logged` becomes it. It reads the free stack, so the
+/// images call it only with their timing line, from their lowest-priority
+/// task; the tools hold the mark to
+/// [`crate::budgets::IMAGE_STACK_BYTES`].
+#[cfg(target_os = "none")]
+pub fn log_if_grown(logged: &mut usize) {
+    let hw = high_water();
+    if hw > *logged {
+        defmt::info!("stack: high-water {=usize} bytes of {=usize}", hw, capacity());
+        *logged = hw;
+    }
+}
+
 /// Bytes the stack may grow to: from where it starts to its lowest address.
 pub fn capacity() -> usize {
     core::ptr::addr_of!(_stack_start) as usize - core::ptr::addr_of!(_stack_end) as usize

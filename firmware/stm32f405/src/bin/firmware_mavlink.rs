@@ -378,11 +378,7 @@ mod app {
             );
         }
         if c.steps / 1000 != last.1.steps / 1000 {
-            let hw = fc_stm32f405::stack::high_water();
-            if hw > last.3 {
-                defmt::info!("stack high-water {=usize} bytes", hw);
-                last.3 = hw;
-            }
+            fc_stm32f405::stack::log_if_grown(&mut last.3);
         }
         (last.0, last.1, last.2) = (armed, *c, reader.refused());
     }
