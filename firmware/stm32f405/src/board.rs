@@ -104,6 +104,17 @@ pub fn fail(why: &str) -> ! {
     }
 }
 
+/// The images' idle task: the boot's stack high-water mark logged
+/// (`stack: boot reached N bytes`, [`crate::stack::boot_done`]), then
+/// asleep between interrupts.
+pub fn idle() -> ! {
+    let boot = crate::stack::boot_done();
+    defmt::info!("stack: boot reached {=usize} bytes", boot);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
 /// The clock tree first (every rate assumes 168 MHz: a board whose
 /// crystal or PLL does not start would run every timer and the UART at the
 /// wrong rate; it refuses to fly instead), then SysTick and USART1.

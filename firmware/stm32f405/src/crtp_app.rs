@@ -120,8 +120,8 @@ macro_rules! crtp_app {
                 syslink: Syslink<DOWNLINK>,
                 last: Last,
                 logged: StepTiming,
-                /// The stack's high-water mark last logged, bytes.
-                stack_logged: usize,
+                /// The tasks' stack high-water mark, watched.
+                stack: $crate::stack::Watch,
                 tx_errors: u32,
                 sample_clock: SysTickClock,
                 control_clock: SysTickClock,
@@ -204,7 +204,7 @@ macro_rules! crtp_app {
                         syslink,
                         last: Last::default(),
                         logged: StepTiming::default(),
-                        stack_logged: 0,
+                        stack: $crate::stack::Watch::new(),
                         tx_errors: 0,
                         sample_clock: clock,
                         control_clock: clock,
@@ -214,9 +214,7 @@ macro_rules! crtp_app {
 
             #[idle]
             fn idle(_: idle::Context) -> ! {
-                loop {
-                    cortex_m::asm::wfi();
-                }
+                board::idle()
             }
 
             /// The radio's bytes into their queue; the link's task takes them.
@@ -447,7 +445,7 @@ macro_rules! crtp_app {
             /// re-design one asks for run at once), the log blocks and answers
             /// that fell due, the simulator's queued answers, then what changed in
             /// the log.
-            #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, stack_logged, tx_errors])]
+            #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, stack, tx_errors])]
             fn link(cx: link::Context) {
                 let link::LocalResources {
                     radio,
@@ -456,7 +454,7 @@ macro_rules! crtp_app {
                     answers_out,
                     last,
                     logged,
-                    stack_logged,
+                    stack,
                     tx_errors,
                     ..
                 } = cx.local;
@@ -492,12 +490,8 @@ macro_rules! crtp_app {
                 let (armed, imu) = vehicle.v.lock(|v| (v.armed(), v.imu_counters()));
                 let sc = sim.lock(|c| *c);
                 log_changes(armed, imu, &syslink.counters(), &sc, last);
-                let now = timing.lock(|t| t.snapshot());
-                if now.due(logged) {
-                    // The scan reads the free stack: with the timing line only.
-                    $crate::stack::log_if_grown(stack_logged);
-                }
-                now.log_if_due(logged);
+                timing.lock(|t| t.snapshot()).log_if_due(logged);
+                stack.poll();
             }
 
             /// The vehicle as the link's task locks it: the controller work a

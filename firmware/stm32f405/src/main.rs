@@ -80,8 +80,8 @@ mod app {
     struct Local {
         last: Last,
         logged: StepTiming,
-        /// The stack's high-water mark last logged, bytes.
-        stack_logged: usize,
+        /// The tasks' stack high-water mark, watched.
+        stack: fc_stm32f405::stack::Watch,
         ctrl: &'static mut AnyController<f32>,
         jobs_in: Producer<'static, (Job, u64)>,
         jobs_out: Consumer<'static, (Job, u64)>,
@@ -126,7 +126,7 @@ mod app {
             Local {
                 last: Last((false, false, Counters::default(), 0)),
                 logged: StepTiming::default(),
-                stack_logged: 0,
+                stack: fc_stm32f405::stack::Watch::new(),
                 ctrl,
                 jobs_in,
                 jobs_out,
@@ -141,9 +141,7 @@ mod app {
 
     #[idle]
     fn idle(_: idle::Context) -> ! {
-        loop {
-            cortex_m::asm::wfi();
-        }
+        board::idle()
     }
 
     /// The sample's arrival (data-ready): every received byte into the
@@ -247,13 +245,13 @@ mod app {
     }
 
     /// The link: the queued answers out, then what changed in the log.
-    #[task(binds = CAN2_RX1, priority = 1, shared = [lp, tx, timing], local = [answers_out, last, logged, stack_logged])]
+    #[task(binds = CAN2_RX1, priority = 1, shared = [lp, tx, timing], local = [answers_out, last, logged, stack])]
     fn link(cx: link::Context) {
         let link::LocalResources {
             answers_out,
             last,
             logged,
-            stack_logged,
+            stack,
             ..
         } = cx.local;
         let (mut lp, mut tx, mut timing) = (cx.shared.lp, cx.shared.tx, cx.shared.timing);
@@ -264,11 +262,8 @@ mod app {
         }
         lp.lock(|lp| log_changes(lp, &mut last.0));
         let now = timing.lock(|t| t.snapshot());
-        if now.due(logged) {
-            // The scan reads the free stack: with the timing line only.
-            fc_stm32f405::stack::log_if_grown(stack_logged);
-        }
         now.log_if_due(logged);
+        stack.poll();
     }
 
     /// What [`log_changes`] saw last.

@@ -43,18 +43,70 @@ pub fn high_water() -> usize {
     top - a
 }
 
-/// Logs the high-water mark ([`high_water`]) when it has grown past
-/// `logged` (the mark last logged), as `stack: high-water N bytes of M`
-/// (M: [`capacity`]); `logged` becomes it. It reads the free stack, so the
-/// images call it only with their timing line, from their lowest-priority
-/// task; the tools hold the mark to
-/// [`crate::budgets::IMAGE_STACK_BYTES`].
-#[cfg(target_os = "none")]
-pub fn log_if_grown(logged: &mut usize) {
-    let hw = high_water();
-    if hw > *logged {
-        defmt::info!("stack: high-water {=usize} bytes of {=usize}", hw, capacity());
-        *logged = hw;
+/// The end of the boot, from the idle task before it first sleeps: returns
+/// the boot's high-water mark (the vehicle built, its first design, the
+/// settings restored) and paints the free stack again, so that from here
+/// [`high_water`] (and a [`Watch`]) measures the tasks, nested as they
+/// pre-empt, over the frames of `main` and idle that stay. The paint
+/// writes up to ~25 000 words, so it leaves interrupts on and the tasks
+/// may pre-empt it: a task's frames are dead once it returns to idle, and the paint
+/// only covers them; a task that runs during the paint is measured again
+/// on its next run.
+pub fn boot_done() -> usize {
+    let boot = high_water();
+    paint();
+    boot
+}
+
+/// Words of the free stack a [`Watch`] reads per [`Watch::poll`] (a few
+/// instructions each), so that the task that polls it on every run stays
+/// short: a whole scan reads up to ~25 000 words.
+pub const WATCH_WORDS: usize = 256;
+
+/// The tasks' high-water mark (since [`boot_done`]), watched a bounded
+/// slice at a time: each [`Watch::poll`] reads at most [`WATCH_WORDS`]
+/// words, from the stack's lowest address up, and a pass ends at the first
+/// word that lost its paint, logging the mark if it grew (`stack:
+/// high-water N bytes of M`, M: [`capacity`]). The mark only grows (that
+/// word only moves down), so no pass reads further than the one before.
+/// The images poll it from their lowest-priority task; the tools hold the
+/// mark to [`crate::budgets::IMAGE_STACK_BYTES`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Watch {
+    /// The next word a pass reads, bytes above the stack's lowest address.
+    next: usize,
+    /// The mark last logged, bytes.
+    logged: usize,
+}
+
+impl Watch {
+    /// At the start of a pass, nothing logged.
+    pub const fn new() -> Self {
+        Self { next: 0, logged: 0 }
+    }
+
+    /// Reads the pass's next slice; at its end, logs the mark if it grew.
+    #[cfg(target_os = "none")]
+    pub fn poll(&mut self) {
+        let bottom = core::ptr::addr_of!(_stack_end) as usize;
+        let top = core::ptr::addr_of!(_stack_start) as usize;
+        let mut a = bottom + self.next;
+        let end = (a + 4 * WATCH_WORDS).min(top);
+        // SAFETY: reads of the stack's own memory.
+        while a < end && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
+            a += 4;
+        }
+        if a < end || a >= top {
+            // The pass ends at the lowest word that lost its paint.
+            self.next = 0;
+            let hw = top - a;
+            if hw > self.logged {
+                defmt::info!("stack: high-water {=usize} bytes of {=usize}", hw, capacity());
+                self.logged = hw;
+            }
+        } else {
+            self.next = a - bottom;
+        }
     }
 }
 

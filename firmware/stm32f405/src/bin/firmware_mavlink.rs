@@ -136,7 +136,7 @@ mod app {
         controller_clock: SysTickClock,
         link_clock: SysTickClock,
         signing_us: u64,
-        last: (bool, VehicleCounters, u32, usize),
+        last: (bool, VehicleCounters, u32, fc_stm32f405::stack::Watch),
     }
 
     #[init]
@@ -185,16 +185,14 @@ mod app {
                 controller_clock: clock,
                 link_clock: clock,
                 signing_us,
-                last: (false, VehicleCounters::default(), 0, 0),
+                last: (false, VehicleCounters::default(), 0, fc_stm32f405::stack::Watch::new()),
             },
         )
     }
 
     #[idle]
     fn idle(_: idle::Context) -> ! {
-        loop {
-            cortex_m::asm::wfi();
-        }
+        board::idle()
     }
 
     /// USART1's bytes into their queue; the link's task takes them.
@@ -350,7 +348,7 @@ mod app {
         armed: bool,
         c: &VehicleCounters,
         reader: &MavCounters,
-        last: &mut (bool, VehicleCounters, u32, usize),
+        last: &mut (bool, VehicleCounters, u32, fc_stm32f405::stack::Watch),
     ) {
         if armed != last.0 {
             if armed {
@@ -377,9 +375,7 @@ mod app {
                 reader.other_system
             );
         }
-        if c.steps / 1000 != last.1.steps / 1000 {
-            fc_stm32f405::stack::log_if_grown(&mut last.3);
-        }
+        last.3.poll();
         (last.0, last.1, last.2) = (armed, *c, reader.refused());
     }
 
