@@ -490,8 +490,12 @@ macro_rules! crtp_app {
                 let (armed, imu) = vehicle.v.lock(|v| (v.armed(), v.imu_counters()));
                 let sc = sim.lock(|c| *c);
                 log_changes(armed, imu, &syslink.counters(), &sc, last);
-                timing.lock(|t| t.snapshot()).log_if_due(logged);
+                let now = timing.lock(|t| t.snapshot());
                 stack.poll();
+                if now.due(logged) {
+                    stack.log_if_grown();
+                }
+                now.log_if_due(logged);
             }
 
             /// The vehicle as the link's task locks it: the controller work a

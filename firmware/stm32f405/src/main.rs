@@ -262,8 +262,11 @@ mod app {
         }
         lp.lock(|lp| log_changes(lp, &mut last.0));
         let now = timing.lock(|t| t.snapshot());
-        now.log_if_due(logged);
         stack.poll();
+        if now.due(logged) {
+            stack.log_if_grown();
+        }
+        now.log_if_due(logged);
     }
 
     /// What [`log_changes`] saw last.

@@ -66,27 +66,34 @@ pub const WATCH_WORDS: usize = 256;
 /// The tasks' high-water mark (since [`boot_done`]), watched a bounded
 /// slice at a time: each [`Watch::poll`] reads at most [`WATCH_WORDS`]
 /// words, from the stack's lowest address up, and a pass ends at the first
-/// word that lost its paint, logging the mark if it grew (`stack:
-/// high-water N bytes of M`, M: [`capacity`]). The mark only grows (that
-/// word only moves down), so no pass reads further than the one before.
-/// The images poll it from their lowest-priority task; the tools hold the
-/// mark to [`crate::budgets::IMAGE_STACK_BYTES`].
+/// word that lost its paint: the mark. The mark only grows (that word only
+/// moves down), so no pass reads further than the one before.
+/// [`Watch::log_if_grown`] logs it (`stack: high-water N bytes of M`, M:
+/// [`capacity`]). The images poll it on every run of their lowest-priority
+/// task and log it with their timing line (a log line masks interrupts
+/// while it is written); the tools hold the mark to
+/// [`crate::budgets::IMAGE_STACK_BYTES`].
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Watch {
     /// The next word a pass reads, bytes above the stack's lowest address.
     next: usize,
+    /// The mark the last whole pass found, bytes.
+    mark: usize,
     /// The mark last logged, bytes.
     logged: usize,
 }
 
 impl Watch {
-    /// At the start of a pass, nothing logged.
+    /// At the start of a pass, nothing found or logged.
     pub const fn new() -> Self {
-        Self { next: 0, logged: 0 }
+        Self {
+            next: 0,
+            mark: 0,
+            logged: 0,
+        }
     }
 
-    /// Reads the pass's next slice; at its end, logs the mark if it grew.
-    #[cfg(target_os = "none")]
+    /// Reads the pass's next slice; at its end, the mark is what it found.
     pub fn poll(&mut self) {
         let bottom = core::ptr::addr_of!(_stack_end) as usize;
         let top = core::ptr::addr_of!(_stack_start) as usize;
@@ -99,13 +106,18 @@ impl Watch {
         if a < end || a >= top {
             // The pass ends at the lowest word that lost its paint.
             self.next = 0;
-            let hw = top - a;
-            if hw > self.logged {
-                defmt::info!("stack: high-water {=usize} bytes of {=usize}", hw, capacity());
-                self.logged = hw;
-            }
+            self.mark = self.mark.max(top - a);
         } else {
             self.next = a - bottom;
+        }
+    }
+
+    /// Logs the mark if it grew since it was last logged.
+    #[cfg(target_os = "none")]
+    pub fn log_if_grown(&mut self) {
+        if self.mark > self.logged {
+            defmt::info!("stack: high-water {=usize} bytes of {=usize}", self.mark, capacity());
+            self.logged = self.mark;
         }
     }
 }

@@ -376,6 +376,9 @@ mod app {
             );
         }
         last.3.poll();
+        if c.steps / 1000 != last.1.steps / 1000 {
+            last.3.log_if_grown();
+        }
         (last.0, last.1, last.2) = (armed, *c, reader.refused());
     }
 
