@@ -42,6 +42,9 @@ TOLERANCES = [
     (r"instructions", 0.005, 0.0,
      "QEMU counts instructions deterministically; 0.5 % is the drift a compiler release brings"),
     (r"load_pct", 0.0, 0.6, "derived from an instruction count, shown to whole percent"),
+    (r"_qemu_stack_tasks_bytes$", 0.10, 0.0,
+     ("an image's stack in its tasks: how deep they nest depends on where the host's frames pre-empt them "
+      "(firmware-crtp: 35 544 and 34 996 B in two runs)")),
     (r"_bytes$", 0.005, 0.0, "sizes from `size -A`; 0.5 % is the drift a compiler release brings"),
     (r"_closed_loop_cost$", 0.005, 0.0, "a deterministic QEMU flight's cost; 0.5 % for a compiler release"),
     (r"^peer_.*_pct$", 0.0, 0.2, "a ratio of two deterministic costs, shown to a tenth"),

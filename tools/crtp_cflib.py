@@ -58,6 +58,7 @@ from cflib.crazyflie.syncLogger import SyncLogger
 
 from children import EndsWithFlight
 from fctools.checks import Checks
+from fctools.image_log import stack
 from fctools.truth import Truth
 from measure import budgets, record
 
@@ -79,6 +80,8 @@ check = Checks(f'crtp{LABEL}')
 # Each QEMU session's (worst data-ready -> answer instructions, late steps,
 # steps passed during a design).
 TIMINGS = []
+# Each QEMU session's stack high-water marks (boot, tasks), bytes.
+STACKS = []
 
 
 class Sil:
@@ -168,6 +171,15 @@ def report(sil, failed_before):
               f'data-ready -> outputs driven {ans} instructions (budget {budget}: 168 000 cycles at CPI 1.5 x 1.5), '
               f'{lent} steps passed with the motors off during a design')
         TIMINGS.append((ans, late, lent))
+        # The image paints its stack at boot, logs the boot's mark, paints it
+        # again and logs the tasks' mark (every task's frames, nested) with
+        # its timing line (fc_stm32f405::stack).
+        boot, tasks, capacity = stack(out)
+        budget = budgets()['budget_image_stack_bytes']
+        check(0 < boot <= budget and 0 < tasks <= budget,
+              f'the image\'s stack reached {boot} B at boot and {tasks} B in its tasks, of the {capacity} B '
+              f'it may grow to (budget {budget} B)')
+        STACKS.append((boot, tasks))
     if QEMU:
         check('storage: a 2 KiB RAM stand-in' in out,
               'the image names what keeps its settings: a RAM stand-in (QEMU models no flash controller)')
@@ -590,6 +602,8 @@ def main():
         record(f'{image}_qemu_answer_worst_icount', max(a for a, _, _ in TIMINGS), 'instructions', source)
         record(f'{image}_qemu_late_steps', sum(n for _, n, _ in TIMINGS), 'steps', source)
         record(f'{image}_qemu_design_passed_steps', sum(p for _, _, p in TIMINGS), 'steps', source)
+        record(f'{image}_qemu_stack_boot_bytes', max(b for b, _ in STACKS), 'bytes', source)
+        record(f'{image}_qemu_stack_tasks_bytes', max(t for _, t in STACKS), 'bytes', source)
     print(check.summary())
     sys.exit(check.exit_code())
 

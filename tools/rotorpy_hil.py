@@ -47,7 +47,8 @@ from rotorpy.wind.default_winds import ConstantWind
 from scipy.spatial.transform import Rotation
 
 from children import EndsWithFlight
-from measure import record
+from fctools.image_log import stack
+from measure import budgets, record
 from reference import EIGHT_PERIOD_S, Reference, window_figures
 
 # Motor layouts as each vendor numbers its motors: (forward, right) hub position
@@ -375,6 +376,19 @@ def main():
             said = [ln for ln in res.get("firmware_log", []) if "storage:" in ln]
             ok = any("RAM stand-in" in ln for ln in said)
             line = line if also(ok, f"the image names what keeps its settings: {said[:1]}") else []
+        if a.target == "qemu" and line:
+            # The image paints its stack at boot, logs the boot's mark, paints it
+            # again and logs the tasks' mark (every task's frames, nested) every
+            # 1000 steps when it has grown (fc_stm32f405::stack).
+            boot, tasks, capacity = stack(res.get("firmware_log", []))
+            budget = budgets()["budget_image_stack_bytes"]
+            line = line if also(0 < boot <= budget and 0 < tasks <= budget,
+                                f"the image's stack reached {boot} B at boot and {tasks} B in its tasks, "
+                                f"of the {capacity} B it may grow to (budget {budget} B)") else []
+            if a.mavsdk:
+                src = "tools/rotorpy_hil.py --target qemu --mavsdk"
+                record("mavlink_qemu_stack_boot_bytes", boot, "bytes", src)
+                record("mavlink_qemu_stack_tasks_bytes", tasks, "bytes", src)
         text = json.dumps(res, indent=2)
         print(text)
         if a.json:

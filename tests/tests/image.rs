@@ -20,8 +20,9 @@
 //!   the RTIC tasks' job and answer queues with the previews held for the
 //!   controller (≈ 4.3 KiB; 17 KiB before the tasks, 16 KiB until issue 29
 //!   added the measured intervals' state).
-//!   The stack's high-water mark (≤ 32 KiB) is the QEMU budget test's; both
-//!   together leave more than half of the 128 KiB SRAM for what comes next.
+//!   The stack's high-water mark is the QEMU tests' (≤ 32 KiB for the
+//!   budget harness's designs and flights, ≤ 64 KiB for each image with
+//!   its tasks nested, `budgets::IMAGE_STACK_BYTES`).
 //!
 //! `firmware-mavlink` (the same loop behind MAVLink): flash ≤ 392 KiB —
 //! the MAVLink messages it reads and writes, the parameter table and the

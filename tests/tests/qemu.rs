@@ -15,7 +15,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use e2e_tests::measure;
-use fc_stm32f405::budgets::{ESTIMATOR_STEP_INSTRUCTIONS, IMAGE_STEP_INSTRUCTIONS, PEER_MIN_RATIO, STACK_BYTES};
+use fc_stm32f405::budgets::{
+    ESTIMATOR_STEP_INSTRUCTIONS, IMAGE_STACK_BYTES, IMAGE_STEP_INSTRUCTIONS, PEER_MIN_RATIO, STACK_BYTES,
+};
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -602,6 +604,38 @@ fn a_redesign_delays_the_controller_task_not_the_samples() {
         (1, 0, 0, 0, 0, 0),
         "{timing}\n{all}"
     );
+    // The image paints its stack at boot, logs the boot's mark (the flight
+    // loop built, the boot design), paints it again and logs the tasks'
+    // mark with its timing line (fc_stm32f405::stack): this re-design in
+    // the controller's task and the samples' task pre-empting it, nested.
+    let (boot, tasks, capacity) = stack_marks(&log);
+    println!("stack: {boot} B at boot, {tasks} B in the tasks, of {capacity} B");
+    let src = "qemu::a_redesign_delays_the_controller_task_not_the_samples";
+    measure("image_qemu_stack_boot_bytes", boot as f64, "bytes", src);
+    measure("image_qemu_stack_tasks_bytes", tasks as f64, "bytes", src);
+    for used in [boot, tasks] {
+        assert!(
+            used > 1024 && used <= IMAGE_STACK_BYTES as usize && capacity >= used,
+            "stack {used} B of {capacity} B, budget {IMAGE_STACK_BYTES} B\n{all}"
+        );
+    }
+}
+
+/// The image's stack marks (fc_stm32f405::stack): the boot's (`stack: boot
+/// reached N bytes`), the tasks' last (`stack: high-water N bytes of M`)
+/// and M, the bytes the stack may grow to; 0 for a figure not logged.
+fn stack_marks(log: &[String]) -> (usize, usize, usize) {
+    let boot = log.iter().find_map(|l| {
+        let rest = l.split_once("stack: boot reached ")?.1;
+        rest.split(' ').next()?.parse().ok()
+    });
+    let tasks = log.iter().rev().find_map(|l| {
+        let rest = l.split_once("stack: high-water ")?.1;
+        let (used, rest) = rest.split_once(" bytes of ")?;
+        Some((used.parse().ok()?, rest.trim().parse().ok()?))
+    });
+    let (tasks, capacity) = tasks.unwrap_or((0, 0));
+    (boot.unwrap_or(0), tasks, capacity)
 }
 
 /// The sensor flight on the real image: the same IMU samples and fixes go

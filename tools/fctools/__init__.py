@@ -5,7 +5,9 @@
   counts;
 - `truth.Truth`: a simulator's true state, read from its UDP stream of JSON
   datagrams (rotorpy's through tools/rotorpy_hil.py, or `sil-host crtp
-  --truth-to`).
+  --truth-to`);
+- `image_log.stack`: the stack's high-water marks (the boot's, the tasks')
+  an image in QEMU logged.
 
 The scripts run as `python3 tools/SCRIPT.py`, so `tools/` is on their path
 and `from fctools.checks import Checks` needs no install.
