@@ -64,7 +64,7 @@ pub const ESTIMATOR_STEP_INSTRUCTIONS: u32 = 20_000;
 pub const STACK_BYTES: u32 = 32 * 1024;
 /// Stack of a whole image, every task's frames nested as their priorities
 /// let them pre-empt (each image paints its stack at boot and logs the
-/// high-water marks, [`crate::stack::Watch`]), bytes: the SRAM less
+/// high-water marks, `stack::Watch`), bytes: the SRAM less
 /// the largest static RAM budget above (28 KiB), 100 KiB, with the cycle
 /// budgets' margin of 1.5, rounded down to 64 KiB. flip-link puts the
 /// stack below the statics, so an overflow faults rather than overwrites.
