@@ -456,9 +456,9 @@ pub(crate) struct FlyArgs {
     #[arg(long)]
     pub(crate) firmware_log: bool,
     /// Over a link (framed, tcp, qemu): send N parameter reads with every step, right after its
-    /// sample, as a ground station flooding the flight controller would (at most 16); their
-    /// answers are dropped. With `--target qemu --firmware-log`, the image's timing line shows
-    /// what the flood cost its tasks.
+    /// sample, as a ground station flooding the flight controller would (at most 16); each step
+    /// waits for their answers, checked, before the next. With `--target qemu --firmware-log`,
+    /// the image's timing line shows what the flood cost its tasks.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub(crate) param_flood: u16,
 }

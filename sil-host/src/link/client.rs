@@ -194,16 +194,22 @@ impl FcClient {
     }
 
     /// Sends `n` parameter reads (`ParamRead`, cycling through the table)
-    /// with every step from now on, right after the step's sample, and
-    /// drops their answers: a ground station flooding the flight controller
-    /// while it flies. 0 stops it.
+    /// with every step from now on, right after the step's sample: a ground
+    /// station flooding the flight controller while it flies. Each step
+    /// waits for their answers (in order, for the indices read) as for its
+    /// own, and checks them: the ground station's next reads and the next
+    /// sample follow them. Under QEMU, whose USART has no baud rate, a host
+    /// that did not wait would send the next step's bytes as fast as the
+    /// image takes them, and the image's lowest-priority task, which sends
+    /// these answers, could go without the processor for many steps (on a
+    /// 115 200-baud line it has most of each step). 0 stops it.
     pub fn flood_param_reads(&mut self, n: u16) {
         self.flood = n;
     }
 
     /// Sends a parameter write (`ParamSet`) without waiting for its answer,
     /// as a ground station's write that crosses the next samples: the
-    /// answer comes before a later step's and is dropped with the flood's.
+    /// answer comes before a later step's, which passes over it.
     pub fn send_param_set(&mut self, index: usize, value: f32) -> Result<()> {
         let index = u16::try_from(index).map_err(|_| anyhow::anyhow!("parameter index {index} is past u16"))?;
         self.send(&ToFc::ParamSet { index, value })
@@ -414,12 +420,17 @@ impl FcClient {
             }
         };
         let count = fc_loop::params::PARAMS.len() as u16;
+        // The flood's reads, answered in order: the step ends when they are
+        // (the ground station waits for their answers before its next reads).
+        let mut reads = std::collections::VecDeque::new();
         for _ in 0..self.flood {
             self.send(&ToFc::ParamRead { index: self.flood_next })?;
+            reads.push_back(self.flood_next);
             self.flood_next = (self.flood_next + 1) % count;
         }
         let mut out: Option<RemoteStep> = None;
         let mut telemetry = false;
+        let mut answered = false;
         // The step's four answers, the flood's, and some slack.
         for _ in 0..8 + usize::from(self.flood) {
             let got = self.receive().with_context(|| {
@@ -480,7 +491,7 @@ impl FcClient {
                         .ok_or_else(|| anyhow::anyhow!("nav biases before the nav frame"))?;
                     n.biases = [gyro_bias, accel_bias];
                     n.bias_sigma = sigma;
-                    return out.ok_or_else(|| anyhow::anyhow!("no actuator frame"));
+                    answered = true;
                 }
                 FromFc::Telemetry {
                     seq: s,
@@ -496,12 +507,24 @@ impl FcClient {
                     r.qp_iterations = qp_iterations;
                     r.counters = counters;
                     telemetry = true;
-                    if !want_nav {
-                        return out.ok_or_else(|| anyhow::anyhow!("no actuator frame"));
-                    }
+                    answered |= !want_nav;
+                }
+                // (Another `Param`, a write's answer sent without waiting,
+                // is passed over.)
+                FromFc::Param { index, .. } if reads.front() == Some(&index) => {
+                    reads.pop_front();
                 }
                 _ => {}
             }
+            if answered && reads.is_empty() {
+                return out.ok_or_else(|| anyhow::anyhow!("no actuator frame"));
+            }
+        }
+        if answered {
+            bail!(
+                "step {seq}: no answer to {} parameter read(s) of the flood",
+                reads.len()
+            )
         }
         bail!("no answer for step {seq}")
     }
