@@ -22,6 +22,15 @@
 //! chosen so that its peak speed is the mode's speed. A ground station
 //! heard and then silent for `gcs_loss_ms` (the settings' `FS_GCS_MS`)
 //! while armed → Land ([`ModeCommander::watch_ground_station`]).
+//!
+//! The supervisor's tumble check ([`crate::supervisor::tumbled`], the one
+//! the CRTP vehicle stops its motors on) runs as PX4's failure detector
+//! does with its defaults: tilted beyond 60° from arming until
+//! [`LOCKDOWN_AFTER_TAKEOFF_US`] after the take-off, the motors stop
+//! (PX4's lockdown, [`ModeEvent::Lockdown`]: a vehicle that flips as it
+//! lifts off, a motor wired in the wrong place); later in the flight
+//! nothing is cut (PX4's flight termination is off by default,
+//! `CBRK_FLIGHTTERM`).
 
 use crate::arming::{self, ArmRefusal, ArmingState};
 use crate::commander::{Legs, Route};
@@ -42,6 +51,10 @@ pub use settings::{joystick_velocity, NavSettings};
 
 /// Height above the arming point from which the vehicle is in the air, m.
 pub const IN_AIR_M: f32 = 0.15;
+
+/// How long after the take-off (the first step in the air, [`IN_AIR_M`])
+/// a tumble still locks the motors down, µs (PX4's `COM_LKDOWN_TKO`, 3 s).
+pub const LOCKDOWN_AFTER_TAKEOFF_US: u64 = 3_000_000;
 
 /// A flight mode (see the module's table).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -148,12 +161,18 @@ pub enum ModeEvent {
     ItemNotFlyable(u16),
     /// Mission item `seq` is out of the planner's reach: Hold.
     ItemOutOfRange(u16),
+    /// Tilted beyond [`crate::supervisor::TUMBLE_TILT_RAD`] on the ground
+    /// or right after the take-off: disarmed (PX4's lockdown).
+    Lockdown,
 }
 
 impl ModeEvent {
     /// A failsafe (rather than news of a plan going as planned).
     pub fn is_failsafe(self) -> bool {
-        matches!(self, ModeEvent::JoystickLost | ModeEvent::GroundStationLost)
+        matches!(
+            self,
+            ModeEvent::JoystickLost | ModeEvent::GroundStationLost | ModeEvent::Lockdown
+        )
     }
 }
 
@@ -169,6 +188,7 @@ impl core::fmt::Display for ModeEvent {
             ModeEvent::MissionDone => f.write_str("mission done: hold"),
             ModeEvent::ItemNotFlyable(seq) => write!(f, "mission item {seq} cannot be flown: hold"),
             ModeEvent::ItemOutOfRange(seq) => write!(f, "mission item {seq} out of range: hold"),
+            ModeEvent::Lockdown => f.write_str("critical failure: tilt beyond 60°, lockdown"),
         }
     }
 }
@@ -207,6 +227,8 @@ pub struct ModeCommander {
     /// Where it armed (estimated), NED about the origin, m: the home a
     /// return flies to (the origin until it arms).
     home_ned_m: Vector3<f32>,
+    /// When it was first in the air since it armed (the take-off), µs.
+    takeoff_us: Option<u64>,
 }
 
 impl Default for ModeCommander {
@@ -228,6 +250,7 @@ impl ModeCommander {
             manual: None,
             gcs_seen_us: None,
             home_ned_m: Vector3::new(0.0, 0.0, 0.0),
+            takeoff_us: None,
         }
     }
 
@@ -304,8 +327,8 @@ impl ModeCommander {
     /// controller `ctrl` of the loop `lp` is designed afresh (no state wound up on the ground).
     /// Where it arms is home; it holds there (or, in Offboard, flies the
     /// streamed set-point; an automatic mode becomes Hold). Nothing else is
-    /// monitored here: PX4's HIL gives no battery reading, and nothing locks
-    /// or sees a tumble.
+    /// checked here: PX4's HIL gives no battery reading, and nothing locks
+    /// (a tumble is the lockdown's, [`ModeCommander::fly`]).
     pub fn arm(&mut self, lp: &mut Loop, ctrl: &mut AnyController<f32>, started: bool) -> Result<(), ArmRefusal> {
         if self.armed {
             return Ok(());
@@ -340,6 +363,7 @@ impl ModeCommander {
             }
         }
         self.home_ned_m = est.pos_ned_m;
+        self.takeoff_us = None;
         self.armed = true;
         Ok(())
     }
@@ -487,6 +511,9 @@ impl ModeCommander {
         if !self.armed {
             return Ok(());
         }
+        if self.lockdown(t_us, lp) {
+            return say(ModeEvent::Lockdown);
+        }
         let nav = lp.settings().nav;
         match self.mode {
             FlightMode::Position => self.fly_joystick(t_us, dt_s, lp, mission, say),
@@ -524,6 +551,27 @@ impl ModeCommander {
             }
             FlightMode::Hold => Ok(()),
         }
+    }
+
+    /// The supervisor's tumble check (see the module's documentation):
+    /// armed, tilted beyond 60° ([`crate::supervisor::tumbled`]) and not yet
+    /// [`LOCKDOWN_AFTER_TAKEOFF_US`] past the take-off → disarmed, `true`.
+    /// Notes the take-off, the first step in the air since arming.
+    fn lockdown(&mut self, t_us: u64, lp: &Loop) -> bool {
+        let Some(est) = lp.navigator().estimate() else {
+            return false;
+        };
+        if self.takeoff_us.is_none() && est.pos_ned_m[2] < self.home_ned_m[2] - IN_AIR_M {
+            self.takeoff_us = Some(t_us);
+        }
+        let early = self
+            .takeoff_us
+            .is_none_or(|t0| t_us.saturating_sub(t0) < LOCKDOWN_AFTER_TAKEOFF_US);
+        if early && crate::supervisor::tumbled(&est.att) {
+            self.disarm();
+            return true;
+        }
+        false
     }
 
     /// Position mode's step: the joystick moves the set-point

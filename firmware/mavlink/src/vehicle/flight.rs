@@ -93,36 +93,41 @@ pub fn setpoint_from_target(m: &SET_POSITION_TARGET_LOCAL_NED_DATA, yaw_rad: f32
 }
 
 impl MavShared {
-    /// Each step, what the mode flies ([`fc_loop::modes::ModeCommander::fly`]),
-    /// after the ground-station failsafe; what happens is told to the
-    /// ground station.
-    pub(in crate::vehicle) fn fly_mode<S: MavSink>(
-        &mut self,
-        t_us: u64,
-        dt_s: f32,
-        out: &mut S,
-    ) -> Result<(), S::Error> {
-        let mut flown = missions::flown(&mut self.mission, self.home);
-        self.modes
-            .fly(t_us, dt_s, &mut self.lp, &mut flown, &mut |e| missions::tell(out, e))
-    }
-
-    /// The ground-station failsafe (`FS_GCS_MS`,
-    /// [`fc_loop::modes::ModeCommander::watch_ground_station`]).
-    pub(in crate::vehicle) fn watch_ground_station<S: MavSink>(
-        &mut self,
-        now_us: u64,
-        out: &mut S,
-    ) -> Result<(), S::Error> {
+    /// The commander's part of a sample's step at `t_us`, `dt_s` after the
+    /// last, before the estimator's (commander → estimator → controller, as
+    /// for every protocol): the ground-station failsafe (`FS_GCS_MS`,
+    /// [`fc_loop::modes::ModeCommander::watch_ground_station`]), then what
+    /// the mode flies and its tumble lockdown
+    /// ([`fc_loop::modes::ModeCommander::fly`]) into the
+    /// set-point this step flies. What happens is kept for the step's end
+    /// to tell the ground station ([`MavShared::tell_events`]).
+    pub(in crate::vehicle) fn command(&mut self, t_us: u64, dt_s: f32) {
         let limit_ms = self.lp.settings().gcs_loss_ms;
         let mut flown = missions::flown(&mut self.mission, self.home);
-        match self
+        let (events, counters) = (&mut self.events, &mut self.counters);
+        let mut keep = |e| {
+            if events.push(e).is_err() {
+                counters.events_dropped = counters.events_dropped.wrapping_add(1);
+            }
+            Ok::<(), core::convert::Infallible>(())
+        };
+        if let Some(e) = self
             .modes
-            .watch_ground_station(now_us, limit_ms, &mut self.lp, &mut flown)
+            .watch_ground_station(t_us, limit_ms, &mut self.lp, &mut flown)
         {
-            Some(e) => missions::tell(out, e),
-            None => Ok(()),
+            let _ = keep(e);
         }
+        let _ = self.modes.fly(t_us, dt_s, &mut self.lp, &mut flown, &mut keep);
+    }
+
+    /// Tells the ground station what the commander's part of the step did
+    /// ([`MavShared::command`]), in order.
+    pub(in crate::vehicle) fn tell_events<S: MavSink>(&mut self, out: &mut S) -> Result<(), S::Error> {
+        let events = core::mem::take(&mut self.events);
+        for e in events {
+            missions::tell(out, e)?;
+        }
+        Ok(())
     }
 
     /// Armed and more than [`super::IN_AIR_M`] above where it armed (estimated):

@@ -49,6 +49,7 @@ pub(in crate::vehicle) fn tell<S: MavSink>(out: &mut S, event: ModeEvent) -> Res
                 &MavMessage::MISSION_CURRENT(MISSION_CURRENT_DATA { seq: next }),
             );
         }
+        ModeEvent::Lockdown => MavSeverity::MAV_SEVERITY_EMERGENCY,
         e if e.is_failsafe() => MavSeverity::MAV_SEVERITY_CRITICAL,
         ModeEvent::OffboardLost | ModeEvent::ItemNotFlyable(_) | ModeEvent::ItemOutOfRange(_) => {
             MavSeverity::MAV_SEVERITY_WARNING

@@ -47,7 +47,7 @@ use fc_core::control::Setpoint;
 use fc_core::estimate::Fix;
 #[cfg(test)]
 use fc_core::model::airframe::MixerError;
-use fc_loop::modes::ModeCommander;
+use fc_loop::modes::{ModeCommander, ModeEvent};
 use fc_loop::nav::NavMode;
 use fc_loop::schedule::Schedule;
 use fc_loop::{Exclusive, FcConfig, Loop};
@@ -125,7 +125,15 @@ pub struct VehicleCounters {
     pub baro_fixes: u32,
     /// Magnetometer headings fused (flagged in `HIL_SENSOR`).
     pub mag_fixes: u32,
+    /// Mode events not told: more in one step than
+    /// [`MODE_EVENTS_PER_STEP`] (never, as the modes are written).
+    pub events_dropped: u32,
 }
+
+/// The most mode events one step keeps for the ground station: the
+/// ground-station failsafe's and the mode's
+/// ([`fc_loop::modes::ModeCommander::fly`] says at most one).
+pub const MODE_EVENTS_PER_STEP: usize = 2;
 
 /// Height above the arming point from which the vehicle is in the air, m.
 pub use fc_loop::modes::IN_AIR_M;
@@ -250,6 +258,9 @@ pub struct MavShared {
     modes: ModeCommander,
     /// The mission store and its transfers.
     mission: Mission,
+    /// What the commander's part of this step did, for its end to tell
+    /// ([`MavShared::command`]).
+    events: heapless::Vec<ModeEvent, MODE_EVENTS_PER_STEP>,
     /// The last streamed acceleration and its sender's time
     /// (`time_boot_ms`), for the jerk the message has no field for.
     offboard_acc: Option<(Vector3<f32>, u32)>,
@@ -306,6 +317,7 @@ impl MavShared {
             lp: Loop::unstarted_with(FcConfig::default(), settings),
             modes: ModeCommander::new(),
             mission: Mission::new(),
+            events: heapless::Vec::new(),
             offboard_acc: None,
             home: None,
             last_fix_us: None,

@@ -14,11 +14,9 @@ use fc_loop::{Actuation, LoopOf, Mutex, Step};
 #[derive(Debug, Clone, Copy)]
 pub struct SensorStep {
     /// The sample's time (`time_usec`), µs.
-    t_us: u64,
-    /// Since the last sample, s.
-    dt_s: f32,
+    pub(in crate::vehicle) t_us: u64,
     /// The loop's step (`None`: nothing to step on yet).
-    job: Option<Step>,
+    pub(in crate::vehicle) job: Option<Step>,
 }
 
 /// Flies `step` on the controller `ctrl` (an image's controller task), the
@@ -52,7 +50,9 @@ impl MavShared {
     /// The estimator's half of a `HIL_SENSOR` (`m`): the sample checked (a
     /// refused one is counted and steps nothing), a simulator that started
     /// again opens a new time line, the barometer and magnetometer fused,
-    /// one estimator step ([`Loop::imu_job`](fc_loop::Loop::imu_job)).
+    /// the commander's part (the ground-station failsafe, the mode's
+    /// set-point for this step: [`MavShared::command`]), one estimator
+    /// step ([`Loop::imu_job`](fc_loop::Loop::imu_job)).
     /// Returns the controller's step ([`fly_sensor_step`] flies it, then
     /// [`MavShared::sensor_end`] answers it); `None`: refused.
     pub fn sensor_begin<C: CycleClock>(&mut self, m: &HIL_SENSOR_DATA, clock: &C, now_us: u64) -> Option<SensorStep> {
@@ -81,10 +81,10 @@ impl MavShared {
         if let Some(mag) = s.mag_frd_gauss {
             self.on_mag(s.time_us, &mag);
         }
+        self.command(s.time_us, dt_s);
         self.seq = self.seq.wrapping_add(1);
         Some(SensorStep {
             t_us: s.time_us,
-            dt_s,
             job: self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us),
         })
     }
@@ -93,8 +93,9 @@ impl MavShared {
     /// not due): the supervisor's gate (every armed step flies: the modes'
     /// failsafes are set-points, Hold and Land) and the mixer
     /// ([`Loop::power`](fc_loop::Loop::power)), the simulator answered
-    /// (`HIL_ACTUATOR_CONTROLS`), then the ground-station failsafe, the
-    /// mission, the mode's set-point for the next step and the telemetry due.
+    /// (`HIL_ACTUATOR_CONTROLS`), then what the commander's part did told
+    /// the ground station, the mission transfer's retries and the
+    /// telemetry due.
     pub fn sensor_end<S: MavSink, C: CycleClock>(
         &mut self,
         step: &SensorStep,
@@ -114,9 +115,8 @@ impl MavShared {
             Peer::Simulator,
             &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(t_us, &self.motors, self.modes.armed())),
         )?;
-        self.watch_ground_station(t_us, out)?;
+        self.tell_events(out)?;
         self.mission.tick(t_us, out)?;
-        self.fly_mode(t_us, step.dt_s, out)?;
         self.telemetry(t_us, out)
     }
 

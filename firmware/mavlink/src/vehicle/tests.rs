@@ -1715,3 +1715,113 @@ fn the_images_halves_send_what_one_call_sends() {
     );
     assert_eq!(parts.mode(), FlightMode::Takeoff);
 }
+
+/// The commander runs before the estimator and the controller, as in
+/// every protocol's step (commander → estimator → controller): in a
+/// take-off, each step's controller flies the route's set-point at its own
+/// sample's time, the one the vehicle holds after the step, not the step
+/// before's (a 1 ms lag at 1 kHz).
+#[test]
+fn a_take_off_flies_each_samples_own_setpoint() {
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut sent = Sent::default();
+    for m in (0..2_000).flat_map(|k| at_rest(k * 1000)) {
+        v.handle(&m, &mut sent, &Still, 0).unwrap();
+    }
+    for m in [
+        set_mode(FlightMode::Hold),
+        command(1.0, 0.0),
+        command_of(MavCmd::MAV_CMD_NAV_TAKEOFF, [f32::NAN; 7]),
+    ] {
+        v.handle(&m, &mut sent, &Still, 0).unwrap();
+    }
+    assert_eq!(v.mode(), FlightMode::Takeoff);
+    let (shared, ctrl) = v.split();
+    let mut heights = Vec::new();
+    for m in (2_000..2_500).flat_map(|k| at_rest(k * 1000)) {
+        let MavMessage::HIL_SENSOR(s) = &m else {
+            shared.handle(ctrl, &m, &mut sent, &Still, 0).unwrap();
+            continue;
+        };
+        let Some(step) = shared.sensor_begin(s, &Still, 0) else {
+            continue;
+        };
+        let job = step.job.and_then(|j| j.control);
+        let flown = fly_sensor_step(&mut Exclusive(&mut *shared), ctrl, &step, &Still);
+        shared.sensor_end(&step, flown, &Still, &mut sent).unwrap();
+        if let Some(job) = job {
+            assert_eq!(job.sp.pos_ned_m, shared.lp.setpoint().pos_ned_m, "at {} µs", step.t_us);
+            heights.push(job.sp.pos_ned_m[2]);
+        }
+    }
+    // The route climbs: every flown set-point is a new one.
+    assert!(heights.len() > 100, "{}", heights.len());
+    assert!(heights.windows(2).all(|w| w[1] < w[0]), "{heights:?}");
+}
+
+/// HIL samples of a vehicle rolled to `roll_rad` about body x, turning at
+/// `p_radps` and otherwise at rest: the accelerometer reads gravity in the
+/// rolled frame, f = (0, −g sin φ, −g cos φ) (body FRD).
+fn rolled(t_us: u64, roll_rad: f32, p_radps: f32) -> [MavMessage; 2] {
+    let [state, MavMessage::HIL_SENSOR(mut s)] = at_rest(t_us) else {
+        unreachable!()
+    };
+    s.xgyro = p_radps;
+    s.yacc = -9.81 * roll_rad.sin();
+    s.zacc = -9.81 * roll_rad.cos();
+    [state, MavMessage::HIL_SENSOR(s)]
+}
+
+/// The supervisor's tumble check, as PX4's failure detector with its
+/// defaults: armed on the ground, a vehicle that rolls over (5 rad/s to
+/// 86°, as with a motor wired in the wrong place) is disarmed within the
+/// roll, told as PX4 tells it (`STATUSTEXT` EMERGENCY); one that rolls to
+/// 45° and back flies on.
+#[test]
+fn a_vehicle_that_flips_as_it_lifts_off_is_locked_down() {
+    for (to_rad, locked) in [(1.5f32, true), (0.785, false)] {
+        let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+        let mut out = Sent::default();
+        let mut t = rest(&mut v, &mut out, 1_000_000, 2000);
+        v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+        assert!(v.armed());
+        let mut out = Sent::default();
+        // Over and back at 5 rad/s, then at rest.
+        let n = (to_rad / 5.0 * 1000.0) as u64;
+        let mut disarmed_at = None;
+        for k in 0..2 * n {
+            let (roll, p) = if k < n {
+                (5.0 * k as f32 * 1e-3, 5.0)
+            } else {
+                (to_rad - 5.0 * (k - n) as f32 * 1e-3, -5.0)
+            };
+            for m in rolled(t, roll, p) {
+                v.handle(&m, &mut out, &Still, 0).unwrap();
+            }
+            if !v.armed() && disarmed_at.is_none() {
+                disarmed_at = Some(roll);
+            }
+            t += 1000;
+        }
+        rest(&mut v, &mut out, t, 500);
+        let said = out.texts();
+        if locked {
+            // Past 60°, before the top of the roll.
+            let at = disarmed_at.expect("disarmed");
+            assert!((1.047..1.2).contains(&at), "disarmed at {at} rad");
+            assert_eq!(said, ["critical failure: tilt beyond 60°, lockdown"]);
+            let severities: Vec<_> = out
+                .0
+                .iter()
+                .filter_map(|(_, m)| match m {
+                    MavMessage::STATUSTEXT(t) => Some(t.severity),
+                    _ => None,
+                })
+                .collect();
+            assert_eq!(severities, [MavSeverity::MAV_SEVERITY_EMERGENCY]);
+            assert!(v.motors().iter().all(|&m| m == 0.0), "{:?}", v.motors());
+        } else {
+            assert!(v.armed() && said.is_empty(), "{said:?}");
+        }
+    }
+}

@@ -19,8 +19,8 @@
 //! | priority | task | interrupt | work |
 //! |---|---|---|---|
 //! | 4 | `usart1_bytes` | USART1 receive | the link's bytes into their queue, the link's task pended |
-//! | 3 | `estimator` | CAN2_SCE (pended) | a `HIL_SENSOR` (the sample): the estimator's half of its step ([`MavShared::sensor_begin`]), handed to the controller's task |
-//! | 2 | `controller` | CAN2_RX0 (pended) | flies the step ([`fly_sensor_step`]), then its end ([`MavShared::sensor_end`]): the motors, the simulator's answer, the modes' set-point, the telemetry due |
+//! | 3 | `estimator` | CAN2_SCE (pended) | a `HIL_SENSOR` (the sample): the commander's and the estimator's half of its step ([`MavShared::sensor_begin`]), handed to the controller's task |
+//! | 2 | `controller` | CAN2_RX0 (pended) | flies the step ([`fly_sensor_step`]), then its end ([`MavShared::sensor_end`]): the motors, the simulator's answer, the modes' events, the telemetry due |
 //! | 1 | `link` | CAN2_RX1 (pended) | decodes the queued frames: a `HIL_SENSOR` goes to the estimator's task, a ground station's message is handled ([`MavShared::handle`]); the signing timestamp kept on landing; the log |
 //!
 //! The simulator's samples and the ground station's messages share
