@@ -51,7 +51,7 @@ impl MavShared {
     /// refused one is counted and steps nothing), a simulator that started
     /// again opens a new time line, the barometer and magnetometer fused,
     /// the commander's part (the ground-station failsafe, the mode's
-    /// set-point for this step: [`MavShared::command`]), one estimator
+    /// set-point for this step: `MavShared::command`), one estimator
     /// step ([`Loop::imu_job`](fc_loop::Loop::imu_job)).
     /// Returns the controller's step ([`fly_sensor_step`] flies it, then
     /// [`MavShared::sensor_end`] answers it); `None`: refused.
