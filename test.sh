@@ -316,9 +316,11 @@ python3 -c 'import sys, pyulog.info; sys.argv = ["ulog_info", sys.argv[1]]; pyul
 python3 tools/check_ulog.py hil target/rotorpy-hil.ulg target/rotorpy-hil.json | tee -a "$log"
 python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
 # Two lanes from here, each about one core (a flight in lockstep, or QEMU and
-# its client taking turns): the MAVLink checks, then cfclient and the Slurm
+# its client taking turns), of about the same length (about 14 min each): the
+# MAVLink flights (the image's step flight, the pymavlink ground station,
+# MAVSDK in process and on the image, MAVProxy), then cfclient and the Slurm
 # sweep, in this shell; beside them, in a subshell, the cflib sessions (ports
-# 198xx), then the MAVSDK flight on the image (on ports of its own). The
+# 198xx), then MAVLink signing (on ports of its own: 4562, 14552, 14562). The
 # lane's output goes to target/lane-beside.out and is shown when this shell's
 # checks are done; its check lines join the count, its stages the table
 # (marked "beside").
@@ -335,9 +337,17 @@ lane_beside() {
     bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
     # The CRTP ports are free from here: cfclient may take 19850 (in this shell).
     touch target/lane-beside.crtp-done
-    stage "the same MAVSDK script against firmware-mavlink in QEMU (about 5 min)"
-    hil --target qemu --mavsdk --duration 150 --port 4561 --gcs-port 14551 --truth-port 14561 \
-        --json target/rotorpy-hil-mavsdk-qemu.json | grep "^mavsdk check:" | tee -a "$log"
+    stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage, then firmware-mavlink in QEMU"
+    # In process with --storage: the owner then sets a second key and a parameter; the vehicle,
+    # started again on the same file, must demand signatures at once and keep both.
+    local ports=(--port 4562 --gcs-port 14552 --truth-port 14562)
+    rm -f target/px4-storage.bin target/px4-storage.bin.json
+    hil "${ports[@]}" --signing --storage target/px4-storage.bin --duration 120 \
+        --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
+    hil "${ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
+        --json target/rotorpy-hil-restart.json | grep "^signing check:" | tee -a "$log"
+    hil "${ports[@]}" --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json \
+        | grep "^signing check:" | tee -a "$log"
     end_stage
     printf '%s\n' "${TIMES[@]}" >target/lane-beside.times
 }
@@ -349,19 +359,13 @@ hil --target qemu --waypoint 0,0,0,-1 --waypoint 5,1,0,-1 --duration 15 --measur
     --json target/rotorpy-hil-qemu.json | grep "rotorpy check:" | tee -a "$log"
 stage "a pymavlink ground station (tools/mav_gcs.py) flies it against rotorpy"
 hil --gcs --duration 60 --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
-stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage, then firmware-mavlink in QEMU"
-# In process with --storage: the owner then sets a second key and a parameter; the vehicle,
-# started again on the same file, must demand signatures at once and keep both.
-rm -f target/px4-storage.bin target/px4-storage.bin.json
-hil --signing --storage target/px4-storage.bin --duration 120 --json target/rotorpy-hil-signing.json \
-    | grep "^signing check:" | tee -a "$log"
-hil --signing --restart --storage target/px4-storage.bin --duration 30 --json target/rotorpy-hil-restart.json \
-    | grep "^signing check:" | tee -a "$log"
-hil --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json | grep "^signing check:" | tee -a "$log"
 stage "MAVSDK (pinned), unmodified, flies it as a PX4, in process"
 hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
 stage "MAVProxy (pinned), unmodified, on its standard input"
 hil --mavproxy --duration 90 --json target/rotorpy-hil-mavproxy.json | grep "^mavproxy check:" | tee -a "$log"
+stage "the same MAVSDK script against firmware-mavlink in QEMU (about 5 min)"
+hil --target qemu --mavsdk --duration 150 --json target/rotorpy-hil-mavsdk-qemu.json \
+    | grep "^mavsdk check:" | tee -a "$log"
 # cfclient takes cflib's port (19850): once the lane beside has done its CRTP sessions.
 end_stage
 while [ ! -f target/lane-beside.crtp-done ] && kill -0 "$LANE_BESIDE" 2>/dev/null; do sleep 2; done
