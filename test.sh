@@ -316,14 +316,14 @@ python3 -c 'import sys, pyulog.info; sys.argv = ["ulog_info", sys.argv[1]]; pyul
 python3 tools/check_ulog.py hil target/rotorpy-hil.ulg target/rotorpy-hil.json | tee -a "$log"
 python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
 # Two lanes from here, each about one core (a flight in lockstep, or QEMU and
-# its client taking turns), of about the same length (about 14 min each): the
-# MAVLink flights (the image's step flight, the pymavlink ground station,
-# MAVSDK in process and on the image, MAVProxy), then cfclient and the Slurm
-# sweep, in this shell; beside them, in a subshell, the cflib sessions (ports
-# 198xx), then MAVLink signing (on ports of its own: 4562, 14552, 14562). The
-# lane's output goes to target/lane-beside.out and is shown when this shell's
-# checks are done; its check lines join the count, its stages the table
-# (marked "beside").
+# its client taking turns; MAVSDK on the image takes more): the MAVLink
+# flights (the image's step flight, the pymavlink ground station, MAVSDK in
+# process and on the image, MAVProxy), then cfclient and the Slurm sweep, in
+# this shell; beside them, in a subshell, the cflib sessions (ports 198xx),
+# then MAVLink signing (on ports of its own: 4562, 14552, 14562). The lane's
+# output goes to target/lane-beside.out and is shown when this shell's checks
+# are done; its check lines join the count, its stages the table (marked
+# "beside").
 lane_beside() {
     TIMES=() STAGE=""
     log=target/lane-beside.log
