@@ -363,7 +363,7 @@ stage "MAVSDK (pinned), unmodified, flies it as a PX4, in process"
 hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
 stage "MAVProxy (pinned), unmodified, on its standard input"
 hil --mavproxy --duration 90 --json target/rotorpy-hil-mavproxy.json | grep "^mavproxy check:" | tee -a "$log"
-stage "the same MAVSDK script against firmware-mavlink in QEMU (about 5 min)"
+stage "the same MAVSDK script against firmware-mavlink in QEMU"
 hil --target qemu --mavsdk --duration 150 --json target/rotorpy-hil-mavsdk-qemu.json \
     | grep "^mavsdk check:" | tee -a "$log"
 # cfclient takes cflib's port (19850): once the lane beside has done its CRTP sessions.
