@@ -3,18 +3,21 @@
 //! client's stream of set-points ([`Source::Streamed`]: CRTP's generic
 //! set-points) ranks above the planner's segments ([`Source::Planned`]:
 //! the high-level commander's take-off, land and go-to, a hold, a failsafe
-//! descent), and a stream is watched ([`Watchdog`]): silent, it is first
-//! held level where it is, then stopped. A stream hands back to the planner
-//! when its client says so ([`Commander::notify_stop`]).
+//! descent, an automatic mode's legs), and a stream is watched
+//! ([`Watchdog`]): silent, it is first held level where it is, then
+//! stopped. A stream hands back to the planner when its client says so
+//! ([`Commander::notify_stop`]). PX4's modes ([`crate::modes`]) are a
+//! source of set-points on it like any other: a mode's hold, the joystick's
+//! set-point and Offboard's are held as given ([`Source::Held`]), an
+//! automatic mode's legs ([`Route`]) are the planner's segments in turn
+//! ([`Commander::follow`]).
 //!
-//! The protocols' adapters decode into its calls; the vehicle asks it for
-//! the set-point of every step ([`Commander::setpoint_now`]) and for the
-//! end of a landing ([`Commander::landed`]). Whether a command may take
-//! control (armed, no design under way) is the vehicle's to say before it
-//! calls.
-//!
-//! An automatic mode's legs at given speeds ([`Route`]: MAVLink's
-//! take-off, land, return and mission) are planned here too.
+//! The protocols' adapters decode into its calls (CRTP's directly, MAVLink's
+//! through the modes); the vehicle asks it for the set-point of every step
+//! ([`Commander::setpoint_now`], [`Commander::setpoint_at`]) and hands that
+//! to the flight loop, and asks for the end of a landing
+//! ([`Commander::landed`]). Whether a command may take control (armed, no
+//! design under way) is the vehicle's to say before it calls.
 
 use crate::planner::{Reference, Segment};
 use fc_core::control::{Setpoint, StateEstimate};
@@ -36,7 +39,7 @@ pub struct Watchdog {
 pub enum Priority {
     /// Nothing is flown: the motors are off.
     Idle,
-    /// The planner's segment.
+    /// The planner's segment, or a set-point held as given.
     Planned,
     /// A client's stream of set-points.
     Streamed,
@@ -65,6 +68,13 @@ pub enum Source {
         last_us: u64,
         /// When control returns to the planner, µs.
         handover_us: Option<u64>,
+    },
+    /// A set-point held as given until it is replaced (PX4's modes: a
+    /// hold, the joystick's set-point, the Offboard set-point): not moved
+    /// by its velocity, not watched (its timeouts are its mode's).
+    Held {
+        /// The set-point.
+        sp: Setpoint<f32>,
     },
 }
 
@@ -102,7 +112,7 @@ impl Commander {
     pub fn priority(&self) -> Priority {
         match self.source {
             Source::Idle => Priority::Idle,
-            Source::Planned { .. } => Priority::Planned,
+            Source::Planned { .. } | Source::Held { .. } => Priority::Planned,
             Source::Streamed { .. } => Priority::Streamed,
         }
     }
@@ -157,6 +167,11 @@ impl Commander {
         }
     }
 
+    /// Flies `sp` as given until it is replaced ([`Source::Held`]).
+    pub fn hold(&mut self, sp: Setpoint<f32>) {
+        self.source = Source::Held { sp };
+    }
+
     /// Flies the planner's segment `seg` (`landing`: stopped on the ground
     /// at its end).
     pub fn plan(&mut self, seg: Segment, landing: bool) {
@@ -205,24 +220,49 @@ impl Commander {
                 event = Some(Event::StreamStopped);
             }
         }
-        let r = match &mut self.source {
-            Source::Idle => return (None, event),
-            Source::Planned { seg, .. } => seg.eval(t_us),
-            Source::Streamed { sp, last_us, .. } => {
-                if t_us.saturating_sub(*last_us) / 1000 > wd.level_ms {
-                    // Level and still where it is.
-                    sp.vel_ned_mps = Vector3::zeros();
-                    sp.acc_ned_mps2 = Vector3::zeros();
-                    sp.yaw_rate_radps = 0.0;
-                } else {
-                    // A velocity set-point moves its position.
-                    sp.pos_ned_m += sp.vel_ned_mps * dt_s;
-                    sp.yaw_rad += sp.yaw_rate_radps * dt_s;
-                }
-                Reference::from(&*sp)
+        if let Source::Streamed { sp, last_us, .. } = &mut self.source {
+            if t_us.saturating_sub(*last_us) / 1000 > wd.level_ms {
+                // Level and still where it is.
+                sp.vel_ned_mps = Vector3::zeros();
+                sp.acc_ned_mps2 = Vector3::zeros();
+                sp.yaw_rate_radps = 0.0;
+            } else {
+                // A velocity set-point moves its position.
+                sp.pos_ned_m += sp.vel_ned_mps * dt_s;
+                sp.yaw_rad += sp.yaw_rate_radps * dt_s;
             }
-        };
-        (Some(r.setpoint()), event)
+        }
+        (self.setpoint_at(t_us), event)
+    }
+
+    /// The set-point flown at `t_us` as it stands (nothing advanced),
+    /// `None` while idle: a segment's reference then, a stream's set-point
+    /// as a reference (its jerk dropped), a held set-point as given.
+    pub fn setpoint_at(&self, t_us: u64) -> Option<Setpoint<f32>> {
+        match &self.source {
+            Source::Idle => None,
+            Source::Planned { seg, .. } => Some(seg.eval(t_us).setpoint()),
+            Source::Streamed { sp, .. } => Some(Reference::from(sp).setpoint()),
+            Source::Held { sp } => Some(*sp),
+        }
+    }
+
+    /// An automatic mode's step at `t_us`: when the segment flown has
+    /// ended, `route`'s next leg is planned from its goal and flown (a
+    /// landing if it is the last leg of a route that lands). Returns
+    /// whether every leg is done, `None` when no segment is flown.
+    pub fn follow(&mut self, route: &mut Route, t_us: u64) -> Option<bool> {
+        let seg = *self.segment()?;
+        if !seg.finished(t_us) {
+            return Some(false);
+        }
+        match route.next(t_us, &seg.goal()) {
+            Some((seg, landing)) => {
+                self.plan(seg, landing);
+                Some(false)
+            }
+            None => Some(true),
+        }
     }
 
     /// What is flown at `now_us`, as a reference; idle, `est` at rest
@@ -230,7 +270,7 @@ impl Commander {
     pub fn reference(&self, now_us: u64, est: Option<&StateEstimate<f32>>) -> Reference {
         match &self.source {
             Source::Planned { seg, .. } => seg.eval(now_us),
-            Source::Streamed { sp, .. } => Reference::from(sp),
+            Source::Streamed { sp, .. } | Source::Held { sp } => Reference::from(sp),
             Source::Idle => match est {
                 Some(e) => Reference::at_rest(e.pos_ned_m, e.euler()[2]),
                 None => Reference::at_rest(Vector3::zeros(), 0.0),
@@ -264,70 +304,60 @@ pub fn leg_duration_s(d_m: f32, v_mps: f32) -> f32 {
 /// its speed, m/s.
 pub type Legs = heapless::Deque<(Vector3<f32>, f32), 3>;
 
-/// An automatic mode under way: the segment flown, the legs after it.
+/// The legs of an automatic mode still to fly after the one the
+/// [`Commander`] flies ([`Commander::follow`]), at a heading held.
 #[derive(Debug, Clone, Default)]
 pub struct Route {
-    segment: Option<Segment>,
     legs: Legs,
     yaw_rad: f32,
+    /// Its last leg is a landing.
+    lands: bool,
 }
 
 impl Route {
     /// Nothing to fly.
     pub const fn new() -> Self {
         Self {
-            segment: None,
             legs: heapless::Deque::new(),
             yaw_rad: 0.0,
+            lands: false,
         }
     }
 
-    /// From `from` at `t_us` through `legs` in turn, holding heading `yaw`;
-    /// `false` (nothing to fly) if no leg could be planned (a goal not
-    /// finite or farther than the planner's 1 km).
-    pub fn start(&mut self, t_us: u64, from: &Reference, legs: Legs, yaw_rad: f32) -> bool {
+    /// From `from` at `t_us` through `legs` in turn, holding heading `yaw`
+    /// (`lands`: the last leg is a landing): the first leg's segment, and
+    /// whether it is a landing, for the commander to fly
+    /// ([`Commander::plan`]); `None` (nothing to fly) if no leg could be
+    /// planned (a goal not finite or farther than the planner's 1 km).
+    pub fn start(
+        &mut self,
+        t_us: u64,
+        from: &Reference,
+        legs: Legs,
+        yaw_rad: f32,
+        lands: bool,
+    ) -> Option<(Segment, bool)> {
         self.legs = legs;
         self.yaw_rad = yaw_rad;
-        self.segment = None;
+        self.lands = lands;
         self.next(t_us, from)
     }
 
-    /// Plans the next leg from `from`; `false` when there is none.
-    fn next(&mut self, t_us: u64, from: &Reference) -> bool {
+    /// The next leg's segment from `from` at `t_us` and whether it is a
+    /// landing; `None` when there is none.
+    pub fn next(&mut self, t_us: u64, from: &Reference) -> Option<(Segment, bool)> {
         while let Some((goal, speed)) = self.legs.pop_front() {
             let d = (goal - from.pos_ned_m).norm();
             if let Ok(s) = Segment::plan(t_us, from, goal, self.yaw_rad, leg_duration_s(d, speed)) {
-                self.segment = Some(s);
-                return true;
+                return Some((s, self.lands && self.legs.is_empty()));
             }
         }
-        false
+        None
     }
 
-    /// The reference at `t_us` and whether every leg is done.
-    pub fn at(&mut self, t_us: u64) -> Option<(Reference, bool)> {
-        let seg = self.segment?;
-        if seg.finished(t_us) {
-            let end = seg.goal();
-            if self.next(t_us, &end) {
-                return self.segment.map(|s| (s.eval(t_us), false));
-            }
-            return Some((end, true));
-        }
-        Some((seg.eval(t_us), false))
-    }
-
-    /// The leg flown is the last one (or the route has ended).
-    pub fn on_last_leg(&self) -> bool {
-        self.segment.is_some() && self.legs.is_empty()
-    }
-
-    /// Where the route ends (the last leg's goal), if under way.
-    pub fn goal(&self) -> Option<Vector3<f32>> {
-        self.legs
-            .back()
-            .map(|l| l.0)
-            .or(self.segment.map(|s| s.goal().pos_ned_m))
+    /// No leg is left after the one flown.
+    pub fn is_empty(&self) -> bool {
+        self.legs.is_empty()
     }
 }
 
@@ -421,35 +451,56 @@ mod tests {
 
     #[test]
     fn a_route_flies_its_legs_in_turn_at_their_peak_speeds() {
+        let mut c = Commander::new();
         let mut r = Route::new();
         let from = Reference::at_rest(Vector3::new(3.0, 4.0, -1.0), 0.0);
         let mut legs = Legs::new();
         legs.push_back((Vector3::new(3.0, 4.0, -2.0), 0.5)).unwrap();
         legs.push_back((Vector3::new(0.0, 0.0, -2.0), 1.0)).unwrap();
-        assert!(r.start(0, &from, legs, 0.0));
-        assert_eq!(r.goal(), Some(Vector3::new(0.0, 0.0, -2.0)));
+        let (seg, landing) = r.start(0, &from, legs, 0.0, true).unwrap();
+        assert!(!landing && !r.is_empty());
+        c.plan(seg, landing);
         let mut t = 0;
         let mut peak = [0.0f32; 2];
         let mut leg = 0;
         loop {
-            let (re, done) = r.at(t).unwrap();
+            let done = c.follow(&mut r, t).unwrap();
+            let sp = c.setpoint_at(t).unwrap();
             if done {
-                assert!((re.pos_ned_m - Vector3::new(0.0, 0.0, -2.0)).norm() < 1e-4);
+                assert!((sp.pos_ned_m - Vector3::new(0.0, 0.0, -2.0)).norm() < 1e-4);
                 break;
             }
-            if re.pos_ned_m[2] <= -2.0 + 1e-4 && re.vel_ned_mps[2].abs() < 1e-4 && leg == 0 && t > 0 {
+            if r.is_empty() {
+                // The last leg of a route that lands is a landing.
+                assert!(c.is_landing());
                 leg = 1;
             }
-            peak[leg] = peak[leg].max(re.vel_ned_mps.norm());
+            peak[leg] = peak[leg].max(sp.vel_ned_mps.norm());
             t += 10_000;
             assert!(t < 20_000_000, "never done");
         }
         // 1 m up at 0.5 m/s: 4.375 s; 5 m across at 1 m/s: 10.9 s.
+        assert!((peak[0] - 0.5).abs() < 0.01 && (peak[1] - 1.0).abs() < 0.01, "{peak:?}");
+        assert!((15_000_000..15_500_000).contains(&t), "{t}");
         // A goal 2 km away is not planned.
         let mut far = Legs::new();
         far.push_back((Vector3::new(2000.0, 0.0, -1.0), 1.0)).unwrap();
-        assert!(!Route::new().start(0, &from, far, 0.0));
-        assert!((peak[0] - 0.5).abs() < 0.01 && (peak[1] - 1.0).abs() < 0.01, "{peak:?}");
-        assert!((15_000_000..15_500_000).contains(&t), "{t}");
+        assert!(Route::new().start(0, &from, far, 0.0, false).is_none());
+        // Nothing flown, nothing followed.
+        assert_eq!(Commander::new().follow(&mut r, 0), None);
+    }
+
+    #[test]
+    fn a_held_set_point_is_flown_as_given() {
+        let mut c = Commander::new();
+        let mut sp = moving();
+        sp.jerk_ned_mps3 = Vector3::new(0.0, 0.5, 0.0);
+        c.hold(sp);
+        assert_eq!(c.priority(), Priority::Planned);
+        // Long silent, still as given: not moved, not levelled, not stopped.
+        for t in [0u64, 1_000, 10_000_000] {
+            assert_eq!(c.setpoint_now(t, 0.001, &WD), (Some(sp), None));
+        }
+        assert_eq!(c.reference(0, None).pos_ned_m, sp.pos_ned_m);
     }
 }

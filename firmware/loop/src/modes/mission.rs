@@ -94,7 +94,7 @@ impl ModeCommander {
                         let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
                         return say(ModeEvent::MissionDone);
                     };
-                    let sp = *lp.setpoint();
+                    let sp = self.current(t_us, lp);
                     let from = Reference::from(&sp);
                     let mut legs = Legs::new();
                     let (goal, accept_m, hold_s) = match step {
@@ -135,10 +135,11 @@ impl ModeCommander {
                             return say(ModeEvent::ItemNotFlyable(seq));
                         }
                     };
-                    if !self.route.start(t_us, &from, legs, sp.yaw_rad) {
+                    let Some((seg, landing)) = self.route.start(t_us, &from, legs, sp.yaw_rad, false) else {
                         let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
                         return say(ModeEvent::ItemOutOfRange(seq));
-                    }
+                    };
+                    self.commander.plan(seg, landing);
                     self.phase = Some(MissionPhase::Flying {
                         seq,
                         goal,
@@ -153,10 +154,9 @@ impl ModeCommander {
                     accept_m,
                     hold_s,
                 }) => {
-                    let Some((r, done)) = self.route.at(t_us) else {
+                    let Some(done) = self.commander.follow(&mut self.route, t_us) else {
                         return Ok(());
                     };
-                    lp.set_setpoint(&r.setpoint());
                     let accept = if accept_m > 0.0 { accept_m } else { nav.acc_rad_m };
                     let near = lp
                         .navigator()

@@ -17,9 +17,14 @@
 //! | Offboard | a client's streamed set-points ([`ModeCommander::offboard`]); entered only while they stream, Hold when they stop for [`NavSettings::offboard_loss_s`] |
 //! | Mission | the uploaded mission ([`MissionItems`]), item by item; then Hold |
 //!
-//! Each leg of an automatic mode is one planner segment
-//! ([`crate::planner::Segment`], rest to rest, [`Route`]), its duration
-//! chosen so that its peak speed is the mode's speed. A ground station
+//! The modes are a source of set-points on the [`Commander`], as CRTP's
+//! set-points and high-level commander are: a hold, the joystick's and
+//! Offboard's set-points are held as given ([`Commander::hold`]); each leg
+//! of an automatic mode is one planner segment
+//! ([`crate::planner::Segment`], rest to rest, [`Route`],
+//! [`Commander::follow`]), its duration chosen so that its peak speed is
+//! the mode's speed. Each step ([`ModeCommander::fly`]) hands the
+//! commander's set-point to the flight loop. A ground station
 //! heard and then silent for `gcs_loss_ms` (the settings' `FS_GCS_MS`)
 //! while armed → Land ([`ModeCommander::watch_ground_station`]).
 //!
@@ -33,7 +38,7 @@
 //! `CBRK_FLIGHTTERM`).
 
 use crate::arming::{self, ArmRefusal, ArmingState};
-use crate::commander::{Legs, Route};
+use crate::commander::{Commander, Legs, Route};
 use crate::nav::NavMode;
 use crate::planner::Reference;
 use crate::{AnyController, Exclusive, Loop};
@@ -212,7 +217,9 @@ pub enum LandedState {
 pub struct ModeCommander {
     mode: FlightMode,
     armed: bool,
-    /// The automatic mode's route.
+    /// The set-point flown: the modes' source on it.
+    commander: Commander,
+    /// The automatic mode's legs after the one flown.
     route: Route,
     /// The mission item flown (Mission mode).
     phase: Option<MissionPhase>,
@@ -243,6 +250,7 @@ impl ModeCommander {
         Self {
             mode: FlightMode::Position,
             armed: false,
+            commander: Commander::new(),
             route: Route::new(),
             phase: None,
             mission_cruise_mps: None,
@@ -269,6 +277,18 @@ impl ModeCommander {
         self.home_ned_m
     }
 
+    /// The set-point flown at `t_us` (the last step's time: the one the
+    /// flight loop flies), `None` before the first arming.
+    pub fn setpoint_at(&self, t_us: u64) -> Option<Setpoint<f32>> {
+        self.commander.setpoint_at(t_us)
+    }
+
+    /// The set-point flown at `t_us`, or the flight loop's if the
+    /// commander has none yet: where a new leg starts.
+    fn current(&self, t_us: u64, lp: &Loop) -> Setpoint<f32> {
+        self.commander.setpoint_at(t_us).unwrap_or(*lp.setpoint())
+    }
+
     /// The last streamed set-point and when it came, if any.
     pub fn streamed(&self) -> Option<(Setpoint<f32>, u64)> {
         self.offboard
@@ -279,13 +299,13 @@ impl ModeCommander {
         (nav.offboard_loss_s * 1e6) as u64
     }
 
-    /// A client's set-point at `t_us`: kept for Offboard, and flown at once
-    /// in Offboard while armed (as PX4 does, a stream outside Offboard only
-    /// makes Offboard possible).
-    pub fn offboard(&mut self, sp: Setpoint<f32>, t_us: u64, lp: &mut Loop) {
+    /// A client's set-point at `t_us`: kept for Offboard, and flown from
+    /// the next step in Offboard while armed (as PX4 does, a stream outside
+    /// Offboard only makes Offboard possible).
+    pub fn offboard(&mut self, sp: Setpoint<f32>, t_us: u64) {
         self.offboard = Some((sp, t_us));
         if self.mode == FlightMode::Offboard && self.armed {
-            lp.set_setpoint(&sp);
+            self.commander.hold(sp);
         }
     }
 
@@ -309,7 +329,7 @@ impl ModeCommander {
     /// A landing is flown: Land, or a return's last leg (straight down over
     /// home).
     fn landing(&self) -> bool {
-        self.mode == FlightMode::Land || (self.mode == FlightMode::Return && self.route.on_last_leg())
+        self.mode == FlightMode::Land || (self.mode == FlightMode::Return && self.commander.is_landing())
     }
 
     /// PX4's landed state: on the ground, taking off, in the air, landing.
@@ -353,10 +373,10 @@ impl ModeCommander {
         let yaw = fc_core::quat_to_euler(&est.att)[2];
         match (self.mode, self.offboard) {
             (FlightMode::Offboard, Some((sp, _))) => {
-                lp.set_setpoint(&sp);
+                self.commander.hold(sp);
             }
             (mode, _) => {
-                lp.set_setpoint(&Setpoint::hold(est.pos_ned_m, yaw));
+                self.commander.hold(Setpoint::hold(est.pos_ned_m, yaw));
                 if mode != FlightMode::Position {
                     self.mode = FlightMode::Hold;
                 }
@@ -394,7 +414,7 @@ impl ModeCommander {
         match mode {
             FlightMode::Position | FlightMode::Hold => {
                 if let (true, Some(p)) = (self.armed, here) {
-                    lp.set_setpoint(&Setpoint::hold(p, yaw));
+                    self.commander.hold(Setpoint::hold(p, yaw));
                 }
             }
             FlightMode::Offboard => {
@@ -405,7 +425,7 @@ impl ModeCommander {
                     return Err(ModeRefusal::NotStreaming);
                 };
                 if self.armed {
-                    lp.set_setpoint(&sp);
+                    self.commander.hold(sp);
                 }
             }
             FlightMode::Mission => {
@@ -449,10 +469,13 @@ impl ModeCommander {
                         legs.push_back((Vector3::new(h[0], h[1], ground), nav.land_mps))
                     }
                 };
-                let from = Reference::from(lp.setpoint());
-                if !self.route.start(t_us, &from, legs, lp.setpoint().yaw_rad) {
+                let sp = self.current(t_us, lp);
+                let lands = mode != FlightMode::Takeoff;
+                let Some((seg, landing)) = self.route.start(t_us, &Reference::from(&sp), legs, sp.yaw_rad, lands)
+                else {
                     return Err(ModeRefusal::OutOfRange);
-                }
+                };
+                self.commander.plan(seg, landing);
             }
         }
         if mode != FlightMode::Mission {
@@ -496,10 +519,11 @@ impl ModeCommander {
     }
 
     /// Each step (at `t_us`, `dt_s` after the last): what the mode flies
-    /// into the loop's set-point (a takeoff then holds; a landing disarms
-    /// on the ground), its failsafes (Offboard's loss of set-points, then
-    /// Hold; Position's lost joystick, then Land) and the mission's items.
-    /// Each event is handed to `say` as it happens; its error ends the step.
+    /// (a takeoff then holds; a landing disarms on the ground), its
+    /// failsafes (Offboard's loss of set-points, then Hold; Position's lost
+    /// joystick, then Land) and the mission's items; then the commander's
+    /// set-point of this step into the flight loop. Each event is handed to
+    /// `say` as it happens; its error ends the step.
     pub fn fly<M: MissionItems + ?Sized, E>(
         &mut self,
         t_us: u64,
@@ -514,14 +538,29 @@ impl ModeCommander {
         if self.lockdown(t_us, lp) {
             return say(ModeEvent::Lockdown);
         }
+        self.fly_mode(t_us, dt_s, lp, mission, say)?;
+        if let Some(sp) = self.commander.setpoint_at(t_us) {
+            lp.set_setpoint(&sp);
+        }
+        Ok(())
+    }
+
+    /// What the mode flies this step, and its failsafes ([`Self::fly`]).
+    fn fly_mode<M: MissionItems + ?Sized, E>(
+        &mut self,
+        t_us: u64,
+        dt_s: f32,
+        lp: &mut Loop,
+        mission: &mut M,
+        say: &mut impl FnMut(ModeEvent) -> Result<(), E>,
+    ) -> Result<(), E> {
         let nav = lp.settings().nav;
         match self.mode {
             FlightMode::Position => self.fly_joystick(t_us, dt_s, lp, mission, say),
             FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
-                let Some((r, done)) = self.route.at(t_us) else {
+                let Some(done) = self.commander.follow(&mut self.route, t_us) else {
                     return Ok(());
                 };
-                lp.set_setpoint(&r.setpoint());
                 if self.mode == FlightMode::Takeoff && done {
                     self.mode = FlightMode::Hold;
                     return say(ModeEvent::TakeoffDone);
@@ -596,7 +635,7 @@ impl ModeCommander {
             }
             return Ok(());
         }
-        let mut sp = *lp.setpoint();
+        let mut sp = self.current(t_us, lp);
         let (v, yaw_rate) = joystick_velocity(&nav, x, y, z, r, sp.yaw_rad);
         let dt = dt_s.clamp(0.0, 0.1);
         sp.pos_ned_m += v * dt;
@@ -606,7 +645,7 @@ impl ModeCommander {
         sp.vel_ned_mps = v;
         sp.acc_ned_mps2 = Vector3::zeros();
         sp.yaw_rate_radps = yaw_rate;
-        lp.set_setpoint(&sp);
+        self.commander.hold(sp);
         Ok(())
     }
 }

@@ -77,7 +77,7 @@ fn a_mode_that_cannot_be_flown_is_refused_with_its_reason_and_nothing_changes() 
     }
     assert_eq!(m.mode(), FlightMode::Position);
     // A stream older than COM_OF_LOSS_T is no stream.
-    m.offboard(Setpoint::hold(Vector3::new(1.0, 0.0, -2.0), 0.0), 0, &mut flight);
+    m.offboard(Setpoint::hold(Vector3::new(1.0, 0.0, -2.0), 0.0), 0);
     assert_eq!(
         m.set_mode(FlightMode::Offboard, 1_000_001, nan, &mut flight, &mut none),
         Err(ModeRefusal::NotStreaming)

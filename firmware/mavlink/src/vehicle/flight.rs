@@ -160,9 +160,10 @@ impl MavShared {
         // in Offboard, as PX4 does. A masked heading keeps the one held:
         // armed, the set-point's; on the ground, the vehicle's own, so a
         // take-off in Offboard keeps the heading it has.
+        let t_us = self.last_sensor_us.unwrap_or(0);
         let held_yaw = match (self.modes.armed(), self.lp.navigator().estimate()) {
             (false, Some(e)) => fc_core::quat_to_euler(&e.att)[2],
-            _ => self.lp.setpoint().yaw_rad,
+            _ => self.modes.setpoint_at(t_us).unwrap_or(*self.lp.setpoint()).yaw_rad,
         };
         let sp = setpoint_from_target(m, held_yaw).filter(|sp| sp.is_valid());
         match sp {
@@ -172,8 +173,7 @@ impl MavShared {
                     sp.jerk_ned_mps3 = streamed_jerk(last, sp.acc_ned_mps2, m.time_boot_ms);
                     self.offboard_acc = Some((sp.acc_ned_mps2, m.time_boot_ms));
                 }
-                let t_us = self.last_sensor_us.unwrap_or(0);
-                self.modes.offboard(sp, t_us, &mut self.lp);
+                self.modes.offboard(sp, t_us);
                 Ok(())
             }
             None => {

@@ -350,6 +350,14 @@ impl MavShared {
         &self.lp
     }
 
+    /// The set-point the commander flies ([`fc_loop::commander`]): the
+    /// flight loop's from the next step on (a command between two steps
+    /// changes this one, the loop's at the next).
+    pub fn setpoint(&self) -> Setpoint<f32> {
+        let t_us = self.last_sensor_us.unwrap_or(0);
+        self.modes.setpoint_at(t_us).unwrap_or(*self.lp.setpoint())
+    }
+
     /// What was done with what arrived.
     pub fn counters(&self) -> VehicleCounters {
         self.counters

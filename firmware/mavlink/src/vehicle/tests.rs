@@ -403,13 +403,13 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
         0,
     )
     .unwrap();
-    assert_ne!(v.flight_loop().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    assert_ne!(v.setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     v.handle(&set_mode(FlightMode::Offboard), &mut out, &Still, 0).unwrap();
     assert_eq!(v.mode(), FlightMode::Offboard);
     v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
     assert!(v.armed());
-    assert_eq!(v.flight_loop().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
-    assert_eq!(v.flight_loop().setpoint().yaw_rad, 0.5);
+    assert_eq!(v.setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    assert_eq!(v.setpoint().yaw_rad, 0.5);
     // The stream's jerk is the slope of its acceleration over the sender's
     // clock: +0.1 m/s² in 10 ms is 10 m/s³; a steeper change is a step
     // (no jerk), as is a gap of more than 100 ms.
@@ -426,7 +426,7 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
             0,
         )
         .unwrap();
-        let j = v.flight_loop().setpoint().jerk_ned_mps3;
+        let j = v.setpoint().jerk_ned_mps3;
         assert!(
             (j[0] - jerk).abs() < 1e-3 && j[1] == 0.0 && j[2] == 0.0,
             "{t_ms} ms: {j:?}"
@@ -440,7 +440,7 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     };
     v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(masked), &mut out, &Still, 0)
         .unwrap();
-    assert_eq!(v.flight_loop().setpoint().yaw_rad, 0.5);
+    assert_eq!(v.setpoint().yaw_rad, 0.5);
     // A NaN velocity (not masked) is refused by the flight loop: counted,
     // said, and the set-point in force stays.
     let bad = SET_POSITION_TARGET_LOCAL_NED_DATA {
@@ -451,7 +451,7 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     v.handle(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(bad), &mut out, &Still, 0)
         .unwrap();
     assert_eq!(v.counters().setpoints_refused, 2);
-    assert_eq!(v.flight_loop().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    assert_eq!(v.setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     assert!(
         out.texts()
             .iter()
@@ -1050,10 +1050,7 @@ fn px4s_tools_find_a_px4_autopilot_with_its_modes_commands_and_streams() {
     let mut out = Sent::default();
     v.handle(&target, &mut out, &Still, 0).unwrap();
     v.handle(&set_mode(FlightMode::Offboard), &mut out, &Still, 0).unwrap();
-    assert_eq!(
-        (v.mode(), v.flight_loop().setpoint().pos_ned_m[0]),
-        (FlightMode::Offboard, 2.0)
-    );
+    assert_eq!((v.mode(), v.setpoint().pos_ned_m[0]), (FlightMode::Offboard, 2.0));
     let t = rest(&mut v, &mut out, t, 1_100);
     assert_eq!(v.mode(), FlightMode::Hold);
     out.assert_text("offboard set-points lost: hold");
