@@ -410,6 +410,11 @@ fn telemetry_comes_at_its_rates_and_bad_commands_are_answered_or_ignored() {
     assert!(v.armed());
     assert_eq!(v.setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
     assert_eq!(v.setpoint().yaw_rad, 0.5);
+    // The commander holds it; the flight loop flies it from the next step
+    // (the commander's part of the step hands it over), not in between.
+    assert_ne!(v.flight_loop().setpoint().pos_ned_m, Vector3::new(1.0, 2.0, -3.0));
+    rest(&mut v, &mut out, 2_000_000, 1);
+    assert_eq!(*v.flight_loop().setpoint(), v.setpoint());
     // The stream's jerk is the slope of its acceleration over the sender's
     // clock: +0.1 m/s² in 10 ms is 10 m/s³; a steeper change is a step
     // (no jerk), as is a gap of more than 100 ms.
