@@ -137,12 +137,12 @@ impl MavShared {
             }
             MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
                 let (id, us) = (p[0] as u32, p[1]);
-                match STREAMS.iter().position(|&(sid, _)| sid == id) {
+                match STREAMS.iter().position(|s| s.id == id) {
                     Some(k) if us.is_finite() && us >= -1.0 => {
                         self.streams[k].0 = if us == -1.0 {
                             0
                         } else if us == 0.0 {
-                            STREAMS[k].1
+                            STREAMS[k].interval_us
                         } else {
                             (us as u64).max(MIN_INTERVAL_US)
                         };

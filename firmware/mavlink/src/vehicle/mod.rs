@@ -70,7 +70,7 @@ pub use flight::{setpoint_from_target, streamed_jerk, JERK_GAP_MAX_MS, JERK_MAX_
 use parameters::param_id;
 pub use parameters::{param_index_of, PARAM_COUNT};
 pub use sensors::{fly_sensor_step, SensorStep};
-pub use streams::{MIN_INTERVAL_US, STREAMS};
+pub use streams::{Stream, MIN_INTERVAL_US, STREAMS};
 
 /// Who a message is for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -327,7 +327,7 @@ impl MavShared {
             seq: 0,
             motors: [0.0; 4],
             cycles: (0, 1),
-            streams: STREAMS.map(|(_, us)| (us, 0)),
+            streams: STREAMS.map(|s| (s.interval_us, 0)),
             link_errors: 0,
             reported_ned_m: None,
             counters: VehicleCounters::default(),

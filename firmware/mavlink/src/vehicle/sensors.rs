@@ -68,7 +68,7 @@ impl MavShared {
             self.mag_ref_rad = None;
             self.mag_due.reset();
             for (k, st) in self.streams.iter_mut().enumerate() {
-                *st = (STREAMS[k].1, s.time_us);
+                *st = (STREAMS[k].interval_us, s.time_us);
             }
         }
         let dt_s = self
