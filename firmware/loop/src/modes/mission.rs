@@ -94,7 +94,7 @@ impl ModeCommander {
                         let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
                         return say(ModeEvent::MissionDone);
                     };
-                    let sp = self.current(t_us, lp);
+                    let sp = self.setpoint(t_us, lp);
                     let from = Reference::from(&sp);
                     let mut legs = Legs::new();
                     let (goal, accept_m, hold_s) = match step {

@@ -278,14 +278,10 @@ impl ModeCommander {
     }
 
     /// The set-point flown at `t_us` (the last step's time: the one the
-    /// flight loop flies), `None` before the first arming.
-    pub fn setpoint_at(&self, t_us: u64) -> Option<Setpoint<f32>> {
-        self.commander.setpoint_at(t_us)
-    }
-
-    /// The set-point flown at `t_us`, or the flight loop's if the
-    /// commander has none yet: where a new leg starts.
-    fn current(&self, t_us: u64, lp: &Loop) -> Setpoint<f32> {
+    /// flight loop flies from the next step), or the loop's `lp` if the
+    /// commander has none yet (before the first arming): where a new leg
+    /// starts, the heading a set-point that masks its own keeps.
+    pub fn setpoint(&self, t_us: u64, lp: &Loop) -> Setpoint<f32> {
         self.commander.setpoint_at(t_us).unwrap_or(*lp.setpoint())
     }
 
@@ -469,7 +465,7 @@ impl ModeCommander {
                         legs.push_back((Vector3::new(h[0], h[1], ground), nav.land_mps))
                     }
                 };
-                let sp = self.current(t_us, lp);
+                let sp = self.setpoint(t_us, lp);
                 let lands = mode != FlightMode::Takeoff;
                 let Some((seg, landing)) = self.route.start(t_us, &Reference::from(&sp), legs, sp.yaw_rad, lands)
                 else {
@@ -635,7 +631,7 @@ impl ModeCommander {
             }
             return Ok(());
         }
-        let mut sp = self.current(t_us, lp);
+        let mut sp = self.setpoint(t_us, lp);
         let (v, yaw_rate) = joystick_velocity(&nav, x, y, z, r, sp.yaw_rad);
         let dt = dt_s.clamp(0.0, 0.1);
         sp.pos_ned_m += v * dt;

@@ -163,7 +163,7 @@ impl MavShared {
         let t_us = self.last_sensor_us.unwrap_or(0);
         let held_yaw = match (self.modes.armed(), self.lp.navigator().estimate()) {
             (false, Some(e)) => fc_core::quat_to_euler(&e.att)[2],
-            _ => self.modes.setpoint_at(t_us).unwrap_or(*self.lp.setpoint()).yaw_rad,
+            _ => self.modes.setpoint(t_us, &self.lp).yaw_rad,
         };
         let sp = setpoint_from_target(m, held_yaw).filter(|sp| sp.is_valid());
         match sp {

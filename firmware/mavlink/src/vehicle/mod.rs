@@ -354,8 +354,7 @@ impl MavShared {
     /// flight loop's from the next step on (a command between two steps
     /// changes this one, the loop's at the next).
     pub fn setpoint(&self) -> Setpoint<f32> {
-        let t_us = self.last_sensor_us.unwrap_or(0);
-        self.modes.setpoint_at(t_us).unwrap_or(*self.lp.setpoint())
+        self.modes.setpoint(self.last_sensor_us.unwrap_or(0), &self.lp)
     }
 
     /// What was done with what arrived.
