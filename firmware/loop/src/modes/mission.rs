@@ -3,7 +3,6 @@
 
 use super::{FlightMode, ModeCommander, ModeEvent};
 use crate::commander::Legs;
-use crate::planner::Reference;
 use crate::Loop;
 use nalgebra::Vector3;
 
@@ -95,7 +94,6 @@ impl ModeCommander {
                         return say(ModeEvent::MissionDone);
                     };
                     let sp = self.setpoint(t_us, lp);
-                    let from = Reference::from(&sp);
                     let mut legs = Legs::new();
                     let (goal, accept_m, hold_s) = match step {
                         Ok(Step::Goto { ned, hold_s, accept_m }) => {
@@ -135,11 +133,10 @@ impl ModeCommander {
                             return say(ModeEvent::ItemNotFlyable(seq));
                         }
                     };
-                    let Some((seg, landing)) = self.route.start(t_us, &from, legs, sp.yaw_rad, false) else {
+                    if !self.start_route(t_us, &sp, legs, false) {
                         let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
                         return say(ModeEvent::ItemOutOfRange(seq));
-                    };
-                    self.commander.plan(seg, landing);
+                    }
                     self.phase = Some(MissionPhase::Flying {
                         seq,
                         goal,

@@ -285,6 +285,20 @@ impl ModeCommander {
         self.commander.setpoint_at(t_us).unwrap_or(*lp.setpoint())
     }
 
+    /// Flies `legs` from the set-point `from` at `t_us`, at its heading
+    /// (`lands`: the last leg is a landing): the route's first segment on
+    /// the commander; `false` if no leg could be planned.
+    fn start_route(&mut self, t_us: u64, from: &Setpoint<f32>, legs: Legs, lands: bool) -> bool {
+        let Some((seg, landing)) = self
+            .route
+            .start(t_us, &Reference::from(from), legs, from.yaw_rad, lands)
+        else {
+            return false;
+        };
+        self.commander.plan(seg, landing);
+        true
+    }
+
     /// The last streamed set-point and when it came, if any.
     pub fn streamed(&self) -> Option<(Setpoint<f32>, u64)> {
         self.offboard
@@ -467,11 +481,9 @@ impl ModeCommander {
                 };
                 let sp = self.setpoint(t_us, lp);
                 let lands = mode != FlightMode::Takeoff;
-                let Some((seg, landing)) = self.route.start(t_us, &Reference::from(&sp), legs, sp.yaw_rad, lands)
-                else {
+                if !self.start_route(t_us, &sp, legs, lands) {
                     return Err(ModeRefusal::OutOfRange);
-                };
-                self.commander.plan(seg, landing);
+                }
             }
         }
         if mode != FlightMode::Mission {
