@@ -1,16 +1,19 @@
-//! One arming check for every protocol (CRTP's supervisor port and
-//! platform commands, MAVLink's `MAV_CMD_COMPONENT_ARM_DISARM`): what must
-//! hold before the motors may run, checked in one order, and a typed
-//! refusal ([`ArmRefusal`]) whose `Display` is what a ground station or
-//! cflib's console shows after "arming refused: ".
+//! One arming state and one arming check for every protocol (CRTP's
+//! supervisor port and platform commands, MAVLink's
+//! `MAV_CMD_COMPONENT_ARM_DISARM`): [`Arming`] holds whether the motors may
+//! run and the supervisor's latches (locked, tumbled); [`Arming::arm`]
+//! checks what must hold first, in one order, and refuses with a typed
+//! [`ArmRefusal`] whose `Display` is what a ground station or cflib's
+//! console shows after "arming refused: ".
 //!
-//! A protocol passes what its vehicle monitors; what it does not monitor
-//! is `None` or `false` (PX4's HIL gives no battery reading, and only the
-//! Crazyflie's supervisor locks or sees a tumble).
+//! A protocol passes what its vehicle monitors ([`ArmingState`]); what it
+//! does not monitor is `None` (PX4's HIL gives no battery reading). Only
+//! the Crazyflie's supervisor locks ([`Arming::lock`], its emergency stop)
+//! or latches a tumble ([`Arming::tumble`]); PX4's lockdown disarms.
 
 use crate::nav::NavMode;
 
-/// What the arming check looks at.
+/// What the arming check looks at besides the latches [`Arming`] holds.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ArmingState {
     /// A sensor the board monitors that stopped answering: its part and
@@ -20,10 +23,6 @@ pub struct ArmingState {
     pub battery_v: Option<Option<f32>>,
     /// Arming is refused below this battery voltage, V.
     pub battery_floor_v: f32,
-    /// The supervisor locked the vehicle (until a restart).
-    pub locked: bool,
-    /// The supervisor saw a tumble (until a recovery).
-    pub tumbled: bool,
     /// The navigator's mode (a navigating one without an estimate counts as
     /// its failsafe).
     pub nav: NavMode,
@@ -108,9 +107,92 @@ impl core::fmt::Display for Centi {
     }
 }
 
+/// Whether the motors may run, and the supervisor's latches: a lock (the
+/// emergency stop; only a restart clears it) and a tumble (until a
+/// recovery). Disarmed and clear at start.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Arming {
+    armed: bool,
+    locked: bool,
+    tumbled: bool,
+}
+
+impl Arming {
+    /// Disarmed, neither locked nor tumbled.
+    pub const fn new() -> Self {
+        Self {
+            armed: false,
+            locked: false,
+            tumbled: false,
+        }
+    }
+
+    /// Armed: the motors may run.
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// Locked by an emergency stop, until a restart.
+    pub fn locked(&self) -> bool {
+        self.locked
+    }
+
+    /// A tumble was seen, until a recovery.
+    pub fn tumbled(&self) -> bool {
+        self.tumbled
+    }
+
+    /// Arms if the check passes on `s` and this state's latches (the
+    /// first of a sensor down, the battery, the lock, the tumble, the
+    /// estimator and the start refuses) and then `prepare`, the vehicle's last step
+    /// before its motors may run (a controller designed afresh), succeeds:
+    /// `Some` of what `prepare` gave; armed already: `None`, nothing run.
+    pub fn arm<T>(
+        &mut self,
+        s: &ArmingState,
+        prepare: impl FnOnce() -> Result<T, ArmRefusal>,
+    ) -> Result<Option<T>, ArmRefusal> {
+        if self.armed {
+            return Ok(None);
+        }
+        check(s, self.locked, self.tumbled)?;
+        let prepared = prepare()?;
+        self.armed = true;
+        Ok(Some(prepared))
+    }
+
+    /// Disarmed (the latches kept).
+    pub fn disarm(&mut self) {
+        self.armed = false;
+    }
+
+    /// The emergency stop: disarmed and locked until a restart.
+    pub fn lock(&mut self) {
+        self.armed = false;
+        self.locked = true;
+    }
+
+    /// A tumble seen: arming is refused until [`Arming::recover`]. The
+    /// arming itself is the vehicle's to end (the Crazyflie's supervisor
+    /// stops the motors and stays armed).
+    pub fn tumble(&mut self) {
+        self.tumbled = true;
+    }
+
+    /// Clears a tumble, unless locked or `flying`; whether it did.
+    pub fn recover(&mut self, flying: bool) -> bool {
+        if self.locked || flying {
+            return false;
+        }
+        self.tumbled = false;
+        true
+    }
+}
+
 /// The arming check: the first of the sensors, the battery, the
-/// supervisor's lock and tumble, the estimator and the start that refuses.
-pub fn check(s: &ArmingState) -> Result<(), ArmRefusal> {
+/// supervisor's lock and tumble ([`Arming`]'s latches), the estimator and
+/// the start that refuses.
+fn check(s: &ArmingState, locked: bool, tumbled: bool) -> Result<(), ArmRefusal> {
     if let Some((device, why)) = s.sensor_down {
         return Err(ArmRefusal::SensorDown { device, why });
     }
@@ -125,10 +207,10 @@ pub fn check(s: &ArmingState) -> Result<(), ArmRefusal> {
         }
         _ => {}
     }
-    if s.locked {
+    if locked {
         return Err(ArmRefusal::Locked);
     }
-    if s.tumbled {
+    if tumbled {
         return Err(ArmRefusal::Tumbled);
     }
     match s.nav {
@@ -148,11 +230,28 @@ mod tests {
             sensor_down: None,
             battery_v: Some(Some(4.0)),
             battery_floor_v: 3.2,
-            locked: false,
-            tumbled: false,
             nav: NavMode::Navigating,
             started: true,
         }
+    }
+
+    /// A disarmed state with the latches given.
+    fn latched(locked: bool, tumbled: bool) -> Arming {
+        let mut a = Arming::new();
+        if locked {
+            a.lock();
+        }
+        if tumbled {
+            a.tumble();
+        }
+        a
+    }
+
+    /// Arms `a` on `s` with nothing to prepare.
+    fn arm(mut a: Arming, s: &ArmingState) -> Result<(), ArmRefusal> {
+        let r = a.arm(s, || Ok(())).map(|_| ());
+        assert_eq!(a.armed(), r.is_ok());
+        r
     }
 
     /// Each condition refuses on its own, by name, and the first in the
@@ -160,18 +259,20 @@ mod tests {
     /// not refuse.
     #[test]
     fn each_condition_refuses_by_name_in_order() {
-        assert_eq!(check(&ready()), Ok(()));
+        let clear = Arming::new();
+        assert_eq!(arm(clear, &ready()), Ok(()));
         let unmonitored = ArmingState {
             battery_v: None,
             ..ready()
         };
-        assert_eq!(check(&unmonitored), Ok(()));
-        let cases: [(ArmingState, ArmRefusal, &str); 9] = [
+        assert_eq!(arm(clear, &unmonitored), Ok(()));
+        let cases: [(ArmingState, Arming, ArmRefusal, &str); 9] = [
             (
                 ArmingState {
                     sensor_down: Some(("BMI088 gyroscope", "wrong chip id")),
                     ..ready()
                 },
+                clear,
                 ArmRefusal::SensorDown {
                     device: "BMI088 gyroscope",
                     why: "wrong chip id",
@@ -183,6 +284,7 @@ mod tests {
                     battery_v: Some(None),
                     ..ready()
                 },
+                clear,
                 ArmRefusal::NoBatteryReading,
                 "no battery reading yet",
             ),
@@ -191,30 +293,18 @@ mod tests {
                     battery_v: Some(Some(3.1)),
                     ..ready()
                 },
+                clear,
                 ArmRefusal::BatteryLow { v: 3.1, floor_v: 3.2 },
                 "battery 3.10 V below 3.20 V",
             ),
-            (
-                ArmingState {
-                    locked: true,
-                    ..ready()
-                },
-                ArmRefusal::Locked,
-                "locked: restart",
-            ),
-            (
-                ArmingState {
-                    tumbled: true,
-                    ..ready()
-                },
-                ArmRefusal::Tumbled,
-                "tumbled: recover",
-            ),
+            (ready(), latched(true, false), ArmRefusal::Locked, "locked: restart"),
+            (ready(), latched(false, true), ArmRefusal::Tumbled, "tumbled: recover"),
             (
                 ArmingState {
                     nav: NavMode::Aligning,
                     ..ready()
                 },
+                clear,
                 ArmRefusal::Aligning,
                 "estimator aligning",
             ),
@@ -223,6 +313,7 @@ mod tests {
                     nav: NavMode::Failsafe,
                     ..ready()
                 },
+                clear,
                 ArmRefusal::EstimatorFailsafe,
                 "estimator failsafe",
             ),
@@ -231,6 +322,7 @@ mod tests {
                     started: false,
                     ..ready()
                 },
+                clear,
                 ArmRefusal::NotStarted,
                 "not started",
             ),
@@ -239,6 +331,7 @@ mod tests {
                     battery_v: Some(Some(f32::NAN)),
                     ..ready()
                 },
+                clear,
                 ArmRefusal::BatteryLow {
                     v: f32::NAN,
                     floor_v: 3.2,
@@ -246,30 +339,88 @@ mod tests {
                 "battery NaN V below 3.20 V",
             ),
         ];
-        for (state, want, text) in cases {
-            let got = check(&state).unwrap_err();
+        for (state, latches, want, text) in cases {
+            let got = arm(latches, &state).unwrap_err();
             assert_eq!(format!("{got}"), text);
             if !matches!(want, ArmRefusal::BatteryLow { .. }) {
                 assert_eq!(got, want);
             }
         }
         // The first in order wins: a dead sensor before a low battery
-        // before the estimator.
+        // before the latches before the estimator.
         let all = ArmingState {
             sensor_down: Some(("BMP388", "no answer")),
             battery_v: Some(Some(3.0)),
-            locked: true,
-            tumbled: true,
             nav: NavMode::Aligning,
             started: false,
             ..ready()
         };
-        assert!(matches!(check(&all), Err(ArmRefusal::SensorDown { .. })));
+        let both = latched(true, true);
+        assert!(matches!(arm(both, &all), Err(ArmRefusal::SensorDown { .. })));
         let no_sensor = ArmingState {
             sensor_down: None,
             ..all
         };
-        assert!(matches!(check(&no_sensor), Err(ArmRefusal::BatteryLow { .. })));
+        assert!(matches!(arm(both, &no_sensor), Err(ArmRefusal::BatteryLow { .. })));
+        let charged = ArmingState {
+            battery_v: None,
+            ..no_sensor
+        };
+        assert_eq!(arm(both, &charged), Err(ArmRefusal::Locked));
+        assert_eq!(arm(latched(false, true), &charged), Err(ArmRefusal::Tumbled));
+    }
+
+    /// The preparation runs after the check and only then: its refusal
+    /// leaves the vehicle disarmed; armed already, nothing runs again.
+    #[test]
+    fn prepare_runs_once_after_the_check() {
+        let mut a = Arming::new();
+        let mut ran = 0;
+        let aligning = ArmingState {
+            nav: NavMode::Aligning,
+            ..ready()
+        };
+        let refused = a.arm(&aligning, || {
+            ran += 1;
+            Ok(())
+        });
+        assert_eq!(refused, Err(ArmRefusal::Aligning));
+        assert_eq!(
+            a.arm(&ready(), || Err::<(), _>(ArmRefusal::DesignFailed)),
+            Err(ArmRefusal::DesignFailed)
+        );
+        assert!(!a.armed() && ran == 0);
+        for want in [Some(1), None] {
+            let got = a.arm(&ready(), || {
+                ran += 1;
+                Ok(ran)
+            });
+            assert_eq!(got, Ok(want));
+        }
+        assert!(a.armed() && ran == 1);
+    }
+
+    /// The emergency stop disarms and holds until a restart; a tumble
+    /// holds until a recovery, which a lock or a flight refuses.
+    #[test]
+    fn latches_hold_until_cleared() {
+        let mut a = Arming::new();
+        a.arm(&ready(), || Ok(())).unwrap();
+        a.tumble();
+        assert!(a.armed() && a.tumbled(), "a tumble does not disarm by itself");
+        assert!(!a.recover(true), "not while flying");
+        assert!(a.recover(false) && !a.tumbled());
+        a.lock();
+        assert!(!a.armed() && a.locked());
+        a.tumble();
+        assert!(!a.recover(false) && a.tumbled(), "locked: no recovery");
+        a.disarm();
+        assert_eq!(a.arm(&ready(), || Ok(())), Err(ArmRefusal::Locked));
+        assert!(!a.armed());
+        assert!(
+            Arming::new().arm(&ready(), || Ok(())).is_ok(),
+            "a restart clears the lock"
+        );
     }
 
     /// The voltages are written as `{:.2}` writes them.

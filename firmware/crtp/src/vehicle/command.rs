@@ -9,7 +9,7 @@ impl CrtpShared {
     /// (refused) while disarmed, or when control cannot be taken
     /// ([`Self::take_control`]) from anything but a stream.
     pub(in crate::vehicle) fn stream(&mut self, sp: Setpoint<f32>) -> bool {
-        if !self.armed {
+        if !self.armed() {
             return false;
         }
         if self.commander.priority() != Priority::Streamed && !self.take_control() {
@@ -33,7 +33,7 @@ impl CrtpShared {
     /// (each refusal said). From idle, the controller's state is forgotten
     /// first (no state wound up on the ground; [`ControllerWork::Reset`]).
     pub(in crate::vehicle) fn take_control(&mut self) -> bool {
-        if !self.armed {
+        if !self.armed() {
             self.say(format_args!("not armed"));
             return false;
         }

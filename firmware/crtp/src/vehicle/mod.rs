@@ -58,6 +58,7 @@ use fc_core::control::AnyController;
 use fc_core::control::Setpoint;
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
+use fc_loop::arming::Arming;
 use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{crtp_params, ParamType, Refusal, Settings, CRTP_ALIASED, CRTP_ALIASES, CRTP_PARAMS, PARAMS};
@@ -351,9 +352,8 @@ pub struct CrtpShared {
     /// A persistent-parameter request, for the link's owner to answer.
     persist: Option<PersistRequest>,
     defaults: Settings,
-    armed: bool,
-    tumbled: bool,
-    locked: bool,
+    /// Armed, and the supervisor's lock (emergency stop) and tumble.
+    arming: Arming,
     /// The set-point flown and its source.
     commander: Commander,
     log: LogBlocks,
@@ -394,9 +394,7 @@ impl CrtpShared {
             reply: None,
             persist: None,
             defaults: settings,
-            armed: false,
-            tumbled: false,
-            locked: false,
+            arming: Arming::new(),
             commander: Commander::new(),
             log: LogBlocks::new(),
             console: heapless::Deque::new(),
@@ -526,12 +524,12 @@ impl CrtpShared {
 
     /// Armed.
     pub fn armed(&self) -> bool {
-        self.armed
+        self.arming.armed()
     }
 
     /// The motors turn (armed and flying a set-point).
     pub fn flying(&self) -> bool {
-        self.armed && !self.commander.is_idle()
+        self.armed() && !self.commander.is_idle()
     }
 
     /// The flight loop (estimator, set-point, counters).

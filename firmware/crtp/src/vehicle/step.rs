@@ -57,7 +57,7 @@ impl CrtpShared {
     /// answer): the supervisor's gate (armed and flying a set-point) and
     /// the mixer ([`fc_loop::Loop::power`]); returns what the motors get.
     pub fn imu_end(&mut self, step: &ImuStep, u: Option<[f32; 4]>) -> Power {
-        let fly = self.armed && !self.commander.is_idle() && step.setpoint;
+        let fly = self.armed() && !self.commander.is_idle() && step.setpoint;
         let power = self.lp.power(fly, u);
         self.u = power.u;
         self.motors = power.motors.commands;
@@ -86,7 +86,7 @@ impl CrtpShared {
             return;
         };
         if self.flying() && fc_loop::supervisor::tumbled(&est.att) {
-            self.tumbled = true;
+            self.arming.tumble();
             self.commander.stop();
             self.say(format_args!("tumbled: motors off"));
         }

@@ -37,7 +37,7 @@
 //! nothing is cut (PX4's flight termination is off by default,
 //! `CBRK_FLIGHTTERM`).
 
-use crate::arming::{self, ArmRefusal, ArmingState};
+use crate::arming::{ArmRefusal, Arming, ArmingState};
 use crate::commander::{Commander, Legs, Route};
 use crate::nav::NavMode;
 use crate::planner::Reference;
@@ -216,7 +216,9 @@ pub enum LandedState {
 #[derive(Debug, Clone)]
 pub struct ModeCommander {
     mode: FlightMode,
-    armed: bool,
+    /// Armed (PX4's lockdown disarms; nothing here locks or latches a
+    /// tumble).
+    arming: Arming,
     /// The set-point flown: the modes' source on it.
     commander: Commander,
     /// The automatic mode's legs after the one flown.
@@ -249,7 +251,7 @@ impl ModeCommander {
     pub const fn new() -> Self {
         Self {
             mode: FlightMode::Position,
-            armed: false,
+            arming: Arming::new(),
             commander: Commander::new(),
             route: Route::new(),
             phase: None,
@@ -269,7 +271,7 @@ impl ModeCommander {
 
     /// Armed (the motors turn).
     pub fn armed(&self) -> bool {
-        self.armed
+        self.arming.armed()
     }
 
     /// Where it armed, NED about the origin, m.
@@ -314,7 +316,7 @@ impl ModeCommander {
     /// Offboard only makes Offboard possible).
     pub fn offboard(&mut self, sp: Setpoint<f32>, t_us: u64) {
         self.offboard = Some((sp, t_us));
-        if self.mode == FlightMode::Offboard && self.armed {
+        if self.mode == FlightMode::Offboard && self.armed() {
             self.commander.hold(sp);
         }
     }
@@ -333,7 +335,7 @@ impl ModeCommander {
     /// disarming would drop it.
     pub fn in_air(&self, lp: &Loop) -> bool {
         let down = lp.navigator().estimate().map(|e| e.pos_ned_m[2]);
-        self.armed && down.is_some_and(|d| d < self.home_ned_m[2] - IN_AIR_M)
+        self.armed() && down.is_some_and(|d| d < self.home_ned_m[2] - IN_AIR_M)
     }
 
     /// A landing is flown: Land, or a return's last leg (straight down over
@@ -344,7 +346,7 @@ impl ModeCommander {
 
     /// PX4's landed state: on the ground, taking off, in the air, landing.
     pub fn landed_state(&self, lp: &Loop) -> LandedState {
-        match (self.armed, self.in_air(lp)) {
+        match (self.armed(), self.in_air(lp)) {
             (false, _) => LandedState::OnGround,
             (true, _) if self.mode == FlightMode::Takeoff => LandedState::Takeoff,
             (true, true) if self.landing() => LandedState::Landing,
@@ -360,26 +362,28 @@ impl ModeCommander {
     /// checked here: PX4's HIL gives no battery reading, and nothing locks
     /// (a tumble is the lockdown's, [`ModeCommander::fly`]).
     pub fn arm(&mut self, lp: &mut Loop, ctrl: &mut AnyController<f32>, started: bool) -> Result<(), ArmRefusal> {
-        if self.armed {
-            return Ok(());
-        }
         let estimate = lp.navigator().estimate();
         let nav = match (lp.navigator().mode(), estimate) {
             (NavMode::Navigating, None) => NavMode::Failsafe,
             (mode, _) => mode,
         };
-        arming::check(&ArmingState {
+        let state = ArmingState {
             sensor_down: None,
             battery_v: None,
             battery_floor_v: 0.0,
-            locked: false,
-            tumbled: false,
             nav,
             started,
-        })?;
-        let est = estimate.ok_or(ArmRefusal::EstimatorFailsafe)?;
+        };
         let spec = lp.settings().controller;
-        crate::select(&mut Exclusive(&mut *lp), ctrl, spec).map_err(|_| ArmRefusal::DesignFailed)?;
+        let prepared = self.arming.arm(&state, || {
+            let est = estimate.ok_or(ArmRefusal::EstimatorFailsafe)?;
+            crate::select(&mut Exclusive(&mut *lp), ctrl, spec).map_err(|_| ArmRefusal::DesignFailed)?;
+            Ok(est)
+        })?;
+        // Armed already: nothing changes.
+        let Some(est) = prepared else {
+            return Ok(());
+        };
         let yaw = fc_core::quat_to_euler(&est.att)[2];
         match (self.mode, self.offboard) {
             (FlightMode::Offboard, Some((sp, _))) => {
@@ -394,13 +398,12 @@ impl ModeCommander {
         }
         self.home_ned_m = est.pos_ned_m;
         self.takeoff_us = None;
-        self.armed = true;
         Ok(())
     }
 
     /// Disarms (an automatic mode becomes Hold).
     pub fn disarm(&mut self) {
-        self.armed = false;
+        self.arming.disarm();
         if !matches!(self.mode, FlightMode::Position | FlightMode::Offboard) {
             self.mode = FlightMode::Hold;
         }
@@ -423,7 +426,7 @@ impl ModeCommander {
         let yaw = est.map_or(0.0, |e| fc_core::quat_to_euler(&e.att)[2]);
         match mode {
             FlightMode::Position | FlightMode::Hold => {
-                if let (true, Some(p)) = (self.armed, here) {
+                if let (true, Some(p)) = (self.armed(), here) {
                     self.commander.hold(Setpoint::hold(p, yaw));
                 }
             }
@@ -434,7 +437,7 @@ impl ModeCommander {
                 let Some((sp, _)) = fresh else {
                     return Err(ModeRefusal::NotStreaming);
                 };
-                if self.armed {
+                if self.armed() {
                     self.commander.hold(sp);
                 }
             }
@@ -442,7 +445,7 @@ impl ModeCommander {
                 if mission.is_empty() {
                     return Err(ModeRefusal::NoMission);
                 }
-                if !self.armed {
+                if !self.armed() {
                     return Err(ModeRefusal::Disarmed);
                 }
                 if usize::from(mission.current()) >= mission.len() {
@@ -452,7 +455,7 @@ impl ModeCommander {
                 self.mission_cruise_mps = None;
             }
             FlightMode::Takeoff | FlightMode::Land | FlightMode::Return => {
-                if !self.armed {
+                if !self.armed() {
                     return Err(ModeRefusal::Disarmed);
                 }
                 let Some(p) = here else {
@@ -514,7 +517,7 @@ impl ModeCommander {
     ) -> Option<ModeEvent> {
         let limit_us = u64::from(gcs_loss_ms) * 1000;
         let lost = self.gcs_seen_us.is_some_and(|t| t_us.saturating_sub(t) > limit_us);
-        if self.armed
+        if self.armed()
             && self.mode != FlightMode::Land
             && limit_us > 0
             && lost
@@ -540,7 +543,7 @@ impl ModeCommander {
         mission: &mut M,
         say: &mut impl FnMut(ModeEvent) -> Result<(), E>,
     ) -> Result<(), E> {
-        if !self.armed {
+        if !self.armed() {
             return Ok(());
         }
         if self.lockdown(t_us, lp) {

@@ -39,11 +39,15 @@ impl CrtpShared {
                     return Ok(Err(short(p)));
                 };
                 let ok = self.request_arming(arm != 0);
-                out.send(&reply(Port::Platform, 0, &[1, u8::from(ok), u8::from(self.armed)]))?;
+                out.send(&reply(Port::Platform, 0, &[1, u8::from(ok), u8::from(self.armed())]))?;
             }
             (0, 2) => {
                 let ok = self.recover();
-                out.send(&reply(Port::Platform, 0, &[2, u8::from(ok), u8::from(!self.tumbled)]))?;
+                out.send(&reply(
+                    Port::Platform,
+                    0,
+                    &[2, u8::from(ok), u8::from(!self.arming.tumbled())],
+                ))?;
             }
             (1, 0) => {
                 let mut b = [0u8; 5];

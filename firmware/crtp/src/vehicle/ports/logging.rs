@@ -157,7 +157,7 @@ impl CrtpShared {
             battery_v: self.battery_v(),
             pm_state: self.pm_state,
             can_fly: self.can_fly(),
-            armed: self.armed,
+            armed: self.armed(),
             supervisor: self.supervisor_bits(),
         }
     }

@@ -2,14 +2,14 @@
 //! bits; the checks before a take-off.
 
 use crate::vehicle::*;
-use fc_loop::arming::{self, ArmingState};
+use fc_loop::arming::ArmingState;
 use fc_loop::commander::Priority;
 
 impl CrtpShared {
     pub(in crate::vehicle) fn can_fly(&self) -> bool {
         self.lp.navigator().mode() == NavMode::Navigating
-            && !self.tumbled
-            && !self.locked
+            && !self.arming.tumbled()
+            && !self.arming.locked()
             && self.sensors.is_ok()
             && self.vbat_v.is_some_and(|v| v >= BATTERY_FLOOR_V)
     }
@@ -19,14 +19,14 @@ impl CrtpShared {
         let high = self.commander.priority() == Priority::Planned;
         let finished = self.commander.segment().is_none_or(|seg| seg.finished(self.now_us));
         let bits = [
-            self.can_fly() && !self.armed,
-            self.armed,
+            self.can_fly() && !self.armed(),
+            self.armed(),
             false,
             self.can_fly(),
             self.flying(),
-            self.tumbled,
-            self.locked,
-            self.tumbled,
+            self.arming.tumbled(),
+            self.arming.locked(),
+            self.arming.tumbled(),
             high,
             finished,
             false,
@@ -40,12 +40,9 @@ impl CrtpShared {
     /// did, and whether it is armed now.
     pub(in crate::vehicle) fn request_arming(&mut self, arm: bool) -> bool {
         if !arm {
-            self.armed = false;
+            self.arming.disarm();
             self.commander.stop();
             self.say(format_args!("disarmed"));
-            return true;
-        }
-        if self.armed {
             return true;
         }
         // The one arming check (fc_loop::arming), with everything this
@@ -54,27 +51,27 @@ impl CrtpShared {
             sensor_down: self.sensors.err().map(|d| (d.device, d.why)),
             battery_v: Some(self.vbat_v),
             battery_floor_v: BATTERY_FLOOR_V,
-            locked: self.locked,
-            tumbled: self.tumbled,
             nav: self.lp.navigator().mode(),
             started: self.lp.mixer().is_some(),
         };
-        if let Err(why) = arming::check(&state) {
-            self.say(format_args!("arming refused: {why}"));
-            return false;
+        match self.arming.arm(&state, || Ok(())) {
+            Ok(None) => {}
+            Ok(Some(())) => {
+                self.commander.stop();
+                self.say(format_args!("armed"));
+            }
+            Err(why) => {
+                self.say(format_args!("arming refused: {why}"));
+                return false;
+            }
         }
-        self.armed = true;
-        self.commander.stop();
-        self.say(format_args!("armed"));
         true
     }
 
+    /// Clears a tumble unless locked or flying; whether it did.
     pub(in crate::vehicle) fn recover(&mut self) -> bool {
-        if self.locked || self.flying() {
-            return false;
-        }
-        self.tumbled = false;
-        true
+        let flying = self.flying();
+        self.arming.recover(flying)
     }
 
     pub(in crate::vehicle) fn on_supervisor<S: CrtpSink>(
@@ -101,14 +98,18 @@ impl CrtpShared {
                     return Ok(Err(short(p)));
                 };
                 let ok = self.request_arming(arm != 0);
-                out.send(&reply(Port::Supervisor, 1, &[0x81, u8::from(ok), u8::from(self.armed)]))?;
+                out.send(&reply(
+                    Port::Supervisor,
+                    1,
+                    &[0x81, u8::from(ok), u8::from(self.armed())],
+                ))?;
             }
             (1, 0x02) => {
                 let ok = self.recover();
                 out.send(&reply(
                     Port::Supervisor,
                     1,
-                    &[0x82, u8::from(ok), u8::from(!self.tumbled)],
+                    &[0x82, u8::from(ok), u8::from(!self.arming.tumbled())],
                 ))?;
             }
             (1, 0x03) => self.emergency_stop(),
@@ -121,8 +122,7 @@ impl CrtpShared {
     /// Motors off and locked until restarted, as the Crazyflie's emergency stop.
     pub(in crate::vehicle) fn emergency_stop(&mut self) {
         self.commander.stop();
-        self.armed = false;
-        self.locked = true;
+        self.arming.lock();
         self.say(format_args!("emergency stop: locked"));
     }
 }
