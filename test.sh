@@ -58,7 +58,7 @@ mkdir -p target
 export FC_MEASUREMENTS="$PWD/target/measurements.jsonl"
 rm -f "$FC_MEASUREMENTS"
 
-stage "toolchain, QEMU, Python venv (install what is missing)"
+stage "toolchain and QEMU (install what is missing)"
 # rust-toolchain.toml pins stable + thumbv7em-none-eabihf; make sure both are present.
 rustup show active-toolchain >/dev/null
 rustup target list --installed | grep -qx thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
@@ -77,23 +77,41 @@ fi
 # Every Python package a check uses, at the exact version and hash of
 # tools/requirements.txt (pip-compile --generate-hashes of
 # tools/requirements.in), in .venv: a reused machine's own packages do not
-# leak in. Re-installed when the pinned file changes.
-if [ ! -x .venv/bin/python ] || ! cmp -s tools/requirements.txt .venv/requirements.txt; then
-    rm -rf .venv
-    python3 -m venv .venv
-    .venv/bin/python -m pip install --quiet --disable-pip-version-check --require-hashes -r tools/requirements.txt
-    cp tools/requirements.txt .venv/requirements.txt
+# leak in. Re-installed when the pinned file changes. The full run's
+# cfclient has a venv of its own (PyQt6 and cflib's pins differ from the
+# checks'), pinned with hashes too. Both are installed in the background
+# while the Rust lints below compile (≈ 80 s and 40 s from pip's cache),
+# and waited for before the first Python tool.
+venv_install() {  # <venv> <pinned file>
+    if [ ! -x "$1/bin/python" ] || ! cmp -s "$2" "$1/requirements.txt"; then
+        rm -rf "$1"
+        python3 -m venv "$1"
+        "$1/bin/python" -m pip install --quiet --disable-pip-version-check --require-hashes -r "$2"
+        cp "$2" "$1/requirements.txt"
+    fi
+}
+venvs() {
+    venv_install .venv tools/requirements.txt
+    if full; then venv_install target/cfclient-venv tools/requirements-cfclient.txt; fi
+}
+venvs >target/venv-install.log 2>&1 &
+VENVS=$!
+
+stage "format (rustfmt)"
+cargo fmt --all -- --check
+stage "clippy (host, all targets)"
+cargo clippy --workspace --all-targets -- -D warnings
+stage "the Python venvs (installed beside the lints above), and the tools' lint (ruff, pinned; tools/ruff.toml)"
+if ! wait "$VENVS"; then
+    cat target/venv-install.log
+    echo "FAIL: the Python venvs could not be installed (above)"
+    exit 1
 fi
 # shellcheck disable=SC1091
 . .venv/bin/activate
 python3 -m pip check
 python3 -c 'import sys; assert sys.prefix.endswith(".venv"), sys.prefix'
-
-stage "format, and the Python tools' lint (ruff, pinned; tools/ruff.toml)"
-cargo fmt --all -- --check
 ruff check tools
-stage "clippy (host, all targets)"
-cargo clippy --workspace --all-targets -- -D warnings
 if full; then
 stage "clippy + build: the STM32F405 and Crazyflie images (thumbv7em)"
 # The images, and the MAVLink and CRTP crates (no_std: the images link them),
@@ -378,14 +396,7 @@ if ! command -v Xvfb >/dev/null || ! command -v xdotool >/dev/null || ! command 
         libgl1 libegl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1 libxcb-randr0 \
         libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 libfontconfig1 libdbus-1-3 fonts-dejavu-core >/dev/null
 fi
-# Its own venv (PyQt6 and cflib's pins differ from the checks'), pinned with hashes too.
-if [ ! -x target/cfclient-venv/bin/cfclient ] || ! cmp -s tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt; then
-    rm -rf target/cfclient-venv
-    python3 -m venv target/cfclient-venv
-    target/cfclient-venv/bin/python -m pip install --quiet --disable-pip-version-check --require-hashes \
-        -r tools/requirements-cfclient.txt
-    cp tools/requirements-cfclient.txt target/cfclient-venv/requirements.txt
-fi
+# Its own venv, installed at the start (venvs).
 bounded 600 python3 tools/cfclient_shot.py target/release/sil-host target/cfclient-venv/bin/cfclient \
     --out target/cfclient-flight-tab.png | tee -a "$log"
 stage "the robustness sweep as a Slurm job array (single-node Slurm: slurm-wlm, munge)"
