@@ -1,16 +1,18 @@
-//! The supervisor's checks of a vehicle that flies from its own board's
-//! sensors (the Crazyflie's `supervisor.c`; the CRTP vehicle,
-//! `fc_crtp::vehicle`, runs them; PX4's HIL samples come checked by the
-//! simulator): whether the board's sensors started, whether the battery is
-//! above its floor, every IMU sample, and tumble. What passes goes to the
-//! motors through [`crate::power`].
+//! The supervisor of a vehicle that flies from its own board's sensors
+//! (the Crazyflie's `supervisor.c`; [`Supervisor`], which the CRTP vehicle,
+//! `fc_crtp::vehicle`, steps after its estimator; PX4's HIL samples come
+//! checked by the simulator, and PX4's modes have their lockdown,
+//! [`crate::modes`]): whether the board's sensors started, whether the
+//! battery is above its floor, every IMU sample, tumble, and the end of a
+//! landing. What passes goes to the motors through [`crate::power`].
 //!
 //! - **Arming** is refused while a sensor the board reported down
 //!   ([`SensorDown`]) or the battery is below [`BATTERY_FLOOR_V`], as well
 //!   as for the vehicle's own reasons (aligning, tumbled, locked;
 //!   [`crate::arming`]).
-//! - **Tumble**: an armed vehicle tilted beyond [`TUMBLE_TILT_RAD`]
-//!   ([`tumbled`]) stops its motors.
+//! - **Tumble**: a vehicle flying a set-point tilted beyond
+//!   [`TUMBLE_TILT_RAD`] ([`tumbled`]) stops its motors, and arming is
+//!   refused until a recovery ([`Arming::tumble`]).
 //! - **Every IMU sample** goes through an [`ImuGuard`]: a sample the board
 //!   could not read (`None`: a bus error, a frozen part) or one that is not
 //!   finite or beyond any MEMS IMU's range is not flown; the last good one
@@ -19,11 +21,16 @@
 //!   [`FAILSAFE_DESCENT_MPS`] to the ground, then motors off), which good
 //!   samples coming back do not cancel: a client takes over with a new
 //!   command. Each kind is counted ([`ImuCounters`]).
+//! - **A landing** (a landing segment, the failsafe descent) that has
+//!   ended on its goal's ground ([`Commander::landed`]) stops the motors.
 //!
 //! A data-ready line that stops altogether runs no step at all: on the
 //! Crazyflie 2.1 image the IWDG, fed only while samples are stepped, resets
 //! the chip (`fc_stm32f405::watchdog`), which stops the motors.
 
+use crate::arming::Arming;
+use crate::commander::Commander;
+use fc_core::control::StateEstimate;
 use fc_core::estimate::ImuSample;
 
 /// Longest gap between good IMU samples that is flown on the last good
@@ -189,6 +196,95 @@ impl ImuGuard {
     }
 }
 
+/// What the supervisor did in one step ([`Supervisor::step`]), for the
+/// vehicle to say.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Supervised {
+    /// The IMU went silent in flight: a failsafe descent began.
+    pub descent_began: bool,
+    /// Tumbled: the motors stopped (still armed), arming refused until a
+    /// recovery.
+    pub tumbled: bool,
+    /// A landing ended on the ground: the motors stopped.
+    pub landed: bool,
+}
+
+/// The supervisor of a vehicle on its own board's sensors (the
+/// Crazyflie's `supervisor.c`; see the module's documentation): the IMU's
+/// samples checked, and each step's failsafe descent, tumble and end of a
+/// landing, on the one arming state ([`Arming`]) and the commander
+/// ([`Commander`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Supervisor {
+    imu: ImuGuard,
+    /// A failsafe descent began in this silence of the IMU.
+    descending: bool,
+}
+
+impl Supervisor {
+    /// No sample seen, no failsafe.
+    pub const fn new() -> Self {
+        Self {
+            imu: ImuGuard::new(),
+            descending: false,
+        }
+    }
+
+    /// The sample to step at `t_us` ([`ImuGuard::take`]).
+    pub fn take(&mut self, t_us: u64, s: Option<&ImuSample>) -> (Option<ImuSample>, ImuOutcome) {
+        self.imu.take(t_us, s)
+    }
+
+    /// A new time line (a host that started again, [`ImuGuard::restart`]).
+    pub fn restart(&mut self) {
+        self.imu.restart();
+    }
+
+    /// The IMU samples that were not good, by kind.
+    pub fn imu_counters(&self) -> ImuCounters {
+        self.imu.counters()
+    }
+
+    /// A failsafe descent is under way (the IMU went silent in flight).
+    pub fn failsafe(&self) -> bool {
+        self.descending
+    }
+
+    /// The checks of the step at `t_us`, after its estimator (`est`: its
+    /// estimate, if any): a silent IMU in flight sends the `commander`
+    /// straight down from where it flies (every command but a landing
+    /// overruled), a tumble stops it and latches on `arming`, a landing
+    /// that ended on its ground stops it.
+    pub fn step(
+        &mut self,
+        t_us: u64,
+        arming: &mut Arming,
+        commander: &mut Commander,
+        est: Option<&StateEstimate<f32>>,
+    ) -> Supervised {
+        let flying = |arming: &Arming, c: &Commander| arming.armed() && !c.is_idle();
+        let mut done = Supervised::default();
+        if !self.imu.silent() {
+            self.descending = false;
+        } else if flying(arming, commander) && !commander.is_landing() {
+            done.descent_began = !self.descending;
+            self.descending = true;
+            let here = commander.reference(t_us, est);
+            commander.descend(&here, t_us, FAILSAFE_DESCENT_MPS);
+        }
+        let Some(est) = est else {
+            return done;
+        };
+        if flying(arming, commander) && tumbled(&est.att) {
+            arming.tumble();
+            commander.stop();
+            done.tumbled = true;
+        }
+        done.landed = commander.landed(t_us, est);
+        done
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -276,6 +372,97 @@ mod tests {
         assert_eq!(ImuGuard::outcome(Some(&sample(-GYRO_LIMIT_RADPS))), ImuOutcome::Good);
         g.restart();
         assert_eq!(g.take(0, None).0, None);
+    }
+
+    fn at(down_m: f32, att: Vector4<f32>) -> StateEstimate<f32> {
+        StateEstimate {
+            pos_ned_m: Vector3::new(1.0, 2.0, down_m),
+            vel_ned_mps: Vector3::zeros(),
+            att,
+            rates_frd_radps: Vector3::zeros(),
+        }
+    }
+
+    const LEVEL: Vector4<f32> = Vector4::new(1.0, 0.0, 0.0, 0.0);
+
+    /// An armed vehicle holding 2 m up.
+    fn flying() -> (Arming, Commander) {
+        let mut arming = Arming::new();
+        let ready = crate::arming::ArmingState {
+            sensor_down: None,
+            battery_v: None,
+            battery_floor_v: 0.0,
+            nav: crate::nav::NavMode::Navigating,
+            started: true,
+        };
+        arming.arm(&ready, || Ok(())).unwrap();
+        let mut c = Commander::new();
+        c.hold(fc_core::control::Setpoint::hold(Vector3::new(1.0, 2.0, -2.0), 0.0));
+        (arming, c)
+    }
+
+    /// A silent IMU in flight starts one descent, straight down from where
+    /// it flies at the failsafe rate, which good samples do not cancel;
+    /// it ends on the ground with the motors stopped.
+    #[test]
+    fn a_silent_imu_in_flight_descends_to_the_ground_and_stops() {
+        let (mut arming, mut c) = flying();
+        let mut sup = Supervisor::new();
+        let up = at(-2.0, LEVEL);
+        sup.take(0, Some(&sample(0.0)));
+        assert_eq!(sup.step(0, &mut arming, &mut c, Some(&up)), Supervised::default());
+        sup.take(IMU_TIMEOUT_US + 1, None);
+        let s = sup.step(IMU_TIMEOUT_US + 1, &mut arming, &mut c, Some(&up));
+        assert!(s.descent_began && sup.failsafe() && c.is_landing());
+        let seg = *c.segment().unwrap();
+        assert_eq!(
+            seg.goal().pos_ned_m,
+            Vector3::new(1.0, 2.0, 0.0),
+            "straight down to z = 0"
+        );
+        // Said once: the next silent step carries on.
+        sup.take(IMU_TIMEOUT_US + 2, None);
+        assert!(
+            !sup.step(IMU_TIMEOUT_US + 2, &mut arming, &mut c, Some(&up))
+                .descent_began
+        );
+        // Good samples back: the failsafe is over, the descent is not.
+        sup.take(IMU_TIMEOUT_US + 3, Some(&sample(0.0)));
+        sup.step(IMU_TIMEOUT_US + 3, &mut arming, &mut c, Some(&up));
+        assert!(!sup.failsafe() && c.is_landing());
+        // 2 m at 0.3 m/s: not landed before its end, landed on the ground after it.
+        let end = IMU_TIMEOUT_US + 1 + (2.0 / FAILSAFE_DESCENT_MPS * 1e6) as u64;
+        let ground = at(0.0, LEVEL);
+        assert!(!sup.step(end - 100_000, &mut arming, &mut c, Some(&ground)).landed);
+        assert!(sup.step(end + 1, &mut arming, &mut c, Some(&ground)).landed);
+        assert!(c.is_idle() && arming.armed(), "motors stopped, still armed");
+    }
+
+    /// A tumble in flight stops the motors and latches, armed still; on
+    /// the ground (nothing flown) a tilt is no tumble.
+    #[test]
+    fn a_tumble_in_flight_stops_and_latches() {
+        let h = 61f32.to_radians() / 2.0;
+        let tilted = at(-2.0, Vector4::new(h.cos(), h.sin(), 0.0, 0.0));
+        let (mut arming, mut c) = flying();
+        let mut sup = Supervisor::new();
+        sup.take(0, Some(&sample(0.0)));
+        let s = sup.step(0, &mut arming, &mut c, Some(&tilted));
+        assert_eq!(
+            s,
+            Supervised {
+                tumbled: true,
+                ..Supervised::default()
+            }
+        );
+        assert!(c.is_idle() && arming.armed() && arming.tumbled());
+        let mut on_ground = Arming::new();
+        let mut idle = Commander::new();
+        assert_eq!(
+            sup.step(1, &mut on_ground, &mut idle, Some(&tilted)),
+            Supervised::default()
+        );
+        assert!(!on_ground.tumbled());
     }
 
     #[test]

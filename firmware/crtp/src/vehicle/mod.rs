@@ -63,7 +63,7 @@ use fc_loop::commander::{Commander, Event, Priority, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{crtp_params, ParamType, Refusal, Settings, CRTP_ALIASED, CRTP_ALIASES, CRTP_PARAMS, PARAMS};
 use fc_loop::power::Power;
-use fc_loop::supervisor::{ImuCounters, ImuGuard, SensorDown, BATTERY_FLOOR_V, FAILSAFE_DESCENT_MPS, IMU_TIMEOUT_US};
+use fc_loop::supervisor::{ImuCounters, SensorDown, Supervisor, BATTERY_FLOOR_V, IMU_TIMEOUT_US};
 use fc_loop::{FcConfig, Loop, Mutex, ParamPlan};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
@@ -374,12 +374,10 @@ pub struct CrtpShared {
     vbat_v: Option<f32>,
     pm_state: i8,
     counters: CrtpCounters,
-    /// Every IMU sample checked, the last good one held.
-    imu: ImuGuard,
+    /// Every IMU sample checked; the failsafe descent, tumble and landing.
+    supervisor: Supervisor,
     /// The board's sensors as it started them (`Ok`: the simulator's).
     sensors: Result<(), SensorDown>,
-    /// A failsafe descent began in this silence of the IMU.
-    failsafe: bool,
     /// Barometer fixes fused.
     baro_fixes: u32,
 }
@@ -407,9 +405,8 @@ impl CrtpShared {
             vbat_v: None,
             pm_state: 0,
             counters: CrtpCounters::default(),
-            imu: ImuGuard::new(),
+            supervisor: Supervisor::new(),
             sensors: Ok(()),
-            failsafe: false,
             baro_fixes: 0,
         }
     }
@@ -424,12 +421,12 @@ impl CrtpShared {
     /// The IMU samples that were not good, by kind
     /// ([`fc_loop::supervisor::ImuGuard`]).
     pub fn imu_counters(&self) -> ImuCounters {
-        self.imu.counters()
+        self.supervisor.imu_counters()
     }
 
     /// A failsafe descent is under way (the IMU went silent in flight).
     pub fn failsafe(&self) -> bool {
-        self.failsafe
+        self.supervisor.failsafe()
     }
 
     /// The board's barometer read `alt_m` (m above sea level: the

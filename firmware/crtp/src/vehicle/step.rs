@@ -1,9 +1,10 @@
 //! The IMU step's shared half: the estimator, the commander's set-point,
-//! the supervisor (failsafes, tumble, the end of a landing).
+//! the supervisor (failsafes, tumble, the end of a landing;
+//! [`fc_loop::supervisor::Supervisor`]).
 
 use super::{
-    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Power, Reference, Setpoint, FAILSAFE_DESCENT_MPS,
-    IMU_TIMEOUT_US, SETPOINT_WATCHDOG,
+    CrtpShared, CycleClock, Event, Fix, ImuSample, ImuStep, Power, Reference, Setpoint, IMU_TIMEOUT_US,
+    SETPOINT_WATCHDOG,
 };
 
 impl CrtpShared {
@@ -24,9 +25,9 @@ impl CrtpShared {
         if t_us < self.now_us {
             // A host that started again: a new time line.
             self.lp.open_session();
-            self.imu.restart();
+            self.supervisor.restart();
         }
-        let (sample, _) = self.imu.take(t_us, imu);
+        let (sample, _) = self.supervisor.take(t_us, imu);
         // The interval a velocity set-point moves over (at most 0.1 s).
         let dt_s = (t_us.saturating_sub(self.now_us) as f32 * 1e-6).min(0.1);
         self.now_us = t_us;
@@ -74,38 +75,24 @@ impl CrtpShared {
         sp
     }
 
-    /// The IMU's silence, tumble detection and the end of a landing.
+    /// The supervisor's step ([`fc_loop::supervisor::Supervisor::step`]):
+    /// the IMU's silence, tumble detection and the end of a landing, each
+    /// said on the console.
     pub(in crate::vehicle) fn supervise(&mut self, t_us: u64) {
-        if !self.imu.silent() {
-            self.failsafe = false;
-        } else if self.flying() && !self.commander.is_landing() {
-            // Every command while silent is overruled by the descent.
-            self.failsafe_descent(t_us);
-        }
-        let Some(est) = self.lp.navigator().estimate() else {
-            return;
-        };
-        if self.flying() && fc_loop::supervisor::tumbled(&est.att) {
-            self.arming.tumble();
-            self.commander.stop();
-            self.say(format_args!("tumbled: motors off"));
-        }
-        if self.commander.landed(t_us, &est) {
-            self.say(format_args!("landed: motors off"));
-        }
-    }
-
-    /// Straight down from where the vehicle is flying to the frame's z = 0
-    /// (the floor of a motion-capture or Lighthouse frame) at
-    /// [`FAILSAFE_DESCENT_MPS`], landed as a landing is.
-    pub(in crate::vehicle) fn failsafe_descent(&mut self, t_us: u64) {
-        if !self.failsafe {
-            self.failsafe = true;
+        let est = self.lp.navigator().estimate();
+        let done = self
+            .supervisor
+            .step(t_us, &mut self.arming, &mut self.commander, est.as_ref());
+        if done.descent_began {
             let ms = IMU_TIMEOUT_US / 1000;
             self.say(format_args!("IMU silent for more than {ms} ms: failsafe descent"));
         }
-        let here = self.reference();
-        self.commander.descend(&here, t_us, FAILSAFE_DESCENT_MPS);
+        if done.tumbled {
+            self.say(format_args!("tumbled: motors off"));
+        }
+        if done.landed {
+            self.say(format_args!("landed: motors off"));
+        }
     }
 
     /// What is flown now, as a reference (the estimate at rest when idle).
