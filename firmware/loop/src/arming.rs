@@ -155,10 +155,16 @@ impl Arming {
         if self.armed {
             return Ok(None);
         }
-        check(s, self.locked, self.tumbled)?;
+        self.may_arm(s)?;
         let prepared = prepare()?;
         self.armed = true;
         Ok(Some(prepared))
+    }
+
+    /// The check [`Arming::arm`] runs, on `s` and this state's latches,
+    /// without arming: whether it would pass, or its refusal.
+    pub fn may_arm(&self, s: &ArmingState) -> Result<(), ArmRefusal> {
+        check(s, self.locked, self.tumbled)
     }
 
     /// Disarmed (the latches kept).
@@ -405,8 +411,11 @@ mod tests {
     #[test]
     fn latches_hold_until_cleared() {
         let mut a = Arming::new();
+        assert_eq!(a.may_arm(&ready()), Ok(()));
+        assert!(!a.armed(), "asking does not arm");
         a.arm(&ready(), || Ok(())).unwrap();
         a.tumble();
+        assert_eq!(a.may_arm(&ready()), Err(ArmRefusal::Tumbled));
         assert!(a.armed() && a.tumbled(), "a tumble does not disarm by itself");
         assert!(!a.recover(true), "not while flying");
         assert!(a.recover(false) && !a.tumbled());

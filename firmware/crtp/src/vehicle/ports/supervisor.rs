@@ -6,12 +6,26 @@ use fc_loop::arming::ArmingState;
 use fc_loop::commander::Priority;
 
 impl CrtpShared {
+    /// What the arming check looks at, with everything this vehicle's
+    /// supervisor monitors.
+    fn arming_state(&self) -> ArmingState {
+        ArmingState {
+            sensor_down: self.sensors.err().map(|d| (d.device, d.why)),
+            battery_v: Some(self.vbat_v),
+            battery_floor_v: BATTERY_FLOOR_V,
+            nav: self.lp.navigator().mode(),
+            started: self.lp.mixer().is_some(),
+        }
+    }
+
+    /// The supervisor's "can fly": the arming check would pass, the
+    /// vehicle's start apart (the Crazyflie's `supervisorCanFly`).
     pub(in crate::vehicle) fn can_fly(&self) -> bool {
-        self.lp.navigator().mode() == NavMode::Navigating
-            && !self.arming.tumbled()
-            && !self.arming.locked()
-            && self.sensors.is_ok()
-            && self.vbat_v.is_some_and(|v| v >= BATTERY_FLOOR_V)
+        let started = ArmingState {
+            started: true,
+            ..self.arming_state()
+        };
+        self.arming.may_arm(&started).is_ok()
     }
 
     /// The supervisor's state bits (cflib's `Supervisor.STATES` order).
@@ -45,16 +59,8 @@ impl CrtpShared {
             self.say(format_args!("disarmed"));
             return true;
         }
-        // The one arming check (fc_loop::arming), with everything this
-        // vehicle's supervisor monitors.
-        let state = ArmingState {
-            sensor_down: self.sensors.err().map(|d| (d.device, d.why)),
-            battery_v: Some(self.vbat_v),
-            battery_floor_v: BATTERY_FLOOR_V,
-            nav: self.lp.navigator().mode(),
-            started: self.lp.mixer().is_some(),
-        };
-        match self.arming.arm(&state, || Ok(())) {
+        // The one arming check (fc_loop::arming).
+        match self.arming.arm(&self.arming_state(), || Ok(())) {
             Ok(None) => {}
             Ok(Some(())) => {
                 self.commander.stop();
