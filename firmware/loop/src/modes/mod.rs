@@ -139,6 +139,21 @@ impl core::fmt::Display for ModeRefusal {
     }
 }
 
+/// Why a disarm was refused ([`ModeCommander::request_disarm`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DisarmRefusal {
+    /// More than [`IN_AIR_M`] above where it armed: disarming would drop it.
+    InAir,
+}
+
+impl core::fmt::Display for DisarmRefusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            DisarmRefusal::InAir => "in the air",
+        })
+    }
+}
+
 /// Something a step did that the ground station should hear of.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ModeEvent {
@@ -399,6 +414,18 @@ impl ModeCommander {
         self.home_ned_m = est.pos_ned_m;
         self.takeoff_us = None;
         Ok(())
+    }
+
+    /// A client's disarm: refused in the air ([`ModeCommander::in_air`]
+    /// over the loop `lp`) unless `forced` (PX4's forced disarm), else
+    /// disarmed ([`ModeCommander::disarm`]); `Ok(true)` if it was armed.
+    pub fn request_disarm(&mut self, lp: &Loop, forced: bool) -> Result<bool, DisarmRefusal> {
+        if self.in_air(lp) && !forced {
+            return Err(DisarmRefusal::InAir);
+        }
+        let was_armed = self.armed();
+        self.disarm();
+        Ok(was_armed)
     }
 
     /// Disarms (an automatic mode becomes Hold).

@@ -65,20 +65,23 @@ impl MavShared {
                     }
                 }
             }
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 0.0 && self.in_air() && p[1] != FORCE => {
-                self.say(
-                    out,
-                    MavSeverity::MAV_SEVERITY_WARNING,
-                    format_args!("disarm refused: in the air (force: 21196)"),
-                )?;
-                MavResult::MAV_RESULT_DENIED
-            }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 0.0 => {
-                if self.modes.armed() {
-                    self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("disarmed"))?;
+                match self.modes.request_disarm(&self.lp, p[1] == FORCE) {
+                    Ok(was_armed) => {
+                        if was_armed {
+                            self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("disarmed"))?;
+                        }
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    Err(why) => {
+                        self.say(
+                            out,
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            format_args!("disarm refused: {why} (force: 21196)"),
+                        )?;
+                        MavResult::MAV_RESULT_DENIED
+                    }
                 }
-                self.modes.disarm();
-                MavResult::MAV_RESULT_ACCEPTED
             }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => MavResult::MAV_RESULT_DENIED,
             MavCmd::MAV_CMD_NAV_TAKEOFF => self.mode_command(FlightMode::Takeoff, p[6], out)?,

@@ -130,12 +130,6 @@ impl MavShared {
         Ok(())
     }
 
-    /// Armed and more than [`super::IN_AIR_M`] above where it armed (estimated):
-    /// disarming would drop it.
-    pub(in crate::vehicle) fn in_air(&self) -> bool {
-        self.modes.in_air(&self.lp)
-    }
-
     /// PX4's landed state: on the ground, taking off, in the air, landing.
     pub fn landed_state(&self) -> MavLandedState {
         match self.modes.landed_state(&self.lp) {
