@@ -164,7 +164,34 @@ impl Arming {
     /// The check [`Arming::arm`] runs, on `s` and this state's latches,
     /// without arming: whether it would pass, or its refusal.
     pub fn may_arm(&self, s: &ArmingState) -> Result<(), ArmRefusal> {
-        check(s, self.locked, self.tumbled)
+        // The first that refuses: a sensor, the battery, the lock, the
+        // tumble, the estimator, the start.
+        if let Some((device, why)) = s.sensor_down {
+            return Err(ArmRefusal::SensorDown { device, why });
+        }
+        match s.battery_v {
+            Some(None) => return Err(ArmRefusal::NoBatteryReading),
+            // A NaN reading refuses too.
+            Some(Some(v)) if v.is_nan() || v < s.battery_floor_v => {
+                return Err(ArmRefusal::BatteryLow {
+                    v,
+                    floor_v: s.battery_floor_v,
+                })
+            }
+            _ => {}
+        }
+        if self.locked {
+            return Err(ArmRefusal::Locked);
+        }
+        if self.tumbled {
+            return Err(ArmRefusal::Tumbled);
+        }
+        match s.nav {
+            NavMode::Aligning => Err(ArmRefusal::Aligning),
+            NavMode::Failsafe => Err(ArmRefusal::EstimatorFailsafe),
+            NavMode::Navigating if !s.started => Err(ArmRefusal::NotStarted),
+            NavMode::Navigating => Ok(()),
+        }
     }
 
     /// Disarmed (the latches kept).
@@ -192,38 +219,6 @@ impl Arming {
         }
         self.tumbled = false;
         true
-    }
-}
-
-/// The arming check: the first of the sensors, the battery, the
-/// supervisor's lock and tumble ([`Arming`]'s latches), the estimator and
-/// the start that refuses.
-fn check(s: &ArmingState, locked: bool, tumbled: bool) -> Result<(), ArmRefusal> {
-    if let Some((device, why)) = s.sensor_down {
-        return Err(ArmRefusal::SensorDown { device, why });
-    }
-    match s.battery_v {
-        Some(None) => return Err(ArmRefusal::NoBatteryReading),
-        // A NaN reading refuses too.
-        Some(Some(v)) if v.is_nan() || v < s.battery_floor_v => {
-            return Err(ArmRefusal::BatteryLow {
-                v,
-                floor_v: s.battery_floor_v,
-            })
-        }
-        _ => {}
-    }
-    if locked {
-        return Err(ArmRefusal::Locked);
-    }
-    if tumbled {
-        return Err(ArmRefusal::Tumbled);
-    }
-    match s.nav {
-        NavMode::Aligning => Err(ArmRefusal::Aligning),
-        NavMode::Failsafe => Err(ArmRefusal::EstimatorFailsafe),
-        NavMode::Navigating if !s.started => Err(ArmRefusal::NotStarted),
-        NavMode::Navigating => Ok(()),
     }
 }
 

@@ -58,7 +58,7 @@ impl CrtpShared {
     /// answer): the supervisor's gate (armed and flying a set-point) and
     /// the mixer ([`fc_loop::Loop::power`]); returns what the motors get.
     pub fn imu_end(&mut self, step: &ImuStep, u: Option<[f32; 4]>) -> Power {
-        let fly = self.armed() && !self.commander.is_idle() && step.setpoint;
+        let fly = self.flying() && step.setpoint;
         let power = self.lp.power(fly, u);
         self.u = power.u;
         self.motors = power.motors.commands;
