@@ -81,6 +81,43 @@ fn every_toc_entry_fits_one_packet_and_the_crc_follows_the_table() {
     );
 }
 
+/// CRC-32 (IEEE 802.3, zlib's `crc32`), bit by bit: the test's own
+/// oracle, apart from the `crc` crate the vehicle uses.
+fn crc32_bitwise(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 != 0 { (c >> 1) ^ 0xEDB8_8320 } else { c >> 1 };
+        }
+    }
+    !c
+}
+
+/// Each table of contents' `GET_INFO_V2` CRC (cflib's cache key, computed
+/// once when the vehicle is made) is the CRC-32 of the table as
+/// `GET_ITEM_V2` serves it, entry by entry: type byte, `group\0name\0`.
+#[test]
+fn toc_info_crcs_are_the_crc_of_the_served_tables() {
+    assert_eq!(crc32_bitwise(b"123456789"), 0xCBF4_3926, "the oracle's check value");
+    let mut v = at_rest(0);
+    for port in [Port::Param, Port::Log] {
+        let info = ask(&mut v, pk(port, 0, &[toc::CMD_GET_INFO_V2]));
+        let d = info.payload();
+        let count = u16::from_le_bytes([d[1], d[2]]);
+        let crc = u32::from_le_bytes([d[3], d[4], d[5], d[6]]);
+        let mut table = Vec::new();
+        for id in 0..count {
+            let [lo, hi] = id.to_le_bytes();
+            let item = ask(&mut v, pk(port, 0, &[toc::CMD_GET_ITEM_V2, lo, hi]));
+            assert_eq!(&item.payload()[..3], &[toc::CMD_GET_ITEM_V2, lo, hi], "{port:?} {id}");
+            table.extend_from_slice(&item.payload()[3..]);
+        }
+        assert!(table.len() > usize::from(count) * 4, "{port:?}: {} B", table.len());
+        assert_eq!(crc, crc32_bitwise(&table), "{port:?}");
+    }
+}
+
 #[test]
 fn log_blocks_answer_every_error_cflib_knows() {
     let mut b = LogBlocks::new();

@@ -380,6 +380,20 @@ pub struct CrtpShared {
     sensors: Result<(), SensorDown>,
     /// Barometer fixes fused.
     baro_fixes: u32,
+    /// The CRCs of the parameter and log tables of contents.
+    toc_crcs: TocCrcs,
+}
+
+/// The CRCs of the two tables of contents (cflib's cache keys), computed
+/// once when the vehicle is made: the tables are fixed, and the CRC over
+/// the parameters' table costs ≈ 27 000 instructions (the image, QEMU),
+/// too long to hold the vehicle for while a client connects.
+#[derive(Debug, Clone, Copy)]
+struct TocCrcs {
+    /// The parameters' ([`param_entry`]).
+    param: u32,
+    /// The log variables' ([`LOG_VARS`]).
+    log: u32,
 }
 
 impl CrtpShared {
@@ -408,6 +422,10 @@ impl CrtpShared {
             supervisor: Supervisor::new(),
             sensors: Ok(()),
             baro_fixes: 0,
+            toc_crcs: TocCrcs {
+                param: ports::param::toc_crc(),
+                log: ports::logging::toc_crc(),
+            },
         }
     }
 

@@ -118,6 +118,12 @@ pub const LOG_VARS: &[LogVar] = &[
     }),
 ];
 
+/// The CRC of the log variables' table of contents, over every entry's
+/// type and name ([`toc::crc`]).
+pub(in crate::vehicle) fn toc_crc() -> u32 {
+    toc::crc(LOG_VARS.iter().map(|v| (v.kind, log_name(v))))
+}
+
 /// A log variable's TOC name.
 fn log_name(v: &LogVar) -> Name<'static> {
     Name {
@@ -184,9 +190,8 @@ impl CrtpShared {
         match p.channel() {
             0 => match cmd {
                 toc::CMD_GET_INFO_V2 => {
-                    let crc = toc::crc(LOG_VARS.iter().map(|v| (v.kind, log_name(v))));
                     let extra = [log::MAX_BLOCKS as u8, log::MAX_OPS as u8];
-                    if let Ok(r) = toc::info_packet(Port::Log, LOG_VARS.len() as u16, crc, &extra) {
+                    if let Ok(r) = toc::info_packet(Port::Log, LOG_VARS.len() as u16, self.toc_crcs.log, &extra) {
                         out.send(&r)?;
                     }
                 }

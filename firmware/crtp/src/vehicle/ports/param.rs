@@ -69,6 +69,12 @@ const DECK: u8 = param_types::U8 | param_types::RONLY;
 /// [`EXTRA_PARAMS`].
 pub const PARAM_COUNT: usize = CRTP_PARAMS + CRTP_ALIASES + EXTRA_PARAMS.len();
 
+/// The CRC of the parameters' table of contents, over every entry's type
+/// and name ([`toc::crc`]).
+pub(in crate::vehicle) fn toc_crc() -> u32 {
+    toc::crc((0..PARAM_COUNT).filter_map(param_entry).map(|(n, t, _)| (t, n)))
+}
+
 /// Group and name of param `id`, its type byte, and what it is.
 pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
     if let Some((group, name, p)) = crtp_params()
@@ -256,8 +262,7 @@ impl CrtpShared {
         match p.channel() {
             0 => match d.first() {
                 Some(&toc::CMD_GET_INFO_V2) => {
-                    let crc = toc::crc((0..PARAM_COUNT).filter_map(param_entry).map(|(n, t, _)| (t, n)));
-                    if let Ok(r) = toc::info_packet(Port::Param, PARAM_COUNT as u16, crc, &[]) {
+                    if let Ok(r) = toc::info_packet(Port::Param, PARAM_COUNT as u16, self.toc_crcs.param, &[]) {
                         out.send(&r)?;
                     }
                 }
