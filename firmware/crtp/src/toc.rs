@@ -4,15 +4,17 @@
 //! one entry: its id, its type byte, `group\0name\0`.
 
 use crate::{CrtpError, Packet, Port};
-use crc::{Crc, CRC_32_ISO_HDLC};
+use crc::{Crc, NoTable, CRC_32_ISO_HDLC};
 
 /// Command: one entry (id as u16).
 pub const CMD_GET_ITEM_V2: u8 = 2;
 /// Command: count and CRC.
 pub const CMD_GET_INFO_V2: u8 = 3;
 
-/// The CRC-32 (IEEE) the TOC CRCs use.
-const CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+/// The CRC-32 (IEEE) the TOC CRCs use, bit by bit: they are computed once,
+/// when the vehicle is made, where a 1 KiB table would cost flash and save
+/// no time that matters.
+static CRC: Crc<u32, NoTable> = Crc::<u32, NoTable>::new(&CRC_32_ISO_HDLC);
 
 /// One entry's name: its group and name as the client sees them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,6 +55,19 @@ pub fn crc<'a>(entries: impl Iterator<Item = (u8, Name<'a>)>) -> u32 {
         for b in n.bytes() {
             d.update(&[b]);
         }
+    }
+    d.finalize()
+}
+
+/// The CRC of a table of `count` entries as `item` serves them (each
+/// entry's `GET_ITEM_V2` answer, [`item_packet`]): over each entry's type
+/// byte and `group\0name\0`, as [`crc()`] computes it.
+pub fn crc_of_items(count: u16, item: impl Fn(u16) -> Packet) -> u32 {
+    let mut d = CRC.digest();
+    for id in 0..count {
+        let p = item(id);
+        // After the command and the id.
+        d.update(p.payload().get(3..).unwrap_or(&[]));
     }
     d.finalize()
 }

@@ -385,9 +385,9 @@ pub struct CrtpShared {
 }
 
 /// The CRCs of the two tables of contents (cflib's cache keys), computed
-/// once when the vehicle is made: the tables are fixed, and the CRC over
-/// the parameters' table costs ≈ 27 000 instructions (the image, QEMU),
-/// too long to hold the vehicle for while a client connects.
+/// once when the vehicle is made: the tables are fixed, and computed at a
+/// client's request the parameters' held the vehicle ≈ 27 000 instructions
+/// (the Crazyflie image in QEMU), the longest hold while cflib connects.
 #[derive(Debug, Clone, Copy)]
 struct TocCrcs {
     /// The parameters' ([`param_entry`]).

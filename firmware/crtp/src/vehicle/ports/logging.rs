@@ -118,10 +118,18 @@ pub const LOG_VARS: &[LogVar] = &[
     }),
 ];
 
-/// The CRC of the log variables' table of contents, over every entry's
-/// type and name ([`toc::crc`]).
+/// The CRC of the log variables' table of contents as [`toc_item`] serves
+/// it ([`toc::crc_of_items`]).
 pub(in crate::vehicle) fn toc_crc() -> u32 {
-    toc::crc(LOG_VARS.iter().map(|v| (v.kind, log_name(v))))
+    toc::crc_of_items(LOG_VARS.len() as u16, toc_item)
+}
+
+/// The `GET_ITEM_V2` answer for log variable `id`.
+fn toc_item(id: u16) -> Packet {
+    match LOG_VARS.get(usize::from(id)) {
+        Some(v) => toc::item_packet(Port::Log, id, v.kind, &log_name(v)).unwrap_or(Packet::NULL),
+        None => toc::no_item_packet(Port::Log),
+    }
 }
 
 /// A log variable's TOC name.
@@ -199,11 +207,7 @@ impl CrtpShared {
                     let Some(id) = u16_at(d, 1) else {
                         return Ok(Err(short(p)));
                     };
-                    let r = match LOG_VARS.get(usize::from(id)) {
-                        Some(v) => toc::item_packet(Port::Log, id, v.kind, &log_name(v)).unwrap_or(Packet::NULL),
-                        None => toc::no_item_packet(Port::Log),
-                    };
-                    out.send(&r)?;
+                    out.send(&toc_item(id))?;
                 }
                 _ => return Ok(Err(unsupported(p))),
             },

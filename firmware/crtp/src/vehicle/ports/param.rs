@@ -69,10 +69,18 @@ const DECK: u8 = param_types::U8 | param_types::RONLY;
 /// [`EXTRA_PARAMS`].
 pub const PARAM_COUNT: usize = CRTP_PARAMS + CRTP_ALIASES + EXTRA_PARAMS.len();
 
-/// The CRC of the parameters' table of contents, over every entry's type
-/// and name ([`toc::crc`]).
+/// The CRC of the parameters' table of contents as [`toc_item`] serves it
+/// ([`toc::crc_of_items`]).
 pub(in crate::vehicle) fn toc_crc() -> u32 {
-    toc::crc((0..PARAM_COUNT).filter_map(param_entry).map(|(n, t, _)| (t, n)))
+    toc::crc_of_items(PARAM_COUNT as u16, toc_item)
+}
+
+/// The `GET_ITEM_V2` answer for parameter `id`.
+fn toc_item(id: u16) -> Packet {
+    match param_entry(usize::from(id)) {
+        Some((n, t, _)) => toc::item_packet(Port::Param, id, t, &n).unwrap_or(Packet::NULL),
+        None => toc::no_item_packet(Port::Param),
+    }
 }
 
 /// Group and name of param `id`, its type byte, and what it is.
@@ -270,11 +278,7 @@ impl CrtpShared {
                     let Some(id) = u16_at(d, 1) else {
                         return Ok(Err(short(p)));
                     };
-                    let r = match param_entry(usize::from(id)) {
-                        Some((n, t, _)) => toc::item_packet(Port::Param, id, t, &n).unwrap_or(Packet::NULL),
-                        None => toc::no_item_packet(Port::Param),
-                    };
-                    out.send(&r)?;
+                    out.send(&toc_item(id))?;
                 }
                 _ => return Ok(Err(unsupported(p))),
             },
