@@ -13,7 +13,7 @@
 //! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame), or pended by the board's IMU | decodes the simulator's frames, takes the board's sample; a sample steps the estimator ([`CrtpShared::imu_begin`]) and goes to the controller |
 //! | 3 | `gyro_ready`, `imu_bus_event`, `imu_bus_error` | EXTI15_10, I2C3_EV, I2C3_ER | the board's own IMU ([`ImuBus`]: the Crazyflie's BMI088; none in QEMU): data-ready starts the reads, the bus's interrupts advance them |
 //! | 2 | `controller` | CAN2_RX0 (pended) | flies each step on the controller ([`fly_step`]), drives the outputs, answers the simulator; a take-off's reset ([`run_work`]) |
-//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle, answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
+//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle (each timed: [`Holds`]), answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
 //!
 //! The vehicle's shared part ([`CrtpShared`]) is locked for an estimator
 //! step, a packet, a step's result; never for a controller step, a design
@@ -26,6 +26,7 @@
 //! every step, data-ready → estimate and data-ready → outputs driven,
 //! against one 1 kHz period.
 //!
+//! [`Holds`]: crate::timing::Holds
 //! [`Outputs`]: crate::crtp_image::Outputs
 //! [`Watchdog`]: crate::crtp_image::Watchdog
 //! [`ImuBus`]: crate::crtp_image::ImuBus
@@ -62,7 +63,7 @@ macro_rules! crtp_app {
             use fc_loop::{fix_from_wire, Mutex};
             use fc_proto::{FrameDecoder, FromFc, ToFc};
             use $crate::crtp_image::{log_changes, send, Last, SimCounters, DOWNLINK, FIXES, SYSLINK_BAUD};
-            use $crate::timing::{StepTiming, Timing};
+            use $crate::timing::{Holds, StepTiming, Timing};
             use $crate::PCLK2_HZ;
             use hal_shim::stm32f405::{read_queued, ticks_now, usart_isr, Port, SysTickClock, Usart};
             use heapless::spsc::{Consumer, Producer, Queue};
@@ -120,6 +121,8 @@ macro_rules! crtp_app {
                 syslink: Syslink<DOWNLINK>,
                 last: Last,
                 logged: StepTiming,
+                /// The link's longest hold of the vehicle.
+                holds: Holds,
                 /// The tasks' stack high-water mark, watched.
                 stack: $crate::stack::Watch,
                 tx_errors: u32,
@@ -204,6 +207,7 @@ macro_rules! crtp_app {
                         syslink,
                         last: Last::default(),
                         logged: StepTiming::default(),
+                        holds: Holds::default(),
                         stack: $crate::stack::Watch::new(),
                         tx_errors: 0,
                         sample_clock: clock,
@@ -445,7 +449,7 @@ macro_rules! crtp_app {
             /// re-design one asks for run at once), the log blocks and answers
             /// that fell due, the simulator's queued answers, then what changed in
             /// the log.
-            #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, stack, tx_errors])]
+            #[task(binds = CAN2_RX1, priority = 1, shared = [v, sim_tx, timing, sim, ctrl], local = [radio, syslink, works_in, answers_out, last, logged, holds, stack, tx_errors])]
             fn link(cx: link::Context) {
                 let link::LocalResources {
                     radio,
@@ -454,6 +458,7 @@ macro_rules! crtp_app {
                     answers_out,
                     last,
                     logged,
+                    holds,
                     stack,
                     tx_errors,
                     ..
@@ -461,6 +466,7 @@ macro_rules! crtp_app {
                 let (v, mut sim_tx, mut timing, mut sim) = (cx.shared.v, cx.shared.sim_tx, cx.shared.timing, cx.shared.sim);
                 let mut vehicle = Handing {
                     v,
+                    holds,
                     works: works_in,
                     ctrl: cx.shared.ctrl,
                     answer: None,
@@ -494,8 +500,17 @@ macro_rules! crtp_app {
                 stack.poll();
                 if now.due(logged) {
                     stack.log_if_grown();
+                    vehicle.holds.log_if_grown();
                 }
                 now.log_if_due(logged);
+            }
+
+            /// [`ticks_now`] out of line: read at the start and end of every
+            /// hold of the link's many locks ([`Holds`]), where inlined it
+            /// costs kilobytes of flash.
+            #[inline(never)]
+            fn hold_clock() -> u64 {
+                ticks_now()
             }
 
             /// The vehicle as the link's task locks it: the controller work a
@@ -503,6 +518,8 @@ macro_rules! crtp_app {
             /// ([`Handing::design`]), anything else in the controller's task.
             struct Handing<'a, M, C> {
                 v: M,
+                /// The longest hold of `v` so far.
+                holds: &'a mut Holds,
                 works: &'a mut Producer<'static, ControllerWork>,
                 ctrl: C,
                 /// The simulator's answer to its re-designing write, once designed.
@@ -538,10 +555,15 @@ macro_rules! crtp_app {
             {
                 type T = CrtpShared;
                 fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpShared) -> R) -> R {
-                    let (r, work) = self.v.lock(|v| {
+                    // Timed inside the lock: once it ends, a task it held
+                    // back runs first.
+                    let (r, work, held) = self.v.lock(|v| {
+                        let t0 = hold_clock();
                         let r = f(v);
-                        (r, v.take_work())
+                        let work = v.take_work();
+                        (r, work, hold_clock().saturating_sub(t0))
                     });
+                    self.holds.held(held);
                     match work {
                         // A packet's design is answered over CRTP (`work_done`),
                         // the simulator's by a message for it.

@@ -157,9 +157,55 @@ impl StepTiming {
     }
 }
 
+/// The longest the link's task has held the vehicle, the resource whose
+/// ceiling is the sample task's priority (`crtp_app`): a sample that
+/// becomes ready meanwhile waits for the hold to end, and its data-ready is
+/// stamped only when its task runs, so [`StepTiming`]'s figures do not
+/// include that wait. Timed inside each lock, with the interrupts above the
+/// ceiling that fell inside it (the radio's bytes); SysTick ticks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Holds {
+    worst_ticks: u64,
+    logged_ticks: u64,
+}
+
+impl Holds {
+    /// One hold of `ticks`.
+    pub fn held(&mut self, ticks: u64) {
+        self.worst_ticks = self.worst_ticks.max(ticks);
+    }
+
+    /// The longest hold so far, SysTick ticks.
+    pub fn worst_ticks(&self) -> u64 {
+        self.worst_ticks
+    }
+
+    /// Logs the longest hold if it grew since it was last logged.
+    #[cfg(target_os = "none")]
+    pub fn log_if_grown(&mut self) {
+        if self.worst_ticks > self.logged_ticks {
+            defmt::info!(
+                "link: held the vehicle up to {=u64} instructions",
+                instructions(self.worst_ticks)
+            );
+            self.logged_ticks = self.worst_ticks;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn holds_keep_the_longest() {
+        let mut h = Holds::default();
+        assert_eq!(h.worst_ticks(), 0);
+        for t in [30, 7_000, 12, 6_999] {
+            h.held(t);
+        }
+        assert_eq!(h.worst_ticks(), 7_000);
+    }
 
     #[test]
     fn the_qemu_deadline_is_a_1khz_period_at_cpi_1_5_with_a_1_5_margin() {
