@@ -65,20 +65,19 @@ fn every_toc_entry_fits_one_packet_and_the_crc_follows_the_table() {
         assert_eq!(text.iter().filter(|&&b| b == 0).count(), 2, "{p:?}");
     }
     assert_eq!(param_entry(PARAM_COUNT), None);
-    let entries = |t: u8| {
-        LOG_VARS.iter().enumerate().map(move |(i, v)| {
+    // The log's table with entry 3's type set to `t`.
+    let crc_with = |t: u8| {
+        toc::crc_of_items(LOG_VARS.len() as u16, |id| {
+            let v = &LOG_VARS[usize::from(id)];
             let n = Name {
                 group: v.group,
                 name: v.name,
                 lower_group: false,
             };
-            (if i == 3 { t } else { v.kind }, n)
+            toc::item_packet(Port::Log, id, if id == 3 { t } else { v.kind }, &n).unwrap()
         })
     };
-    assert_ne!(
-        toc::crc(entries(log::types::FLOAT)),
-        toc::crc(entries(log::types::FP16))
-    );
+    assert_ne!(crc_with(log::types::FLOAT), crc_with(log::types::FP16));
 }
 
 /// CRC-32 (IEEE 802.3, zlib's `crc32`), bit by bit: the test's own

@@ -46,22 +46,9 @@ impl Name<'_> {
     }
 }
 
-/// The CRC of a table whose entries are `(type byte, name)`: it covers
-/// every type and name, so any change to the table changes it.
-pub fn crc<'a>(entries: impl Iterator<Item = (u8, Name<'a>)>) -> u32 {
-    let mut d = CRC.digest();
-    for (t, n) in entries {
-        d.update(&[t]);
-        for b in n.bytes() {
-            d.update(&[b]);
-        }
-    }
-    d.finalize()
-}
-
 /// The CRC of a table of `count` entries as `item` serves them (each
-/// entry's `GET_ITEM_V2` answer, [`item_packet`]): over each entry's type
-/// byte and `group\0name\0`, as [`crc()`] computes it.
+/// entry's `GET_ITEM_V2` answer, [`item_packet`]): over every entry's type
+/// byte and `group\0name\0`, so any change to the table changes it.
 pub fn crc_of_items(count: u16, item: impl Fn(u16) -> Packet) -> u32 {
     let mut d = CRC.digest();
     for id in 0..count {

@@ -13,7 +13,7 @@
 //! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame), or pended by the board's IMU | decodes the simulator's frames, takes the board's sample; a sample steps the estimator ([`CrtpShared::imu_begin`]) and goes to the controller |
 //! | 3 | `gyro_ready`, `imu_bus_event`, `imu_bus_error` | EXTI15_10, I2C3_EV, I2C3_ER | the board's own IMU ([`ImuBus`]: the Crazyflie's BMI088; none in QEMU): data-ready starts the reads, the bus's interrupts advance them |
 //! | 2 | `controller` | CAN2_RX0 (pended) | flies each step on the controller ([`fly_step`]), drives the outputs, answers the simulator; a take-off's reset ([`run_work`]) |
-//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle (each timed: [`Holds`]), answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
+//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle (each packet's timed: [`Holds`]), answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
 //!
 //! The vehicle's shared part ([`CrtpShared`]) is locked for an estimator
 //! step, a packet, a step's result; never for a controller step, a design
@@ -505,9 +505,9 @@ macro_rules! crtp_app {
                 now.log_if_due(logged);
             }
 
-            /// [`ticks_now`] out of line: read at the start and end of every
-            /// hold of the link's many locks ([`Holds`]), where inlined it
-            /// costs kilobytes of flash.
+            /// [`ticks_now`] out of line: read at the start and end of each of
+            /// the link's packet locks ([`Holds`], [`Handing::lock`]'s many
+            /// instances), where inlined it costs kilobytes of flash.
             #[inline(never)]
             fn hold_clock() -> u64 {
                 ticks_now()

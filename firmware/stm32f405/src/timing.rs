@@ -161,8 +161,10 @@ impl StepTiming {
 /// ceiling is the sample task's priority (`crtp_app`): a sample that
 /// becomes ready meanwhile waits for the hold to end, and its data-ready is
 /// stamped only when its task runs, so [`StepTiming`]'s figures do not
-/// include that wait. Timed inside each lock, with the interrupts above the
-/// ceiling that fell inside it (the radio's bytes); SysTick ticks.
+/// include that wait. Timed inside each lock the link's task takes for a
+/// packet or the log blocks (not the few of a re-design, which runs only
+/// disarmed), with the interrupts above the ceiling that fell inside it
+/// (the radio's bytes); SysTick ticks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Holds {
     worst_ticks: u64,
