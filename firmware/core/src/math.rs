@@ -33,6 +33,21 @@ pub fn sin_cos<T: RealField + Copy>(x: T) -> (T, T) {
     x.sin_cos()
 }
 
+/// `√x`: for `f32` the FPU's `VSQRT.F32` on the chip ([`fc_fpu::sqrt`]:
+/// one instruction where libm's is about 50, the same correctly rounded
+/// bits), `T::sqrt` for any other `T`.
+#[inline]
+pub fn sqrt<T: RealField + Copy>(x: T) -> T {
+    if let Some(&v) = (&x as &dyn Any).downcast_ref::<f32>() {
+        let mut out = T::zero();
+        if let Some(o) = (&mut out as &mut dyn Any).downcast_mut::<f32>() {
+            *o = fc_fpu::sqrt(v);
+            return out;
+        }
+    }
+    x.sqrt()
+}
+
 /// `sin x`, x in rad.
 #[inline]
 pub fn sin<T: RealField + Copy>(x: T) -> T {

@@ -65,7 +65,7 @@ impl<T: RealField + Copy> StateEstimate<T> {
 
     /// True if every value is finite and the attitude is a unit quaternion (±1e-3).
     pub fn is_valid(&self) -> bool {
-        let n = self.att.norm();
+        let n = crate::math::sqrt(self.att.norm_squared());
         self.pos_ned_m.iter().all(|v| v.is_finite())
             && self.vel_ned_mps.iter().all(|v| v.is_finite())
             && self.rates_frd_radps.iter().all(|v| v.is_finite())

@@ -709,7 +709,7 @@ fn apply_transition(m: &mut Cov, r: &Matrix3<f32>, f_ned: &Vector3<f32>, dt: f32
 
 /// The unit quaternion of the rotation vector `a` (rad): `exp(a/2)`.
 pub(crate) fn rotation_quat(a: &Vector3<f32>) -> Quat<f32> {
-    let angle = a.norm();
+    let angle = fc_fpu::sqrt(a.norm_squared());
     if angle < 1e-6 {
         return quat_normalize(&Vector4::new(1.0, 0.5 * a[0], 0.5 * a[1], 0.5 * a[2]));
     }

@@ -51,7 +51,7 @@ pub fn quat_conj<T: RealField + Copy>(q: &Quat<T>) -> Quat<T> {
 
 /// Normalises `q`; a zero or non-finite quaternion becomes the identity.
 pub fn quat_normalize<T: RealField + Copy>(q: &Quat<T>) -> Quat<T> {
-    let n = q.norm();
+    let n = trig::sqrt(q.norm_squared());
     if n.is_finite() && n > T::default_epsilon() {
         q * (T::one() / n)
     } else {

@@ -31,7 +31,16 @@ pub fn unmix<T: RealField + Copy>(p: &VehicleParams<T>, u: &Vector4<T>) -> Vecto
 /// Negative or NaN squared speeds give 0: a corrupt command stops that rotor
 /// rather than poisoning the state.
 pub fn rotor_speeds<T: RealField + Copy>(p: &VehicleParams<T>, u: &Vector4<T>) -> Vector4<T> {
-    unmix(p, u).map(|w2| clamp_speed(p, if w2 > T::zero() { w2.sqrt() } else { T::zero() }))
+    unmix(p, u).map(|w2| {
+        clamp_speed(
+            p,
+            if w2 > T::zero() {
+                crate::math::sqrt(w2)
+            } else {
+                T::zero()
+            },
+        )
+    })
 }
 
 /// Clamps one rotor speed to `[0, Ωmax]` (NaN → 0).

@@ -17,6 +17,23 @@ mod target {
     use cortex_m_semihosting::{debug, hprintln};
     #[entry]
     fn main() -> ! {
+        // The FPU's square root (what the core calls on the chip) against
+        // libm's (what it calls on the host), bit for bit, over inputs of
+        // every exponent, both signs, zeros, infinities and NaN: a
+        // difference fails the program before any line is printed.
+        let mut bits = 0u32;
+        loop {
+            let x = f32::from_bits(bits);
+            let (chip, host) = (fc_fpu::sqrt(x), libm::sqrtf(x));
+            if chip.to_bits() != host.to_bits() && !(chip.is_nan() && host.is_nan()) {
+                hprintln!("sqrt({:e}): {:e} on the chip, {:e} in libm", x, chip, host);
+                debug::exit(debug::EXIT_FAILURE);
+            }
+            match bits.checked_add(0x0000_3579) {
+                Some(b) => bits = b,
+                None => break,
+            }
+        }
         fc_stm32f405::equivalence::run(|k, it, u| {
             hprintln!("{} {} {:e} {:e} {:e} {:e}", k, it, u[0], u[1], u[2], u[3])
         });
