@@ -12,6 +12,7 @@
 //! against `f64`); outside that range and for non-finite input it falls back
 //! to `libm`.
 
+use crate::lit;
 use core::any::Any;
 use nalgebra::RealField;
 
@@ -46,6 +47,18 @@ pub fn sqrt<T: RealField + Copy>(x: T) -> T {
         }
     }
     x.sqrt()
+}
+
+/// `(sin a/2, cos a/2)` from `(sin a, cos a)` for `|a| < π`:
+/// `cos a/2 = √((1 + cos a)/2)` (≥ 0 there), `sin a/2 = sin a / (2 cos a/2)`
+/// (accurate to a few ulps for `|a| ≤ π/2`; it loses digits towards ±π,
+/// where `1 + cos a` cancels).
+/// A square root and a division in place of a sine and a cosine (the
+/// MPC's reference attitude: its roll and pitch are within ±45°).
+#[inline]
+pub fn half_angle<T: RealField + Copy>(s: T, c: T) -> (T, T) {
+    let ch = sqrt((T::one() + c) * lit::<T>(0.5));
+    (s / (ch + ch), ch)
 }
 
 /// `sin x`, x in rad.
@@ -190,6 +203,33 @@ mod tests {
             assert_eq!(s1, -s2);
             assert_eq!(c1, c2);
         }
+    }
+
+    /// Against f64's own sine and cosine of the half-angle, for angles over
+    /// (−π, π) given as the f32 sine and cosine of their whole.
+    #[test]
+    fn half_angles_match_the_half_angle_sine_and_cosine() {
+        let n = 20_000;
+        let mut worst = 0.0f64;
+        for i in 1..n {
+            let a = -3.1f64 + 6.2 * i as f64 / n as f64;
+            let (s, c) = half_angle(a.sin() as f32, a.cos() as f32);
+            worst = worst
+                .max((s as f64 - (a / 2.0).sin()).abs())
+                .max((c as f64 - (a / 2.0).cos()).abs());
+        }
+        // Within ±45° (the MPC's use) a few f32 ulps; near ±π, where
+        // 1 + cos a cancels, it loses digits, as the doc says it may.
+        let mut near = 0.0f64;
+        for i in 0..=2_000 {
+            let a = -core::f64::consts::FRAC_PI_4 + core::f64::consts::FRAC_PI_2 * i as f64 / 2_000.0;
+            let (s, c) = half_angle(a.sin() as f32, a.cos() as f32);
+            near = near
+                .max((s as f64 - (a / 2.0).sin()).abs())
+                .max((c as f64 - (a / 2.0).cos()).abs());
+        }
+        assert!(near <= 2e-7, "within 45°: {near:e}");
+        assert!(worst <= 1e-3, "over (−3.1, 3.1): {worst:e}");
     }
 
     #[test]

@@ -70,6 +70,32 @@ pub fn tilt_and_thrust<T: RealField + Copy>(
     Tilt::new(p, acc_d, vel, yaw).tt
 }
 
+/// `sin` and `cos` of `angle`, which is `atan(t)` when `free`, else the
+/// tilt limit's `±MAX_TILT_RAD` (or what [`limit`] made of a NaN).
+/// Algebraic where it can be, which costs a square root and a division in
+/// place of a sine and a cosine (the MPC takes 20 of these a step):
+/// `sin atan t = t/√(1+t²)`, `cos atan t = 1/√(1+t²)` (`|t| ≤ 1` when
+/// free, so `t²` cannot overflow), and at the limit `sin, cos = ±1/√2, 1/√2`
+/// for the 45° of [`MAX_TILT_RAD`].
+fn sin_cos_of_atan<T: RealField + Copy>(t: T, free: bool, angle: T) -> (T, T) {
+    if free {
+        let r = T::one() / trig::sqrt(T::one() + t * t);
+        return (t * r, r);
+    }
+    let lim = lit::<T>(MAX_TILT_RAD);
+    let h = lit::<T>(MAX_TILT_SIN_COS);
+    if angle == lim {
+        (h, h)
+    } else if angle == -lim {
+        (-h, h)
+    } else {
+        trig::sin_cos(angle)
+    }
+}
+
+/// `sin` and `cos` of [`MAX_TILT_RAD`] (equal at 45°).
+const MAX_TILT_SIN_COS: f64 = core::f64::consts::FRAC_1_SQRT_2;
+
 /// [`tilt_and_thrust`] with the intermediate values its time derivative
 /// reuses ([`AttitudeRef::feedforward`]).
 struct Tilt<T: RealField + Copy> {
@@ -104,12 +130,14 @@ impl<T: RealField + Copy> Tilt<T> {
         let lift = if g - az > floor { g - az } else { floor };
         let (s, c) = trig::sin_cos(yaw);
         let max_tilt = lit::<T>(MAX_TILT_RAD);
-        let pitch_free = ((-c * ax - s * ay) / lift).atan();
+        let u = (-c * ax - s * ay) / lift;
+        let pitch_free = u.atan();
         let pitch = limit(pitch_free, max_tilt);
-        let (s_pitch, c_pitch) = trig::sin_cos(pitch);
-        let roll_free = ((-s * ax + c * ay) * c_pitch / lift).atan();
+        let (s_pitch, c_pitch) = sin_cos_of_atan(u, pitch == pitch_free, pitch);
+        let v = (-s * ax + c * ay) * c_pitch / lift;
+        let roll_free = v.atan();
         let roll = limit(roll_free, max_tilt);
-        let (s_roll, c_roll) = trig::sin_cos(roll);
+        let (s_roll, c_roll) = sin_cos_of_atan(v, roll == roll_free, roll);
         Self {
             tt: TiltThrust {
                 roll_rad: roll,
@@ -193,6 +221,21 @@ impl<T: RealField + Copy> AttitudeRef<T> {
     /// reference velocity and heading), with body rates from the exact time
     /// derivative of that map along the reference's jerk and yaw rate.
     pub fn feedforward(p: &VehicleParams<T>, sp: &Setpoint<T>) -> Self {
+        Self::feedforward_trig(p, sp).0
+    }
+
+    /// [`Self::for_mode`] with the sine and cosine of its roll and pitch,
+    /// `[sin φ, cos φ, sin θ, cos θ]` (computed on the way: a caller that
+    /// needs them does not take them again).
+    pub(crate) fn for_mode_trig(p: &VehicleParams<T>, sp: &Setpoint<T>, mode: ReferenceMode) -> (Self, [T; 4]) {
+        match mode {
+            ReferenceMode::Thesis => (Self::level(p, sp), [T::zero(), T::one(), T::zero(), T::one()]),
+            ReferenceMode::Feedforward => Self::feedforward_trig(p, sp),
+        }
+    }
+
+    /// [`Self::feedforward`] and `[sin φ, cos φ, sin θ, cos θ]`.
+    fn feedforward_trig(p: &VehicleParams<T>, sp: &Setpoint<T>) -> (Self, [T; 4]) {
         let t = Tilt::new(p, &sp.acc_ned_mps2, &sp.vel_ned_mps, sp.yaw_rad);
         // d/dt of the drag-compensated acceleration along the reference.
         let m = p.mass_kg;
@@ -210,13 +253,14 @@ impl<T: RealField + Copy> AttitudeRef<T> {
             theta_dot * cphi + psi_dot * sphi * cth,
             -theta_dot * sphi + psi_dot * cphi * cth,
         );
-        Self {
+        let ar = Self {
             roll_rad: t.tt.roll_rad,
             pitch_rad: t.tt.pitch_rad,
             yaw_rad: sp.yaw_rad,
             thrust_n: t.tt.thrust_n,
             rates_frd_radps: rates,
-        }
+        };
+        (ar, [sphi, cphi, sth, cth])
     }
 
     /// [`Self::level`] or [`Self::feedforward`] by mode.
@@ -320,6 +364,27 @@ mod tests {
             a.rates_frd_radps
         );
         assert!(a.rates_frd_radps.norm() > 0.1);
+    }
+
+    #[test]
+    fn sines_of_the_tilt_are_those_of_its_angles() {
+        // The algebraic sine and cosine of atan(t), free and at the limit,
+        // against f64's of the angle itself.
+        let lim = MAX_TILT_RAD;
+        assert!((MAX_TILT_SIN_COS - lim.sin()).abs() < 1e-15 && (MAX_TILT_SIN_COS - lim.cos()).abs() < 1e-15);
+        let mut worst = 0.0f64;
+        for i in 0..=4_000 {
+            let t = -3.0f32 + 6.0 * i as f32 / 4_000.0;
+            let free = t.atan();
+            let angle = limit(free, lim as f32);
+            let (s, c) = sin_cos_of_atan(t, angle == free, angle);
+            let a = (t as f64).atan().clamp(-lim, lim);
+            worst = worst.max((s as f64 - a.sin()).abs()).max((c as f64 - a.cos()).abs());
+        }
+        assert!(worst <= 2e-7, "{worst:e}");
+        // A NaN request keeps what `limit` made of it (−45°).
+        let (s, c) = sin_cos_of_atan(f32::NAN, false, limit(f32::NAN, lim as f32));
+        assert!((s + MAX_TILT_SIN_COS as f32).abs() < 1e-7 && (c - MAX_TILT_SIN_COS as f32).abs() < 1e-7);
     }
 
     #[test]

@@ -11,9 +11,13 @@ pub type Quat<T> = Vector4<T>;
 /// Quaternion of the ZYX rotation with roll φ, pitch θ, yaw ψ (rad).
 pub fn euler_to_quat<T: RealField + Copy>(phi: T, theta: T, psi: T) -> Quat<T> {
     let h = lit::<T>(0.5);
-    let (sr, cr) = trig::sin_cos(phi * h);
-    let (sp, cp) = trig::sin_cos(theta * h);
-    let (sy, cy) = trig::sin_cos(psi * h);
+    quat_of_half_angles(trig::sin_cos(phi * h), trig::sin_cos(theta * h), trig::sin_cos(psi * h))
+}
+
+/// [`euler_to_quat`] from the `(sin, cos)` of the half-angles `φ/2`, `θ/2`,
+/// `ψ/2`, for a caller that has them without the angles' sines (see
+/// [`crate::math::half_angle`]).
+pub fn quat_of_half_angles<T: RealField + Copy>((sr, cr): (T, T), (sp, cp): (T, T), (sy, cy): (T, T)) -> Quat<T> {
     Vector4::new(
         cr * cp * cy + sr * sp * sy,
         sr * cp * cy - cr * sp * sy,

@@ -151,7 +151,8 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
                 -p.inertia_kgm2[2] * self.dist[5],
             );
         }
-        let ar = AttitudeRef::for_mode(&self.params, &spd, self.cfg.reference);
+        let (ar, [s_roll, c_roll, s_pitch, c_pitch]) =
+            AttitudeRef::for_mode_trig(&self.params, &spd, self.cfg.reference);
         let lim = lit::<T>(self.cfg.max_heading_error_rad);
         // The heading error the reference asks for, capped.
         let dpsi = crate::math::limit(wrap_pi(ar.yaw_rad - yaw), lim);
@@ -165,7 +166,13 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let att = match self.cfg.form {
             AttitudeForm::Euler => Vector3::new(ar.roll_rad, ar.pitch_rad, dpsi),
             AttitudeForm::Quaternion => {
-                let q = crate::model::euler_to_quat(ar.roll_rad, ar.pitch_rad, dpsi);
+                // The roll's and pitch's half-angles from their sines and
+                // cosines (|φ|, |θ| ≤ 45°): no sine or cosine taken again.
+                let q = crate::model::quat_of_half_angles(
+                    crate::math::half_angle(s_roll, c_roll),
+                    crate::math::half_angle(s_pitch, c_pitch),
+                    crate::math::sin_cos(dpsi * lit::<T>(0.5)),
+                );
                 let q = if q[0] < T::zero() { -q } else { q };
                 Vector3::new(q[1], q[2], q[3])
             }
