@@ -35,8 +35,8 @@ pub fn sin_cos<T: RealField + Copy>(x: T) -> (T, T) {
 }
 
 /// `√x`: for `f32` the FPU's `VSQRT.F32` on the chip ([`fc_fpu::sqrt`]:
-/// one instruction where libm's is about 50, the same correctly rounded
-/// bits), `T::sqrt` for any other `T`.
+/// an instruction where libm's is an algorithm in software, the same
+/// correctly rounded bits), `T::sqrt` for any other `T`.
 #[inline]
 pub fn sqrt<T: RealField + Copy>(x: T) -> T {
     if let Some(&v) = (&x as &dyn Any).downcast_ref::<f32>() {

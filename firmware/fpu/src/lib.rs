@@ -1,9 +1,10 @@
 //! The single-precision FPU's square root for the flight core.
 //!
 //! Stable `core` has no `f32::sqrt` (it is `std`'s), so `no_std` code
-//! calls `libm::sqrtf`, which on Arm is libm's integer algorithm: about
-//! 50 instructions where the Cortex-M4F's `VSQRT.F32` is one (14 cycles
-//! on silicon, ST PM0214 §3.10). Both are IEEE 754 square roots, correctly
+//! calls `libm::sqrtf`, which on Arm is libm's integer algorithm in
+//! software, where the Cortex-M4F has an instruction, `VSQRT.F32` (14
+//! cycles on silicon, ST PM0214 §3.10); here it takes four moves beside
+//! it (below). Both are IEEE 754 square roots, correctly
 //! rounded, so the two give the same bits for every input: the host (libm,
 //! or SSE's `sqrtss` under it) and the chip compute the same flight. The
 //! QEMU harness `equivalence` holds the chip's against libm's, bit for
@@ -12,7 +13,7 @@
 //! the architecture, not checked here).
 //!
 //! Its own crate because the flight core forbids `unsafe` and `asm!` needs
-//! it: this is the one instruction, with nothing else beside it.
+//! it: this is that instruction, with nothing else beside it.
 
 #![no_std]
 #![deny(missing_docs)]
