@@ -136,8 +136,6 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         self.bx = params.input_box();
         self.u_hover = crate::model::hover_input(&params);
         self.params = params;
-        // The rotors' time constant may have changed.
-        self.lag_factors = (T::zero(), T::one(), T::one());
         self.settings = qp_settings(&cfg);
         self.last_dt = lit(cfg.exec_dt_s);
         self.trend = [T::zero(); N];

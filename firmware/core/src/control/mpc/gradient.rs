@@ -205,6 +205,18 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         d
     }
 
+    /// The rotors' lag over a step of `dt` s: `(dt, e^(−dt/τr),
+    /// (1 − e^(−dt/τr))·τr/dt)`. The identity `(0, 1, 1)` when the observer
+    /// does not model the lag.
+    pub(super) fn lag_factors_over(&self, dt: T) -> (T, T, T) {
+        if !(self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero()) {
+            return (T::zero(), T::one(), T::one());
+        }
+        let r = dt / self.params.rotor_tau_s;
+        let decay = (-r).exp();
+        (dt, decay, (T::one() - decay) / r)
+    }
+
     /// Observer update from the previous step's prediction (and, with a
     /// trend, the low-passed rate of the horizontal estimate).
     ///
@@ -224,9 +236,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         // first-order lag). Roll and pitch keep the input sent.
         let du_applied = if self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero() {
             if self.lag_factors.0 != dt {
-                let r = dt / self.params.rotor_tau_s;
-                let decay = (-r).exp();
-                self.lag_factors = (dt, decay, (T::one() - decay) / r);
+                self.lag_factors = self.lag_factors_over(dt);
             }
             let (_, decay, mean) = self.lag_factors;
             let u0 = self.du_delivered;

@@ -335,8 +335,9 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     /// The input deviation the rotors have delivered by the lag model
     /// ([`MpcConfig::observer_rotor_lag`]).
     du_delivered: Vector4<T>,
-    /// `(dt, e^(−dt/τr), (1 − e^(−dt/τr))·τr/dt)` of the last step: a loop
-    /// on a steady period computes the exponential once.
+    /// `(dt, e^(−dt/τr), (1 − e^(−dt/τr))·τr/dt)` of the last step, those
+    /// of the nominal period after a design or a reset: a loop on a steady
+    /// period computes the exponential in the design, not in a step.
     lag_factors: (T, T, T),
     /// Disturbance estimate: acceleration NED (m/s²) and angular acceleration body (rad/s²).
     dist: SVector<T, 6>,
@@ -618,7 +619,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         self.z = SVector::zeros();
         self.du_prev = Vector4::zeros();
         self.du_delivered = Vector4::zeros();
-        self.lag_factors = (T::zero(), T::one(), T::one());
+        // At the nominal period, as the first step after a design or a
+        // reset takes them: its exponential here, not in that step.
+        self.lag_factors = self.lag_factors_over(lit(self.cfg.exec_dt_s));
         self.dist = SVector::zeros();
         self.dist_lp = [[T::zero(); 2]; 2];
         self.last = None;
@@ -746,5 +749,39 @@ mod tests {
             assert!(fly(true, dt).abs() < 1e-3, "dt {dt}: {}", fly(true, dt));
             assert!(fly(false, dt) > 0.05, "dt {dt}: {}", fly(false, dt));
         }
+    }
+
+    /// A design (and a re-design with another time constant) leaves the
+    /// lag's factors of the nominal period in place, as the analytic
+    /// first-order lag gives them: a first step at that period computes no
+    /// exponential, and flies what one that computed it would.
+    #[test]
+    fn a_design_takes_the_lag_factors_of_its_period() {
+        let mut p = VehicleParams::<f64>::os4();
+        let cfg = MpcConfig::fast(AttitudeForm::Euler);
+        assert!(cfg.observer_rotor_lag && p.rotor_tau_s > 0.0);
+        let close = |got: (f64, f64, f64), tau: f64| {
+            let r = cfg.exec_dt_s / tau;
+            let (decay, mean) = (libm::exp(-r), (1.0 - libm::exp(-r)) / r);
+            got.0 == cfg.exec_dt_s && (got.1 - decay).abs() < 1e-15 && (got.2 - mean).abs() < 1e-15
+        };
+        let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+        assert!(close(mpc.lag_factors, p.rotor_tau_s), "{:?}", mpc.lag_factors);
+        // A step at the nominal period keeps them.
+        let _ = mpc.update(&hover_at(-1.0), &Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0));
+        let _ = mpc.update(&hover_at(-1.0), &Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0));
+        assert!(close(mpc.lag_factors, p.rotor_tau_s), "{:?}", mpc.lag_factors);
+        // A longer step takes its own, then a re-design for slower rotors.
+        mpc.elapsed(0.002);
+        let _ = mpc.update(&hover_at(-1.0), &Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0));
+        assert_eq!(mpc.lag_factors.0, 0.002);
+        p.rotor_tau_s *= 2.0;
+        mpc.redesign(p, cfg).unwrap();
+        assert!(close(mpc.lag_factors, p.rotor_tau_s), "{:?}", mpc.lag_factors);
+        // No lag modelled: the identity.
+        let mut off = cfg;
+        off.observer_rotor_lag = false;
+        mpc.redesign(p, off).unwrap();
+        assert_eq!(mpc.lag_factors, (0.0, 1.0, 1.0));
     }
 }
