@@ -291,6 +291,67 @@ fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
     assert!(!v.flying() && v.armed());
 }
 
+/// The flight stack's one write rule ([`fc_loop::Loop::plan_param`]) as a
+/// Crazyflie's users meet it: armed on the ground the motors are still, so
+/// a gain that re-designs is taken; flying a set-point it is refused, said
+/// on the console, and the value in force answered; a write that needs no
+/// design is taken in flight; landed (the motors stopped), the gain again.
+#[test]
+fn a_redesigning_write_waits_for_the_motors_to_stop_not_for_a_disarm() {
+    let w_pos = (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
+        .unwrap();
+    let id = (w_pos as u16).to_le_bytes();
+    let write = |value: f32| {
+        let mut w = vec![id[0], id[1]];
+        w.extend_from_slice(&value.to_le_bytes());
+        pk(Port::Param, 2, &w)
+    };
+    let mut v = at_rest(3000);
+    let before = crate::f32_at(ask(&mut v, pk(Port::Param, 1, &id)).payload(), 3).unwrap();
+    assert_eq!(
+        ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1])).payload(),
+        &[0x81, 1, 1]
+    );
+    assert!(v.armed() && !v.flying());
+    let r = ask(&mut v, write(2.0 * before));
+    assert_eq!(
+        crate::f32_at(r.payload(), 2),
+        Some(2.0 * before),
+        "armed, motors still: taken"
+    );
+    let mut out = Sent::default();
+    v.handle(&takeoff(0.5, 2.0), &mut out).unwrap();
+    assert!(v.flying());
+    let (r, said) = ask_said(&mut v, write(3.0 * before));
+    assert_eq!(
+        crate::f32_at(r.payload(), 2),
+        Some(2.0 * before),
+        "flying: the value in force"
+    );
+    assert!(said.contains("MPC.W_POS: disarm first"), "{said}");
+    let t = (0..PARAM_COUNT)
+        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"fs", b"TIMEOUT_MS")))
+        .map(|i| (i as u16).to_le_bytes())
+        .unwrap();
+    let mut w = vec![t[0], t[1]];
+    w.extend_from_slice(&80u16.to_le_bytes());
+    let r = ask(&mut v, pk(Port::Param, 2, &w));
+    assert_eq!(&r.payload()[2..4], &80u16.to_le_bytes(), "no design: taken in flight");
+    assert_eq!(v.flight_loop().settings().failsafe_timeout_ms, 80);
+    // The legacy commander's thrust 0 stops the motors, still armed.
+    let mut rpyt = vec![0u8; 12];
+    rpyt.extend_from_slice(&0u16.to_le_bytes());
+    v.handle(&pk(Port::Commander, 0, &rpyt), &mut out).unwrap();
+    assert!(v.armed() && !v.flying());
+    let r = ask(&mut v, write(3.0 * before));
+    assert_eq!(
+        crate::f32_at(r.payload(), 2),
+        Some(3.0 * before),
+        "motors stopped: taken"
+    );
+}
+
 /// A small generator (SplitMix64), so the fuzz is the same every run.
 struct Mix(u64);
 

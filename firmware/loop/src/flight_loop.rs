@@ -117,11 +117,11 @@ impl FlightLoop {
 
     /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
     /// settings checked; a change of the vehicle, the controller or its
-    /// gains and weights re-designs it, which only `allow_redesign` permits
-    /// (a front end says whether the vehicle is disarmed). A refusal leaves
+    /// gains and weights re-designs it, refused while `motors_turn` (the
+    /// front end's supervisor gate, [`Loop::plan_param`]). A refusal leaves
     /// everything as it was.
-    pub fn apply_param(&mut self, index: usize, value: f32, allow_redesign: bool) -> Result<(), params::Refusal> {
-        apply_param(&mut self.lp, &mut self.ctrl, index, value, allow_redesign)
+    pub fn apply_param(&mut self, index: usize, value: f32, motors_turn: bool) -> Result<(), params::Refusal> {
+        apply_param(&mut self.lp, &mut self.ctrl, index, value, motors_turn)
     }
 
     /// Reads what the link has (bounded), handles every complete frame,

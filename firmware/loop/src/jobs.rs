@@ -15,14 +15,15 @@ pub enum Job {
     Step(Step),
     /// Design this controller in place of the running one (`Select`).
     Select(ControllerSpec),
-    /// Write a parameter (`ParamSet`); a re-design only if `allow_redesign`.
+    /// Write a parameter (`ParamSet`); a re-design only while the motors
+    /// are stopped ([`Loop::plan_param`]).
     Param {
         /// Index in [`params::PARAMS`].
         index: u16,
         /// Its new value.
         value: f32,
-        /// The vehicle is not flying (no step of the session yet).
-        allow_redesign: bool,
+        /// The motors turn: our protocol's session has had a step.
+        motors_turn: bool,
     },
 }
 
@@ -218,10 +219,10 @@ pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
         Job::Param {
             index,
             value,
-            allow_redesign,
+            motors_turn,
         } => {
             let r = lp
-                .lock(|l| l.plan_param(usize::from(index), value, allow_redesign))
+                .lock(|l| l.plan_param(usize::from(index), value, motors_turn))
                 .and_then(|plan| apply_plan(lp, ctrl, plan));
             let answer = lp.lock(|l| {
                 if r.is_err() {
@@ -278,16 +279,16 @@ pub fn start_front_end(lp: &mut Loop, ctrl: &mut AnyController<f32>) -> Result<(
 /// Sets parameter `index` ([`params::PARAMS`]) of the loop `lp` to
 /// `value` ([`Loop::plan_param`], then [`apply_plan`] on its controller
 /// `ctrl`): the whole settings checked; a change that re-designs is
-/// allowed only when `allow_redesign` (a front end says whether the
-/// vehicle is disarmed). A refusal leaves everything as it was.
+/// refused while `motors_turn` (the front end's supervisor gate, the one it
+/// gives [`Loop::power`]). A refusal leaves everything as it was.
 pub fn apply_param(
     lp: &mut Loop,
     ctrl: &mut AnyController<f32>,
     index: usize,
     value: f32,
-    allow_redesign: bool,
+    motors_turn: bool,
 ) -> Result<(), params::Refusal> {
-    let plan = lp.plan_param(index, value, allow_redesign)?;
+    let plan = lp.plan_param(index, value, motors_turn)?;
     apply_plan(&mut Exclusive(lp), ctrl, plan)
 }
 

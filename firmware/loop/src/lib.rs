@@ -390,8 +390,15 @@ impl Loop {
 
     /// What writing `value` to parameter `index` does: the whole settings
     /// checked; a change of the vehicle, the controller or its gains and
-    /// weights needs a re-design, which only `allow_redesign` permits.
-    pub fn plan_param(&self, index: usize, value: f32, allow_redesign: bool) -> Result<ParamPlan, params::Refusal> {
+    /// weights needs a re-design.
+    ///
+    /// The one write rule of every protocol: a re-design is refused
+    /// ([`params::Refusal::Armed`]) while `motors_turn`, the front end's
+    /// supervisor gate, the `fly` it gives [`Loop::power`] (PX4's modes:
+    /// armed, the motors idle on the ground; the Crazyflie's: armed and
+    /// flying a set-point; our protocol: its session has had a step). A
+    /// design takes many steps' time, and no controller flies meanwhile.
+    pub fn plan_param(&self, index: usize, value: f32, motors_turn: bool) -> Result<ParamPlan, params::Refusal> {
         let next = params::write(&self.settings, index, value)?;
         // `index` is known (`params::write` refused it otherwise). A
         // parameter writes only its own field: its value says whether
@@ -400,10 +407,10 @@ impl Loop {
         if (p.get)(&next).to_bits() == (p.get)(&self.settings).to_bits() {
             return Ok(ParamPlan::Unchanged);
         }
-        match (p.redesign, allow_redesign) {
+        match (p.redesign, motors_turn) {
             (false, _) => Ok(ParamPlan::Set(next)),
-            (true, true) => Ok(ParamPlan::Redesign(next)),
-            (true, false) => Err(params::Refusal::Armed),
+            (true, false) => Ok(ParamPlan::Redesign(next)),
+            (true, true) => Err(params::Refusal::Armed),
         }
     }
 

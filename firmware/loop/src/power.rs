@@ -125,7 +125,7 @@ mod tests {
         let before = *fl.split().0.mixer().unwrap();
         let i = params::index_of(b"MOT_HUB_M").unwrap();
         let v = (params::PARAMS[i].get)(fl.split().0.settings());
-        fl.apply_param(i, v * 2.0, true).unwrap();
+        fl.apply_param(i, v * 2.0, false).unwrap();
         let after = *fl.split().0.mixer().unwrap();
         assert_ne!(before, after, "a new arm length is a new mixer");
         assert_eq!(Some(&after), fl.split().0.settings().mixer().ok().as_ref());

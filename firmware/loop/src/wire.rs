@@ -190,12 +190,12 @@ impl Loop {
             }
             ToFc::ParamRead { index } => out.send(&param_answer(&self.settings, index, None))?,
             ToFc::ParamSet { index, value } => {
-                // Re-designs only before the session's first step: a
-                // controller is not re-designed under a flying vehicle.
+                // Our protocol's motors turn from the session's first
+                // step: re-designs only before it (`Loop::plan_param`).
                 return Ok(Some(Job::Param {
                     index,
                     value,
-                    allow_redesign: self.last_seq.is_none(),
+                    motors_turn: self.last_seq.is_some(),
                 }));
             }
             ToFc::Fix(w) => {

@@ -542,7 +542,10 @@ impl CrtpShared {
         self.arming.armed()
     }
 
-    /// The motors turn (armed and flying a set-point).
+    /// The supervisor's gate: the motors turn (armed and flying a
+    /// set-point), as a Crazyflie's do. The power stage's `fly` (with the
+    /// step's set-point) and the parameters' write rule
+    /// ([`fc_loop::Loop::plan_param`]).
     pub fn flying(&self) -> bool {
         self.armed() && !self.commander.is_idle()
     }

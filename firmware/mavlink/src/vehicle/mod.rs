@@ -340,6 +340,14 @@ impl MavShared {
         self.modes.armed()
     }
 
+    /// The supervisor's gate: the motors turn, as PX4's do from arming
+    /// (every armed step flies: the modes' failsafes are set-points, Hold
+    /// and Land). The power stage's `fly` and the parameters' write rule
+    /// ([`fc_loop::Loop::plan_param`]).
+    pub fn motors_turn(&self) -> bool {
+        self.modes.armed()
+    }
+
     /// The settings in force (the parameters' values).
     pub fn settings(&self) -> &Settings {
         self.lp.settings()

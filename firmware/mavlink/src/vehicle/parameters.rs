@@ -60,11 +60,12 @@ impl MavShared {
     }
 
     /// Sets parameter `index` to `value`: checked, and applied to the
-    /// controller `ctrl` (re-designed while disarmed), the mixer and the
-    /// failsafe.
+    /// controller `ctrl` (re-designed only while the motors are stopped,
+    /// [`fc_loop::Loop::plan_param`]), the mixer and the failsafe.
     pub fn apply(&mut self, ctrl: &mut AnyController<f32>, index: usize, value: f32) -> Result<(), Refusal> {
         // The loop's mixer follows its settings.
-        fc_loop::apply_param(&mut self.lp, ctrl, index, value, !self.modes.armed())
+        let motors_turn = self.motors_turn();
+        fc_loop::apply_param(&mut self.lp, ctrl, index, value, motors_turn)
     }
 
     pub(in crate::vehicle) fn send_param<S: MavSink>(&self, index: usize, out: &mut S) -> Result<(), S::Error> {

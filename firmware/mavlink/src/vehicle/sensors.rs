@@ -103,7 +103,7 @@ impl MavShared {
         clock: &C,
         out: &mut S,
     ) -> Result<(), S::Error> {
-        let power = self.lp.power(self.modes.armed(), flown.map(|a| a.u));
+        let power = self.lp.power(self.motors_turn(), flown.map(|a| a.u));
         self.cycles = (flown.map_or(0, |a| a.cycles), clock.hz());
         self.counters.steps = self.counters.steps.wrapping_add(1);
         self.motors = power.motors.commands;

@@ -227,7 +227,7 @@ impl CrtpShared {
             Some(Extra::Deck) if value == 0.0 => return Ok(Written::Now),
             Some(_) => return Err(Refusal::Range { lo: value, hi: value }),
         };
-        let plan = self.lp.plan_param(index, value, !self.flying())?;
+        let plan = self.lp.plan_param(index, value, self.flying())?;
         if let ParamPlan::Set(next) | ParamPlan::Redesign(next) = &plan {
             // The mixer's settings checked before anything is taken.
             next.mixer()?;
