@@ -7,6 +7,7 @@ use crate::{
     FALLBACK_CONTROLLER,
 };
 use fc_core::control::Controller;
+use fc_core::model::airframe::Mixer;
 
 /// Work for the controller's task: everything that needs the controller.
 #[derive(Debug, Clone, Copy)]
@@ -187,8 +188,8 @@ impl Design {
 pub enum ParamPlan {
     /// The value in force: nothing.
     Unchanged,
-    /// New settings, no design.
-    Set(params::Settings),
+    /// New settings, no design, and the mixer their check built.
+    Set(params::Settings, Mixer<f32>),
     /// New settings whose controller is designed first.
     Redesign(params::Settings),
 }
@@ -307,8 +308,8 @@ pub fn apply_plan<M: Mutex<T = Loop>>(
 ) -> Result<(), params::Refusal> {
     match plan {
         ParamPlan::Unchanged => Ok(()),
-        ParamPlan::Set(next) => {
-            lp.lock(|l| l.set_settings(next));
+        ParamPlan::Set(next, mixer) => {
+            lp.lock(|l| l.set_settings(next, Some(mixer)));
             Ok(())
         }
         ParamPlan::Redesign(next) => {
@@ -326,7 +327,7 @@ pub fn apply_plan<M: Mutex<T = Loop>>(
                         if next.controller != old.controller {
                             l.selections = l.selections.wrapping_add(1);
                         }
-                        l.set_settings(next);
+                        l.set_settings(next, None);
                     });
                     Ok(())
                 }

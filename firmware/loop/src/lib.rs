@@ -58,6 +58,7 @@ use fc_core::control::{
     ReferenceMode, Setpoint, StateEstimate,
 };
 use fc_core::estimate::{Fix, ImuSample};
+use fc_core::model::airframe::Mixer;
 use fc_core::model::{AttitudeForm, Input, QuatState, VehicleParams};
 use fc_proto::{
     encode, Counters, FrameDecoder, FrameError, FromFc, ToFc, WireFix, WireSetpoint, MAX_FRAME, PROTOCOL_VERSION,
@@ -210,7 +211,7 @@ pub struct Loop {
     last_control_us: Option<u64>,
     /// The mixer `settings` give, once a protocol front end started the
     /// loop ([`start_front_end`]; [`power`]).
-    mixer: Option<fc_core::model::airframe::Mixer<f32>>,
+    mixer: Option<Mixer<f32>>,
 }
 
 /// Preview set-points a [`Loop`] holds between two controller steps, by
@@ -377,12 +378,12 @@ impl Loop {
 
     /// Puts `next` (checked by [`params::write`]) in force; a started
     /// front end's mixer follows it (`MOT_FRAME` changes it without a
-    /// design).
-    fn set_settings(&mut self, next: params::Settings) {
+    /// design): `mixer`, the one the check built, or built again.
+    fn set_settings(&mut self, next: params::Settings, mixer: Option<Mixer<f32>>) {
         self.settings = next;
         if self.mixer.is_some() {
             // A checked write mixes; were it not to, the old mixer stays.
-            if let Ok(m) = next.mixer() {
+            if let Some(m) = mixer.or_else(|| next.mixer().ok()) {
                 self.mixer = Some(m);
             }
         }
@@ -399,7 +400,7 @@ impl Loop {
     /// flying a set-point; our protocol: its session has had a step). A
     /// design takes many steps' time, and no controller flies meanwhile.
     pub fn plan_param(&self, index: usize, value: f32, motors_turn: bool) -> Result<ParamPlan, params::Refusal> {
-        let next = params::write(&self.settings, index, value)?;
+        let (next, mixer) = params::write_mixed(&self.settings, index, value)?;
         // `index` is known (`params::write` refused it otherwise). A
         // parameter writes only its own field: its value says whether
         // anything changed, its flag whether the change re-designs.
@@ -408,7 +409,7 @@ impl Loop {
             return Ok(ParamPlan::Unchanged);
         }
         match (p.redesign, motors_turn) {
-            (false, _) => Ok(ParamPlan::Set(next)),
+            (false, _) => Ok(ParamPlan::Set(next, mixer)),
             (true, false) => Ok(ParamPlan::Redesign(next)),
             (true, true) => Err(params::Refusal::Armed),
         }
@@ -420,8 +421,8 @@ impl Loop {
     pub fn apply_unless_design(&mut self, plan: ParamPlan) -> Option<params::Settings> {
         match plan {
             ParamPlan::Unchanged => None,
-            ParamPlan::Set(next) => {
-                self.set_settings(next);
+            ParamPlan::Set(next, mixer) => {
+                self.set_settings(next, Some(mixer));
                 None
             }
             ParamPlan::Redesign(next) => Some(next),

@@ -22,7 +22,7 @@
 //! `STATUSTEXT`).
 
 use fc_core::control::ControllerSpec;
-use fc_core::model::airframe::MotorUnit;
+use fc_core::model::airframe::{Mixer, MotorUnit};
 
 mod refusal;
 mod settings;
@@ -697,9 +697,15 @@ pub fn differences<'a>(s: &'a Settings, base: &'a Settings) -> impl Iterator<Ite
 /// Writes parameter `index` = `value` into a copy of `s` and checks the
 /// copy; the new settings, or why not.
 pub fn write(s: &Settings, index: usize, value: f32) -> Result<Settings, Refusal> {
+    write_mixed(s, index, value).map(|(next, _)| next)
+}
+
+/// [`write`], with the mixer its check built for the new settings
+/// ([`Settings::checked_mixer`]).
+pub fn write_mixed(s: &Settings, index: usize, value: f32) -> Result<(Settings, Mixer<f32>), Refusal> {
     let p = PARAMS.get(index).ok_or(Refusal::Unknown)?;
     let mut next = *s;
     (p.set)(&mut next, value)?;
-    next.check()?;
-    Ok(next)
+    let mixer = next.checked_mixer()?;
+    Ok((next, mixer))
 }

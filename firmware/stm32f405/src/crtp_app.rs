@@ -18,7 +18,7 @@
 //! The vehicle's shared part ([`CrtpShared`]) is locked for an estimator
 //! step, a packet, a step's result; never for a controller step, a design
 //! or a USART write. A re-designing parameter write (tens of milliseconds,
-//! allowed only disarmed, and no take-off while it runs) borrows the
+//! allowed only while the motors are stopped, and no take-off while it runs) borrows the
 //! controller for the link's task, which designs it in place: the
 //! controller's task meanwhile answers every step on time with the motors
 //! off ([`pass_step`]), so a design delays neither a sample nor a step.

@@ -114,11 +114,17 @@ impl Settings {
 
     /// Checks the settings as a whole (see the module's documentation).
     pub fn check(&self) -> Result<(), Refusal> {
+        self.checked_mixer().map(|_| ())
+    }
+
+    /// [`Settings::check`], returning the mixer the check built: a write
+    /// that is taken flies it, and builds no other.
+    pub fn checked_mixer(&self) -> Result<Mixer<f32>, Refusal> {
         self.vehicle.check().map_err(|e| Refusal::Range {
             lo: e.range.lo as f32,
             hi: e.range.hi as f32,
         })?;
-        self.mixer()?;
+        let mixer = self.mixer()?;
         if !(10..=5_000).contains(&self.failsafe_timeout_ms) {
             return Err(Refusal::Range { lo: 10.0, hi: 5_000.0 });
         }
@@ -132,7 +138,8 @@ impl Settings {
         if !(1..=1_000).contains(&self.fix_period_ms) {
             return Err(Refusal::Range { lo: 1.0, hi: 1_000.0 });
         }
-        check_tuning(&self.tuning)
+        check_tuning(&self.tuning)?;
+        Ok(mixer)
     }
 }
 

@@ -227,11 +227,9 @@ impl CrtpShared {
             Some(Extra::Deck) if value == 0.0 => return Ok(Written::Now),
             Some(_) => return Err(Refusal::Range { lo: value, hi: value }),
         };
+        // Checked as a whole, the mixer's settings included, before
+        // anything is taken.
         let plan = self.lp.plan_param(index, value, self.flying())?;
-        if let ParamPlan::Set(next) | ParamPlan::Redesign(next) = &plan {
-            // The mixer's settings checked before anything is taken.
-            next.mixer()?;
-        }
         match self.lp.apply_unless_design(plan) {
             Some(next) => {
                 self.work = WorkState::Queued(ControllerWork::Param { next, reply });
