@@ -67,34 +67,92 @@ impl core::fmt::Display for Refusal {
 /// A number in at most six significant digits (`0.01`, `100`, `-1`,
 /// `1.5e-7`), written with integer formatting only: `f32`'s own `Display`
 /// links ≈ 20 KiB of float-printing code into the image for a few
-/// `STATUSTEXT`s.
+/// `STATUSTEXT`s. Its only f64 work is a few products with exact powers of
+/// ten (the M4 has no f64 unit: libm's `pow` took thousands of
+/// instructions here, under the vehicle's lock on the CRTP images).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Num(pub f32);
 
-impl core::fmt::Display for Num {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+/// 10⁰ to 10²², every one exact in f64.
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20,
+    1e21, 1e22,
+];
+
+/// `a · 10^k` rounded to an integer, for `a` a positive finite f32 and `k`
+/// in [−38, 50] (at most three products or quotients by exact powers).
+fn scaled(a: f32, k: i32) -> u64 {
+    let mut v = f64::from(a);
+    let mut k = k;
+    while k > 22 {
+        v *= POW10[22];
+        k -= 22;
+    }
+    while k < -22 {
+        v /= POW10[22];
+        k += 22;
+    }
+    let p = POW10[k.unsigned_abs() as usize];
+    let v = if k >= 0 { v * p } else { v / p };
+    libm::round(v) as u64
+}
+
+/// Text written into a fixed buffer (ASCII only; never more than it holds).
+struct Text {
+    buf: [u8; 16],
+    len: usize,
+}
+
+impl Text {
+    fn push(&mut self, b: u8) {
+        if let Some(slot) = self.buf.get_mut(self.len) {
+            *slot = b;
+            self.len += 1;
+        }
+    }
+
+    fn push_all(&mut self, s: &[u8]) {
+        s.iter().for_each(|&b| self.push(b));
+    }
+
+    fn as_str(&self) -> &str {
+        // Only ASCII is pushed.
+        core::str::from_utf8(&self.buf[..self.len]).unwrap_or("?")
+    }
+}
+
+impl Num {
+    /// The text of the number (at most 13 characters: `-1.23456e-45`).
+    fn text(&self) -> Text {
+        let mut t = Text { buf: [0; 16], len: 0 };
         let x = self.0;
         if x.is_nan() {
-            return f.write_str("NaN");
+            t.push_all(b"NaN");
+            return t;
         }
         if x < 0.0 {
-            f.write_str("-")?;
+            t.push(b'-');
         }
         let a = libm::fabsf(x);
         if a.is_infinite() {
-            return f.write_str("inf");
+            t.push_all(b"inf");
+            return t;
         }
         if a == 0.0 {
-            return f.write_str("0");
+            t.push(b'0');
+            return t;
         }
         // a = m · 10^e with m in [1, 10); plain notation for e in [-3, 6).
+        // f32's range puts e in [-45, 38].
         let mut e = libm::floorf(libm::log10f(a)) as i32;
-        let scaled = |e: i32| f64::from(a) / libm::pow(10.0, f64::from(e));
         // Six significant digits: an integer in [100 000, 1 000 000).
-        let mut n = libm::round(scaled(e) * 1e5) as u64;
+        let mut n = scaled(a, 5 - e);
         if n >= 1_000_000 {
             e += 1;
-            n = libm::round(scaled(e) * 1e5) as u64;
+            n = scaled(a, 5 - e);
+        } else if n < 100_000 {
+            e -= 1;
+            n = scaled(a, 5 - e);
         }
         let (mut digits, mut len) = ([0u8; 6], 6);
         for d in digits.iter_mut().rev() {
@@ -104,27 +162,42 @@ impl core::fmt::Display for Num {
         while len > 1 && digits[len - 1] == b'0' {
             len -= 1;
         }
-        let d = |i: usize| if i < len { digits[i] as char } else { '0' };
-        let plain = (-3..6).contains(&e);
-        if !plain {
-            write!(f, "{}", d(0))?;
+        let d = |i: usize| if i < len { digits[i] } else { b'0' };
+        if !(-3..6).contains(&e) {
+            t.push(d(0));
             if len > 1 {
-                f.write_str(".")?;
-                (1..len).try_for_each(|i| write!(f, "{}", d(i)))?;
+                t.push(b'.');
+                (1..len).for_each(|i| t.push(d(i)));
             }
-            return write!(f, "e{e}");
+            t.push(b'e');
+            if e < 0 {
+                t.push(b'-');
+            }
+            let m = e.unsigned_abs();
+            if m >= 10 {
+                t.push(b'0' + (m / 10) as u8);
+            }
+            t.push(b'0' + (m % 10) as u8);
+            return t;
         }
         if e < 0 {
-            f.write_str("0.")?;
-            (0..(-e - 1)).try_for_each(|_| f.write_str("0"))?;
-            return (0..len).try_for_each(|i| write!(f, "{}", d(i)));
+            t.push_all(b"0.");
+            (0..(-e - 1)).for_each(|_| t.push(b'0'));
+            (0..len).for_each(|i| t.push(d(i)));
+            return t;
         }
         let int_digits = e as usize + 1;
-        (0..int_digits).try_for_each(|i| write!(f, "{}", d(i)))?;
+        (0..int_digits).for_each(|i| t.push(d(i)));
         if len > int_digits {
-            f.write_str(".")?;
-            (int_digits..len).try_for_each(|i| write!(f, "{}", d(i)))?;
+            t.push(b'.');
+            (int_digits..len).for_each(|i| t.push(d(i)));
         }
-        Ok(())
+        t
+    }
+}
+
+impl core::fmt::Display for Num {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.text().as_str())
     }
 }

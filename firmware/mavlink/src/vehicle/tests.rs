@@ -190,6 +190,11 @@ fn numbers_print_in_six_significant_digits_and_parse_back() {
         (f32::NAN, "NaN"),
         (f32::NEG_INFINITY, "-inf"),
         (f32::MAX, "3.40282e38"),
+        // Exact ties at the sixth digit round away from zero (one rounding,
+        // not two: dividing by 10^5 first lost them).
+        (-969765.5, "-969766"),
+        (9848555.0, "9.84856e6"),
+        (f32::from_bits(1), "1.4013e-45"),
     ] {
         assert_eq!(Num(x).to_string(), want, "{x}");
     }
