@@ -274,3 +274,71 @@ fn persistent_parameters_are_answered_with_the_links_storage() {
     assert_eq!(state[..5], [0x23, 4, lo, hi, 1], "stored");
     assert_eq!(state[5..9], state[9..13], "the default stored: value and default alike");
 }
+
+/// A parameter write by id through syslink, checked on a copy of the
+/// settings before the lock that takes it ([`CrtpShared::handle_checked`]),
+/// is answered and taken as the same write handled in one piece: a write
+/// taken, a refused one, and an alias of the Crazyflie's.
+#[test]
+fn a_write_checked_before_its_lock_is_the_write_handled_whole() {
+    use crate::vehicle::{param_entry, write_request, PARAM_COUNT};
+    use crate::Port;
+    let find = |g: &[u8], n: &[u8]| {
+        (0..PARAM_COUNT)
+            .find(|&i| param_entry(i).is_some_and(|(e, _, _)| e.is(g, n)))
+            .unwrap() as u16
+    };
+    let write = |id: u16, value: &[u8]| {
+        let mut d = id.to_le_bytes().to_vec();
+        d.extend_from_slice(value);
+        Packet::new(Port::Param, 2, &d).unwrap()
+    };
+    let writes = [
+        write(find(b"fs", b"TIMEOUT_MS"), &80u16.to_le_bytes()),
+        write(find(b"veh", b"MASS"), &(-1.0f32).to_le_bytes()),
+        write(find(b"pid_attitude", b"roll_kp"), &(2.0f32).to_le_bytes()),
+    ];
+    assert!(writes.iter().all(|w| write_request(w).is_some()));
+    let mut through = CrtpVehicle::new(Settings::os4()).unwrap();
+    let mut whole = CrtpVehicle::new(Settings::os4()).unwrap();
+    let mut s: Syslink<8> = Syslink::new();
+    let bytes = |p: &Packet| {
+        let mut b = [0u8; MAX_PACKET];
+        let n = p.write_to(&mut b);
+        b[..n].to_vec()
+    };
+    // The parameter port's answers (channel 2), in order.
+    let param_answers =
+        |all: Vec<Vec<u8>>| -> Vec<Vec<u8>> { all.into_iter().filter(|d| d[0] & 0xF3 == 0x22).collect() };
+    for w in &writes {
+        let mut wire = Wire::default();
+        s.receive(&frame(types::RADIO_RAW, &bytes(w)), &mut through, &mut wire)
+            .unwrap();
+        // Null packets take what else is queued (one downlink per uplink).
+        for _ in 0..4 {
+            s.receive(&frame(types::RADIO_RAW, &[0xFF]), &mut through, &mut wire)
+                .unwrap();
+        }
+        let mut direct = Seen::default();
+        whole.handle(w, &mut direct).unwrap();
+        let answers = param_answers(frames(&wire.0).iter().map(|f| f.data().to_vec()).collect());
+        assert_eq!(answers, param_answers(direct.0), "{:?}", bytes(w));
+        assert_eq!(answers.len(), 1);
+        assert_eq!(through.flight_loop().settings(), whole.flight_loop().settings());
+    }
+    assert_eq!(through.flight_loop().settings().failsafe_timeout_ms, 80);
+}
+
+/// What a vehicle answered, as the bytes a radio sends.
+#[derive(Default)]
+struct Seen(Vec<Vec<u8>>);
+
+impl CrtpSink for Seen {
+    type Error = core::convert::Infallible;
+    fn send(&mut self, p: &Packet) -> Result<(), Self::Error> {
+        let mut b = [0u8; MAX_PACKET];
+        let n = p.write_to(&mut b);
+        self.0.push(b[..n].to_vec());
+        Ok(())
+    }
+}
