@@ -739,7 +739,7 @@ pub fn precheck(base: &Settings, index: usize, value: f32) -> Checked {
     }
 }
 
-/// [`write`], with the mixer its check built for the new settings
+/// [`write()`], with the mixer its check built for the new settings
 /// ([`Settings::checked_mixer`]).
 pub fn write_mixed(s: &Settings, index: usize, value: f32) -> Result<(Settings, Mixer<f32>), Refusal> {
     let p = PARAMS.get(index).ok_or(Refusal::Unknown)?;

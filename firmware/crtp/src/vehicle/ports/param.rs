@@ -153,7 +153,7 @@ pub(crate) fn put_typed(r: &mut Packet, t: u8, v: f32) {
 }
 
 /// The flight parameter a packet writes by id (port 2, channel 2) and its
-/// value, as [`CrtpShared::param_write`] takes them: `(index in
+/// value, as the parameter port takes them: `(index in
 /// [`fc_loop::params::PARAMS`], value)`, a Crazyflie name's alias as the
 /// parameter it names. `None` for anything else (those writes are checked
 /// where they are taken). Reads nothing but the packet: for a check done
