@@ -15,10 +15,9 @@
 //! STM32 says `RADIO_READY` at boot; the nRF51 echoes it and reports the
 //! battery (`PM_BATTERY_STATE`: flags, V, A).
 
-use crate::vehicle::{write_request, CrtpShared, CrtpSink};
+use crate::vehicle::{CrtpShared, CrtpSink};
 use crate::{f32_at, CrtpError, Packet, MAX_PACKET};
 use core::borrow::BorrowMut;
-use fc_loop::params::precheck;
 use fc_loop::Mutex;
 use hal_shim::ByteLink;
 
@@ -483,15 +482,7 @@ impl<const Q: usize> Syslink<Q> {
                     }
                     Ok(c) => {
                         let down = &mut self.down;
-                        // A parameter write is checked on a copy of the
-                        // settings here, between two short locks, not under
-                        // the one that takes it (which checks it again if
-                        // the settings changed in between).
-                        let checked = write_request(&c).map(|(index, value)| {
-                            let base = vehicle.lock(|v| *v.borrow_mut().flight_loop().settings());
-                            precheck(&base, index, value)
-                        });
-                        let _ = vehicle.lock(|v| v.borrow_mut().handle_checked(&c, down, checked.as_ref()));
+                        let _ = vehicle.lock(|v| v.borrow_mut().handle(&c, down));
                         // A persistent parameter's request, answered with
                         // the storage outside the lock.
                         if let Some(r) = vehicle.lock(|v| v.borrow_mut().take_persist()) {

@@ -400,24 +400,7 @@ impl Loop {
     /// flying a set-point; our protocol: its session has had a step). A
     /// design takes many steps' time, and no controller flies meanwhile.
     pub fn plan_param(&self, index: usize, value: f32, motors_turn: bool) -> Result<ParamPlan, params::Refusal> {
-        self.plan_param_checked(index, value, motors_turn, None)
-    }
-
-    /// [`Loop::plan_param`] with the write's check done beforehand on a copy
-    /// of the settings ([`params::precheck`], outside the lock this runs
-    /// under): its result is taken while the settings in force are still
-    /// that copy, and the write checked again here otherwise.
-    pub fn plan_param_checked(
-        &self,
-        index: usize,
-        value: f32,
-        motors_turn: bool,
-        checked: Option<&params::Checked>,
-    ) -> Result<ParamPlan, params::Refusal> {
-        let (next, mixer) = match checked.and_then(|c| c.result_for(&self.settings, index, value)) {
-            Some(r) => r?,
-            None => params::write_mixed(&self.settings, index, value)?,
-        };
+        let (next, mixer) = params::write_mixed(&self.settings, index, value)?;
         // `index` is known (`params::write` refused it otherwise). A
         // parameter writes only its own field: its value says whether
         // anything changed, its flag whether the change re-designs.

@@ -700,45 +700,6 @@ pub fn write(s: &Settings, index: usize, value: f32) -> Result<Settings, Refusal
     write_mixed(s, index, value).map(|(next, _)| next)
 }
 
-/// A parameter write checked against a copy of the settings ([`precheck`]),
-/// where no lock is held: the lock that takes the write
-/// ([`Loop::plan_param_checked`](crate::Loop::plan_param_checked)) uses its
-/// result only while the settings in force are still the copy, and checks
-/// the write again otherwise.
-#[derive(Debug, Clone, Copy)]
-pub struct Checked {
-    index: usize,
-    value: f32,
-    base: Settings,
-    result: Result<(Settings, Mixer<f32>), Refusal>,
-}
-
-impl Checked {
-    /// The result for writing `value` to parameter `index` on `settings`,
-    /// if this check was of that write on those settings (`None`: check it
-    /// again).
-    pub fn result_for(
-        &self,
-        settings: &Settings,
-        index: usize,
-        value: f32,
-    ) -> Option<Result<(Settings, Mixer<f32>), Refusal>> {
-        (self.index == index && self.value.to_bits() == value.to_bits() && self.base == *settings)
-            .then_some(self.result)
-    }
-}
-
-/// Writing `value` to parameter `index` of `base` ([`write_mixed`]),
-/// checked now, for a lock taken later ([`Checked`]).
-pub fn precheck(base: &Settings, index: usize, value: f32) -> Checked {
-    Checked {
-        index,
-        value,
-        base: *base,
-        result: write_mixed(base, index, value),
-    }
-}
-
 /// [`write()`], with the mixer its check built for the new settings
 /// ([`Settings::checked_mixer`]).
 pub fn write_mixed(s: &Settings, index: usize, value: f32) -> Result<(Settings, Mixer<f32>), Refusal> {

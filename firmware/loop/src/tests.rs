@@ -872,37 +872,3 @@ fn one_parameter_table_names_each_for_every_protocol_and_checks_the_modes() {
     }
     assert_eq!(params::index_of(b"NOPE"), None);
 }
-
-/// A write checked on a copy of the settings ([`params::precheck`]) is
-/// taken as that check found only while the settings in force are still
-/// the copy: the same write on other settings, or another write, is
-/// checked again where it is taken, so no change in between is undone.
-#[test]
-fn a_write_checked_on_a_copy_is_taken_only_on_that_copy() {
-    use params::{precheck, Refusal, Settings, PARAMS};
-    let mass = params::index_of(b"VEH_MASS").unwrap();
-    let gain = params::index_of(b"FS_TIMEOUT_MS").unwrap();
-    let s = Settings::os4();
-    let c = precheck(&s, gain, 80.0);
-    assert_eq!(c.result_for(&s, gain, 80.0), Some(params::write_mixed(&s, gain, 80.0)));
-    assert_eq!(c.result_for(&s, gain, 81.0), None, "another value");
-    assert_eq!(c.result_for(&s, mass, 80.0), None, "another parameter");
-    let heavier = params::write(&s, mass, 0.8).unwrap();
-    assert_eq!(c.result_for(&heavier, gain, 80.0), None, "the settings changed since");
-    // Through the loop: the stale check is not taken, the mass stays.
-    let mut fl = FlightLoop::unstarted_with(FcConfig::default(), s);
-    fl.start_front_end().unwrap();
-    fl.apply_param(mass, 0.8, false).unwrap();
-    let (lp, _) = fl.split();
-    let Ok(ParamPlan::Set(next, _)) = lp.plan_param_checked(gain, 80.0, false, Some(&c)) else {
-        panic!("a write that needs no design")
-    };
-    assert_eq!((next.vehicle.mass_kg, next.failsafe_timeout_ms), (0.8, 80));
-    // A refusal found on the copy is the refusal taken.
-    let bad = precheck(lp.settings(), mass, -1.0);
-    assert!(matches!(
-        lp.plan_param_checked(mass, -1.0, false, Some(&bad)),
-        Err(Refusal::Range { .. })
-    ));
-    assert_eq!((PARAMS[mass].get)(lp.settings()), 0.8);
-}

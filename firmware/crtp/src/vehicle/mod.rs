@@ -76,7 +76,7 @@ mod step;
 
 pub use ports::logging::{LogSample, LogVar, LOG_VARS};
 pub(crate) use ports::param::put_typed;
-pub use ports::param::{param_entry, param_types, write_request, Extra, EXTRA_PARAMS, PARAM_COUNT};
+pub use ports::param::{param_entry, param_types, Extra, EXTRA_PARAMS, PARAM_COUNT};
 pub use split::{fly_step, pass_step, run_work};
 
 /// A generic set-point older than this is held level where it is, ms.
@@ -288,7 +288,7 @@ impl CrtpVehicle {
     /// motors are off. Returns the value in force.
     pub fn write_param(&mut self, index: usize, value: f32) -> Result<f32, Refusal> {
         let param = crtp_params().get(index).ok_or(Refusal::Unknown)?;
-        if let Written::Later = self.shared.param_write(index, value, Reply::Caller, None)? {
+        if let Written::Later = self.shared.param_write(index, value, Reply::Caller)? {
             if let Some((r, _)) = self.run_pending() {
                 r?;
             }
@@ -477,7 +477,7 @@ impl CrtpShared {
         // not this vehicle's.
         let r = match crtp_params().get(usize::from(index)) {
             None => Err(Refusal::Unknown),
-            Some(_) => self.param_write(usize::from(index), value, Reply::Sim(index), None),
+            Some(_) => self.param_write(usize::from(index), value, Reply::Sim(index)),
         };
         match r {
             Ok(Written::Later) => None,
@@ -630,20 +630,6 @@ impl CrtpShared {
 
     /// Handles one packet; answers go to `out`.
     pub fn handle<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Result<(), S::Error> {
-        self.handle_checked(p, out, None)
-    }
-
-    /// [`CrtpShared::handle`], a parameter write's check done beforehand
-    /// where no lock was held: `checked`, [`write_request`]'s write
-    /// checked on a copy of the settings ([`fc_loop::params::precheck`]),
-    /// taken while the settings are still that copy
-    /// ([`fc_loop::Loop::plan_param_checked`]).
-    pub fn handle_checked<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-        checked: Option<&fc_loop::params::Checked>,
-    ) -> Result<(), S::Error> {
         if p.is_null() {
             self.counters.null = self.counters.null.wrapping_add(1);
             return out.send(&Packet::NULL);
@@ -653,7 +639,7 @@ impl CrtpShared {
             Some(Port::Link) => self.on_link(p, out),
             Some(Port::Platform) => self.on_platform(p, out),
             Some(Port::Log) => self.on_log(p, out),
-            Some(Port::Param) => self.on_param(p, out, checked),
+            Some(Port::Param) => self.on_param(p, out),
             Some(Port::Mem) => self.on_mem(p, out),
             Some(Port::HighLevel) => Ok(self.on_high_level(p)),
             Some(Port::Generic) => Ok(self.on_generic(p)),

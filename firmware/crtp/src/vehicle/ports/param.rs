@@ -4,7 +4,6 @@
 //! write, set by name, default values, extended types, persistent storage.
 
 use crate::vehicle::*;
-use fc_loop::params::Checked;
 
 /// Param type bytes (cflib's `ParamTocElement.types`).
 pub mod param_types {
@@ -152,27 +151,6 @@ pub(crate) fn put_typed(r: &mut Packet, t: u8, v: f32) {
     };
 }
 
-/// The flight parameter a packet writes by id (port 2, channel 2) and its
-/// value, as the parameter port takes them: `(index in
-/// [`fc_loop::params::PARAMS`], value)`, a Crazyflie name's alias as the
-/// parameter it names. `None` for anything else (those writes are checked
-/// where they are taken). Reads nothing but the packet: for a check done
-/// before the vehicle's lock ([`CrtpShared::handle_checked`]).
-pub fn write_request(p: &Packet) -> Option<(usize, f32)> {
-    if p.port() != Port::Param as u8 || p.channel() != 2 {
-        return None;
-    }
-    let d = p.payload();
-    let id = usize::from(u16_at(d, 0)?);
-    let (_, t, extra) = param_entry(id)?;
-    let index = match extra {
-        None => id,
-        Some(Extra::Alias(i)) => i,
-        Some(_) => return None,
-    };
-    Some((index, read_value(t, d.get(2..)?)?))
-}
-
 /// `[f32]` from the start of `b` as parameter type `t`.
 fn read_value(t: u8, b: &[u8]) -> Option<f32> {
     match t & param_types::TYPE {
@@ -227,13 +205,7 @@ impl CrtpShared {
     /// motors are off; a re-design is queued for the controller's side,
     /// and `reply` answered when it is done). Refused while other
     /// controller work is under way.
-    pub(in crate::vehicle) fn param_write(
-        &mut self,
-        id: usize,
-        value: f32,
-        reply: Reply,
-        checked: Option<&Checked>,
-    ) -> Result<Written, Refusal> {
+    pub(in crate::vehicle) fn param_write(&mut self, id: usize, value: f32, reply: Reply) -> Result<Written, Refusal> {
         let (_, _, extra) = param_entry(id).ok_or(Refusal::Unknown)?;
         if self.busy() {
             return Err(Refusal::Busy);
@@ -257,7 +229,7 @@ impl CrtpShared {
         };
         // Checked as a whole, the mixer's settings included, before
         // anything is taken.
-        let plan = self.lp.plan_param_checked(index, value, self.flying(), checked)?;
+        let plan = self.lp.plan_param(index, value, self.flying())?;
         match self.lp.apply_unless_design(plan) {
             Some(next) => {
                 self.work = WorkState::Queued(ControllerWork::Param { next, reply });
@@ -291,7 +263,6 @@ impl CrtpShared {
         &mut self,
         p: &Packet,
         out: &mut S,
-        checked: Option<&Checked>,
     ) -> Result<Result<(), CrtpError>, S::Error> {
         let d = p.payload();
         match p.channel() {
@@ -342,7 +313,7 @@ impl CrtpShared {
                     return Ok(Err(CrtpError::Refused { port: p.port() }));
                 }
                 let refused = match read_value(t, &d[2..]) {
-                    Some(v) => match self.param_write(id, v, Reply::Crtp(*p), checked) {
+                    Some(v) => match self.param_write(id, v, Reply::Crtp(*p)) {
                         Ok(Written::Later) => return Ok(Ok(())),
                         Ok(Written::Now) => None,
                         Err(e) => Some(e),
@@ -448,7 +419,7 @@ impl CrtpShared {
             (None, _) => log::ENOENT,
             // The type as the firmware compares it: without its flags.
             (Some(i), Some(v)) if param_entry(i).is_some_and(|(_, pt, _)| same_type(pt, t)) => {
-                match self.param_write(i, v, Reply::Crtp(*p), None) {
+                match self.param_write(i, v, Reply::Crtp(*p)) {
                     Ok(Written::Later) => return Ok(Ok(())),
                     Ok(Written::Now) => 0,
                     Err(_) => log::ENOEXEC,
