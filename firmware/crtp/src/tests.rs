@@ -298,10 +298,7 @@ fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
 /// design is taken in flight; landed (the motors stopped), the gain again.
 #[test]
 fn a_redesigning_write_waits_for_the_motors_to_stop_not_for_a_disarm() {
-    let w_pos = (0..PARAM_COUNT)
-        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
-        .unwrap();
-    let id = (w_pos as u16).to_le_bytes();
+    let id = find(b"mpc", b"W_POS").to_le_bytes();
     let write = |value: f32| {
         let mut w = vec![id[0], id[1]];
         w.extend_from_slice(&value.to_le_bytes());
@@ -330,10 +327,7 @@ fn a_redesigning_write_waits_for_the_motors_to_stop_not_for_a_disarm() {
         "flying: the value in force"
     );
     assert!(said.contains("MPC.W_POS: disarm first"), "{said}");
-    let t = (0..PARAM_COUNT)
-        .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"fs", b"TIMEOUT_MS")))
-        .map(|i| (i as u16).to_le_bytes())
-        .unwrap();
+    let t = find(b"fs", b"TIMEOUT_MS").to_le_bytes();
     let mut w = vec![t[0], t[1]];
     w.extend_from_slice(&80u16.to_le_bytes());
     let r = ask(&mut v, pk(Port::Param, 2, &w));
