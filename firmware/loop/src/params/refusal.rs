@@ -80,7 +80,7 @@ const POW10: [f64; 23] = [
 ];
 
 /// `a · 10^k` rounded to an integer, for `a` a positive finite f32 and `k`
-/// in [−38, 50] (at most three products or quotients by exact powers).
+/// in [−34, 51] (at most three products or quotients by exact powers).
 fn scaled(a: f32, k: i32) -> u64 {
     let mut v = f64::from(a);
     let mut k = k;
@@ -97,49 +97,26 @@ fn scaled(a: f32, k: i32) -> u64 {
     libm::round(v) as u64
 }
 
-/// Text written into a fixed buffer (ASCII only; never more than it holds).
-struct Text {
-    buf: [u8; 16],
-    len: usize,
-}
-
-impl Text {
-    fn push(&mut self, b: u8) {
-        if let Some(slot) = self.buf.get_mut(self.len) {
-            *slot = b;
-            self.len += 1;
-        }
-    }
-
-    fn push_all(&mut self, s: &[u8]) {
-        s.iter().for_each(|&b| self.push(b));
-    }
-
-    fn as_str(&self) -> &str {
-        // Only ASCII is pushed.
-        core::str::from_utf8(&self.buf[..self.len]).unwrap_or("?")
-    }
-}
-
 impl Num {
     /// The text of the number (at most 13 characters: `-1.23456e-45`).
-    fn text(&self) -> Text {
-        let mut t = Text { buf: [0; 16], len: 0 };
+    /// A push past the capacity is dropped (none is: 16 holds them all).
+    fn text(&self) -> heapless::String<16> {
+        let mut t = heapless::String::<16>::new();
         let x = self.0;
         if x.is_nan() {
-            t.push_all(b"NaN");
+            let _ = t.push_str("NaN");
             return t;
         }
         if x < 0.0 {
-            t.push(b'-');
+            let _ = t.push('-');
         }
         let a = libm::fabsf(x);
         if a.is_infinite() {
-            t.push_all(b"inf");
+            let _ = t.push_str("inf");
             return t;
         }
         if a == 0.0 {
-            t.push(b'0');
+            let _ = t.push('0');
             return t;
         }
         // a = m · 10^e with m in [1, 10); plain notation for e in [-3, 6).
@@ -162,35 +139,45 @@ impl Num {
         while len > 1 && digits[len - 1] == b'0' {
             len -= 1;
         }
-        let d = |i: usize| if i < len { digits[i] } else { b'0' };
+        let d = |i: usize| if i < len { char::from(digits[i]) } else { '0' };
         if !(-3..6).contains(&e) {
-            t.push(d(0));
+            let _ = t.push(d(0));
             if len > 1 {
-                t.push(b'.');
-                (1..len).for_each(|i| t.push(d(i)));
+                let _ = t.push('.');
+                (1..len).for_each(|i| {
+                    let _ = t.push(d(i));
+                });
             }
-            t.push(b'e');
+            let _ = t.push('e');
             if e < 0 {
-                t.push(b'-');
+                let _ = t.push('-');
             }
             let m = e.unsigned_abs();
             if m >= 10 {
-                t.push(b'0' + (m / 10) as u8);
+                let _ = t.push(char::from(b'0' + (m / 10) as u8));
             }
-            t.push(b'0' + (m % 10) as u8);
+            let _ = t.push(char::from(b'0' + (m % 10) as u8));
             return t;
         }
         if e < 0 {
-            t.push_all(b"0.");
-            (0..(-e - 1)).for_each(|_| t.push(b'0'));
-            (0..len).for_each(|i| t.push(d(i)));
+            let _ = t.push_str("0.");
+            (0..(-e - 1)).for_each(|_| {
+                let _ = t.push('0');
+            });
+            (0..len).for_each(|i| {
+                let _ = t.push(d(i));
+            });
             return t;
         }
         let int_digits = e as usize + 1;
-        (0..int_digits).for_each(|i| t.push(d(i)));
+        (0..int_digits).for_each(|i| {
+            let _ = t.push(d(i));
+        });
         if len > int_digits {
-            t.push(b'.');
-            (int_digits..len).for_each(|i| t.push(d(i)));
+            let _ = t.push('.');
+            (int_digits..len).for_each(|i| {
+                let _ = t.push(d(i));
+            });
         }
         t
     }
@@ -198,6 +185,6 @@ impl Num {
 
 impl core::fmt::Display for Num {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(self.text().as_str())
+        f.write_str(&self.text())
     }
 }
