@@ -768,12 +768,13 @@ mod tests {
         let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
         assert!(close(mpc.lag_factors, p.rotor_tau_s), "{:?}", mpc.lag_factors);
         // A step at the nominal period keeps them.
-        let _ = mpc.update(&hover_at(-1.0), &Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0));
-        let _ = mpc.update(&hover_at(-1.0), &Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0));
+        let (est, sp) = (hover_at(-1.0), Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0));
+        let _ = mpc.update(&est, &sp);
+        let _ = mpc.update(&est, &sp);
         assert!(close(mpc.lag_factors, p.rotor_tau_s), "{:?}", mpc.lag_factors);
         // A longer step takes its own, then a re-design for slower rotors.
         mpc.elapsed(0.002);
-        let _ = mpc.update(&hover_at(-1.0), &Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0));
+        let _ = mpc.update(&est, &sp);
         assert_eq!(mpc.lag_factors.0, 0.002);
         p.rotor_tau_s *= 2.0;
         mpc.redesign(p, cfg).unwrap();
