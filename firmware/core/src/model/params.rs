@@ -192,10 +192,18 @@ impl<T: RealField + Copy> VehicleParams<T> {
             self.rotor_tau_s,
             self.rotor_gain,
         ];
-        for (v, r) in values.iter().zip(PARAM_RANGES.iter()) {
-            let x = nalgebra::try_convert::<T, f64>(*v).unwrap_or(f64::NAN);
-            if !(x.is_finite() && x >= r.lo && x <= r.hi) {
-                return Err(ParamError { range: *r, value: x });
+        let f64_of = |v: T| nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN);
+        for (&v, r) in values.iter().zip(PARAM_RANGES.iter()) {
+            // Compared by `total_cmp`, integer work on the bits, where `<=`
+            // on an f64 is a library call on an M4 (it has no f64 unit): the
+            // same order for finite values once `-0` is `+0`, which `+ 0`
+            // in `T` makes it.
+            let x = f64_of(v + T::zero());
+            if !(x.is_finite() && x.total_cmp(&r.lo).is_ge() && x.total_cmp(&r.hi).is_le()) {
+                return Err(ParamError {
+                    range: *r,
+                    value: f64_of(v),
+                });
             }
         }
         Ok(())
@@ -253,6 +261,67 @@ impl<T: RealField + Copy> InputBox<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// Field `i` of `p` (in [`PARAM_RANGES`]' order) set to `v`.
+    fn with_field(p: &VehicleParams<f32>, i: usize, v: f32) -> VehicleParams<f32> {
+        let mut q = *p;
+        match i {
+            0 => q.mass_kg = v,
+            1 => q.gravity_mps2 = v,
+            2..=4 => q.inertia_kgm2[i - 2] = v,
+            5 => q.arm_m = v,
+            6 => q.rotor_inertia_kgm2 = v,
+            7 => q.kf_ns2 = v,
+            8 => q.km_nms2 = v,
+            9..=11 => q.kt_nspm[i - 9] = v,
+            12..=14 => q.kr_nms[i - 12] = v,
+            15 => q.omega_max_radps = v,
+            16 => q.rotor_tau_s = v,
+            17 => q.rotor_gain = v,
+            _ => unreachable!("18 fields"),
+        }
+        q
+    }
+
+    /// The range test as plain f64 comparisons say it.
+    fn in_range(v: f32, r: &ParamRange) -> bool {
+        let x = f64::from(v);
+        x.is_finite() && x >= r.lo && x <= r.hi
+    }
+
+    /// Each field's bounds, the f32 values either side of them, the zeros
+    /// and the non-finite values.
+    #[test]
+    fn the_check_takes_what_f64_comparisons_take_at_every_bound() {
+        let os4 = VehicleParams::<f32>::os4();
+        for (i, r) in PARAM_RANGES.iter().enumerate() {
+            let mut edges = vec![0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MIN_POSITIVE];
+            for b in [r.lo, r.hi] {
+                let near = b as f32;
+                edges.extend([near, near.next_up(), near.next_down(), -near]);
+            }
+            for v in edges {
+                let got = with_field(&os4, i, v).check();
+                assert_eq!(got.is_ok(), in_range(v, r), "{} = {v:e}", r.field);
+                if let Err(e) = got {
+                    assert_eq!(e.range.field, r.field);
+                    assert_eq!(e.value.to_bits(), f64::from(v).to_bits(), "{} = {v:e}", r.field);
+                }
+            }
+        }
+    }
+
+    proptest! {
+        /// Any f32 bit pattern in any field: taken exactly when f64
+        /// comparisons take it.
+        #[test]
+        fn the_check_takes_what_f64_comparisons_take(i in 0usize..18, bits in any::<u32>()) {
+            let v = f32::from_bits(bits);
+            let r = &PARAM_RANGES[i];
+            prop_assert_eq!(with_field(&VehicleParams::<f32>::os4(), i, v).check().is_ok(), in_range(v, r));
+        }
+    }
 
     #[test]
     fn the_os4_is_plausible_and_each_implausible_field_is_named() {
