@@ -291,7 +291,7 @@ fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
     assert!(!v.flying() && v.armed());
 }
 
-/// The flight stack's one write rule ([`fc_loop::Loop::plan_param`]) as a
+/// The flight stack's one write rule ([`fc_loop::Loop::write_param`]) as a
 /// Crazyflie's users meet it: armed on the ground the motors are still, so
 /// a gain that re-designs is taken; flying a set-point it is refused, said
 /// on the console, and the value in force answered; a write that needs no
@@ -998,6 +998,26 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
     assert_eq!(state(kept.ask(&mut v, misc(4))), stored);
     assert_eq!(kept.ask(&mut v, misc(5)).payload(), &[5, id[0], id[1], 0]);
     assert_eq!(state(kept.ask(&mut v, misc(4))), not_stored);
+}
+
+/// A lookup by name ([`param_named`], which compares lengths first) finds
+/// what trying every entry's name finds: each entry by its own name, in
+/// the case cflib writes it and in upper case, and nothing for a name one
+/// byte longer or shorter.
+#[test]
+fn a_lookup_by_name_finds_what_every_entrys_name_finds() {
+    use crate::vehicle::param_named;
+    let scan = |g: &[u8], n: &[u8]| (0..PARAM_COUNT).find(|&i| param_entry(i).is_some_and(|(e, _, _)| e.is(g, n)));
+    for id in 0..PARAM_COUNT {
+        let (e, _, _) = param_entry(id).unwrap();
+        let (g, n) = (e.group.as_bytes(), e.name.as_bytes());
+        let upper = g.to_ascii_uppercase();
+        let longer = [n, b"x"].concat();
+        for (g, n) in [(g, n), (&upper[..], n), (g, &longer[..]), (g, &n[..n.len() - 1])] {
+            assert_eq!(param_named(g, n), scan(g, n), "{}.{}", e.group, e.name);
+        }
+        assert!(param_named(g, n).is_some());
+    }
 }
 
 /// The param TOC id of `group.name` (cflib compares the group in lower case).

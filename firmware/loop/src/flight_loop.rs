@@ -118,7 +118,7 @@ impl FlightLoop {
     /// Sets parameter `index` ([`params::PARAMS`]) to `value`: the whole
     /// settings checked; a change of the vehicle, the controller or its
     /// gains and weights re-designs it, refused while `motors_turn` (the
-    /// front end's supervisor gate, [`Loop::plan_param`]). A refusal leaves
+    /// front end's supervisor gate, [`Loop::write_param`]). A refusal leaves
     /// everything as it was.
     pub fn apply_param(&mut self, index: usize, value: f32, motors_turn: bool) -> Result<(), params::Refusal> {
         apply_param(&mut self.lp, &mut self.ctrl, index, value, motors_turn)

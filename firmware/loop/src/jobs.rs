@@ -7,7 +7,6 @@ use crate::{
     FALLBACK_CONTROLLER,
 };
 use fc_core::control::Controller;
-use fc_core::model::airframe::Mixer;
 
 /// Work for the controller's task: everything that needs the controller.
 #[derive(Debug, Clone, Copy)]
@@ -17,7 +16,7 @@ pub enum Job {
     /// Design this controller in place of the running one (`Select`).
     Select(ControllerSpec),
     /// Write a parameter (`ParamSet`); a re-design only while the motors
-    /// are stopped ([`Loop::plan_param`]).
+    /// are stopped ([`Loop::write_param`]).
     Param {
         /// Index in [`params::PARAMS`].
         index: u16,
@@ -104,7 +103,7 @@ pub trait HoldsLoop {
 }
 
 /// The [`Loop`] inside a front end's locked vehicle state `V` (the
-/// [`Mutex`] `M` holds a `V`): what [`stabilize`] and [`apply_plan`] lock
+/// [`Mutex`] `M` holds a `V`): what [`stabilize`] and [`redesign`] lock
 /// when the vehicle, not the bare loop, is the resource an image shares.
 pub struct LoopOf<'a, M, V: ?Sized>(&'a mut M, core::marker::PhantomData<fn() -> *const V>);
 
@@ -183,17 +182,6 @@ impl Design {
     }
 }
 
-/// What a parameter write does ([`Loop::plan_param`]).
-#[derive(Debug, Clone, Copy)]
-pub enum ParamPlan {
-    /// The value in force: nothing.
-    Unchanged,
-    /// New settings, no design, and the mixer their check built.
-    Set(params::Settings, Mixer<f32>),
-    /// New settings whose controller is designed first.
-    Redesign(params::Settings),
-}
-
 /// Runs `job` on the controller's side: the controller `ctrl`, the shared
 /// loop `lp` locked only to read the step's previews and to record its
 /// result, the answers to `out`. [`FlightLoop`](crate::FlightLoop) calls it directly; an image
@@ -223,8 +211,8 @@ pub fn run_job<M: Mutex<T = Loop>, O: Outbox, C: CycleClock>(
             motors_turn,
         } => {
             let r = lp
-                .lock(|l| l.plan_param(usize::from(index), value, motors_turn))
-                .and_then(|plan| apply_plan(lp, ctrl, plan));
+                .lock(|l| l.write_param(usize::from(index), value, motors_turn))
+                .and_then(|next| next.map_or(Ok(()), |next| redesign(lp, ctrl, next)));
             let answer = lp.lock(|l| {
                 if r.is_err() {
                     l.counters.invalid_values = l.counters.invalid_values.wrapping_add(1);
@@ -278,8 +266,8 @@ pub fn start_front_end(lp: &mut Loop, ctrl: &mut AnyController<f32>) -> Result<(
 }
 
 /// Sets parameter `index` ([`params::PARAMS`]) of the loop `lp` to
-/// `value` ([`Loop::plan_param`], then [`apply_plan`] on its controller
-/// `ctrl`): the whole settings checked; a change that re-designs is
+/// `value` ([`Loop::write_param`], then [`redesign`] on its controller
+/// `ctrl` if it asks for one): the whole settings checked; a change that re-designs is
 /// refused while `motors_turn` (the front end's supervisor gate, the one it
 /// gives [`Loop::power`]). A refusal leaves everything as it was.
 pub fn apply_param(
@@ -289,8 +277,10 @@ pub fn apply_param(
     value: f32,
     motors_turn: bool,
 ) -> Result<(), params::Refusal> {
-    let plan = lp.plan_param(index, value, motors_turn)?;
-    apply_plan(&mut Exclusive(lp), ctrl, plan)
+    match lp.write_param(index, value, motors_turn)? {
+        Some(next) => redesign(&mut Exclusive(lp), ctrl, next),
+        None => Ok(()),
+    }
 }
 
 /// The controller a loop flies before its first design: the tuned Euler
@@ -299,50 +289,42 @@ pub fn fallback_controller(vehicle: VehicleParams<f32>) -> AnyController<f32> {
     AnyController::PdEuler(PdEuler::new(vehicle, PdEulerGains::tuned(), ReferenceMode::Feedforward))
 }
 
-/// Carries out a parameter write's plan: a re-design runs on `ctrl` with
-/// the loop unlocked; a refusal leaves everything as it was.
-pub fn apply_plan<M: Mutex<T = Loop>>(
+/// Carries out a parameter write that re-designs ([`Loop::write_param`]'s
+/// `next`): the design runs on `ctrl` with the loop unlocked, and `next`
+/// is put in force once it is done; a refusal leaves everything as it was.
+pub fn redesign<M: Mutex<T = Loop>>(
     lp: &mut M,
     ctrl: &mut AnyController<f32>,
-    plan: ParamPlan,
+    next: params::Settings,
 ) -> Result<(), params::Refusal> {
-    match plan {
-        ParamPlan::Unchanged => Ok(()),
-        ParamPlan::Set(next, mixer) => {
-            lp.lock(|l| l.set_settings(next, Some(mixer)));
+    let (old, design) = lp.lock(|l| (l.settings, l.design()));
+    let (r, flying) = Design {
+        vehicle: next.vehicle,
+        tuning: next.tuning,
+        ..design
+    }
+    .run(ctrl, next.controller);
+    match r {
+        Ok(()) => {
+            lp.lock(|l| {
+                l.installed(next.controller, true, flying, ctrl);
+                if next.controller != old.controller {
+                    l.selections = l.selections.wrapping_add(1);
+                }
+                l.set_settings(next);
+            });
             Ok(())
         }
-        ParamPlan::Redesign(next) => {
-            let (old, design) = lp.lock(|l| (l.settings, l.design()));
-            let (r, flying) = Design {
-                vehicle: next.vehicle,
-                tuning: next.tuning,
+        Err(e) => {
+            // Back to the old settings, and their controller (it
+            // was designed from them before).
+            let (r_old, flying) = Design {
+                running: flying,
                 ..design
             }
-            .run(ctrl, next.controller);
-            match r {
-                Ok(()) => {
-                    lp.lock(|l| {
-                        l.installed(next.controller, true, flying, ctrl);
-                        if next.controller != old.controller {
-                            l.selections = l.selections.wrapping_add(1);
-                        }
-                        l.set_settings(next, None);
-                    });
-                    Ok(())
-                }
-                Err(e) => {
-                    // Back to the old settings, and their controller (it
-                    // was designed from them before).
-                    let (r_old, flying) = Design {
-                        running: flying,
-                        ..design
-                    }
-                    .run(ctrl, old.controller);
-                    lp.lock(|l| l.installed(old.controller, r_old.is_ok(), flying, ctrl));
-                    Err(params::Refusal::Design(e))
-                }
-            }
+            .run(ctrl, old.controller);
+            lp.lock(|l| l.installed(old.controller, r_old.is_ok(), flying, ctrl));
+            Err(params::Refusal::Design(e))
         }
     }
 }

@@ -48,8 +48,8 @@ mod wire;
 
 pub use flight_loop::FlightLoop;
 pub use jobs::{
-    apply_param, apply_plan, fallback_controller, install, run_job, select, stabilize, start_front_end, Actuation,
-    ControlJob, Design, HoldsLoop, Job, LoopOf, ParamPlan, Step,
+    apply_param, fallback_controller, install, redesign, run_job, select, stabilize, start_front_end, Actuation,
+    ControlJob, Design, HoldsLoop, Job, LoopOf, Step,
 };
 pub use wire::{fix_from_wire, fix_to_wire, param_answer, setpoint_from_wire, setpoint_to_wire, Framed};
 
@@ -378,20 +378,23 @@ impl Loop {
 
     /// Puts `next` (checked by [`params::write`]) in force; a started
     /// front end's mixer follows it (`MOT_FRAME` changes it without a
-    /// design): `mixer`, the one the check built, or built again.
-    fn set_settings(&mut self, next: params::Settings, mixer: Option<Mixer<f32>>) {
+    /// design).
+    fn set_settings(&mut self, next: params::Settings) {
         self.settings = next;
         if self.mixer.is_some() {
             // A checked write mixes; were it not to, the old mixer stays.
-            if let Some(m) = mixer.or_else(|| next.mixer().ok()) {
+            if let Ok(m) = next.mixer() {
                 self.mixer = Some(m);
             }
         }
     }
 
-    /// What writing `value` to parameter `index` does: the whole settings
-    /// checked; a change of the vehicle, the controller or its gains and
-    /// weights needs a re-design.
+    /// Writes `value` to parameter `index`: the whole settings checked; a
+    /// change that needs no design is taken at once (the mixer the check
+    /// built follows it), and `Ok(None)` returned, as for a value already
+    /// in force; a change of the vehicle, the controller or its gains and
+    /// weights needs a re-design, whose settings are returned for the
+    /// controller's side ([`redesign`]), nothing taken yet.
     ///
     /// The one write rule of every protocol: a re-design is refused
     /// ([`params::Refusal::Armed`]) while `motors_turn`, the front end's
@@ -399,33 +402,36 @@ impl Loop {
     /// armed, the motors idle on the ground; the Crazyflie's: armed and
     /// flying a set-point; our protocol: its session has had a step). A
     /// design takes many steps' time, and no controller flies meanwhile.
-    pub fn plan_param(&self, index: usize, value: f32, motors_turn: bool) -> Result<ParamPlan, params::Refusal> {
-        let (next, mixer) = params::write_mixed(&self.settings, index, value)?;
-        // `index` is known (`params::write` refused it otherwise). A
+    /// A refusal leaves everything as it was.
+    ///
+    /// It runs under a protocol's lock of the vehicle, a sample that
+    /// comes ready meanwhile waiting: the settings are copied once, to be
+    /// checked, and once more when taken.
+    pub fn write_param(
+        &mut self,
+        index: usize,
+        value: f32,
+        motors_turn: bool,
+    ) -> Result<Option<params::Settings>, params::Refusal> {
+        let mut next = self.settings;
+        let mixer = params::write_into(&mut next, index, value)?;
+        // `index` is known (`write_into` refused it otherwise). A
         // parameter writes only its own field: its value says whether
         // anything changed, its flag whether the change re-designs.
         let p = &params::PARAMS[index];
         if (p.get)(&next).to_bits() == (p.get)(&self.settings).to_bits() {
-            return Ok(ParamPlan::Unchanged);
+            return Ok(None);
         }
         match (p.redesign, motors_turn) {
-            (false, _) => Ok(ParamPlan::Set(next, mixer)),
-            (true, false) => Ok(ParamPlan::Redesign(next)),
-            (true, true) => Err(params::Refusal::Armed),
-        }
-    }
-
-    /// Applies a plan that needs no design ([`Loop::plan_param`]); a
-    /// re-design's settings are returned, for the controller's side
-    /// ([`apply_plan`]).
-    pub fn apply_unless_design(&mut self, plan: ParamPlan) -> Option<params::Settings> {
-        match plan {
-            ParamPlan::Unchanged => None,
-            ParamPlan::Set(next, mixer) => {
-                self.set_settings(next, Some(mixer));
-                None
+            (false, _) => {
+                self.settings = next;
+                if self.mixer.is_some() {
+                    self.mixer = Some(mixer);
+                }
+                Ok(None)
             }
-            ParamPlan::Redesign(next) => Some(next),
+            (true, false) => Ok(Some(next)),
+            (true, true) => Err(params::Refusal::Armed),
         }
     }
 

@@ -69,7 +69,13 @@ impl Param {
     /// at its first `_` (`VEH_MASS` → `veh.MASS`; cflib shows the group in
     /// lower case), or group `fc` for a name without one.
     pub fn crtp_name(&self) -> Option<(&'static str, &'static str)> {
-        self.crtp.then(|| self.id.split_once('_').unwrap_or(("fc", self.id)))
+        // By byte, not `split_once`'s pattern search: a lookup by name
+        // tries every entry under the link's lock.
+        // `get`, which cannot panic, where slicing would bring in the
+        // formatting of its panic message (kilobytes of flash).
+        let at = self.id.bytes().position(|b| b == b'_');
+        let split = at.and_then(|i| Some((self.id.get(..i)?, self.id.get(i + 1..)?)));
+        self.crtp.then(|| split.unwrap_or(("fc", self.id)))
     }
 
     /// Its Crazyflie group and name, if it has one and CRTP serves it
@@ -697,15 +703,17 @@ pub fn differences<'a>(s: &'a Settings, base: &'a Settings) -> impl Iterator<Ite
 /// Writes parameter `index` = `value` into a copy of `s` and checks the
 /// copy; the new settings, or why not.
 pub fn write(s: &Settings, index: usize, value: f32) -> Result<Settings, Refusal> {
-    write_mixed(s, index, value).map(|(next, _)| next)
+    let mut next = *s;
+    write_into(&mut next, index, value)?;
+    Ok(next)
 }
 
-/// [`write()`], with the mixer its check built for the new settings
-/// ([`Settings::checked_mixer`]).
-pub fn write_mixed(s: &Settings, index: usize, value: f32) -> Result<(Settings, Mixer<f32>), Refusal> {
+/// Writes parameter `index` = `value` into `next` and checks it as a
+/// whole; the mixer the check built ([`Settings::checked_mixer`]), or why
+/// not (`next` is then not to be used). In place: a write under a lock
+/// copies no settings it does not need to.
+pub fn write_into(next: &mut Settings, index: usize, value: f32) -> Result<Mixer<f32>, Refusal> {
     let p = PARAMS.get(index).ok_or(Refusal::Unknown)?;
-    let mut next = *s;
-    (p.set)(&mut next, value)?;
-    let mixer = next.checked_mixer()?;
-    Ok((next, mixer))
+    (p.set)(next, value)?;
+    next.checked_mixer()
 }

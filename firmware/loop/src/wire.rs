@@ -191,7 +191,7 @@ impl Loop {
             ToFc::ParamRead { index } => out.send(&param_answer(&self.settings, index, None))?,
             ToFc::ParamSet { index, value } => {
                 // Our protocol's motors turn from the session's first
-                // step: re-designs only before it (`Loop::plan_param`).
+                // step: re-designs only before it (`Loop::write_param`).
                 return Ok(Some(Job::Param {
                     index,
                     value,

@@ -64,7 +64,7 @@ use fc_loop::nav::NavMode;
 use fc_loop::params::{crtp_params, ParamType, Refusal, Settings, CRTP_ALIASED, CRTP_ALIASES, CRTP_PARAMS, PARAMS};
 use fc_loop::power::Power;
 use fc_loop::supervisor::{ImuCounters, SensorDown, Supervisor, BATTERY_FLOOR_V, IMU_TIMEOUT_US};
-use fc_loop::{FcConfig, Loop, Mutex, ParamPlan};
+use fc_loop::{FcConfig, Loop, Mutex};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
 use nalgebra::{Vector3, Vector4};
@@ -76,7 +76,7 @@ mod step;
 
 pub use ports::logging::{LogSample, LogVar, LOG_VARS};
 pub(crate) use ports::param::put_typed;
-pub use ports::param::{param_entry, param_types, Extra, EXTRA_PARAMS, PARAM_COUNT};
+pub use ports::param::{param_entry, param_named, param_types, Extra, EXTRA_PARAMS, PARAM_COUNT};
 pub use split::{fly_step, pass_step, run_work};
 
 /// A generic set-point older than this is held level where it is, ms.
@@ -545,7 +545,7 @@ impl CrtpShared {
     /// The supervisor's gate: the motors turn (armed and flying a
     /// set-point), as a Crazyflie's do. The power stage's `fly` (with the
     /// step's set-point) and the parameters' write rule
-    /// ([`fc_loop::Loop::plan_param`]).
+    /// ([`fc_loop::Loop::write_param`]).
     pub fn flying(&self) -> bool {
         self.armed() && !self.commander.is_idle()
     }

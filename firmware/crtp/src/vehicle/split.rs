@@ -2,8 +2,7 @@
 //! from the link's): [`fly_step`], [`pass_step`], [`run_work`].
 
 use super::{
-    AnyController, BorrowMut, ControllerWork, CrtpShared, CycleClock, FromFc, ImuStep, Loop, Mutex, ParamPlan, Power,
-    Refusal,
+    AnyController, BorrowMut, ControllerWork, CrtpShared, CycleClock, FromFc, ImuStep, Loop, Mutex, Power, Refusal,
 };
 use fc_core::control::Controller;
 use fc_loop::LoopOf;
@@ -65,7 +64,7 @@ where
             ctrl.reset();
             Ok(())
         }
-        ControllerWork::Param { next, .. } => fc_loop::apply_plan(&mut loop_of(v), ctrl, ParamPlan::Redesign(next)),
+        ControllerWork::Param { next, .. } => fc_loop::redesign(&mut loop_of(v), ctrl, next),
     };
     let answer = v.lock(|v| v.borrow_mut().work_done(&work, r));
     (r, answer)

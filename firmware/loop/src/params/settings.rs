@@ -124,7 +124,10 @@ impl Settings {
             lo: e.range.lo as f32,
             hi: e.range.hi as f32,
         })?;
-        let mixer = self.mixer()?;
+        // Built where it is returned, not moved out and back: a write
+        // checks under the link's lock (the refusals' order is kept).
+        let mixer = self.mixer();
+        mixer.as_ref().map_err(|&e| e)?;
         if !(10..=5_000).contains(&self.failsafe_timeout_ms) {
             return Err(Refusal::Range { lo: 10.0, hi: 5_000.0 });
         }
@@ -139,7 +142,7 @@ impl Settings {
             return Err(Refusal::Range { lo: 1.0, hi: 1_000.0 });
         }
         check_tuning(&self.tuning)?;
-        Ok(mixer)
+        mixer
     }
 }
 

@@ -343,7 +343,7 @@ impl MavShared {
     /// The supervisor's gate: the motors turn, as PX4's do from arming
     /// (every armed step flies: the modes' failsafes are set-points, Hold
     /// and Land). The power stage's `fly` and the parameters' write rule
-    /// ([`fc_loop::Loop::plan_param`]).
+    /// ([`fc_loop::Loop::write_param`]).
     pub fn motors_turn(&self) -> bool {
         self.modes.armed()
     }

@@ -61,7 +61,7 @@ impl MavShared {
 
     /// Sets parameter `index` to `value`: checked, and applied to the
     /// controller `ctrl` (re-designed only while the motors are stopped,
-    /// [`fc_loop::Loop::plan_param`]), the mixer and the failsafe.
+    /// [`fc_loop::Loop::write_param`]), the mixer and the failsafe.
     pub fn apply(&mut self, ctrl: &mut AnyController<f32>, index: usize, value: f32) -> Result<(), Refusal> {
         // The loop's mixer follows its settings.
         let motors_turn = self.motors_turn();

@@ -127,6 +127,31 @@ pub fn param_entry(id: usize) -> Option<(Name<'static>, u8, Option<Extra>)> {
     ))
 }
 
+/// The id of the parameter named `group.name` (the group compared without
+/// case, [`Name::is`]), as a set by name finds it: the first entry that has
+/// that name. Every entry is tried, under the link's lock of the vehicle,
+/// so each one's length is compared before its name is made.
+pub fn param_named(group: &[u8], name: &[u8]) -> Option<usize> {
+    let len = group.len() + 1 + name.len();
+    (0..PARAM_COUNT).find(|&i| may_be_named(i, len) && param_entry(i).is_some_and(|(n, _, _)| n.is(group, name)))
+}
+
+/// Whether entry `id`'s group, a separator and its name could be `len`
+/// bytes, read without making its name ([`param_entry`]).
+fn may_be_named(id: usize, len: usize) -> bool {
+    if let Some(p) = crtp_params().get(id) {
+        // `GROUP_NAME`, or `NAME` in the group `fc` ([`Param::crtp_name`]).
+        return p.id.len() == len || p.id.len() + 3 == len;
+    }
+    let k = id - CRTP_PARAMS;
+    if let Some(&i) = CRTP_ALIASED.get(k) {
+        return PARAMS[i].crazyflie_alias.len() == len;
+    }
+    EXTRA_PARAMS
+        .get(k - CRTP_ALIASES)
+        .is_some_and(|(g, n, _, _)| g.len() + 1 + n.len() == len)
+}
+
 /// The param TOC's type byte of a parameter of type `ty`.
 const fn toc_type(ty: ParamType) -> u8 {
     match ty {
@@ -229,13 +254,12 @@ impl CrtpShared {
         };
         // Checked as a whole, the mixer's settings included, before
         // anything is taken.
-        let plan = self.lp.plan_param(index, value, self.flying())?;
-        match self.lp.apply_unless_design(plan) {
+        match self.lp.write_param(index, value, self.flying())? {
             Some(next) => {
                 self.work = WorkState::Queued(ControllerWork::Param { next, reply });
                 Ok(Written::Later)
             }
-            // The loop's mixer follows its settings.
+            // Taken (the loop's mixer follows its settings), or in force.
             None => Ok(Written::Now),
         }
     }
@@ -410,7 +434,7 @@ impl CrtpShared {
         let Some((&t, value)) = rest.split_first() else {
             return Ok(Err(short(p)));
         };
-        let id = (0..PARAM_COUNT).find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(group, name)));
+        let id = param_named(group, name);
         if id.is_some() && self.busy() {
             // As a write by id: not answered until the design under way is done.
             return Ok(Err(CrtpError::Refused { port: p.port() }));
