@@ -136,7 +136,13 @@ impl core::fmt::Display for CrtpError {
 }
 
 /// One CRTP packet: the header byte and up to 30 bytes of payload.
+///
+/// Aligned to a word (its 32 bytes are a multiple of one, so it is no
+/// larger): a copy, of which the link's handling of a packet under its
+/// lock of the vehicle makes several, is eight word moves, not 32 byte
+/// moves.
 #[derive(Clone, Copy, PartialEq, Eq)]
+#[repr(align(4))]
 pub struct Packet {
     header: u8,
     len: u8,
