@@ -131,6 +131,8 @@ impl Num {
             e -= 1;
             n = scaled(a, 5 - e);
         }
+        // Below 10⁷: the M4 divides a u32 itself, a u64 by a library call.
+        let mut n = n as u32;
         let (mut digits, mut len) = ([0u8; 6], 6);
         for d in digits.iter_mut().rev() {
             *d = b'0' + (n % 10) as u8;
