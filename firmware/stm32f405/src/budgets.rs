@@ -59,6 +59,13 @@ pub const IMAGE_STEP_INSTRUCTIONS: u32 = 74_600;
 /// task's share of the 1 kHz step, leaving the controller's task the rest
 /// of [`IMAGE_STEP_INSTRUCTIONS`].
 pub const ESTIMATOR_STEP_INSTRUCTIONS: u32 = 20_000;
+/// The longest the link's task may hold the vehicle for one radio packet
+/// or one log poll, instructions. The vehicle's lock has the sample task's
+/// priority: a sample that comes ready as a hold begins waits for it, then
+/// takes its step, and both must fit the period of
+/// [`IMAGE_STEP_INSTRUCTIONS`]: 6 000 is 8 % of it, and leaves the step
+/// 68 600.
+pub const LINK_HOLD_INSTRUCTIONS: u32 = 6_000;
 /// Stack for designing and flying any controller, bytes: a quarter of the
 /// SRAM (the controllers are designed in place, in static RAM).
 pub const STACK_BYTES: u32 = 32 * 1024;
