@@ -16,7 +16,8 @@ use std::sync::Arc;
 
 use e2e_tests::measure;
 use fc_stm32f405::budgets::{
-    ESTIMATOR_STEP_INSTRUCTIONS, IMAGE_STACK_BYTES, IMAGE_STEP_INSTRUCTIONS, PEER_MIN_RATIO, STACK_BYTES,
+    ESTIMATOR_STEP_INSTRUCTIONS, IMAGE_STACK_BYTES, IMAGE_STEP_INSTRUCTIONS, LINK_HOLD_INSTRUCTIONS, PEER_MIN_RATIO,
+    STACK_BYTES,
 };
 
 fn root() -> PathBuf {
@@ -108,8 +109,24 @@ fn every_controller_fits_its_cycle_budget() {
     // whole image step, with and without the link's frames, and its two
     // tasks (2 forms) + the estimator's two (a whole mocap fix; the
     // navigator's worst gps step) + the MAVLink signing check of the
-    // largest frame.
-    assert_eq!(rows.len(), 37, "{out}");
+    // largest frame + the CRTP link's longest hold.
+    assert_eq!(rows.len(), 38, "{out}");
+    // The CRTP link's longest hold of the vehicle over the packets that
+    // take it longest, within its budget (a sample ready meanwhile waits).
+    let hold = rows
+        .iter()
+        .find(|r| r[0] == "CRTP link" && r[3] == "longest hold of the vehicle")
+        .and_then(|r| r[4].parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("no link hold row:\n{out}"));
+    assert!(
+        hold <= f64::from(LINK_HOLD_INSTRUCTIONS),
+        "the link holds the vehicle {hold} instructions, over {LINK_HOLD_INSTRUCTIONS}"
+    );
+    assert_eq!(
+        out.lines().filter(|l| l.starts_with("budget: link hold, ")).count(),
+        9,
+        "every packet timed:\n{out}"
+    );
     // `firmware`'s two tasks apart: the IMU task (the sample to the
     // estimate) within the estimator's 20 000 instructions, and with the
     // controller task (to the output) within the 1 kHz step's 74 600.

@@ -22,7 +22,9 @@
 //!   lockstep link's frames, for information;
 //! - and `FGM to its a-priori bound, info`: the fast gradient method the
 //!   exact solve replaced, forced to run its whole certified iteration
-//!   bound, for comparison.
+//!   bound, for comparison;
+//! - and the CRTP link's longest hold of the vehicle over the packets that
+//!   take it longest (`holds.rs`), enforced at 6 000 instructions.
 //!
 //! A controller fits when `worst instructions × CPI × margin ≤ 168 MHz / rate`
 //! with CPI 1.5 (Cortex-M4 from flash with the ART accelerator, FPU code;
@@ -67,6 +69,7 @@ mod target {
     use hal_shim::{ByteLink, CycleClock};
     use nalgebra::Vector3;
 
+    mod holds;
     mod link;
     use link::*;
 
@@ -125,6 +128,8 @@ mod target {
 
     /// Largest instructions of one estimator step allowed (the bound).
     const ESTIMATOR_BUDGET: u32 = fc_stm32f405::budgets::ESTIMATOR_STEP_INSTRUCTIONS;
+    /// The longest the CRTP link may hold the vehicle, instructions.
+    const LINK_HOLD_BUDGET: u32 = fc_stm32f405::budgets::LINK_HOLD_INSTRUCTIONS;
 
     /// An IMU at rest, level.
     const REST: ImuSample = ImuSample {
@@ -732,6 +737,20 @@ mod target {
             "check a signed 280-byte frame, info",
             with_stack(|| signing_worst(&clock)),
         );
+        // The CRTP link's longest hold of the vehicle over the packets that
+        // take it longest (a sample ready meanwhile waits), enforced.
+        let vehicle = holds::vehicle();
+        let m = with_stack(|| holds::link_hold_worst(vehicle?, &clock));
+        check("CRTP link", "packet", 1000, "longest hold of the vehicle", m);
+        match m.0 {
+            Some(w) if w <= LINK_HOLD_BUDGET => {
+                hprintln!("budget: link hold: {} instructions, within its {}", w, LINK_HOLD_BUDGET)
+            }
+            w => {
+                hprintln!("budget: link hold: {:?} instructions, OVER its {}", w, LINK_HOLD_BUDGET);
+                ok = false;
+            }
+        }
         let static_ram = fc_stm32f405::stack::static_ram();
         hprintln!(
             "budget: stack high-water {} bytes, static RAM {} bytes, of 131072",
