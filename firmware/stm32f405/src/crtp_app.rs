@@ -13,7 +13,7 @@
 //! | 3 | `data_ready` | USART1 receive (the simulator's `Imu` frame), or pended by the board's IMU | decodes the simulator's frames, takes the board's sample; a sample steps the estimator ([`CrtpShared::imu_begin`]) and goes to the controller |
 //! | 3 | `gyro_ready`, `imu_bus_event`, `imu_bus_error` | EXTI15_10, I2C3_EV, I2C3_ER | the board's own IMU ([`ImuBus`]: the Crazyflie's BMI088; none in QEMU): data-ready starts the reads, the bus's interrupts advance them |
 //! | 2 | `controller` | CAN2_RX0 (pended) | flies each step on the controller ([`fly_step`]), drives the outputs, answers the simulator; a take-off's reset ([`run_work`]) |
-//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle (each packet's timed: [`Holds`]), answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
+//! | 1 | `link` | CAN2_RX1 (pended) | syslink: the radio's packets handled under short locks of the vehicle (each packet's timed, the radio's interrupts in it apart: [`Holds`]), answers and log blocks queued for the radio; the re-designs a packet or the simulator asked for ([`run_work`]); the simulator's queued answers; the log |
 //!
 //! The vehicle's shared part ([`CrtpShared`]) is locked for an estimator
 //! step, a packet, a step's result; never for a controller step, a design
@@ -39,6 +39,14 @@
 /// Whether the vehicle is armed, as the link's task last saw it: the
 /// settings store refuses writes then.
 pub static ARMED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
+/// Whether the link's task holds the vehicle now: the radio's task then
+/// times itself, into [`RADIO_IN_HOLD`].
+pub static HOLDING: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
+/// SysTick ticks the radio's task has run while the link held the vehicle
+/// (wrapping): a hold's own work is its length less what this grew by.
+pub static RADIO_IN_HOLD: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 
 /// Binds the CRTP images' RTIC application (see the module's
 /// documentation) in an image, once, at its crate's root on the target,
@@ -222,10 +230,18 @@ macro_rules! crtp_app {
             }
 
             /// The radio's bytes into their queue; the link's task takes them.
+            /// Timed while the link holds the vehicle (not during a step),
+            /// for the holds' own work ([`Handing::lock`]).
             #[task(binds = USART6, priority = 4)]
             fn radio_bytes(_: radio_bytes::Context) {
+                use core::sync::atomic::Ordering::Relaxed;
+                let t0 = $crate::crtp_app::HOLDING.load(Relaxed).then(hold_clock);
                 usart_isr(Port::Usart6);
                 rtic::pend(Interrupt::CAN2_RX1);
+                if let Some(t0) = t0 {
+                    let ran = hold_clock().saturating_sub(t0) as u32;
+                    $crate::crtp_app::RADIO_IN_HOLD.fetch_add(ran, Relaxed);
+                }
             }
 
             /// The simulator's frames: a parameter write (answered, or its design
@@ -507,7 +523,8 @@ macro_rules! crtp_app {
 
             /// [`ticks_now`] out of line: read at the start and end of each of
             /// the link's packet locks ([`Holds`], [`Handing::lock`]'s many
-            /// instances), where inlined it costs kilobytes of flash.
+            /// instances), where inlined it costs kilobytes of flash, and by
+            /// the radio's task during them.
             #[inline(never)]
             fn hold_clock() -> u64 {
                 ticks_now()
@@ -555,13 +572,22 @@ macro_rules! crtp_app {
             {
                 type T = CrtpShared;
                 fn lock<R>(&mut self, f: impl FnOnce(&mut CrtpShared) -> R) -> R {
-                    // Timed inside the lock: once it ends, a task it held
-                    // back runs first.
+                    // Timed inside the lock (once it ends, a task it held
+                    // back runs first), less the radio's interrupts that
+                    // fell inside it: the hold's own work. The flag is set
+                    // after the start and cleared before the end, so an
+                    // interrupt at either edge counts as the hold's.
+                    use core::sync::atomic::Ordering::Relaxed;
+                    use $crate::crtp_app::{HOLDING, RADIO_IN_HOLD};
                     let (r, work, held) = self.v.lock(|v| {
                         let t0 = hold_clock();
+                        let radio0 = RADIO_IN_HOLD.load(Relaxed);
+                        HOLDING.store(true, Relaxed);
                         let r = f(v);
                         let work = v.take_work();
-                        (r, work, hold_clock().saturating_sub(t0))
+                        HOLDING.store(false, Relaxed);
+                        let radio = RADIO_IN_HOLD.load(Relaxed).wrapping_sub(radio0);
+                        (r, work, hold_clock().saturating_sub(t0).saturating_sub(u64::from(radio)))
                     });
                     self.holds.held(held);
                     match work {
