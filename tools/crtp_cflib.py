@@ -184,11 +184,13 @@ def report(sil, failed_before):
         STACKS.append((boot, tasks))
         # The link's task holds the vehicle while it handles a packet; a
         # sample ready meanwhile waits, and its data-ready is stamped only
-        # once its task runs: that wait is not in the figures above. Shown,
-        # not yet held to a budget (the book's firmware chapter).
+        # once its task runs: that wait is not in the figures above. Held
+        # to its budget here with the radio's bytes that land in it (QEMU
+        # delivers them unpaced); the sum with the worst step, below.
         held = link_hold(out)
-        check(held > 0, f'the image timed the link\'s holds of the vehicle: up to {held} instructions, a wait '
-                        f'the step figures above do not include (information)')
+        hold_budget = budgets()['budget_link_hold_instructions']
+        check(0 < held <= hold_budget, f'the image timed the link\'s holds of the vehicle: up to {held} '
+                                       f'instructions, the radio\'s interrupts in them apart (budget {hold_budget})')
         HOLDS.append(held)
     if QEMU:
         check('storage: a 2 KiB RAM stand-in' in out,
@@ -617,8 +619,10 @@ def main():
         record(f'{image}_qemu_link_hold_worst_icount', max(HOLDS), 'instructions', source)
         # A sample that comes ready just as the longest hold starts waits
         # for it, then takes a step: what that costs at worst, beside the
-        # step's budget. Shown, not held to it: the margin is smaller than
-        # the step's run-to-run spread (the book's firmware chapter).
+        # step's budget. Shown, not held to it here: the worst step moves by
+        # about 2 000 instructions from run to run with where the radio's
+        # unpaced bytes land, more than the margin; the budget harness holds
+        # the same sum, without interrupts (the book's firmware chapter).
         worst = max(HOLDS) + max(a for a, _, _ in TIMINGS)
         print(f'the longest hold and the worst step together: {max(HOLDS)} + {max(a for a, _, _ in TIMINGS)} = '
               f'{worst} instructions, beside the step\'s budget of {budgets()["budget_image_step_instructions"]} '

@@ -127,6 +127,19 @@ fn every_controller_fits_its_cycle_budget() {
         9,
         "every packet timed:\n{out}"
     );
+    // A sample that comes ready as the longest hold begins waits for it,
+    // then takes the whole image step: both within one period.
+    for r in rows
+        .iter()
+        .filter(|r| r[0] == "mpc-fast" && r[3].starts_with("image step (IMU"))
+    {
+        let step: f64 = r[4].parse().unwrap_or_else(|_| panic!("{r:?}"));
+        assert!(
+            hold + step <= f64::from(IMAGE_STEP_INSTRUCTIONS),
+            "{}: the longest hold {hold} and the image step {step} over {IMAGE_STEP_INSTRUCTIONS}",
+            r[1]
+        );
+    }
     // `firmware`'s two tasks apart: the IMU task (the sample to the
     // estimate) within the estimator's 20 000 instructions, and with the
     // controller task (to the output) within the 1 kHz step's 74 600.
