@@ -69,13 +69,15 @@ impl Param {
     /// at its first `_` (`VEH_MASS` → `veh.MASS`; cflib shows the group in
     /// lower case), or group `fc` for a name without one.
     pub fn crtp_name(&self) -> Option<(&'static str, &'static str)> {
-        // By byte, not `split_once`'s pattern search: a lookup by name
-        // tries every entry under the link's lock.
-        // `get`, which cannot panic, where slicing would bring in the
-        // formatting of its panic message (kilobytes of flash).
-        let at = self.id.bytes().position(|b| b == b'_');
-        let split = at.and_then(|i| Some((self.id.get(..i)?, self.id.get(i + 1..)?)));
-        self.crtp.then(|| split.unwrap_or(("fc", self.id)))
+        // By byte, not `split_once`'s pattern search (a lookup by name
+        // tries every entry under the link's lock), and with `get`, which
+        // cannot panic, where slicing would bring in the formatting of its
+        // panic message (kilobytes of flash).
+        self.crtp.then(|| {
+            let at = self.id.bytes().position(|b| b == b'_');
+            at.and_then(|i| Some((self.id.get(..i)?, self.id.get(i + 1..)?)))
+                .unwrap_or(("fc", self.id))
+        })
     }
 
     /// Its Crazyflie group and name, if it has one and CRTP serves it

@@ -143,7 +143,9 @@ fn may_be_named(id: usize, len: usize) -> bool {
         // `GROUP_NAME`, or `NAME` in the group `fc` ([`Param::crtp_name`]).
         return p.id.len() == len || p.id.len() + 3 == len;
     }
-    let k = id - CRTP_PARAMS;
+    let Some(k) = id.checked_sub(CRTP_PARAMS) else {
+        return false;
+    };
     if let Some(&i) = CRTP_ALIASED.get(k) {
         return PARAMS[i].crazyflie_alias.len() == len;
     }
