@@ -621,5 +621,4 @@ impl Burst {
 }
 
 #[cfg(test)]
-#[path = "i2c_tests.rs"]
 mod tests;

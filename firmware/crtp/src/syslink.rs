@@ -541,5 +541,4 @@ fn send<L: ByteLink>(link: &mut L, p: &SyslinkPacket) -> Result<(), L::Error> {
 }
 
 #[cfg(test)]
-#[path = "syslink_tests.rs"]
 mod tests;
