@@ -268,6 +268,17 @@ fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
     let mut out = Sent::default();
     v.handle(&takeoff, &mut out).unwrap();
     assert!(!v.flying() && v.counters().refused == 1, "not armed: refused");
+    assert_eq!(console_of(&out.0), "not armed\n", "the take-off's refusal is said");
+    // A streamed set-point while disarmed is refused too, and not said: a
+    // client streams at 100 Hz.
+    let mut hold = vec![7u8];
+    for x in [0.0f32, 0.0, 0.5, 0.0] {
+        hold.extend_from_slice(&x.to_le_bytes());
+    }
+    let mut quiet = Sent::default();
+    v.handle(&pk(Port::Generic, 0, &hold), &mut quiet).unwrap();
+    assert!(!v.flying() && v.counters().refused == 2);
+    assert_eq!(console_of(&quiet.0), "");
     rest(&mut v, 5, 3000);
     let yes = ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1]));
     assert_eq!(yes.payload(), &[0x81, 1, 1]);

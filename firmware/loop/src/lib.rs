@@ -31,6 +31,7 @@
 
 pub mod arming;
 pub mod baro;
+pub mod client;
 pub mod commander;
 pub mod land;
 pub mod modes;

@@ -1,49 +1,42 @@
-//! The vehicle's side of the commander ([`fc_loop::commander`]): whether a
-//! command the ports decoded may take control, then the commander's call.
-//! The ports decode; what is allowed is decided here.
+//! The vehicle's side of the client commander ([`fc_loop::client`]): the
+//! ports' decoded commands handed to it, its refusals said on the console,
+//! and the controller's reset it asks for queued for the controller's side.
+//! What a command may do is the flight stack's to decide.
 
-use super::{ControllerWork, CrtpShared, Priority, Segment, Setpoint, WorkState};
+use super::{CommandRefusal, ControllerWork, CrtpShared, Segment, Setpoint, Takeover, WorkState};
 
 impl CrtpShared {
     /// Flies `sp`, a client's streamed set-point, from now; `false`
-    /// (refused) while disarmed, or when control cannot be taken
-    /// ([`Self::take_control`]) from anything but a stream.
+    /// (refused) while disarmed (not said: a client streams at its rate),
+    /// or when control cannot be taken ([`fc_loop::client::ClientCommander::stream`]).
     pub(in crate::vehicle) fn stream(&mut self, sp: Setpoint<f32>) -> bool {
-        if !self.armed() {
-            return false;
-        }
-        if self.commander.priority() != Priority::Streamed && !self.take_control() {
-            return false;
-        }
-        self.commander.stream(sp, self.now_us);
-        true
+        let r = self.client.stream(sp, self.now_us, self.busy());
+        self.took(r, false)
     }
 
     /// Flies the planner's segment `seg` (`landing`: the motors stop on the
-    /// ground at its end); `false` (refused) when control cannot be taken.
+    /// ground at its end); `false` (refused, and said) when control cannot
+    /// be taken ([`fc_loop::client::ClientCommander::plan`]).
     pub(in crate::vehicle) fn plan(&mut self, seg: Segment, landing: bool) -> bool {
-        if !self.take_control() {
-            return false;
-        }
-        self.commander.plan(seg, landing);
-        true
+        let r = self.client.plan(seg, landing, self.busy());
+        self.took(r, true)
     }
 
-    /// Whether a command may fly: armed, no controller design under way
-    /// (each refusal said). From idle, the controller's state is forgotten
-    /// first (no state wound up on the ground; [`ControllerWork::Reset`]).
-    pub(in crate::vehicle) fn take_control(&mut self) -> bool {
-        if !self.armed() {
-            self.say(format_args!("not armed"));
-            return false;
+    /// What a command's answer `r` asks of the vehicle: the controller's
+    /// reset queued ([`ControllerWork::Reset`]), or its refusal said (a
+    /// disarmed one only if `say_disarmed`).
+    fn took(&mut self, r: Result<Takeover, CommandRefusal>, say_disarmed: bool) -> bool {
+        match r {
+            Ok(Takeover::Reset) => {
+                self.work = WorkState::Queued(ControllerWork::Reset);
+                true
+            }
+            Ok(Takeover::Continue) => true,
+            Err(CommandRefusal::NotArmed) if !say_disarmed => false,
+            Err(why) => {
+                self.say(format_args!("{why}"));
+                false
+            }
         }
-        if self.busy() {
-            self.say(format_args!("controller design under way"));
-            return false;
-        }
-        if self.commander.is_idle() {
-            self.work = WorkState::Queued(ControllerWork::Reset);
-        }
-        true
     }
 }

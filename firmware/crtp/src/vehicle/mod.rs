@@ -58,12 +58,12 @@ use fc_core::control::AnyController;
 use fc_core::control::Setpoint;
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
-use fc_loop::arming::Arming;
-use fc_loop::commander::{Commander, Event, Priority, Watchdog};
+use fc_loop::client::{ClientCommander, CommandRefusal, Takeover};
+use fc_loop::commander::{Event, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{crtp_params, ParamType, Refusal, Settings, CRTP_ALIASED, CRTP_ALIASES, CRTP_PARAMS, PARAMS};
 use fc_loop::power::Power;
-use fc_loop::supervisor::{ImuCounters, SensorDown, Supervisor, BATTERY_FLOOR_V, IMU_TIMEOUT_US};
+use fc_loop::supervisor::{ImuCounters, SensorDown, BATTERY_FLOOR_V, IMU_TIMEOUT_US};
 use fc_loop::{FcConfig, Loop, Mutex};
 use fc_proto::FromFc;
 use hal_shim::CycleClock;
@@ -352,10 +352,9 @@ pub struct CrtpShared {
     /// A persistent-parameter request, for the link's owner to answer.
     persist: Option<PersistRequest>,
     defaults: Settings,
-    /// Armed, and the supervisor's lock (emergency stop) and tumble.
-    arming: Arming,
-    /// The set-point flown and its source.
-    commander: Commander,
+    /// Arming, the set-point flown and its source, the supervisor: what a
+    /// client's commands may do ([`fc_loop::client`]).
+    client: ClientCommander,
     log: LogBlocks,
     console: heapless::Deque<Packet, CONSOLE_QUEUE>,
     /// Log blocks sampled at their step, waiting for the link.
@@ -374,8 +373,6 @@ pub struct CrtpShared {
     vbat_v: Option<f32>,
     pm_state: i8,
     counters: CrtpCounters,
-    /// Every IMU sample checked; the failsafe descent, tumble and landing.
-    supervisor: Supervisor,
     /// The board's sensors as it started them (`Ok`: the simulator's).
     sensors: Result<(), SensorDown>,
     /// Barometer fixes fused.
@@ -406,8 +403,7 @@ impl CrtpShared {
             reply: None,
             persist: None,
             defaults: settings,
-            arming: Arming::new(),
-            commander: Commander::new(),
+            client: ClientCommander::new(),
             log: LogBlocks::new(),
             console: heapless::Deque::new(),
             sampled: heapless::Deque::new(),
@@ -419,7 +415,6 @@ impl CrtpShared {
             vbat_v: None,
             pm_state: 0,
             counters: CrtpCounters::default(),
-            supervisor: Supervisor::new(),
             sensors: Ok(()),
             baro_fixes: 0,
             toc_crcs: TocCrcs {
@@ -439,12 +434,12 @@ impl CrtpShared {
     /// The IMU samples that were not good, by kind
     /// ([`fc_loop::supervisor::ImuGuard`]).
     pub fn imu_counters(&self) -> ImuCounters {
-        self.supervisor.imu_counters()
+        self.client.imu_counters()
     }
 
     /// A failsafe descent is under way (the IMU went silent in flight).
     pub fn failsafe(&self) -> bool {
-        self.supervisor.failsafe()
+        self.client.failsafe()
     }
 
     /// The board's barometer read `alt_m` (m above sea level: the
@@ -512,7 +507,7 @@ impl CrtpShared {
             }
             (ControllerWork::Reset, Err(_)) => {
                 self.counters.refused = self.counters.refused.wrapping_add(1);
-                self.commander.stop();
+                self.client.stop();
                 self.say(format_args!("controller reset failed"));
                 None
             }
@@ -539,7 +534,7 @@ impl CrtpShared {
 
     /// Armed.
     pub fn armed(&self) -> bool {
-        self.arming.armed()
+        self.client.armed()
     }
 
     /// The supervisor's gate: the motors turn (armed and flying a
@@ -547,7 +542,7 @@ impl CrtpShared {
     /// step's set-point) and the parameters' write rule
     /// ([`fc_loop::Loop::write_param`]).
     pub fn flying(&self) -> bool {
-        self.armed() && !self.commander.is_idle()
+        self.client.flying()
     }
 
     /// The flight loop (estimator, set-point, counters).

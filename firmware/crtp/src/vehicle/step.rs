@@ -25,9 +25,9 @@ impl CrtpShared {
         if t_us < self.now_us {
             // A host that started again: a new time line.
             self.lp.open_session();
-            self.supervisor.restart();
+            self.client.restart();
         }
-        let (sample, _) = self.supervisor.take(t_us, imu);
+        let (sample, _) = self.client.take_sample(t_us, imu);
         // The interval a velocity set-point moves over (at most 0.1 s).
         let dt_s = (t_us.saturating_sub(self.now_us) as f32 * 1e-6).min(0.1);
         self.now_us = t_us;
@@ -68,7 +68,7 @@ impl CrtpShared {
     /// The set-point to fly at `t_us`, `dt_s` after the last step (the
     /// commander advanced: hand-over, watchdog, velocity), `None` while idle.
     pub(in crate::vehicle) fn setpoint_now(&mut self, t_us: u64, dt_s: f32) -> Option<Setpoint<f32>> {
-        let (sp, event) = self.commander.setpoint_now(t_us, dt_s, &SETPOINT_WATCHDOG);
+        let (sp, event) = self.client.setpoint_now(t_us, dt_s, &SETPOINT_WATCHDOG);
         if event == Some(Event::StreamStopped) {
             self.say(format_args!("set-points stopped: motors off"));
         }
@@ -80,9 +80,7 @@ impl CrtpShared {
     /// said on the console.
     pub(in crate::vehicle) fn supervise(&mut self, t_us: u64) {
         let est = self.lp.navigator().estimate();
-        let done = self
-            .supervisor
-            .step(t_us, &mut self.arming, &mut self.commander, est.as_ref());
+        let done = self.client.supervise(t_us, est.as_ref());
         if done.descent_began {
             let ms = IMU_TIMEOUT_US / 1000;
             self.say(format_args!("IMU silent for more than {ms} ms: failsafe descent"));
@@ -98,6 +96,6 @@ impl CrtpShared {
     /// What is flown now, as a reference (the estimate at rest when idle).
     pub(in crate::vehicle) fn reference(&self) -> Reference {
         let est = self.lp.navigator().estimate();
-        self.commander.reference(self.now_us, est.as_ref())
+        self.client.reference(self.now_us, est.as_ref())
     }
 }

@@ -13,7 +13,7 @@ impl CrtpShared {
             return match (kind, d.get(1..5)) {
                 (0, Some(ms)) => {
                     let ms = u32::from_le_bytes([ms[0], ms[1], ms[2], ms[3]]);
-                    self.commander.notify_stop(self.now_us, ms);
+                    self.client.notify_stop(self.now_us, ms);
                     Ok(())
                 }
                 (0, None) => Err(short(p)),
@@ -24,7 +24,7 @@ impl CrtpShared {
             return Err(unsupported(p));
         }
         if kind == 0 {
-            self.commander.stop();
+            self.client.stop();
             return Ok(());
         }
         let vals = [f32_at(d, 1), f32_at(d, 5), f32_at(d, 9), f32_at(d, 13)];
@@ -40,7 +40,7 @@ impl CrtpShared {
         }
         let here = self.reference();
         let deg = core::f32::consts::PI / 180.0;
-        let mut sp = match self.commander.streamed() {
+        let mut sp = match self.client.commander().streamed() {
             Some(sp) => *sp,
             None => Setpoint::hold(here.pos_ned_m, here.yaw_rad),
         };
@@ -77,7 +77,7 @@ impl CrtpShared {
         // roll, pitch, yaw rate (f32 each), thrust (u16).
         match u16_at(p.payload(), 12) {
             Some(0) => {
-                self.commander.stop();
+                self.client.stop();
                 Ok(())
             }
             Some(_) => Err(unsupported(p)),

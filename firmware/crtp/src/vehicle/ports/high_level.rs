@@ -13,7 +13,7 @@ impl CrtpShared {
         match cmd {
             0 => Ok(()),
             3 => {
-                self.commander.stop();
+                self.client.stop();
                 Ok(())
             }
             // TAKEOFF_2 / LAND_2: group, height, yaw, use current yaw, duration.

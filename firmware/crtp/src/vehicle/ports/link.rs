@@ -42,11 +42,11 @@ impl CrtpShared {
                 out.send(&reply(Port::Platform, 0, &[1, u8::from(ok), u8::from(self.armed())]))?;
             }
             (0, 2) => {
-                let ok = self.recover();
+                let ok = self.client.recover();
                 out.send(&reply(
                     Port::Platform,
                     0,
-                    &[2, u8::from(ok), u8::from(!self.arming.tumbled())],
+                    &[2, u8::from(ok), u8::from(!self.client.arming().tumbled())],
                 ))?;
             }
             (1, 0) => {

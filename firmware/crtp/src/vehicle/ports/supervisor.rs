@@ -18,29 +18,25 @@ impl CrtpShared {
         }
     }
 
-    /// The supervisor's "can fly": the arming check would pass, the
-    /// vehicle's start apart (the Crazyflie's `supervisorCanFly`).
+    /// The supervisor's "can fly" ([`fc_loop::client::ClientCommander::can_fly`]).
     pub(in crate::vehicle) fn can_fly(&self) -> bool {
-        let started = ArmingState {
-            started: true,
-            ..self.arming_state()
-        };
-        self.arming.may_arm(&started).is_ok()
+        self.client.can_fly(&self.arming_state())
     }
 
     /// The supervisor's state bits (cflib's `Supervisor.STATES` order).
     pub fn supervisor_bits(&self) -> u16 {
-        let high = self.commander.priority() == Priority::Planned;
-        let finished = self.commander.segment().is_none_or(|seg| seg.finished(self.now_us));
+        let commander = self.client.commander();
+        let high = commander.priority() == Priority::Planned;
+        let finished = commander.segment().is_none_or(|seg| seg.finished(self.now_us));
         let bits = [
             self.can_fly() && !self.armed(),
             self.armed(),
             false,
             self.can_fly(),
             self.flying(),
-            self.arming.tumbled(),
-            self.arming.locked(),
-            self.arming.tumbled(),
+            self.client.arming().tumbled(),
+            self.client.arming().locked(),
+            self.client.arming().tumbled(),
             high,
             finished,
             false,
@@ -54,30 +50,20 @@ impl CrtpShared {
     /// did, and whether it is armed now.
     pub(in crate::vehicle) fn request_arming(&mut self, arm: bool) -> bool {
         if !arm {
-            self.arming.disarm();
-            self.commander.stop();
+            self.client.disarm();
             self.say(format_args!("disarmed"));
             return true;
         }
         // The one arming check (fc_loop::arming).
-        match self.arming.arm(&self.arming_state(), || Ok(())) {
-            Ok(None) => {}
-            Ok(Some(())) => {
-                self.commander.stop();
-                self.say(format_args!("armed"));
-            }
+        match self.client.arm(&self.arming_state()) {
+            Ok(false) => {}
+            Ok(true) => self.say(format_args!("armed")),
             Err(why) => {
                 self.say(format_args!("arming refused: {why}"));
                 return false;
             }
         }
         true
-    }
-
-    /// Clears a tumble unless locked or flying; whether it did.
-    pub(in crate::vehicle) fn recover(&mut self) -> bool {
-        let flying = self.flying();
-        self.arming.recover(flying)
     }
 
     pub(in crate::vehicle) fn on_supervisor<S: CrtpSink>(
@@ -111,11 +97,11 @@ impl CrtpShared {
                 ))?;
             }
             (1, 0x02) => {
-                let ok = self.recover();
+                let ok = self.client.recover();
                 out.send(&reply(
                     Port::Supervisor,
                     1,
-                    &[0x82, u8::from(ok), u8::from(!self.arming.tumbled())],
+                    &[0x82, u8::from(ok), u8::from(!self.client.arming().tumbled())],
                 ))?;
             }
             (1, 0x03) => self.emergency_stop(),
@@ -127,8 +113,7 @@ impl CrtpShared {
 
     /// Motors off and locked until restarted, as the Crazyflie's emergency stop.
     pub(in crate::vehicle) fn emergency_stop(&mut self) {
-        self.commander.stop();
-        self.arming.lock();
+        self.client.emergency_stop();
         self.say(format_args!("emergency stop: locked"));
     }
 }

@@ -1,0 +1,317 @@
+//! The commander a client drives directly, by set-points it streams and
+//! segments it plans, under the supervisor's arming (the Crazyflie's
+//! `commander.c` with its `supervisor.c`): [`ClientCommander`]. PX4's
+//! modes, which a ground station commands by mode, are the other source of
+//! set-points on the same [`Commander`] ([`crate::modes::ModeCommander`]).
+//!
+//! It decides what a client's command may do, for any protocol that
+//! speaks this way (fc-crtp decodes CRTP into its calls and says its
+//! refusals):
+//!
+//! - **Arming** is the one check ([`Arming::arm`]); arming or disarming
+//!   stops whatever was flown, so nothing from before flies on.
+//! - **A streamed set-point** flies only while armed. It takes control from
+//!   the planner or from idle, as any command does ([`ClientCommander::plan`]).
+//! - **Taking control** is refused while disarmed or while a controller
+//!   design is under way (no controller flies then); from idle, the
+//!   controller's state is to be forgotten first ([`Takeover::Reset`]: no
+//!   state wound up on the ground flies).
+//! - **The emergency stop** stops and locks until a restart; a **recovery**
+//!   clears a tumble, unless locked or flying.
+//! - **Each step** the supervisor checks the IMU's sample and, after the
+//!   estimator, starts the failsafe descent, latches a tumble or ends a
+//!   landing ([`Supervisor`]).
+//!
+//! The motors turn while it is [`ClientCommander::flying`]: armed and the
+//! commander not idle, as a Crazyflie's do.
+
+use crate::arming::{ArmRefusal, Arming, ArmingState};
+use crate::commander::{Commander, Event, Priority, Watchdog};
+use crate::planner::{Reference, Segment};
+use crate::supervisor::{ImuCounters, ImuOutcome, Supervised, Supervisor};
+use fc_core::control::{Setpoint, StateEstimate};
+use fc_core::estimate::ImuSample;
+
+/// Why a client's command was not flown.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CommandRefusal {
+    /// The vehicle is not armed.
+    NotArmed,
+    /// A controller design is under way: no controller flies until it is done.
+    Designing,
+}
+
+impl core::fmt::Display for CommandRefusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            CommandRefusal::NotArmed => "not armed",
+            CommandRefusal::Designing => "controller design under way",
+        })
+    }
+}
+
+/// What a command that took control asks of the controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Takeover {
+    /// Fly on: the controller was flying already.
+    Continue,
+    /// Forget the controller's state before its first step (control taken
+    /// from idle: `Controller::reset`, no new design).
+    Reset,
+}
+
+/// Arming, the commander and the supervisor of a vehicle a client flies
+/// (see the module's documentation).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ClientCommander {
+    arming: Arming,
+    commander: Commander,
+    supervisor: Supervisor,
+}
+
+impl ClientCommander {
+    /// Disarmed, idle, no sample seen.
+    pub const fn new() -> Self {
+        Self {
+            arming: Arming::new(),
+            commander: Commander::new(),
+            supervisor: Supervisor::new(),
+        }
+    }
+
+    /// Armed, and the supervisor's latches (the lock, the tumble).
+    pub fn arming(&self) -> &Arming {
+        &self.arming
+    }
+
+    /// The set-point flown and its source.
+    pub fn commander(&self) -> &Commander {
+        &self.commander
+    }
+
+    /// Armed.
+    pub fn armed(&self) -> bool {
+        self.arming.armed()
+    }
+
+    /// The motors turn: armed and flying a set-point.
+    pub fn flying(&self) -> bool {
+        self.arming.armed() && !self.commander.is_idle()
+    }
+
+    /// The supervisor's "can fly": the arming check on `s` would pass, the
+    /// vehicle's start apart (the Crazyflie's `supervisorCanFly`).
+    pub fn can_fly(&self, s: &ArmingState) -> bool {
+        let started = ArmingState { started: true, ..*s };
+        self.arming.may_arm(&started).is_ok()
+    }
+
+    /// Arms if the one check passes on `s`: `Ok(true)` armed now (the
+    /// commander stopped: nothing from before flies), `Ok(false)` armed
+    /// already.
+    pub fn arm(&mut self, s: &ArmingState) -> Result<bool, ArmRefusal> {
+        let armed = self.arming.arm(s, || Ok(()))?.is_some();
+        if armed {
+            self.commander.stop();
+        }
+        Ok(armed)
+    }
+
+    /// Disarmed, the commander stopped.
+    pub fn disarm(&mut self) {
+        self.arming.disarm();
+        self.commander.stop();
+    }
+
+    /// The emergency stop: the commander stopped, disarmed and locked
+    /// until a restart.
+    pub fn emergency_stop(&mut self) {
+        self.commander.stop();
+        self.arming.lock();
+    }
+
+    /// Clears a tumble, unless locked or flying; whether it did.
+    pub fn recover(&mut self) -> bool {
+        let flying = self.flying();
+        self.arming.recover(flying)
+    }
+
+    /// Motors off: nothing flown (a client's stop).
+    pub fn stop(&mut self) {
+        self.commander.stop();
+    }
+
+    /// A client's stream hands back to the planner after `after_ms`
+    /// ([`Commander::notify_stop`]).
+    pub fn notify_stop(&mut self, now_us: u64, after_ms: u32) {
+        self.commander.notify_stop(now_us, after_ms);
+    }
+
+    /// Whether a command may take control now (`designing`: a controller
+    /// design is under way), and what it asks of the controller.
+    fn take_control(&self, designing: bool) -> Result<Takeover, CommandRefusal> {
+        if !self.arming.armed() {
+            return Err(CommandRefusal::NotArmed);
+        }
+        if designing {
+            return Err(CommandRefusal::Designing);
+        }
+        Ok(if self.commander.is_idle() {
+            Takeover::Reset
+        } else {
+            Takeover::Continue
+        })
+    }
+
+    /// Flies `sp`, a client's streamed set-point, from `now_us`: refused
+    /// while disarmed, and when control cannot be taken from anything but
+    /// a stream (a stream already flying goes on).
+    pub fn stream(&mut self, sp: Setpoint<f32>, now_us: u64, designing: bool) -> Result<Takeover, CommandRefusal> {
+        if !self.arming.armed() {
+            return Err(CommandRefusal::NotArmed);
+        }
+        let takeover = if self.commander.priority() == Priority::Streamed {
+            Takeover::Continue
+        } else {
+            self.take_control(designing)?
+        };
+        self.commander.stream(sp, now_us);
+        Ok(takeover)
+    }
+
+    /// Flies the planner's segment `seg` (`landing`: the motors stop on
+    /// the ground at its end), when control can be taken.
+    pub fn plan(&mut self, seg: Segment, landing: bool, designing: bool) -> Result<Takeover, CommandRefusal> {
+        let takeover = self.take_control(designing)?;
+        self.commander.plan(seg, landing);
+        Ok(takeover)
+    }
+
+    /// The IMU sample to step at `t_us` ([`Supervisor::take`]).
+    pub fn take_sample(&mut self, t_us: u64, s: Option<&ImuSample>) -> (Option<ImuSample>, ImuOutcome) {
+        self.supervisor.take(t_us, s)
+    }
+
+    /// A new time line (a host that started again).
+    pub fn restart(&mut self) {
+        self.supervisor.restart();
+    }
+
+    /// The set-point to fly at `t_us`, `dt_s` after the last step, with the
+    /// stream's watchdog `wd` ([`Commander::setpoint_now`]).
+    pub fn setpoint_now(&mut self, t_us: u64, dt_s: f32, wd: &Watchdog) -> (Option<Setpoint<f32>>, Option<Event>) {
+        self.commander.setpoint_now(t_us, dt_s, wd)
+    }
+
+    /// The supervisor's checks of the step at `t_us`, after its estimator
+    /// (`est`; [`Supervisor::step`]).
+    pub fn supervise(&mut self, t_us: u64, est: Option<&StateEstimate<f32>>) -> Supervised {
+        self.supervisor.step(t_us, &mut self.arming, &mut self.commander, est)
+    }
+
+    /// What is flown at `now_us`, as a reference (`est` at rest when idle).
+    pub fn reference(&self, now_us: u64, est: Option<&StateEstimate<f32>>) -> Reference {
+        self.commander.reference(now_us, est)
+    }
+
+    /// The IMU samples that were not good, by kind.
+    pub fn imu_counters(&self) -> ImuCounters {
+        self.supervisor.imu_counters()
+    }
+
+    /// A failsafe descent is under way (the IMU went silent in flight).
+    pub fn failsafe(&self) -> bool {
+        self.supervisor.failsafe()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nav::NavMode;
+    use nalgebra::Vector3;
+
+    fn ready() -> ArmingState {
+        ArmingState {
+            sensor_down: None,
+            battery_v: Some(Some(4.0)),
+            battery_floor_v: 3.2,
+            nav: NavMode::Navigating,
+            started: true,
+        }
+    }
+
+    fn sp() -> Setpoint<f32> {
+        Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0)
+    }
+
+    fn seg() -> Segment {
+        let from = Reference {
+            pos_ned_m: Vector3::zeros(),
+            vel_ned_mps: Vector3::zeros(),
+            acc_ned_mps2: Vector3::zeros(),
+            yaw_rad: 0.0,
+            yaw_rate_radps: 0.0,
+        };
+        Segment::plan(0, &from, Vector3::new(0.0, 0.0, -1.0), 0.0, 2.0).expect("a 1 m climb in 2 s plans")
+    }
+
+    /// Disarmed, nothing takes control, and nothing is flown; the refusal
+    /// is typed.
+    #[test]
+    fn a_disarmed_vehicle_flies_no_command() {
+        let mut c = ClientCommander::new();
+        assert_eq!(c.stream(sp(), 0, false), Err(CommandRefusal::NotArmed));
+        assert_eq!(c.plan(seg(), false, false), Err(CommandRefusal::NotArmed));
+        assert!(c.commander().is_idle() && !c.flying());
+        assert_eq!(CommandRefusal::NotArmed.to_string(), "not armed");
+    }
+
+    /// Control taken from idle asks for the controller's reset; a stream
+    /// already flying goes on; the planner under a stream is taken over.
+    #[test]
+    fn taking_control_from_idle_resets_the_controller_once() {
+        let mut c = ClientCommander::new();
+        assert_eq!(c.arm(&ready()), Ok(true));
+        assert_eq!(c.arm(&ready()), Ok(false), "armed already");
+        assert!(!c.flying(), "armed, nothing flown: motors off");
+        assert_eq!(c.stream(sp(), 0, false), Ok(Takeover::Reset));
+        assert!(c.flying());
+        assert_eq!(c.stream(sp(), 10, false), Ok(Takeover::Continue));
+        assert_eq!(c.plan(seg(), false, false), Ok(Takeover::Continue));
+        assert_eq!(c.commander().priority(), Priority::Planned);
+        assert_eq!(c.stream(sp(), 20, false), Ok(Takeover::Continue));
+    }
+
+    /// While a controller is designed, nothing takes control from idle or
+    /// from the planner, and says so.
+    #[test]
+    fn nothing_takes_control_while_a_controller_is_designed() {
+        let mut c = ClientCommander::new();
+        assert_eq!(c.arm(&ready()), Ok(true));
+        assert_eq!(c.stream(sp(), 0, true), Err(CommandRefusal::Designing));
+        assert_eq!(c.plan(seg(), false, true), Err(CommandRefusal::Designing));
+        assert!(c.commander().is_idle());
+        assert_eq!(CommandRefusal::Designing.to_string(), "controller design under way");
+    }
+
+    /// Arming and disarming stop what was flown; the emergency stop locks
+    /// until a restart, and a locked or flying vehicle does not recover.
+    #[test]
+    fn arming_the_stop_and_recovery_end_what_was_flown() {
+        let mut c = ClientCommander::new();
+        assert_eq!(c.arm(&ready()), Ok(true));
+        assert_eq!(c.stream(sp(), 0, false), Ok(Takeover::Reset));
+        assert!(!c.recover(), "flying: no recovery");
+        c.disarm();
+        assert!(!c.armed() && c.commander().is_idle());
+        assert!(c.recover(), "on the ground, unlocked");
+        assert_eq!(c.arm(&ready()), Ok(true));
+        assert_eq!(c.stream(sp(), 0, false), Ok(Takeover::Reset));
+        c.emergency_stop();
+        assert!(!c.armed() && c.commander().is_idle() && c.arming().locked());
+        assert!(!c.recover(), "locked");
+        assert!(!c.can_fly(&ready()));
+        assert_eq!(c.arm(&ready()), Err(ArmRefusal::Locked));
+    }
+}
