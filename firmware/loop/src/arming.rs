@@ -223,10 +223,12 @@ impl Arming {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn ready() -> ArmingState {
+    /// A state every check passes: sensors up, a full battery, the
+    /// estimator navigating, started.
+    pub(crate) fn ready() -> ArmingState {
         ArmingState {
             sensor_down: None,
             battery_v: Some(Some(4.0)),

@@ -228,18 +228,8 @@ impl ClientCommander {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nav::NavMode;
+    use crate::arming::tests::ready;
     use nalgebra::Vector3;
-
-    fn ready() -> ArmingState {
-        ArmingState {
-            sensor_down: None,
-            battery_v: Some(Some(4.0)),
-            battery_floor_v: 3.2,
-            nav: NavMode::Navigating,
-            started: true,
-        }
-    }
 
     fn sp() -> Setpoint<f32> {
         Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0)
