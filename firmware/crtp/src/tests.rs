@@ -530,56 +530,54 @@ fn a_redesigning_write_is_answered_once_the_controllers_side_has_designed() {
     let r = ask(&mut whole, write);
     assert_eq!(crate::f32_at(r.payload(), 2), Some(2.0 * before));
 
-    let (core, ctrl) = split.split();
+    let (shared, ctrl) = split.split();
     let mut out = Sent::default();
-    core.handle(&write, &mut out).unwrap();
+    shared.handle(&write, &mut out).unwrap();
     assert!(
         out.0.iter().all(|p| p.port() != Port::Param as u8),
         "answered before its design"
     );
-    let Some(work @ ControllerWork::Param { .. }) = core.take_work() else {
+    let Some(work @ ControllerWork::Param { .. }) = shared.take_work() else {
         panic!("no design queued")
     };
     assert!(work.designs(), "the watchdog's window is widened for it");
     // Meanwhile: a second write and a take-off are refused, unanswered.
-    core.handle(&write, &mut out).unwrap();
+    shared.handle(&write, &mut out).unwrap();
     assert!(out.0.iter().all(|p| p.port() != Port::Param as u8));
-    assert_eq!(core.counters().refused, 1);
-    assert!(core.take_work().is_none(), "one design at a time");
+    assert_eq!(shared.counters().refused, 1);
+    assert!(shared.take_work().is_none(), "one design at a time");
     // The estimator's steps go on while the design waits.
     let clock = MonotonicClock::default();
     let imu = ImuSample {
         gyro_frd_radps: Vector3::zeros(),
         accel_frd_mps2: Vector3::new(0.0, 0.0, -9.81),
     };
-    let step = core.imu_begin(3_001_000, Some(&imu), &[], &clock);
-    fly_step(&mut Exclusive(&mut *core), ctrl, step, &clock);
+    let step = shared.imu_begin(3_001_000, Some(&imu), &[], &clock);
+    fly_step(&mut Exclusive(&mut *shared), ctrl, step, &clock);
     // An image lends the controller to the design (at the link's priority):
     // the controller's task passes its steps meanwhile, motors off.
-    let step = core.imu_begin(3_002_000, Some(&imu), &[], &clock);
+    let step = shared.imu_begin(3_002_000, Some(&imu), &[], &clock);
     assert!(step.job.is_some(), "a step the controller would fly");
-    let p = pass_step(&mut Exclusive(&mut *core), step, &clock);
+    let p = pass_step(&mut Exclusive(&mut *shared), step, &clock);
     assert_eq!(p.u, Vector4::zeros(), "nothing flown without a controller");
     assert_eq!(p.thrusts_n, Vector4::zeros());
     assert_eq!(p.motors.commands, [0.0; 4]);
-    assert_eq!(core.motors(), [0.0; 4]);
+    assert_eq!(shared.motors(), [0.0; 4]);
     // The controller's side designs; the answer is queued for the link.
-    let (r, answer) = run_work(&mut Exclusive(&mut *core), ctrl, work);
+    let (r, answer) = run_work(&mut Exclusive(&mut *shared), ctrl, work);
     assert!(r.is_ok() && answer.is_none(), "a CRTP write is answered over CRTP");
-    let mut later = Sent::default();
-    core.poll(&mut later).unwrap();
-    let r = later
-        .0
-        .iter()
-        .find(|p| p.port() == Port::Param as u8)
-        .expect("answered after the design");
+    let r = answered_after_design(shared);
     assert_eq!(
         r.payload(),
         ask(&mut whole, write).payload(),
         "the same answer as in one piece"
     );
-    assert_eq!(core.counters().handled, 1, "the write, counted once its design is done");
-    assert!(!core.busy());
+    assert_eq!(
+        shared.counters().handled,
+        1,
+        "the write, counted once its design is done"
+    );
+    assert!(!shared.busy());
 }
 
 /// The simulator's `ParamSet` on the split vehicle: a write that needs no
@@ -595,28 +593,28 @@ fn the_simulators_redesigning_write_is_answered_by_the_controllers_side() {
     let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
     let mass = index_of(b"VEH_MASS").unwrap() as u16;
     let timeout = index_of(b"FS_TIMEOUT_MS").unwrap() as u16;
-    let (core, ctrl) = v.split();
+    let (shared, ctrl) = v.split();
     assert!(matches!(
-        core.sim_param(timeout, 300.0),
+        shared.sim_param(timeout, 300.0),
         Some(FromFc::Param { refusal: 0, .. })
     ));
     assert!(
-        core.sim_param(mass, 0.75).is_none(),
+        shared.sim_param(mass, 0.75).is_none(),
         "a re-design waits for the controller's side"
     );
-    let work = core.take_work().unwrap();
+    let work = shared.take_work().unwrap();
     assert!(matches!(
-        core.sim_param(timeout, 400.0),
+        shared.sim_param(timeout, 400.0),
         Some(FromFc::Param { refusal: 8, .. })
     ));
     assert_eq!(Refusal::Busy.code(), 8);
-    let (r, answer) = run_work(&mut Exclusive(&mut *core), ctrl, work);
+    let (r, answer) = run_work(&mut Exclusive(&mut *shared), ctrl, work);
     assert!(r.is_ok());
     let Some(FromFc::Param { value, refusal: 0, .. }) = answer else {
         panic!("{answer:?}")
     };
     assert_eq!(value, 0.75);
-    assert_eq!(core.flight_loop().settings().vehicle.mass_kg, 0.75);
+    assert_eq!(shared.flight_loop().settings().vehicle.mass_kg, 0.75);
 }
 
 /// A take-off forgets the controller's state (`ControllerWork::Reset`)
@@ -652,7 +650,7 @@ fn a_reset_controller_flies_as_a_freshly_designed_one() {
             };
             let mut fresh = CrtpVehicle::new(settings).unwrap();
             let mut wound = CrtpVehicle::new(settings).unwrap();
-            let (core, ctrl) = wound.split();
+            let (shared, ctrl) = wound.split();
             for _ in 0..300 {
                 ctrl.update(&on_ground, &up).unwrap();
             }
@@ -660,7 +658,7 @@ fn a_reset_controller_flies_as_a_freshly_designed_one() {
                 !ControllerWork::Reset.designs(),
                 "no design: the watchdog's window stays"
             );
-            let (r, _) = run_work(&mut Exclusive(&mut *core), ctrl, ControllerWork::Reset);
+            let (r, _) = run_work(&mut Exclusive(&mut *shared), ctrl, ControllerWork::Reset);
             assert!(r.is_ok());
             let (_, fresh_ctrl) = fresh.split();
             for k in 0..100 {
@@ -712,24 +710,19 @@ fn a_write_by_name_is_answered_with_its_name_and_status() {
     let r = ask(&mut v, by_name(b"mpc", b"W_POS", t, &(-1.0f32).to_le_bytes()));
     assert_eq!(r.payload(), &answer(b"mpc", b"W_POS", log::ENOEXEC)[..]);
 
-    let (core, ctrl) = v.split();
+    let (shared, ctrl) = v.split();
     let mut out = Sent::default();
-    core.handle(&by_name(b"mpc", b"W_POS", t, &4.0f32.to_le_bytes()), &mut out)
+    shared
+        .handle(&by_name(b"mpc", b"W_POS", t, &4.0f32.to_le_bytes()), &mut out)
         .unwrap();
     assert!(
         out.0.iter().all(|p| p.port() != Port::Param as u8),
         "answered before its design"
     );
-    let work = core.take_work().expect("a design queued");
-    let (r, _) = run_work(&mut Exclusive(&mut *core), ctrl, work);
+    let work = shared.take_work().expect("a design queued");
+    let (r, _) = run_work(&mut Exclusive(&mut *shared), ctrl, work);
     assert!(r.is_ok());
-    let mut later = Sent::default();
-    core.poll(&mut later).unwrap();
-    let r = later
-        .0
-        .iter()
-        .find(|p| p.port() == Port::Param as u8)
-        .expect("answered after the design");
+    let r = answered_after_design(shared);
     assert_eq!(r.payload(), &answer(b"mpc", b"W_POS", 0)[..]);
 }
 
@@ -758,6 +751,17 @@ fn the_mixer_follows_a_motor_layout_write() {
     let after = v.mixer().unwrap().thrusts(&u);
     assert_eq!(after, expected);
     assert_ne!(after, before);
+}
+
+/// The parameter answer `shared` sends once its design is done.
+fn answered_after_design(shared: &mut crate::vehicle::CrtpShared) -> Packet {
+    let mut later = Sent::default();
+    shared.poll(&mut later).unwrap();
+    *later
+        .0
+        .iter()
+        .find(|p| p.port() == Port::Param as u8)
+        .expect("answered after the design")
 }
 
 /// The console lines in `sent`.

@@ -156,6 +156,11 @@ impl core::fmt::Write for Line<'_> {
     }
 }
 
+/// What a port's handler gives: its sends' error outside (the link's to
+/// deal with), and inside what it did with the packet (a refusal is
+/// counted, [`CrtpCounters::count`]).
+type Handled<E> = Result<Result<(), CrtpError>, E>;
+
 /// Controller work a packet (or the simulator) asked for, run on the
 /// controller's side ([`run_work`]).
 #[derive(Debug, Clone, Copy)]

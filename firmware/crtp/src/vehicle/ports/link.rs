@@ -5,11 +5,7 @@
 use crate::vehicle::*;
 
 impl CrtpShared {
-    pub(in crate::vehicle) fn on_link<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_link<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         match p.channel() {
             0 => out.send(p)?,
             1 => {
@@ -23,11 +19,7 @@ impl CrtpShared {
         Ok(Ok(()))
     }
 
-    pub(in crate::vehicle) fn on_platform<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_platform<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         let d = p.payload();
         let Some(&cmd) = d.first() else {
             return Ok(Err(short(p)));
@@ -65,11 +57,7 @@ impl CrtpShared {
         Ok(Ok(()))
     }
 
-    pub(in crate::vehicle) fn on_mem<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_mem<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         match (p.channel(), p.payload().first()) {
             // No memories.
             (0, Some(&1)) => out.send(&reply(Port::Mem, 0, &[1, 0]))?,

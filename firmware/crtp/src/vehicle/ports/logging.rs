@@ -186,11 +186,7 @@ impl CrtpShared {
         v
     }
 
-    pub(in crate::vehicle) fn on_log<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_log<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         let d = p.payload();
         let Some(&cmd) = d.first() else {
             return Ok(Err(short(p)));

@@ -285,11 +285,7 @@ impl CrtpShared {
         r
     }
 
-    pub(in crate::vehicle) fn on_param<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_param<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         let d = p.payload();
         match p.channel() {
             0 => match d.first() {
@@ -363,11 +359,7 @@ impl CrtpShared {
         put_typed(r, param_entry(id).map_or(param_types::FLOAT, |(_, t, _)| t), v);
     }
 
-    pub(in crate::vehicle) fn on_param_misc<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_param_misc<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         let d = p.payload();
         let Some(&cmd) = d.first() else {
             return Ok(Err(short(p)));
@@ -423,11 +415,7 @@ impl CrtpShared {
 
     /// `MISC_SETBYNAME`: `[0, group\0, name\0, type, value]`, answered
     /// `[0, group\0, name\0, error]`.
-    pub(in crate::vehicle) fn on_set_by_name<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_set_by_name<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         let d = &p.payload()[1..];
         let mut parts = d.splitn(3, |&b| b == 0);
         let (Some(group), Some(name), Some(rest)) = (parts.next(), parts.next(), parts.next()) else {

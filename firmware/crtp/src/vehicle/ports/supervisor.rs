@@ -66,11 +66,7 @@ impl CrtpShared {
         true
     }
 
-    pub(in crate::vehicle) fn on_supervisor<S: CrtpSink>(
-        &mut self,
-        p: &Packet,
-        out: &mut S,
-    ) -> Result<Result<(), CrtpError>, S::Error> {
+    pub(in crate::vehicle) fn on_supervisor<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
         let d = p.payload();
         let Some(&cmd) = d.first() else {
             return Ok(Err(short(p)));
