@@ -141,8 +141,9 @@ fn every_controller_fits_its_cycle_budget() {
         );
     }
     // `firmware`'s two tasks apart: the IMU task (the sample to the
-    // estimate) within the estimator's 20 000 instructions, and with the
-    // controller task (to the output) within the 1 kHz step's 74 600.
+    // estimate) within the estimator's budget (`ESTIMATOR_STEP_INSTRUCTIONS`),
+    // and with the controller task (to the output) within the 1 kHz step's
+    // (`IMAGE_STEP_INSTRUCTIONS`).
     for form in ["euler", "quaternion"] {
         let task = |what: &str| -> f64 {
             let r = rows
@@ -177,8 +178,8 @@ fn every_controller_fits_its_cycle_budget() {
         );
     }
     // The fast MPC at 1 kHz: the whole image step (IMU sample and a fix in,
-    // estimator, MPC, output) within 74 600 instructions (× CPI 1.5 × margin
-    // 1.5 ≤ 168 000 cycles), both forms.
+    // estimator, MPC, output) within `IMAGE_STEP_INSTRUCTIONS` (× CPI 1.5 ×
+    // margin 1.5 ≤ 168 000 cycles), both forms.
     let image: Vec<_> = rows
         .iter()
         .filter(|r| r[0] == "mpc-fast" && r[3].starts_with("image step (IMU"))

@@ -18,13 +18,15 @@
 //!   one (up to branches: which candidate wins, clamps);
 //! - for the fast MPC, `image step`: the whole step of the image at 1 kHz
 //!   (IMU sample and a fix in, estimator, MPC, output), as the image itself
-//!   counts it, enforced at 74 600 instructions; and the same with the
-//!   lockstep link's frames, for information;
+//!   counts it, enforced at
+//!   [`fc_stm32f405::budgets::IMAGE_STEP_INSTRUCTIONS`]; and the same with
+//!   the lockstep link's frames, for information;
 //! - and `FGM to its a-priori bound, info`: the fast gradient method the
 //!   exact solve replaced, forced to run its whole certified iteration
 //!   bound, for comparison;
 //! - and the CRTP link's longest hold of the vehicle over the packets that
-//!   take it longest (`holds.rs`), enforced at 6 000 instructions.
+//!   take it longest (`holds.rs`), enforced at
+//!   [`fc_stm32f405::budgets::LINK_HOLD_INSTRUCTIONS`].
 //!
 //! A controller fits when `worst instructions × CPI × margin ≤ 168 MHz / rate`
 //! with CPI 1.5 (Cortex-M4 from flash with the ART accelerator, FPU code;
