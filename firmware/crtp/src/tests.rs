@@ -1163,3 +1163,51 @@ fn log_variables_read_the_estimate_set_point_and_supervisor_by_name() {
     assert_eq!(vals[at("motor", "m1")], 0.0);
     assert_eq!(vals[at("supervisor", "info")], f32::from(v.supervisor_bits()));
 }
+
+/// The Crazyflie's fixed choices and read-only flags (`EXTRA_PARAMS`)
+/// take their one value and refuse any other, naming that value (the
+/// range used to name the value refused); the estimator's reset is the
+/// flight stack's to refuse while the motors turn
+/// ([`fc_loop::Loop::reset_estimation`]).
+#[test]
+fn fixed_entries_take_one_value_and_a_reset_waits_for_the_motors() {
+    let mut v = at_rest(3000);
+    let fixed: [(&[u8], &[u8], u8); 3] = [
+        (b"stabilizer", b"estimator", 2),
+        (b"commander", b"enHighLevel", 1),
+        (b"deck", b"bcLedRing", 0),
+    ];
+    for (g, n, one) in fixed {
+        let id = find(g, n).to_le_bytes();
+        let (r, said) = ask_said(&mut v, pk(Port::Param, 2, &[id[0], id[1], one + 1]));
+        assert_eq!(r.payload().get(2), Some(&one), "the value in force");
+        assert!(said.contains(&format!("out of [{one}, {one}]")), "{said}");
+        let (r, said) = ask_said(&mut v, pk(Port::Param, 2, &[id[0], id[1], one]));
+        assert_eq!(r.payload().get(2), Some(&one));
+        assert_eq!(said, "", "its own value is taken");
+    }
+    let reset = find(b"kalman", b"resetEstimation").to_le_bytes();
+    assert_eq!(
+        ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1])).payload(),
+        &[0x81, 1, 1]
+    );
+    let mut out = Sent::default();
+    v.handle(&takeoff(0.5, 2.0), &mut out).unwrap();
+    assert!(v.flying());
+    let (_, said) = ask_said(&mut v, pk(Port::Param, 2, &[reset[0], reset[1], 1]));
+    assert!(said.contains("kalman.resetEstimation: disarm first"), "{said}");
+    assert_eq!(
+        v.flight_loop().navigator().mode(),
+        fc_loop::nav::NavMode::Navigating,
+        "not reset in flight"
+    );
+    v.handle(&pk(Port::Generic, 0, &[0]), &mut out).unwrap();
+    assert!(!v.flying());
+    let (_, said) = ask_said(&mut v, pk(Port::Param, 2, &[reset[0], reset[1], 1]));
+    assert!(said.contains("estimator reset"), "{said}");
+    assert_eq!(
+        v.flight_loop().navigator().mode(),
+        fc_loop::nav::NavMode::Aligning,
+        "reset on the ground"
+    );
+}

@@ -335,6 +335,19 @@ impl Loop {
         self.last_control_us = None;
     }
 
+    /// Restarts the estimator at a client's request (a Crazyflie's
+    /// `kalman.resetEstimation`): a new time line ([`Loop::open_session`]),
+    /// refused ([`params::Refusal::Armed`]) while `motors_turn` (the front
+    /// end's gate, as for a parameter write): nothing could hold the
+    /// vehicle while its estimator aligns again.
+    pub fn reset_estimation(&mut self, motors_turn: bool) -> Result<(), params::Refusal> {
+        if motors_turn {
+            return Err(params::Refusal::Armed);
+        }
+        self.open_session();
+        Ok(())
+    }
+
     /// Flies `sp` from now on, as a `Setpoint` message does; a set-point
     /// with NaN/∞ is refused (counted) and `false` returned.
     pub fn set_setpoint(&mut self, sp: &Setpoint<f32>) -> bool {

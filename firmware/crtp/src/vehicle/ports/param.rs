@@ -42,6 +42,19 @@ pub enum Extra {
     Deck,
 }
 
+impl Extra {
+    /// The one value a fixed choice or a read-only flag has (`None`: an
+    /// alias or a command, which read their own).
+    pub const fn fixed(self) -> Option<f32> {
+        match self {
+            Extra::Estimator => Some(2.0),
+            Extra::EnHighLevel => Some(1.0),
+            Extra::Deck => Some(0.0),
+            Extra::Alias(_) | Extra::ResetEstimation => None,
+        }
+    }
+}
+
 /// The Crazyflie-named entries that are not the flight stack's
 /// parameters, last in the param TOC: a command, the fixed choices of a
 /// Crazyflie (the Kalman estimator, the high-level commander) and the
@@ -211,10 +224,8 @@ impl CrtpShared {
         Some(match extra {
             None => (PARAMS[id].get)(s),
             Some(Extra::ResetEstimation) => 0.0,
-            Some(Extra::Estimator) => 2.0,
-            Some(Extra::EnHighLevel) => 1.0,
             Some(Extra::Alias(i)) => (PARAMS[i].get)(s),
-            Some(Extra::Deck) => 0.0,
+            Some(fixed) => fixed.fixed()?,
         })
     }
 
@@ -241,18 +252,22 @@ impl CrtpShared {
             None => id,
             Some(Extra::Alias(i)) => i,
             Some(Extra::ResetEstimation) if value == 0.0 => return Ok(Written::Now),
-            Some(Extra::ResetEstimation) if self.flying() => return Err(Refusal::Armed),
             Some(Extra::ResetEstimation) => {
-                self.lp.open_session();
+                self.lp.reset_estimation(self.flying())?;
                 self.heading_seen = false;
                 self.say(format_args!("estimator reset"));
                 return Ok(Written::Now);
             }
-            Some(Extra::Estimator) if value == 2.0 => return Ok(Written::Now),
-            Some(Extra::EnHighLevel) if value == 1.0 => return Ok(Written::Now),
-            // Read-only: the value in force, 0, is the only one taken.
-            Some(Extra::Deck) if value == 0.0 => return Ok(Written::Now),
-            Some(_) => return Err(Refusal::Range { lo: value, hi: value }),
+            // A fixed choice or a read-only flag takes its one value and
+            // refuses any other, naming it.
+            Some(fixed) => {
+                let v = fixed.fixed().ok_or(Refusal::Unknown)?;
+                return if value == v {
+                    Ok(Written::Now)
+                } else {
+                    Err(Refusal::Range { lo: v, hi: v })
+                };
+            }
         };
         // Checked as a whole, the mixer's settings included, before
         // anything is taken.
