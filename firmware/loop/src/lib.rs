@@ -321,7 +321,10 @@ impl Loop {
     }
 
     /// Opens a session, as an accepted `Hello` does: a new time line (a
-    /// simulation restarts at t = 0), the estimator starts over.
+    /// simulation restarts at t = 0), the estimator starts over. Out of
+    /// line: its callers (a `Hello`, a host's restart, an estimator reset)
+    /// are rare, and each inlined copy is ~350 B of flash.
+    #[inline(never)]
     pub fn open_session(&mut self) {
         self.session = true;
         self.last_seq = None;
