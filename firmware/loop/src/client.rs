@@ -94,9 +94,10 @@ impl ClientCommander {
         self.arming.armed()
     }
 
-    /// The motors turn: armed and flying a set-point.
+    /// The motors turn: armed and flying a set-point
+    /// ([`crate::supervisor::flying`]).
     pub fn flying(&self) -> bool {
-        self.arming.armed() && !self.commander.is_idle()
+        crate::supervisor::flying(&self.arming, &self.commander)
     }
 
     /// The supervisor's "can fly": the arming check on `s` would pass, the
@@ -167,10 +168,8 @@ impl ClientCommander {
     /// while disarmed, and when control cannot be taken from anything but
     /// a stream (a stream already flying goes on).
     pub fn stream(&mut self, sp: Setpoint<f32>, now_us: u64, designing: bool) -> Result<Takeover, CommandRefusal> {
-        if !self.arming.armed() {
-            return Err(CommandRefusal::NotArmed);
-        }
-        let takeover = if self.commander.priority() == Priority::Streamed {
+        // A stream already flying goes on; anything else takes control.
+        let takeover = if self.flying() && self.commander.priority() == Priority::Streamed {
             Takeover::Continue
         } else {
             self.take_control(designing)?

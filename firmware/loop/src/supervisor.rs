@@ -64,6 +64,13 @@ pub fn tumbled(q: &fc_core::model::Quat<f32>) -> bool {
     cos_tilt < COS_TUMBLE_TILT
 }
 
+/// The supervisor's gate: the motors turn, armed (`arming`) and flying a
+/// set-point (the `commander` not idle), as a Crazyflie's do.
+#[inline]
+pub fn flying(arming: &Arming, commander: &Commander) -> bool {
+    arming.armed() && !commander.is_idle()
+}
+
 /// A sensor the board could not start, as the vehicle's console and its
 /// arming refusal name it (the driver's full error goes to the board's log).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -262,7 +269,6 @@ impl Supervisor {
         commander: &mut Commander,
         est: Option<&StateEstimate<f32>>,
     ) -> Supervised {
-        let flying = |arming: &Arming, c: &Commander| arming.armed() && !c.is_idle();
         let mut done = Supervised::default();
         if !self.imu.silent() {
             self.descending = false;
