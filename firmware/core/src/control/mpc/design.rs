@@ -22,6 +22,21 @@ pub(super) struct ModelWork<const S: usize> {
     bd_all: SMatrix<f64, S, 10>,
 }
 
+/// The continuous hover model with the disturbance inputs appended, as
+/// [`ModelWork::hover`] builds it without lag, and nothing else.
+pub(super) struct HoverModel {
+    pub(super) a: SMatrix<f64, 12, 12>,
+    pub(super) b_all: SMatrix<f64, 12, 10>,
+}
+
+impl HoverModel {
+    /// The hover model of `form` for `p64`.
+    pub(super) fn of(form: AttitudeForm, p64: &VehicleParams<f64>) -> Self {
+        let w = ModelWork::<12>::hover(form, p64, None);
+        Self { a: w.a, b_all: w.b_all }
+    }
+}
+
 impl<const S: usize> ModelWork<S> {
     /// The hover model of `form` for `p64` (ZOH parts zero); with
     /// `rotor_tau_s` (and `S` ≥ 16) the inputs drive the lag states
@@ -51,6 +66,16 @@ impl<const S: usize> ModelWork<S> {
         Self {
             a,
             b_all,
+            ad: SMatrix::zeros(),
+            bd_all: SMatrix::zeros(),
+        }
+    }
+
+    /// Every matrix zero.
+    pub(super) fn blank() -> Self {
+        Self {
+            a: SMatrix::zeros(),
+            b_all: SMatrix::zeros(),
             ad: SMatrix::zeros(),
             bd_all: SMatrix::zeros(),
         }
@@ -152,25 +177,80 @@ pub(super) fn prediction_model(cfg: &MpcConfig, p64: &VehicleParams<f64>) -> Pre
     }
 }
 
+/// A group design's matrices: state, input, terminal weight, and the
+/// group's index of each prediction state (`usize::MAX`: not in it).
+type GroupDesign<'a> = (
+    &'a SMatrix<f64, 12, 12>,
+    &'a SMatrix<f64, 12, 4>,
+    &'a SMatrix<f64, 12, 12>,
+    &'a [usize; PREDICTION_STATES],
+);
+
+/// A channel's blocks (its states `idx`, input `c`; `a` and `p` row-major
+/// `K × K`, `b` of `K`) from a group's design; a state not designed (a lag
+/// state of the hover model alone) is stored as zero. Not generic in the
+/// channel's size: one copy in the image.
+#[inline(never)]
+fn store_channel<T: RealField + Copy>(
+    (a, b, p): (&mut [T], &mut [T], &mut [T]),
+    idx: &[usize],
+    (ad, bd, pt, local): GroupDesign<'_>,
+    c: usize,
+) {
+    let k = idx.len();
+    let at = |m: &SMatrix<f64, 12, 12>, i: usize, j: usize| match (local[i], local[j]) {
+        (usize::MAX, _) | (_, usize::MAX) => 0.0,
+        (li, lj) => m[(li, lj)],
+    };
+    for (r, &i) in idx.iter().enumerate() {
+        for (s, &j) in idx.iter().enumerate() {
+            a[r * k + s] = lit(at(ad, i, j));
+            p[r * k + s] = lit(at(pt, i, j));
+        }
+        b[r] = lit(if local[i] == usize::MAX { 0.0 } else { bd[(local[i], c)] });
+    }
+}
+
+/// The prediction states of channel `c` (0 thrust, 1 roll, 2 pitch, 3 yaw).
+fn channel_states(c: usize) -> &'static [usize] {
+    const C: ([usize; 3], [usize; 5], [usize; 5], [usize; 3]) = CHANNELS;
+    match c {
+        0 => &C.0,
+        1 => &C.1,
+        2 => &C.2,
+        _ => &C.3,
+    }
+}
+
 /// Whether the continuous prediction model's state matrix `a` and its
 /// input columns (the first four of `b_all`) couple no two of the
-/// [`CHANNELS`]: every entry between two channels below 1e-9 of the
-/// matrix's largest. Then each channel's ZOH and DARE are the whole
+/// [`CHANNELS`]: every entry between two channels exactly zero, as the
+/// hover model builds them. Then each channel's ZOH and DARE are the whole
 /// model's, restricted to it, and the design runs channel by channel.
+#[inline(never)]
 pub(super) fn channels_decouple<const S: usize>(a: &SMatrix<f64, S, S>, b_all: &SMatrix<f64, S, 10>) -> bool {
-    let (z, y, x, w) = CHANNELS;
-    let mut channel = [usize::MAX; S];
-    for (c, states) in [&z[..], &y[..], &x[..], &w[..]].iter().enumerate() {
-        for &i in states.iter().filter(|&&i| i < S) {
-            channel[i] = c;
+    let mut channel = [u8::MAX; S];
+    for c in 0..4 {
+        for &i in channel_states(c).iter().filter(|&&i| i < S) {
+            channel[i] = c as u8;
         }
     }
-    let tol = a.amax() * 1e-9;
-    let square_ok = (0..S).all(|i| (0..S).all(|j| channel[i] == channel[j] || a[(i, j)].abs() <= tol));
-    let b = b_all.fixed_columns::<4>(0);
-    let tol = b.amax() * 1e-9;
-    let input_ok = (0..S).all(|i| (0..4).all(|c| channel[i] == c || b[(i, c)].abs() <= tol));
-    square_ok && input_ok
+    for (j, &cj) in channel.iter().enumerate() {
+        for (i, &ci) in channel.iter().enumerate() {
+            if ci != cj && a[(i, j)] != 0.0 {
+                return false;
+            }
+        }
+        if j < 4
+            && channel
+                .iter()
+                .enumerate()
+                .any(|(i, &ci)| ci != j as u8 && b_all[(i, j)] != 0.0)
+        {
+            return false;
+        }
+    }
+    true
 }
 
 impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T, N, M, NZ> {
@@ -230,26 +310,117 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     }
 
     /// Prediction model (ZOH at `pred_dt`) and the terminal weight (DARE of
-    /// (Q, R), or Q), designed and stored channel by channel: with the
-    /// rotors' lag states when [`MpcConfig::rotor_lag_prediction`] (and the
-    /// rotors lag), else the hover model alone (the lag states' blocks
-    /// zero). The channels do not couple (checked here on the continuous
-    /// model), so each channel's ZOH and DARE, of 3 or 5 states and one
-    /// input, are the whole 16-state model's: the design's f64 scratch is a
-    /// few hundred bytes a channel, not a 16-state Riccati workspace.
+    /// (Q, R), or Q), stored channel by channel: with the rotors' lag
+    /// states when [`MpcConfig::rotor_lag_prediction`] (and the rotors lag),
+    /// else the hover model alone (the lag states' blocks zero). The
+    /// channels do not couple (checked here on the continuous hover model;
+    /// the lag adds to each channel only its own input's state), so the
+    /// 16-state model is designed as two models of 12 states, thrust with
+    /// yaw and roll with pitch, with the 12-state ZOH and DARE the observer
+    /// and the LQR use too: no larger Riccati workspace on the stack, and
+    /// no other size of them in the image.
     #[inline(never)]
     pub(super) fn design_prediction(&mut self, p64: &VehicleParams<f64>) -> Result<(), ControlError> {
-        let lag = (self.cfg.rotor_lag_prediction && p64.rotor_tau_s > 0.0).then_some(p64.rotor_tau_s);
-        let w = ModelWork::<PREDICTION_STATES>::hover(self.cfg.form, p64, lag);
-        if !channels_decouple(&w.a, &w.b_all) {
+        // The continuous hover model alone (no ZOH parts: they would sit on
+        // the stack beneath the groups' designs).
+        let hover = HoverModel::of(self.cfg.form, p64);
+        if !channels_decouple(&hover.a, &hover.b_all) {
             return Err(ControlError::InvalidParameter);
         }
+        if self.cfg.rotor_lag_prediction && p64.rotor_tau_s > 0.0 {
+            self.design_group(&hover, &[0, 3], Some(p64.rotor_tau_s))?;
+            self.design_group(&hover, &[1, 2], Some(p64.rotor_tau_s))
+        } else {
+            self.design_group(&hover, &[0, 1, 2, 3], None)
+        }
+    }
+
+    /// Designs the channels `chans` in one model of 12 states: their states
+    /// and, with the rotors' time constant `tau`, their lag states; the
+    /// rest of the 12 are states of their own that nothing drives or
+    /// weighs, decaying at `1/pred_dt`, so the DARE sees them stable. The
+    /// hover model alone (`tau` `None`, every channel) keeps its own state
+    /// order. Stores each channel's blocks and the disturbance rows.
+    // Design-time code: kept out of line so that its large frames are not
+    // merged into the callers' (stack) and not copied into each (flash).
+    #[inline(never)]
+    fn design_group(&mut self, hover: &HoverModel, chans: &[usize], tau: Option<f64>) -> Result<(), ControlError> {
+        // The group's states: (prediction state, its index in the group);
+        // `local` the reverse (usize::MAX: not in the group).
+        let mut states = [(0usize, 0usize); 12];
+        let mut local = [usize::MAX; PREDICTION_STATES];
+        let mut n = 0;
+        for &c in chans {
+            for &i in channel_states(c) {
+                if i >= 12 && tau.is_none() {
+                    continue;
+                }
+                let li = if tau.is_some() { n } else { i };
+                *states.get_mut(n).ok_or(ControlError::InvalidParameter)? = (i, li);
+                local[i] = li;
+                n += 1;
+            }
+        }
+        let states = &states[..n];
+        let dt = self.cfg.pred_dt_s;
+        let mut w = ModelWork::<12>::blank();
+        for l in n..12 {
+            w.a[(l, l)] = -1.0 / dt;
+        }
+        for &(i, li) in states {
+            if i >= 12 {
+                // A lag state: `U̇_d = (U − U_d)/τ` of its own input.
+                let (c, tau) = (i - 12, tau.unwrap_or(dt));
+                w.a[(li, li)] = -1.0 / tau;
+                w.b_all[(li, c)] = 1.0 / tau;
+                continue;
+            }
+            for &(j, lj) in states {
+                // The vehicle's state matrix; its input matrix, into the lag
+                // states when they are there, else from the inputs.
+                w.a[(li, lj)] = if j < 12 {
+                    hover.a[(i, j)]
+                } else {
+                    hover.b_all[(i, j - 12)]
+                };
+            }
+            for col in 0..10 {
+                if col >= 4 || tau.is_none() {
+                    w.b_all[(li, col)] = hover.b_all[(i, col)];
+                }
+            }
+        }
+        w.zoh(dt)?;
+        let mut q = SMatrix::<f64, 12, 12>::zeros();
+        for &(i, li) in states.iter().filter(|&&(i, _)| i < 12) {
+            q[(li, li)] = self.cfg.q[i];
+        }
+        let bd: SMatrix<f64, 12, 4> = w.bd_all.fixed_columns::<4>(0).into_owned();
+        let p = if self.cfg.terminal {
+            // A tiny input weight keeps R invertible when the config has
+            // zeros (and for the inputs of the channels not in the group,
+            // which move nothing here).
+            let rr = SMatrix::<f64, 4, 4>::from_diagonal(&Vector4::<f64>::from(self.cfg.r).map(|v| v.max(1e-6)));
+            solve_dare(&w.ad, &bd, &q, &rr)?.x
+        } else {
+            q
+        };
         let (zi, yi, xi, wi) = CHANNELS;
-        let (cfg, lagged) = (self.cfg, lag.is_some());
-        self.zc.design(&zi, 0, &w, &cfg, lagged, &mut self.wd)?;
-        self.yc.design(&yi, 1, &w, &cfg, lagged, &mut self.wd)?;
-        self.xc.design(&xi, 2, &w, &cfg, lagged, &mut self.wd)?;
-        self.wc.design(&wi, 3, &w, &cfg, lagged, &mut self.wd)
+        let m = (&w.ad, &bd, &p, &local);
+        for &c in chans {
+            match c {
+                0 => store_channel(self.zc.blocks(), &zi, m, c),
+                1 => store_channel(self.yc.blocks(), &yi, m, c),
+                2 => store_channel(self.xc.blocks(), &xi, m, c),
+                _ => store_channel(self.wc.blocks(), &wi, m, c),
+            }
+        }
+        for &(i, li) in states.iter().filter(|&&(i, _)| i < 12) {
+            for col in 0..6 {
+                self.wd[(i, col)] = lit(w.bd_all[(li, 4 + col)]);
+            }
+        }
+        Ok(())
     }
 
     /// Observer model (ZOH at `exec_dt`), its velocity and rate rows.
@@ -361,69 +532,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
 
 impl<T: RealField + Copy, const K: usize, const M: usize> Channel<T, K, M> {
     /// This channel's blocks of the f64 design (its states `idx`, input `c`).
-    /// Designs this channel (its states `idx`, input `c`) from the
-    /// continuous prediction model `w`: the ZOH of its block at `pred_dt`
-    /// (its input and the disturbance inputs; the disturbance rows into
-    /// `wd`) and its terminal weight. Without the lag (`lagged` false) the
-    /// lag state (the channel's last) is given a decay of its own, so that
-    /// the DARE sees a stable mode nothing drives or weighs, and its blocks
-    /// are then stored as zero.
-    // Design-time code: kept out of line so that its large frames are not
-    // merged into the callers' (stack) and not copied into each (flash).
-    #[inline(never)]
-    fn design(
-        &mut self,
-        idx: &[usize; K],
-        c: usize,
-        w: &ModelWork<PREDICTION_STATES>,
-        cfg: &MpcConfig,
-        lagged: bool,
-        wd: &mut SMatrix<T, 12, 6>,
-    ) -> Result<(), ControlError> {
-        let mut a = SMatrix::<f64, K, K>::zeros();
-        let mut b_all = SMatrix::<f64, K, 10>::zeros();
-        for (r, &i) in idx.iter().enumerate() {
-            for (s, &j) in idx.iter().enumerate() {
-                a[(r, s)] = w.a[(i, j)];
-            }
-            for col in 0..10 {
-                b_all[(r, col)] = w.b_all[(i, col)];
-            }
-        }
-        if !lagged {
-            a[(K - 1, K - 1)] = -1.0 / cfg.pred_dt_s;
-        }
-        let (mut ad, mut bd_all) = (SMatrix::<f64, K, K>::zeros(), SMatrix::<f64, K, 10>::zeros());
-        zoh_into(&a, &b_all, cfg.pred_dt_s, &mut ad, &mut bd_all)?;
-        let bd: SMatrix<f64, K, 1> = bd_all.fixed_columns::<1>(c).into_owned();
-        let mut q = SMatrix::<f64, K, K>::zeros();
-        for (r, &i) in idx.iter().enumerate() {
-            if i < 12 {
-                q[(r, r)] = cfg.q[i];
-            }
-        }
-        let p = if cfg.terminal {
-            // A tiny input weight keeps R invertible when the config has zeros.
-            let rr = SMatrix::<f64, 1, 1>::new(cfg.r[c].max(1e-6));
-            solve_dare(&ad, &bd, &q, &rr)?.x
-        } else {
-            q
-        };
-        let keep = |r: usize| lagged || r < K - 1;
-        for r in 0..K {
-            for s in 0..K {
-                let on = keep(r) && keep(s);
-                self.a[r][s] = if on { lit(ad[(r, s)]) } else { T::zero() };
-                self.p[r][s] = if on { lit(p[(r, s)]) } else { T::zero() };
-            }
-            self.b[r] = if keep(r) { lit(bd[r]) } else { T::zero() };
-        }
-        for (r, &i) in idx.iter().enumerate().filter(|&(_, &i)| i < 12) {
-            for col in 0..6 {
-                wd[(i, col)] = lit(bd_all[(r, 4 + col)]);
-            }
-        }
-        Ok(())
+    /// The channel's blocks as flat slices, for [`store_channel`].
+    fn blocks(&mut self) -> (&mut [T], &mut [T], &mut [T]) {
+        (self.a.as_flattened_mut(), &mut self.b, self.p.as_flattened_mut())
     }
 
     /// The gradient `g` of a unit initial state `col`, when `col` is one of

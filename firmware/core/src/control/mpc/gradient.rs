@@ -104,26 +104,24 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
 
     /// The prediction model's state after one step from `x`, with no input.
     pub(super) fn predict(&self, x: &VecX<T>) -> VecX<T> {
-        fn channel<T: RealField + Copy, const K: usize, const M: usize>(
-            c: &Channel<T, K, M>,
-            idx: &[usize; K],
-            x: &VecX<T>,
-            y: &mut VecX<T>,
-        ) {
-            for (a, &i) in idx.iter().enumerate() {
+        // Design-time only: one copy for every channel's size.
+        #[inline(never)]
+        fn channel<T: RealField + Copy>(a: &[T], idx: &[usize], x: &VecX<T>, y: &mut VecX<T>) {
+            let k = idx.len();
+            for (r, &i) in idx.iter().enumerate() {
                 let mut s = T::zero();
-                for (b, &j) in idx.iter().enumerate() {
-                    s += c.a[a][b] * x[j];
+                for (c, &j) in idx.iter().enumerate() {
+                    s += a[r * k + c] * x[j];
                 }
                 y[i] = s;
             }
         }
         let mut y = VecX::<T>::zeros();
         let (z, yi, xi, w) = CHANNELS;
-        channel(&self.zc, &z, x, &mut y);
-        channel(&self.yc, &yi, x, &mut y);
-        channel(&self.xc, &xi, x, &mut y);
-        channel(&self.wc, &w, x, &mut y);
+        channel(self.zc.a.as_flattened(), &z, x, &mut y);
+        channel(self.yc.a.as_flattened(), &yi, x, &mut y);
+        channel(self.xc.a.as_flattened(), &xi, x, &mut y);
+        channel(self.wc.a.as_flattened(), &w, x, &mut y);
         y
     }
 

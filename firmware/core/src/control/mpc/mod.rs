@@ -846,21 +846,19 @@ mod tests {
         assert!(b < a, "rotors already delivering {u1}: {b} vs {a}");
     }
 
-    /// The design checks that the continuous model couples no two
-    /// channels before it designs them one by one; a coupled one is refused.
+    /// The design checks that the continuous hover model couples no two
+    /// channels before it designs them; a coupled one is refused.
     #[test]
     fn a_coupled_model_is_refused() {
         let p = VehicleParams::<f64>::os4();
-        for lag in [None, Some(p.rotor_tau_s)] {
-            let w = design::ModelWork::<PREDICTION_STATES>::hover(AttitudeForm::Euler, &p, lag);
-            assert!(design::channels_decouple(&w.a, &w.b_all));
-            let mut coupled = design::ModelWork::<PREDICTION_STATES>::hover(AttitudeForm::Euler, &p, lag);
-            coupled.a[(0, 1)] = 0.1; // x driven by y: no longer four channels
-            assert!(!design::channels_decouple(&coupled.a, &coupled.b_all));
-            let mut coupled = design::ModelWork::<PREDICTION_STATES>::hover(AttitudeForm::Euler, &p, lag);
-            coupled.b_all[(12, 1)] = 0.1; // the thrust's lag state driven by the roll input
-            assert!(!design::channels_decouple(&coupled.a, &coupled.b_all));
-        }
+        let w = design::ModelWork::<12>::hover(AttitudeForm::Euler, &p, None);
+        assert!(design::channels_decouple(&w.a, &w.b_all));
+        let mut coupled = design::ModelWork::<12>::hover(AttitudeForm::Euler, &p, None);
+        coupled.a[(0, 1)] = 0.1; // x driven by y: no longer four channels
+        assert!(!design::channels_decouple(&coupled.a, &coupled.b_all));
+        let mut coupled = design::ModelWork::<12>::hover(AttitudeForm::Euler, &p, None);
+        coupled.b_all[(5, 1)] = 0.1; // ż driven by the roll torque
+        assert!(!design::channels_decouple(&coupled.a, &coupled.b_all));
     }
 
     /// At hover, with no disturbance, a step of any measured length is
