@@ -22,8 +22,8 @@ pub(super) struct ModelWork<const S: usize> {
     bd_all: SMatrix<f64, S, 10>,
 }
 
-/// The continuous hover model with the disturbance inputs appended, as
-/// [`ModelWork::hover`] builds it without lag, and nothing else.
+/// The continuous hover model with the disturbance inputs appended,
+/// `[B | Bw]`, and nothing else.
 pub(super) struct HoverModel {
     pub(super) a: SMatrix<f64, 12, 12>,
     pub(super) b_all: SMatrix<f64, 12, 10>,
@@ -32,43 +32,42 @@ pub(super) struct HoverModel {
 impl HoverModel {
     /// The hover model of `form` for `p64`.
     pub(super) fn of(form: AttitudeForm, p64: &VehicleParams<f64>) -> Self {
-        let w = ModelWork::<12>::hover(form, p64, None);
-        Self { a: w.a, b_all: w.b_all }
+        let lm: LinearModel<f64> = match form {
+            AttitudeForm::Euler => euler_hover_model(p64, 0.0),
+            AttitudeForm::Quaternion => quat_hover_model(p64, 0.0),
+        };
+        let mut b_all = SMatrix::<f64, 12, 10>::zeros();
+        b_all.fixed_columns_mut::<4>(0).copy_from(&lm.b);
+        for i in 0..3 {
+            b_all[(3 + i, 4 + i)] = 1.0;
+            b_all[(9 + i, 7 + i)] = 1.0;
+        }
+        Self { a: lm.a, b_all }
     }
 }
 
 impl<const S: usize> ModelWork<S> {
     /// The hover model of `form` for `p64` (ZOH parts zero); with
     /// `rotor_tau_s` (and `S` ≥ 16) the inputs drive the lag states
-    /// `U̇_d = (U − U_d)/τr` and those drive the vehicle.
+    /// `U̇_d = (U − U_d)/τr` and those drive the vehicle. (The tests' whole
+    /// 16-state model; the images design from [`HoverModel`].)
+    #[cfg(test)]
     pub(super) fn hover(form: AttitudeForm, p64: &VehicleParams<f64>, rotor_tau_s: Option<f64>) -> Self {
-        let lm: LinearModel<f64> = match form {
-            AttitudeForm::Euler => euler_hover_model(p64, 0.0),
-            AttitudeForm::Quaternion => quat_hover_model(p64, 0.0),
-        };
-        let mut a = SMatrix::<f64, S, S>::zeros();
-        let mut b_all = SMatrix::<f64, S, 10>::zeros();
-        a.fixed_view_mut::<12, 12>(0, 0).copy_from(&lm.a);
-        match rotor_tau_s {
-            Some(tau) if S >= 16 => {
-                a.fixed_view_mut::<12, 4>(0, 12).copy_from(&lm.b);
-                for c in 0..4 {
-                    a[(12 + c, 12 + c)] = -1.0 / tau;
-                    b_all[(12 + c, c)] = 1.0 / tau;
-                }
+        let h = HoverModel::of(form, p64);
+        let mut w = Self::blank();
+        w.a.fixed_view_mut::<12, 12>(0, 0).copy_from(&h.a);
+        w.b_all.fixed_view_mut::<12, 10>(0, 0).copy_from(&h.b_all);
+        if let Some(tau) = rotor_tau_s.filter(|_| S >= 16) {
+            // The inputs through the lag states.
+            w.a.fixed_view_mut::<12, 4>(0, 12)
+                .copy_from(&h.b_all.fixed_columns::<4>(0));
+            w.b_all.fixed_view_mut::<12, 4>(0, 0).fill(0.0);
+            for c in 0..4 {
+                w.a[(12 + c, 12 + c)] = -1.0 / tau;
+                w.b_all[(12 + c, c)] = 1.0 / tau;
             }
-            _ => b_all.fixed_view_mut::<12, 4>(0, 0).copy_from(&lm.b),
         }
-        for i in 0..3 {
-            b_all[(3 + i, 4 + i)] = 1.0;
-            b_all[(9 + i, 7 + i)] = 1.0;
-        }
-        Self {
-            a,
-            b_all,
-            ad: SMatrix::zeros(),
-            bd_all: SMatrix::zeros(),
-        }
+        w
     }
 
     /// Every matrix zero.
@@ -426,7 +425,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     /// Observer model (ZOH at `exec_dt`), its velocity and rate rows.
     #[inline(never)]
     pub(super) fn design_observer(&mut self, p64: &VehicleParams<f64>) -> Result<(), ControlError> {
-        let mut w = ModelWork::<12>::hover(self.cfg.form, p64, None);
+        let h = HoverModel::of(self.cfg.form, p64);
+        let mut w = ModelWork::<12>::blank();
+        w.a = h.a;
+        w.b_all = h.b_all;
         w.zoh(self.cfg.exec_dt_s)?;
         w.store_observed(&mut self.ad_e, &mut self.bd_e, &mut self.wd_e);
         Ok(())

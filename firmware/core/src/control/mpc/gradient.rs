@@ -76,30 +76,30 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     /// `Gx·x₀`: the gradient of the free response from the initial state
     /// `x0`, each channel's moves from its own states.
     pub(super) fn initial_response(&self, x0: &VecX<T>) -> SVector<T, NZ> {
+        // One copy for every channel's size (48 products a step).
+        #[inline(never)]
+        fn channel<T: RealField + Copy, const NZ: usize>(
+            gx: &[T],
+            idx: &[usize],
+            ch: usize,
+            x0: &VecX<T>,
+            g: &mut SVector<T, NZ>,
+        ) {
+            for (m, row) in gx.chunks_exact(idx.len()).enumerate() {
+                let mut s = T::zero();
+                for (j, &i) in idx.iter().enumerate() {
+                    s += row[j] * x0[i];
+                }
+                g[4 * m + ch] = s;
+            }
+        }
         let mut g = SVector::<T, NZ>::zeros();
         let (z, y, x, w) = CHANNELS;
-        Self::channel_response(&self.zc, &z, 0, x0, &mut g);
-        Self::channel_response(&self.yc, &y, 1, x0, &mut g);
-        Self::channel_response(&self.xc, &x, 2, x0, &mut g);
-        Self::channel_response(&self.wc, &w, 3, x0, &mut g);
+        channel(self.zc.gx.as_flattened(), &z, 0, x0, &mut g);
+        channel(self.yc.gx.as_flattened(), &y, 1, x0, &mut g);
+        channel(self.xc.gx.as_flattened(), &x, 2, x0, &mut g);
+        channel(self.wc.gx.as_flattened(), &w, 3, x0, &mut g);
         g
-    }
-
-    #[inline(always)]
-    fn channel_response<const K: usize>(
-        c: &Channel<T, K, M>,
-        idx: &[usize; K],
-        ch: usize,
-        x0: &VecX<T>,
-        g: &mut SVector<T, NZ>,
-    ) {
-        for (m, row) in c.gx.iter().enumerate() {
-            let mut s = T::zero();
-            for (j, &i) in idx.iter().enumerate() {
-                s += row[j] * x0[i];
-            }
-            g[4 * m + ch] = s;
-        }
     }
 
     /// The prediction model's state after one step from `x`, with no input.
