@@ -28,6 +28,11 @@ pub const FRAME_MAX: usize = MTU + 6;
 /// The two start bytes.
 pub const START: [u8; 2] = [0xBC, 0xCF];
 
+/// The most packets the vehicle keeps waiting for the link: a
+/// re-designing write's answer, its console lines and its log blocks
+/// sampled. Bounds the link's one-packet locks ([`Syslink::poll`]).
+const WAITING_MAX: usize = 1 + crate::vehicle::CONSOLE_QUEUE + crate::vehicle::LOG_QUEUE;
+
 /// Syslink packet types this firmware acts on (`syslink.h`).
 pub mod types {
     /// A CRTP packet to or from the radio.
@@ -437,9 +442,15 @@ impl<const Q: usize> Syslink<Q> {
     where
         M::T: BorrowMut<CrtpShared>,
     {
-        // A full queue drops the block's sample (counted), as a radio would.
+        // One packet per lock (each hold short), at most what the vehicle
+        // queues; a full queue drops the block's sample (counted), as a
+        // radio would.
         let down = &mut self.down;
-        let _ = vehicle.lock(|v| v.borrow_mut().poll(down));
+        for _ in 0..WAITING_MAX {
+            if !matches!(vehicle.lock(|v| v.borrow_mut().send_next(down, true)), Ok(true)) {
+                break;
+            }
+        }
     }
 
     /// Feeds the bytes `rx` from the nRF51; answers on `link`.
@@ -490,7 +501,11 @@ impl<const Q: usize> Syslink<Q> {
                         }
                         // What the packet's controller work answered, if it
                         // is done already (in-process it is).
-                        let _ = vehicle.lock(|v| v.borrow_mut().send_queued(down));
+                        for _ in 0..WAITING_MAX {
+                            if !matches!(vehicle.lock(|v| v.borrow_mut().send_next(down, false)), Ok(true)) {
+                                break;
+                            }
+                        }
                     }
                     Err(e) => vehicle.lock(|v| v.borrow_mut().count_malformed(e)),
                 }

@@ -51,6 +51,11 @@ pub struct StepTiming {
 pub struct Timing {
     deadline_ticks: u64,
     now: StepTiming,
+    /// The most the radio's interrupts took of one step, ticks (the CRTP
+    /// images: apart from the step's figures, [`Timing::radio_in_step`]).
+    worst_radio_ticks: u64,
+    /// `worst_radio_ticks` when it was last logged.
+    logged_radio_ticks: u64,
 }
 
 impl Timing {
@@ -69,6 +74,8 @@ impl Timing {
                 tx_timeouts: 0,
                 passed: 0,
             },
+            worst_radio_ticks: 0,
+            logged_radio_ticks: 0,
         }
     }
 
@@ -98,6 +105,25 @@ impl Timing {
     pub fn passed(&mut self, entry: u64, done: u64) {
         self.flown(entry, done);
         self.now.passed = self.now.passed.wrapping_add(1);
+    }
+
+    /// The radio's interrupts took `ticks` of a step (a CRTP image's radio;
+    /// under QEMU, which delivers its bytes unpaced, kept apart from the
+    /// step's figures, `crtp_app::RADIO_APART_FROM_STEPS`).
+    pub fn radio_in_step(&mut self, ticks: u64) {
+        self.worst_radio_ticks = self.worst_radio_ticks.max(ticks);
+    }
+
+    /// Logs the radio's most in one step if it grew since it was last logged.
+    #[cfg(target_os = "none")]
+    pub fn log_radio_if_grown(&mut self) {
+        if self.worst_radio_ticks > self.logged_radio_ticks {
+            defmt::info!(
+                "radio: its interrupts took up to {=u64} instructions of one step",
+                instructions(self.worst_radio_ticks)
+            );
+            self.logged_radio_ticks = self.worst_radio_ticks;
+        }
     }
 
     /// A job found the controller's queue full: its step is missed.
@@ -164,8 +190,9 @@ impl StepTiming {
 /// include that wait. Timed inside each lock the link's task takes for a
 /// packet or the log blocks (not the few of a re-design, which runs only
 /// disarmed), less the interrupts above the ceiling that fell inside it
-/// (the radio's bytes, which time themselves during a hold: QEMU delivers
-/// them unpaced): the holds' own work, SysTick ticks.
+/// (the radio's bytes, which time themselves, each run's entry and exit
+/// measured at boot: QEMU delivers them unpaced): the holds' own work,
+/// SysTick ticks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Holds {
     worst_ticks: u64,
