@@ -623,7 +623,9 @@ macro_rules! crtp_app {
                 if now.due(logged) {
                     stack.log_if_grown();
                     vehicle.holds.log_if_grown();
-                    timing.lock(|t| t.log_radio_if_grown());
+                    if let Some(n) = timing.lock(|t| t.radio_grown()) {
+                        defmt::info!("radio: its interrupts took up to {=u64} instructions of one step", n);
+                    }
                 }
                 now.log_if_due(logged);
             }

@@ -114,16 +114,13 @@ impl Timing {
         self.worst_radio_ticks = self.worst_radio_ticks.max(ticks);
     }
 
-    /// Logs the radio's most in one step if it grew since it was last logged.
-    #[cfg(target_os = "none")]
-    pub fn log_radio_if_grown(&mut self) {
-        if self.worst_radio_ticks > self.logged_radio_ticks {
-            defmt::info!(
-                "radio: its interrupts took up to {=u64} instructions of one step",
-                instructions(self.worst_radio_ticks)
-            );
+    /// The most the radio's interrupts took of one step, instructions, if
+    /// it grew since this last said so (for the log).
+    pub fn radio_grown(&mut self) -> Option<u64> {
+        (self.worst_radio_ticks > self.logged_radio_ticks).then(|| {
             self.logged_radio_ticks = self.worst_radio_ticks;
-        }
+            instructions(self.worst_radio_ticks)
+        })
     }
 
     /// A job found the controller's queue full: its step is missed.
@@ -226,6 +223,18 @@ impl Holds {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_radios_most_in_a_step_is_said_once_each_time_it_grows() {
+        let mut t = Timing::new(DEADLINE_TICKS);
+        assert_eq!(t.radio_grown(), None);
+        t.radio_in_step(168);
+        t.radio_in_step(84);
+        assert_eq!(t.radio_grown(), Some(1_000));
+        assert_eq!(t.radio_grown(), None);
+        t.radio_in_step(336);
+        assert_eq!(t.radio_grown(), Some(2_000));
+    }
 
     #[test]
     fn holds_keep_the_longest() {
