@@ -33,6 +33,20 @@ pub const START: [u8; 2] = [0xBC, 0xCF];
 /// sampled. Bounds the link's one-packet locks ([`Syslink::poll`]).
 const WAITING_MAX: usize = 1 + crate::vehicle::CONSOLE_QUEUE + crate::vehicle::LOG_QUEUE;
 
+/// Sends what the vehicle has waiting (with `logs`, its log blocks too)
+/// to `down`, one packet per lock of `vehicle`
+/// ([`CrtpShared::send_next`]), until none waits or `down` is full.
+fn send_waiting<M: Mutex, const Q: usize>(down: &mut Downlink<Q>, vehicle: &mut M, logs: bool)
+where
+    M::T: BorrowMut<CrtpShared>,
+{
+    for _ in 0..WAITING_MAX {
+        if !matches!(vehicle.lock(|v| v.borrow_mut().send_next(down, logs)), Ok(true)) {
+            break;
+        }
+    }
+}
+
 /// Syslink packet types this firmware acts on (`syslink.h`).
 pub mod types {
     /// A CRTP packet to or from the radio.
@@ -445,12 +459,7 @@ impl<const Q: usize> Syslink<Q> {
         // One packet per lock (each hold short), at most what the vehicle
         // queues; a full queue drops the block's sample (counted), as a
         // radio would.
-        let down = &mut self.down;
-        for _ in 0..WAITING_MAX {
-            if !matches!(vehicle.lock(|v| v.borrow_mut().send_next(down, true)), Ok(true)) {
-                break;
-            }
-        }
+        send_waiting(&mut self.down, vehicle, true);
     }
 
     /// Feeds the bytes `rx` from the nRF51; answers on `link`.
@@ -501,11 +510,7 @@ impl<const Q: usize> Syslink<Q> {
                         }
                         // What the packet's controller work answered, if it
                         // is done already (in-process it is).
-                        for _ in 0..WAITING_MAX {
-                            if !matches!(vehicle.lock(|v| v.borrow_mut().send_next(down, false)), Ok(true)) {
-                                break;
-                            }
-                        }
+                        send_waiting(down, vehicle, false);
                     }
                     Err(e) => vehicle.lock(|v| v.borrow_mut().count_malformed(e)),
                 }
