@@ -1,6 +1,7 @@
 //! Tuning aid: flies the fast MPC on the hardest cases with the preset
 //! changed by `KEY=VALUE` arguments (tau, q0..q11, r0..r3, s0..s3, pred, exec,
-//! yawlim, trend, trendmax, ratelp; noise = scale of the typical sensor noise).
+//! yawlim, trend, trendmax, ratelp; lag = 1/0 the rotors' lag in the
+//! prediction; noise = scale of the typical sensor noise).
 //! `cargo run --release -p sil-host --example tune_mpc -- tau=0.1 q2=80`
 
 use fc_core::control::Family;
@@ -20,6 +21,8 @@ fn main() {
             match k {
                 "noise" => noise = Some(SensorNoise::typical(v, 1).expect("noise scale")),
                 "yawlim" => c.max_heading_error_rad = v,
+                "lag" => c.rotor_lag_prediction = v != 0.0,
+                "mtau" => c.observer_moment_tau_s = v,
                 "trend" => c.disturbance_trend_s = if v > 0.0 { Some(v) } else { None },
                 "trendmax" => c.disturbance_trend_max_mps2 = v,
                 "ratelp" => c.disturbance_rate_filter_s = v,

@@ -3,63 +3,69 @@
 //! by adjoint recursion.
 
 use super::{
-    block_of, lit, mul, quat_to_euler, tr_mul, wrap_pi, AttitudeForm, AttitudeRef, HeadingFrame, Mpc, RealField,
-    ReferenceMode, SVector, Setpoint, StateEstimate, Vec12, Vector3, Vector4, CHANNELS, LAGGED_CHANNELS,
+    block_of, lit, quat_to_euler, wrap_pi, AttitudeForm, AttitudeRef, Channel, HeadingFrame, Mpc, RealField,
+    ReferenceMode, SVector, Setpoint, StateEstimate, Vec12, VecX, Vector3, Vector4, CHANNELS, LAGGED_CHANNELS,
+    OBSERVED_ROWS,
 };
 
 impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T, N, M, NZ> {
     /// Adjoint gradient of the state cost for the errors `e[k] = x[k] − r[k]`
-    /// of steps 1..=N: per-move sums of `Bdᵀλ_{k+1}`.
-    pub(super) fn state_gradient(&self, e: &[Vec12<T>; N]) -> SVector<T, NZ> {
-        if self.decoupled {
-            let mut g = SVector::<T, NZ>::zeros();
-            let (z, y, x, w) = CHANNELS;
-            self.channel_gradient(z, 0, e, &mut g);
-            self.channel_gradient(y, 1, e, &mut g);
-            self.channel_gradient(x, 2, e, &mut g);
-            self.channel_gradient(w, 3, e, &mut g);
-            return g;
-        }
-        self.dense_gradient(e)
+    /// of steps 1..=N: per-move sums of `Bdᵀλ_{k+1}`, channel by channel
+    /// (the model couples no two).
+    pub(super) fn state_gradient(&self, e: &[VecX<T>; N]) -> SVector<T, NZ> {
+        let mut g = SVector::<T, NZ>::zeros();
+        let (z, y, x, w) = CHANNELS;
+        self.channel_gradient(&self.zc, z, 0, e, &mut g);
+        self.channel_gradient(&self.yc, y, 1, e, &mut g);
+        self.channel_gradient(&self.xc, x, 2, e, &mut g);
+        self.channel_gradient(&self.wc, w, 3, e, &mut g);
+        g
     }
 
     /// [`Mpc::state_gradient`] of one channel: the adjoint recursion on the
     /// states `idx` of input `ch` alone (the others are not coupled to it).
     /// The indices are constants once inlined, so each product is a few
-    /// loads and multiply-adds with no index arithmetic.
+    /// loads and multiply-adds with no index arithmetic; the lag states
+    /// (index 12 and up) have no stage weight.
     #[inline(always)]
     pub(super) fn channel_gradient<const K: usize>(
         &self,
+        c: &Channel<T, K, M>,
         idx: [usize; K],
         ch: usize,
-        e: &[Vec12<T>; N],
+        e: &[VecX<T>; N],
         g: &mut SVector<T, NZ>,
     ) {
         // Terminal step: P·e restricted to the channel.
         let mut lambda = [T::zero(); K];
-        for (a, &i) in idx.iter().enumerate() {
+        for (a, l) in lambda.iter_mut().enumerate() {
             let mut s = T::zero();
-            for &j in idx.iter() {
-                s += self.p_term[(i, j)] * e[N - 1][j];
+            for (b, &j) in idx.iter().enumerate() {
+                s += c.p[a][b] * e[N - 1][j];
             }
-            lambda[a] = s;
+            *l = s;
         }
         let mut k = N - 1;
         loop {
             let mut gk = T::zero();
-            for (b, &j) in idx.iter().enumerate() {
-                gk += self.bd[(j, ch)] * lambda[b];
+            for (b, l) in lambda.iter().enumerate() {
+                gk += c.b[b] * *l;
             }
             g[4 * block_of::<M>(k) + ch] += gk;
             if k == 0 {
                 return;
             }
             k -= 1;
+            // `λ_k = Q e_k + Aᵀ λ_{k+1}`. The lag state (the channel's last)
+            // is driven by no state of the vehicle (`a[K−1][j] = 0` for
+            // j < K−1, exactly: the ZOH of a block-triangular model), so
+            // the vehicle's states skip its λ.
             let mut next = [T::zero(); K];
             for (a, &i) in idx.iter().enumerate() {
-                let mut s = self.q[i] * e[k][i];
-                for (b, &j) in idx.iter().enumerate() {
-                    s += self.ad[(j, i)] * lambda[b];
+                let mut s = if i < 12 { self.q[i] * e[k][i] } else { T::zero() };
+                let from = if a == K - 1 { K } else { K - 1 };
+                for (b, l) in lambda.iter().enumerate().take(from) {
+                    s += c.a[b][a] * *l;
                 }
                 next[a] = s;
             }
@@ -67,36 +73,89 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         }
     }
 
-    /// [`Mpc::state_gradient`] over all 12 states (a model that does not decouple).
-    pub(super) fn dense_gradient(&self, e: &[Vec12<T>; N]) -> SVector<T, NZ> {
-        let mut g = SVector::<T, NZ>::zeros();
-        let mut lambda = Vec12::<T>::zeros();
-        for k in (0..N).rev() {
-            let w = if k == N - 1 {
-                mul(&self.p_term, &e[k])
-            } else {
-                self.q.component_mul(&e[k])
-            };
-            lambda = w + tr_mul(&self.ad, &lambda);
-            // x[k] is the state after input step k: its λ feeds input step k.
-            let gk = tr_mul(&self.bd, &lambda);
-            let b = block_of::<M>(k);
-            for c in 0..4 {
-                g[4 * b + c] += gk[c];
+    /// `Gx·x₀`: the gradient of the free response from the initial state
+    /// `x0`, each channel's moves from its own states.
+    pub(super) fn initial_response(&self, x0: &VecX<T>) -> SVector<T, NZ> {
+        // One copy for every channel's size (48 products a step).
+        #[inline(never)]
+        fn channel<T: RealField + Copy, const NZ: usize>(
+            gx: &[T],
+            idx: &[usize],
+            ch: usize,
+            x0: &VecX<T>,
+            g: &mut SVector<T, NZ>,
+        ) {
+            for (m, row) in gx.chunks_exact(idx.len()).enumerate() {
+                let mut s = T::zero();
+                for (j, &i) in idx.iter().enumerate() {
+                    s += row[j] * x0[i];
+                }
+                g[4 * m + ch] = s;
             }
         }
+        let mut g = SVector::<T, NZ>::zeros();
+        let (z, y, x, w) = CHANNELS;
+        channel(self.zc.gx.as_flattened(), &z, 0, x0, &mut g);
+        channel(self.yc.gx.as_flattened(), &y, 1, x0, &mut g);
+        channel(self.xc.gx.as_flattened(), &x, 2, x0, &mut g);
+        channel(self.wc.gx.as_flattened(), &w, 3, x0, &mut g);
         g
+    }
+
+    /// The prediction model's state after one step from `x`, with no input.
+    pub(super) fn predict(&self, x: &VecX<T>) -> VecX<T> {
+        // Design-time only: one copy for every channel's size.
+        #[inline(never)]
+        fn channel<T: RealField + Copy>(a: &[T], idx: &[usize], x: &VecX<T>, y: &mut VecX<T>) {
+            let k = idx.len();
+            for (r, &i) in idx.iter().enumerate() {
+                let mut s = T::zero();
+                for (c, &j) in idx.iter().enumerate() {
+                    s += a[r * k + c] * x[j];
+                }
+                y[i] = s;
+            }
+        }
+        let mut y = VecX::<T>::zeros();
+        let (z, yi, xi, w) = CHANNELS;
+        channel(self.zc.a.as_flattened(), &z, x, &mut y);
+        channel(self.yc.a.as_flattened(), &yi, x, &mut y);
+        channel(self.xc.a.as_flattened(), &xi, x, &mut y);
+        channel(self.wc.a.as_flattened(), &w, x, &mut y);
+        y
+    }
+
+    /// The input matrix's column of input `c` (0 thrust … 3 yaw torque), as
+    /// a prediction state.
+    pub(super) fn input_column(&self, c: usize) -> VecX<T> {
+        fn put<T: RealField + Copy, const K: usize, const M: usize>(
+            ch: &Channel<T, K, M>,
+            idx: &[usize; K],
+        ) -> VecX<T> {
+            let mut v = VecX::<T>::zeros();
+            for (a, &i) in idx.iter().enumerate() {
+                v[i] = ch.b[a];
+            }
+            v
+        }
+        let (z, y, x, w) = CHANNELS;
+        match c {
+            0 => put(&self.zc, &z),
+            1 => put(&self.yc, &y),
+            2 => put(&self.xc, &x),
+            _ => put(&self.wc, &w),
+        }
     }
 
     /// The state cost's gradient (references zero) of the free response
     /// from `x0` under the per-step input `input(k)` added to the
     /// prediction: the design's one simulation, for the Hessian's columns
     /// and the responses `Gx`, `Gw`, `Gt`.
-    pub(super) fn response_gradient(&self, x0: Vec12<T>, input: &dyn Fn(usize) -> Vec12<T>) -> SVector<T, NZ> {
-        let mut x = [Vec12::<T>::zeros(); N];
+    pub(super) fn response_gradient(&self, x0: VecX<T>, input: &dyn Fn(usize) -> VecX<T>) -> SVector<T, NZ> {
+        let mut x = [VecX::<T>::zeros(); N];
         let mut xk = x0;
         for (k, xs) in x.iter_mut().enumerate() {
-            xk = mul(&self.ad, &xk) + input(k);
+            xk = self.predict(&xk) + input(k);
             *xs = xk;
         }
         self.state_gradient(&x)
@@ -205,11 +264,23 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         d
     }
 
+    /// Whether the prediction has the rotors' lag states
+    /// ([`MpcConfig::rotor_lag_prediction`], and the vehicle's rotors lag).
+    pub(super) fn predicts_lag(&self) -> bool {
+        self.cfg.rotor_lag_prediction && self.params.rotor_tau_s > T::zero()
+    }
+
+    /// Whether the controller follows what the rotors deliver by the lag
+    /// model: for its observer, its prediction, or both.
+    pub(super) fn follows_lag(&self) -> bool {
+        (self.cfg.observer_rotor_lag || self.cfg.rotor_lag_prediction) && self.params.rotor_tau_s > T::zero()
+    }
+
     /// The rotors' lag over a step of `dt` s: `(dt, e^(−dt/τr),
-    /// (1 − e^(−dt/τr))·τr/dt)`. The identity `(0, 1, 1)` when the observer
-    /// does not model the lag.
+    /// (1 − e^(−dt/τr))·τr/dt)`. The identity `(0, 1, 1)` when the
+    /// controller does not model the lag.
     pub(super) fn lag_factors_over(&self, dt: T) -> (T, T, T) {
-        if !(self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero()) {
+        if !self.follows_lag() {
             return (T::zero(), T::one(), T::one());
         }
         let r = dt / self.params.rotor_tau_s;
@@ -229,12 +300,14 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     pub(super) fn observe(&mut self, est: &StateEstimate<T>) {
         let t_nominal = lit::<T>(self.cfg.exec_dt_s);
         let dt = self.next_dt.take().unwrap_or(t_nominal);
-        let Some(tau) = self.cfg.observer_tau_s else { return };
-        // The thrust and yaw torque the rotors delivered over the step: the
-        // lag's mean over it, `u + (u₀ − u)·(τr/dt)·(1 − e^(−dt/τr))` from
-        // `u₀` at its start towards the input sent `u` (exact for a
-        // first-order lag). Roll and pitch keep the input sent.
-        let du_applied = if self.cfg.observer_rotor_lag && self.params.rotor_tau_s > T::zero() {
+        // What the rotors delivered over the step: the lag's mean over it,
+        // `u + (u₀ − u)·(τr/dt)·(1 − e^(−dt/τr))` from `u₀` at its start
+        // towards the input sent `u` (exact for a first-order lag); and
+        // what they deliver at its end, where the next prediction starts.
+        // The observer compares with it on thrust and yaw torque, and on
+        // every axis when the prediction has the lag; the rest keep the
+        // input sent.
+        let du_applied = if self.follows_lag() {
             if self.lag_factors.0 != dt {
                 self.lag_factors = self.lag_factors_over(dt);
             }
@@ -242,13 +315,16 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             let u0 = self.du_delivered;
             self.du_delivered = self.du_prev + (u0 - self.du_prev) * decay;
             let mut applied = self.du_prev;
-            for c in LAGGED_CHANNELS {
+            let all = [0, 1, 2, 3];
+            let lagged: &[usize] = if self.predicts_lag() { &all } else { &LAGGED_CHANNELS };
+            for &c in lagged {
                 applied[c] += (u0[c] - self.du_prev[c]) * mean;
             }
             applied
         } else {
             self.du_prev
         };
+        let Some(tau) = self.cfg.observer_tau_s else { return };
         let Some((x_prev, yaw_prev)) = self.last else { return };
         self.last_dt = dt;
         let scale = dt / t_nominal;
@@ -258,16 +334,16 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let meas = self.heading_state(est, yaw_prev);
         // Only the velocity and rate rows of the prediction are read.
         let mut nu = Vec12::<T>::zeros();
-        for i in [3, 4, 5, 9, 10, 11] {
+        for (r, &i) in OBSERVED_ROWS.iter().enumerate() {
             let mut p = T::zero();
             for j in 0..12 {
-                p += self.ad_e[(i, j)] * x_prev[j];
+                p += self.ad_e[(r, j)] * x_prev[j];
             }
             for c in 0..4 {
-                p += self.bd_e[(i, c)] * du_applied[c];
+                p += self.bd_e[(r, c)] * du_applied[c];
             }
             for c in 0..6 {
-                p += self.wd_e[(i, c)] * dh[c];
+                p += self.wd_e[(r, c)] * dh[c];
             }
             nu[i] = meas[i] - (x_prev[i] + (p - x_prev[i]) * scale);
         }
@@ -275,8 +351,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         let gain = (dt / lit::<T>(tau)).min(T::one());
         let gain_m = (dt / lit::<T>(self.cfg.observer_moment_tau_s)).min(T::one());
         for i in 0..3 {
-            let bf = self.wd_e[(3 + i, i)] * scale;
-            let bm = self.wd_e[(9 + i, 3 + i)] * scale;
+            // OBSERVED_ROWS: ẋ ẏ ż are rows 0–2, p q r rows 3–5.
+            let bf = self.wd_e[(i, i)] * scale;
+            let bm = self.wd_e[(3 + i, 3 + i)] * scale;
             if bf > T::zero() {
                 dh[i] += gain * nu[3 + i] / bf;
             }

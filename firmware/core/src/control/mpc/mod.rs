@@ -24,15 +24,20 @@
 //!   output-disturbance estimator for the same reason); optionally a damped
 //!   trend of the horizontal force over the horizon, so a gust is anticipated
 //!   rather than chased.
-//! - **Gradient by adjoint recursion**: `g` costs O(N·12²) per step and no
-//!   prediction matrix is stored.
+//! - **Rotors** (optional, [`MpcConfig::rotor_lag_prediction`]): the four
+//!   inputs reach the vehicle through the rotors' first-order lag, four more
+//!   states of the prediction (16 in all).
+//! - **Gradient by adjoint recursion**, channel by channel: the model
+//!   couples no two of its four input channels, so it is stored and run as
+//!   four blocks of 3, 5, 5 and 3 states ([`CHANNELS`]) and no prediction
+//!   matrix is stored.
 
 use super::reference::AttitudeRef;
 use super::{
     validate, wrap_pi, ControlError, ControlOutput, ControlStatus, Controller, HeadingFrame, ReferenceMode, Setpoint,
     StateEstimate,
 };
-use crate::linalg::matvec::{mul, tr_mul};
+use crate::linalg::matvec::mul;
 use crate::linalg::solve_dare;
 use crate::lit;
 use crate::model::{
@@ -87,6 +92,18 @@ pub struct MpcConfig {
     /// plant without lag rely on (the heavy roll/pitch-rate weights keep
     /// that loop damped).
     pub observer_rotor_lag: bool,
+    /// The prediction models the rotors: each input reaches the vehicle
+    /// through a first-order lag with the vehicle's `rotor_tau_s`, as four
+    /// more states of the model the MPC predicts with (the thrust and the
+    /// three torques the rotors deliver, `U_d − U_hover`; N, N·m), started
+    /// each step from what the lag model says the rotors deliver now. The
+    /// prediction then knows that a thrust or torque asked for arrives
+    /// over `τr`, not at once, so the attitude loop needs no heavy rate
+    /// weights to stay damped under slow rotors. With it the observer
+    /// compares the vehicle with what the rotors deliver on every axis
+    /// (roll and pitch too). `false`: the lag states stay zero and the
+    /// prediction is the rotor-less hover model.
+    pub rotor_lag_prediction: bool,
     /// Damped-trend prediction of the horizontal disturbance force: its
     /// horizon `T`, s (`None`: the estimate is held constant over the
     /// prediction). The estimate's rate ḋ is extrapolated as
@@ -147,6 +164,7 @@ impl MpcConfig {
             observer_tau_s: Some(0.5),
             observer_moment_tau_s: 0.5,
             observer_rotor_lag: false,
+            rotor_lag_prediction: false,
             disturbance_trend_s: None,
             disturbance_trend_max_mps2: 0.0,
             disturbance_rate_filter_s: 0.1,
@@ -224,6 +242,7 @@ impl MpcConfig {
             observer_tau_s: Some(0.02),
             observer_moment_tau_s: 0.004,
             observer_rotor_lag: true,
+            rotor_lag_prediction: false,
             disturbance_trend_s: Some(0.3),
             disturbance_trend_max_mps2: 0.4,
             disturbance_rate_filter_s: 0.05,
@@ -256,8 +275,18 @@ pub struct MpcQp<T: RealField + Copy, const NZ: usize> {
     pub solution: QpSolution<T, NZ>,
 }
 
-type Mat12<T> = SMatrix<T, 12, 12>;
 type Vec12<T> = SVector<T, 12>;
+/// States of the prediction model: the hover model's 12
+/// (`[x y z ẋ ẏ ż a₁ a₂ a₃ p q r]`) and the four inputs the rotors deliver
+/// (`U_d − U_hover`: thrust, N, then roll, pitch and yaw torque, N·m), the
+/// states of their first-order lag ([`MpcConfig::rotor_lag_prediction`]).
+pub const PREDICTION_STATES: usize = 16;
+#[cfg(test)]
+type MatX<T> = SMatrix<T, PREDICTION_STATES, PREDICTION_STATES>;
+type VecX<T> = SVector<T, PREDICTION_STATES>;
+/// The observer's rows of the hover model: the velocity and rate states
+/// (`ẋ ẏ ż p q r`), the only ones whose innovation it reads.
+const OBSERVED_ROWS: [usize; 6] = [3, 4, 5, 9, 10, 11];
 
 /// Linear MPC with horizon `N` prediction steps, `M` moves and `NZ = 4·M`
 /// decision variables.
@@ -299,21 +328,24 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     params: VehicleParams<T>,
     bx: InputBox<T>,
     u_hover: Vector4<T>,
-    // Prediction model (pred_dt) and observer model (exec_dt), heading frame.
-    ad: Mat12<T>,
-    bd: SMatrix<T, 12, 4>,
+    // Prediction model (pred_dt, with the rotors' lag states), channel by
+    // channel ([`CHANNELS`]: thrust, roll, pitch, yaw), and its disturbance
+    // input; the observer's rows of the hover model (exec_dt,
+    // `OBSERVED_ROWS`). Heading frame.
+    zc: Channel<T, 3, M>,
+    yc: Channel<T, 5, M>,
+    xc: Channel<T, 5, M>,
+    wc: Channel<T, 3, M>,
     wd: SMatrix<T, 12, 6>,
-    ad_e: Mat12<T>,
-    bd_e: SMatrix<T, 12, 4>,
-    wd_e: SMatrix<T, 12, 6>,
+    ad_e: SMatrix<T, 6, 12>,
+    bd_e: SMatrix<T, 6, 4>,
+    wd_e: SMatrix<T, 6, 6>,
     q: Vec12<T>,
-    p_term: Mat12<T>,
     /// The state cost's gradient in z is linear in the initial state, the
     /// disturbance and its trend: `g = Gx·x₀ + Gw·d + Gt·ḋ + (reference
     /// part)`. These are computed once at design ([`Mpc::design_response`]),
     /// so a step needs no free-response simulation, only the adjoint pass
-    /// over the references.
-    gx: SMatrix<T, NZ, 12>,
+    /// over the references. `Gx` is each channel's own (`Channel::gx`).
     /// Gradient per unit of disturbance (heading frame: acceleration, m/s²,
     /// then angular acceleration, rad/s²).
     gw: SMatrix<T, NZ, 6>,
@@ -333,7 +365,8 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     z: SVector<T, NZ>,
     du_prev: Vector4<T>,
     /// The input deviation the rotors have delivered by the lag model
-    /// ([`MpcConfig::observer_rotor_lag`]).
+    /// ([`MpcConfig::observer_rotor_lag`], [`MpcConfig::rotor_lag_prediction`]):
+    /// after a step's observer update, what they deliver now.
     du_delivered: Vector4<T>,
     /// `(dt, e^(−dt/τr), (1 − e^(−dt/τr))·τr/dt)` of the last step, those
     /// of the nominal period after a design or a reset: a loop on a steady
@@ -354,21 +387,46 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     /// The interval the last observer update spanned, s (the trend's rate
     /// filter differences over it).
     last_dt: T,
-    /// The prediction model, its terminal weight and its input matrix
-    /// decouple into the hover model's four channels ([`CHANNELS`]): the
-    /// adjoint pass runs on each channel's few states instead of all 12.
-    decoupled: bool,
+}
+
+/// One channel of the prediction model ([`CHANNELS`]): the blocks of its
+/// `K` states. The model couples no two channels (the design checks it), so
+/// these are all of it that is not zero.
+#[derive(Debug, Clone, Copy)]
+struct Channel<T, const K: usize, const M: usize> {
+    /// `a[i][j]`: the state matrix's entry from the channel's state `j` to its state `i`.
+    a: [[T; K]; K],
+    /// The input matrix's column of the channel's input.
+    b: [T; K],
+    /// The terminal weight's block.
+    p: [[T; K]; K],
+    /// `gx[m][j]`: the gradient of move `m` of the channel's input per unit
+    /// initial value of its state `j` (the other channels' moves see none).
+    gx: [[T; K]; M],
+}
+
+impl<T: RealField + Copy, const K: usize, const M: usize> Channel<T, K, M> {
+    fn zero() -> Self {
+        Self {
+            a: [[T::zero(); K]; K],
+            b: [T::zero(); K],
+            p: [[T::zero(); K]; K],
+            gx: [[T::zero(); K]; M],
+        }
+    }
 }
 
 /// The input channels (`U1` thrust, `U4` yaw torque) whose delivery the
 /// observer models with the rotors' lag ([`MpcConfig::observer_rotor_lag`]).
 const LAGGED_CHANNELS: [usize; 2] = [0, 3];
 
-/// The hover model's independent channels in the heading frame: each
-/// input moves only its own states (state order `[x y z ẋ ẏ ż a₁ a₂ a₃ p q r]`,
-/// `a` the attitude coordinates). Thrust: z, ż; roll: y, ẏ, a₁, p; pitch:
-/// x, ẋ, a₂, q; yaw: a₃, r.
-pub const CHANNELS: ([usize; 2], [usize; 4], [usize; 4], [usize; 2]) = ([2, 5], [1, 4, 6, 9], [0, 3, 7, 10], [8, 11]);
+/// The prediction model's independent channels in the heading frame: each
+/// input moves only its own states (state order `[x y z ẋ ẏ ż a₁ a₂ a₃ p q r
+/// U_d1 U_d2 U_d3 U_d4]`, `a` the attitude coordinates, `U_d` what the
+/// rotors deliver). Thrust: z, ż, U_d1; roll: y, ẏ, a₁, p, U_d2; pitch:
+/// x, ẋ, a₂, q, U_d3; yaw: a₃, r, U_d4.
+pub const CHANNELS: ([usize; 3], [usize; 5], [usize; 5], [usize; 3]) =
+    ([2, 5, 12], [1, 4, 6, 9, 13], [0, 3, 7, 10, 14], [8, 11, 15]);
 
 /// Which prediction steps belong to which move (the last move is held).
 #[inline]
@@ -405,15 +463,15 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             bx: params.input_box(),
             u_hover: crate::model::hover_input(&params),
             params,
-            ad: Mat12::zeros(),
-            bd: SMatrix::zeros(),
+            zc: Channel::zero(),
+            yc: Channel::zero(),
+            xc: Channel::zero(),
+            wc: Channel::zero(),
             wd: SMatrix::zeros(),
-            ad_e: Mat12::zeros(),
+            ad_e: SMatrix::zeros(),
             bd_e: SMatrix::zeros(),
             wd_e: SMatrix::zeros(),
             q: Vec12::zeros(),
-            p_term: Mat12::zeros(),
-            gx: SMatrix::zeros(),
             gw: SMatrix::zeros(),
             gt: SMatrix::zeros(),
             r: Vector4::zeros(),
@@ -436,13 +494,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             last_qp: None,
             next_dt: None,
             last_dt: lit(cfg.exec_dt_s),
-            decoupled: false,
         }
-    }
-
-    /// Whether the adjoint pass runs channel by channel (see [`CHANNELS`]).
-    pub fn decoupled(&self) -> bool {
-        self.decoupled
     }
 
     /// The constant QP Hessian.
@@ -533,20 +585,32 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         let yaw = quat_to_euler(&est.att)[2];
         let x0 = self.heading_state(est, yaw);
         let frame = HeadingFrame::new(yaw);
+        // The prediction starts from the state and what the rotors deliver
+        // now (zero when the prediction has no lag states).
+        let mut x0p = VecX::<T>::zeros();
+        x0p.fixed_rows_mut::<12>(0).copy_from(&x0);
+        if self.predicts_lag() {
+            x0p.fixed_rows_mut::<4>(12).copy_from(&self.du_delivered);
+        }
         let d_acc = self.dist.fixed_rows::<3>(0).into_owned();
         let d_rate = self.disturbance_rate();
         // The state cost's gradient from the initial state and the
         // disturbance with its trend (heading frame), through the responses
         // computed at design: the prediction needs no simulation here.
-        let mut g = mul(&self.gx, &x0) + mul(&self.gw, &self.dist_in(&frame)) + mul(&self.gt, &frame.to_frame(&d_rate));
+        let mut g = self.initial_response(&x0p) + mul(&self.gw, &self.dist_in(&frame));
+        g += mul(&self.gt, &frame.to_frame(&d_rate));
         // The references over the horizon, as the errors of a zero state.
-        let mut es = [Vec12::<T>::zeros(); N];
+        let mut es = [VecX::<T>::zeros(); N];
         for (k, ek) in es.iter_mut().enumerate() {
             let spk = self.horizon_setpoint(sp, k + 1);
             // Disturbance of step k: the estimate plus its damped trend.
             let dk = d_acc + d_rate * self.trend[k];
             let (rk, du_ref) = self.reference_state(&spk, &dk, yaw, &frame);
-            *ek = -rk;
+            ek.fixed_rows_mut::<12>(0).copy_from(&-rk);
+            if self.predicts_lag() {
+                // What the rotors deliver at the reference: its input.
+                ek.fixed_rows_mut::<4>(12).copy_from(&-du_ref);
+            }
             // Input magnitude reference: the input of step k is move block_of(k).
             let b = block_of::<M>(k);
             for ch in 0..4 {
@@ -651,30 +715,150 @@ mod tests {
         }
     }
 
+    /// The channel-by-channel adjoint pass against the dense one over all
+    /// 16 states of the design's own f64 model, with and without the
+    /// rotors' lag states.
     #[test]
     fn the_channel_adjoint_equals_the_dense_one() {
+        let p = VehicleParams::<f64>::os4();
         for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
-            for cfg in [MpcConfig::fast(form), MpcConfig::thesis(form)] {
-                let mpc = MpcFast::<f64>::new(VehicleParams::os4(), cfg).unwrap();
-                assert!(mpc.decoupled(), "the hover model decouples into its four channels");
+            for (cfg, lag) in [MpcConfig::fast(form), MpcConfig::thesis(form)]
+                .into_iter()
+                .flat_map(|c| [(c, false), (c, true)])
+            {
+                let mut cfg = cfg;
+                cfg.rotor_lag_prediction = lag;
+                let mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+                let m = design::prediction_model(&cfg, &p);
                 // Arbitrary errors on every state at every step.
-                let mut e = [Vec12::<f64>::zeros(); 20];
+                let mut e = [VecX::<f64>::zeros(); 20];
                 for (k, ek) in e.iter_mut().enumerate() {
-                    for i in 0..12 {
+                    for i in 0..PREDICTION_STATES {
                         ek[i] = libm::sin(1.3 * k as f64 + 0.7 * i as f64) * (1.0 + i as f64);
                     }
                 }
-                let (a, b) = (mpc.state_gradient(&e), mpc.dense_gradient(&e));
-                assert!((a - b).amax() <= 1e-9 * b.amax(), "{form:?}: {a} vs {b}");
+                let mut q = VecX::<f64>::zeros();
+                q.fixed_rows_mut::<12>(0).copy_from(&Vec12::from(cfg.q));
+                let mut dense = SVector::<f64, 12>::zeros();
+                let mut lambda = VecX::<f64>::zeros();
+                for k in (0..20).rev() {
+                    let w = if k == 19 {
+                        m.p_term * e[k]
+                    } else {
+                        q.component_mul(&e[k])
+                    };
+                    lambda = w + m.ad.transpose() * lambda;
+                    let gk = m.bd.transpose() * lambda;
+                    for c in 0..4 {
+                        dense[4 * block_of::<3>(k) + c] += gk[c];
+                    }
+                }
+                // The lag state is driven by no state of the vehicle, as
+                // the channel pass assumes: exactly zero.
+                for i in 0..12 {
+                    for j in 12..PREDICTION_STATES {
+                        assert_eq!(m.ad[(j, i)], 0.0, "lag state {j} driven by state {i}");
+                    }
+                }
+                let a = mpc.state_gradient(&e);
+                assert!(
+                    (a - dense).amax() <= 1e-9 * dense.amax(),
+                    "{form:?} lag {lag}: {a} vs {dense}"
+                );
             }
         }
     }
 
+    /// The rotors in the prediction: a thrust step asked for from hover
+    /// reaches the vehicle through the first-order lag, so the predicted
+    /// climb is the analytic one of a lagged thrust, `ż(t) = −(Δ/m)·(t −
+    /// τ(1 − e^(−t/τ)))` and `z(t) = −(Δ/m)·(t²/2 − τt + τ²(1 − e^(−t/τ)))`
+    /// (NED, no drag), and what the rotors deliver is `Δ(1 − e^(−t/τ))`;
+    /// without the lag states the prediction is the instant thrust's.
     #[test]
-    fn a_coupled_model_takes_the_dense_path() {
-        let mut mpc = MpcFast::<f64>::new(VehicleParams::os4(), MpcConfig::fast(AttitudeForm::Euler)).unwrap();
-        mpc.ad[(0, 1)] = 0.1; // x driven by y: no longer four channels
-        assert!(!mpc.channels_decouple());
+    fn the_prediction_delivers_thrust_through_the_rotors_lag() {
+        let mut p = VehicleParams::<f64>::os4();
+        p.kt_nspm = [0.0; 3];
+        let (m, tau, du) = (p.mass_kg, p.rotor_tau_s, 1.5);
+        for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
+            for lag in [true, false] {
+                let mut cfg = MpcConfig::fast(form);
+                cfg.rotor_lag_prediction = lag;
+                let mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+                let b = mpc.input_column(0) * du;
+                let mut x = VecX::<f64>::zeros();
+                for k in 1..=20 {
+                    x = mpc.predict(&x) + b;
+                    let t = k as f64 * cfg.pred_dt_s;
+                    let (vz, z, ud) = if lag {
+                        let e = libm::exp(-t / tau);
+                        let vz = -(du / m) * (t - tau * (1.0 - e));
+                        let z = -(du / m) * (0.5 * t * t - tau * t + tau * tau * (1.0 - e));
+                        (vz, z, du * (1.0 - e))
+                    } else {
+                        (-(du / m) * t, -(du / m) * 0.5 * t * t, 0.0)
+                    };
+                    let tol = 1e-9 * (1.0 + z.abs());
+                    assert!((x[5] - vz).abs() < tol, "{form:?} lag {lag} t {t}: ż {} vs {vz}", x[5]);
+                    assert!((x[2] - z).abs() < tol, "{form:?} lag {lag} t {t}: z {} vs {z}", x[2]);
+                    assert!(
+                        (x[12] - ud).abs() < 1e-9,
+                        "{form:?} lag {lag} t {t}: U_d {} vs {ud}",
+                        x[12]
+                    );
+                    // The other channels see none of it.
+                    for i in [0, 1, 3, 4, 6, 7, 8, 9, 10, 11, 13, 14, 15] {
+                        assert_eq!(x[i], 0.0, "{form:?} lag {lag}: state {i}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// With the lag in its prediction, the MPC asks for a climb's thrust
+    /// above a lag-blind MPC's, which expects it at once; and it starts each
+    /// step from what the rotors deliver now: from the same state, rotors
+    /// already delivering the thrust asked for are asked for less than
+    /// rotors still spinning up.
+    #[test]
+    fn an_mpc_that_knows_its_rotors_asks_early() {
+        let p = VehicleParams::<f64>::os4();
+        let sp = Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0);
+        let first = |lag: bool| {
+            let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
+            cfg.rotor_lag_prediction = lag;
+            let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+            mpc.update(&hover_at(-1.0), &sp).unwrap().u[0]
+        };
+        assert!(first(true) > first(false), "{} vs {}", first(true), first(false));
+        // The same state, with the rotors told to be delivering the thrust
+        // already asked for: less is asked again.
+        let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
+        cfg.rotor_lag_prediction = true;
+        let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+        let u1 = mpc.update(&hover_at(-1.0), &sp).unwrap().u[0];
+        let mut spun = mpc.clone();
+        spun.du_delivered[0] = u1 - mpc.u_hover[0];
+        let (a, b) = (
+            mpc.update(&hover_at(-1.0), &sp).unwrap().u[0],
+            spun.update(&hover_at(-1.0), &sp).unwrap().u[0],
+        );
+        assert!(b < a, "rotors already delivering {u1}: {b} vs {a}");
+    }
+
+    /// The design checks that the continuous hover model couples no two
+    /// channels before it designs them; a coupled one is refused.
+    #[test]
+    fn a_coupled_model_is_refused() {
+        let p = VehicleParams::<f64>::os4();
+        let w = design::ModelWork::<12>::hover(AttitudeForm::Euler, &p, None);
+        assert!(design::channels_decouple(&w.a, &w.b_all));
+        let mut coupled = design::ModelWork::<12>::hover(AttitudeForm::Euler, &p, None);
+        coupled.a[(0, 1)] = 0.1; // x driven by y: no longer four channels
+        assert!(!design::channels_decouple(&coupled.a, &coupled.b_all));
+        let mut coupled = design::ModelWork::<12>::hover(AttitudeForm::Euler, &p, None);
+        coupled.b_all[(5, 1)] = 0.1; // ż driven by the roll torque
+        assert!(!design::channels_decouple(&coupled.a, &coupled.b_all));
     }
 
     /// At hover, with no disturbance, a step of any measured length is
@@ -687,6 +871,7 @@ mod tests {
         let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
         cfg.exec_dt_s = 0.001;
         cfg.observer_rotor_lag = false;
+        cfg.rotor_lag_prediction = false;
         // A climb: the thrust is not the hover thrust.
         let sp = Setpoint::hold(Vector3::new(0.0, 0.0, -2.0), 0.0);
         // The vehicle from hover for `dt` under the MPC's first input, as the model has it.
@@ -729,6 +914,7 @@ mod tests {
         let fly = |lag_model: bool, dt: f64| {
             let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
             cfg.observer_rotor_lag = lag_model;
+            cfg.rotor_lag_prediction = lag_model;
             let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
             let mut est = hover_at(-1.0);
             let u = mpc.update(&est, &sp).unwrap().u;
@@ -782,6 +968,7 @@ mod tests {
         // No lag modelled: the identity.
         let mut off = cfg;
         off.observer_rotor_lag = false;
+        off.rotor_lag_prediction = false;
         mpc.redesign(p, off).unwrap();
         assert_eq!(mpc.lag_factors, (0.0, 1.0, 1.0));
     }
