@@ -292,8 +292,9 @@ fn fast_mpc_flies_the_same_on_any_simulator_grid() {
 /// light roll/pitch-rate weights (2, 6 and 10 instead of 600) flies the
 /// set-point under `mismatch`, whose plant has the OS4's 0.178 s rotor lag.
 /// With the lag as states of its prediction it settles at every one of
-/// them: the worst distance from the target over the flight's last 10 s
-/// (the simulator's truth) under 1 cm. Blind to its rotors
+/// them, with moves one or two prediction steps long
+/// (`MpcConfig::move_steps`): the worst distance from the target over the
+/// flight's last 10 s (the simulator's truth) under 1 cm. Blind to its rotors
 /// (`rotor_lag_prediction` off), which is why the preset damps its
 /// attitude loop with heavy rate weights, the lightest diverges in both
 /// forms (single lag-blind flights at 6 and 10 are chaotic: some diverge,
@@ -302,13 +303,14 @@ fn fast_mpc_flies_the_same_on_any_simulator_grid() {
 fn an_mpc_that_knows_its_rotors_needs_no_heavy_rate_weights() {
     use fc_core::control::MpcConfig;
     for m in MODELS {
-        let fly_with = |lag: bool, rate_w: f64| {
+        let fly_with = |lag: bool, rate_w: f64, move_steps: usize| {
             let mut cfg = FlightConfig::new(Family::Mpc, m, Scenario::default_for(ScenarioKind::Setpoint));
             cfg.disturbance = "mismatch".parse().unwrap();
             let mut c = MpcConfig::fast(m);
             c.q[9] = rate_w;
             c.q[10] = rate_w;
             c.rotor_lag_prediction = lag;
+            c.move_steps = move_steps;
             cfg.mpc_override = Some(c);
             fly(&cfg).unwrap()
         };
@@ -331,10 +333,13 @@ fn an_mpc_that_knows_its_rotors_needs_no_heavy_rate_weights() {
         };
         let mut worst = 0.0f64;
         for rate_w in [2.0, 6.0, 10.0] {
-            let knows = fly_with(true, rate_w);
-            assert_eq!(knows.metrics.max_box_violation, 0.0, "{m:?}: input outside the box");
-            let w = late_worst(&knows);
-            let b = late_worst(&fly_with(false, rate_w));
+            let mut w = 0.0f64;
+            for move_steps in [1, 2] {
+                let knows = fly_with(true, rate_w, move_steps);
+                assert_eq!(knows.metrics.max_box_violation, 0.0, "{m:?}: input outside the box");
+                w = w.max(late_worst(&knows));
+            }
+            let b = late_worst(&fly_with(false, rate_w, 1));
             eprintln!(
                 "{m:?}: rate weight {rate_w}, worst over the last 10 s: {w:.5} m knowing the rotors, {b:.3} m blind"
             );

@@ -280,7 +280,16 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         {
             return Err(ControlError::InvalidParameter);
         }
+        // Every move but the last spans `move_steps` steps, and the last
+        // at least one.
+        if cfg.move_steps == 0 || (M - 1).saturating_mul(cfg.move_steps) >= N {
+            return Err(ControlError::InvalidParameter);
+        }
         self.cfg = cfg;
+        for (k, m) in self.move_of.iter_mut().enumerate() {
+            // < M, which fits a byte (checked where `move_of` is built).
+            *m = block_of::<M>(k, cfg.move_steps) as u8;
+        }
         self.bx = params.input_box();
         self.u_hover = crate::model::hover_input(&params);
         self.params = params;
@@ -507,12 +516,18 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             // move's prediction steps.
             let (b, c) = (col / 4, col % 4);
             let column = self.input_column(c);
-            let input = |k: usize| if block_of::<M>(k) == b { column } else { VecX::zeros() };
+            let input = |k: usize| {
+                if self.move_of[k] as usize == b {
+                    column
+                } else {
+                    VecX::zeros()
+                }
+            };
             h.set_column(col, &self.response_gradient(VecX::zeros(), &input));
         }
         // Input magnitude: each prediction step's input belongs to one move.
         for k in 0..N {
-            let b = block_of::<M>(k);
+            let b = self.move_of[k] as usize;
             for c in 0..4 {
                 h[(4 * b + c, 4 * b + c)] += self.r[c];
             }

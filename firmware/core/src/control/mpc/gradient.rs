@@ -3,9 +3,8 @@
 //! by adjoint recursion.
 
 use super::{
-    block_of, lit, quat_to_euler, wrap_pi, AttitudeForm, AttitudeRef, Channel, HeadingFrame, Mpc, RealField,
-    ReferenceMode, SVector, Setpoint, StateEstimate, Vec12, VecX, Vector3, Vector4, CHANNELS, LAGGED_CHANNELS,
-    OBSERVED_ROWS,
+    lit, quat_to_euler, wrap_pi, AttitudeForm, AttitudeRef, Channel, HeadingFrame, Mpc, RealField, ReferenceMode,
+    SVector, Setpoint, StateEstimate, Vec12, VecX, Vector3, Vector4, CHANNELS, LAGGED_CHANNELS, OBSERVED_ROWS,
 };
 
 impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T, N, M, NZ> {
@@ -51,7 +50,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             for (b, l) in lambda.iter().enumerate() {
                 gk += c.b[b] * *l;
             }
-            g[4 * block_of::<M>(k) + ch] += gk;
+            g[4 * self.move_of[k] as usize + ch] += gk;
             if k == 0 {
                 return;
             }

@@ -104,6 +104,14 @@ pub struct MpcConfig {
     /// (roll and pitch too). `false`: the lag states stay zero and the
     /// prediction is the rotor-less hover model.
     pub rotor_lag_prediction: bool,
+    /// Prediction steps each move but the last spans (≥ 1; the last move is
+    /// held over the rest of the horizon, so `(M − 1)·move_steps < N`).
+    /// Move blocking: with the rotors in the prediction, two moves one
+    /// 50 ms step apart behind a 178 ms lag are nearly one move to the
+    /// prediction, and the QP's Hessian nearly singular in their direction
+    /// (the f32 certificate then fails to prove its accuracy); moves two
+    /// steps apart are not.
+    pub move_steps: usize,
     /// Damped-trend prediction of the horizontal disturbance force: its
     /// horizon `T`, s (`None`: the estimate is held constant over the
     /// prediction). The estimate's rate ḋ is extrapolated as
@@ -165,6 +173,7 @@ impl MpcConfig {
             observer_moment_tau_s: 0.5,
             observer_rotor_lag: false,
             rotor_lag_prediction: false,
+            move_steps: 1,
             disturbance_trend_s: None,
             disturbance_trend_max_mps2: 0.0,
             disturbance_rate_filter_s: 0.1,
@@ -243,6 +252,7 @@ impl MpcConfig {
             observer_moment_tau_s: 0.004,
             observer_rotor_lag: true,
             rotor_lag_prediction: false,
+            move_steps: 1,
             disturbance_trend_s: Some(0.3),
             disturbance_trend_max_mps2: 0.4,
             disturbance_rate_filter_s: 0.05,
@@ -359,6 +369,8 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     ub: SVector<T, NZ>,
     settings: QpSettings<T>,
     iteration_bound: u32,
+    /// The move of each prediction step ([`MpcConfig::move_steps`]).
+    move_of: [u8; N],
     // Run-time state.
     preview: [Setpoint<T>; N],
     preview_valid: bool,
@@ -428,10 +440,11 @@ const LAGGED_CHANNELS: [usize; 2] = [0, 3];
 pub const CHANNELS: ([usize; 3], [usize; 5], [usize; 5], [usize; 3]) =
     ([2, 5, 12], [1, 4, 6, 9, 13], [0, 3, 7, 10, 14], [8, 11, 15]);
 
-/// Which prediction steps belong to which move (the last move is held).
+/// The move of prediction step `k` when each move but the last spans
+/// `move_steps` steps ([`MpcConfig::move_steps`]; the last is held).
 #[inline]
-fn block_of<const M: usize>(k: usize) -> usize {
-    k.min(M - 1)
+fn block_of<const M: usize>(k: usize, move_steps: usize) -> usize {
+    (k / move_steps.max(1)).min(M - 1)
 }
 
 impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T, N, M, NZ> {
@@ -481,6 +494,11 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
             ub: SVector::zeros(),
             settings: qp_settings(&cfg),
             iteration_bound: 0,
+            move_of: {
+                // A move's index is kept in a byte.
+                const { assert!(M <= u8::MAX as usize) };
+                [0; N]
+            },
             preview: [Setpoint::hold(Vector3::zeros(), T::zero()); N],
             preview_valid: false,
             z: SVector::zeros(),
@@ -612,7 +630,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
                 ek.fixed_rows_mut::<4>(12).copy_from(&-du_ref);
             }
             // Input magnitude reference: the input of step k is move block_of(k).
-            let b = block_of::<M>(k);
+            let b = self.move_of[k] as usize;
             for ch in 0..4 {
                 g[4 * b + ch] -= self.r[ch] * du_ref[ch];
             }
@@ -622,9 +640,9 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
             g[ch] -= self.s[ch] * self.du_prev[ch];
         }
         // Warm start: the previous moves, shifted by one when a whole
-        // prediction step has passed.
+        // prediction step has passed and a move is one step long.
         let mut warm = self.z;
-        if self.cfg.exec_dt_s >= self.cfg.pred_dt_s && M > 1 {
+        if self.cfg.exec_dt_s >= self.cfg.pred_dt_s && self.cfg.move_steps == 1 && M > 1 {
             for b in 0..M - 1 {
                 for ch in 0..4 {
                     warm[4 * b + ch] = self.z[4 * (b + 1) + ch];
@@ -717,17 +735,18 @@ mod tests {
 
     /// The channel-by-channel adjoint pass against the dense one over all
     /// 16 states of the design's own f64 model, with and without the
-    /// rotors' lag states.
+    /// rotors' lag states, with moves of one and three prediction steps.
     #[test]
     fn the_channel_adjoint_equals_the_dense_one() {
         let p = VehicleParams::<f64>::os4();
         for form in [AttitudeForm::Euler, AttitudeForm::Quaternion] {
-            for (cfg, lag) in [MpcConfig::fast(form), MpcConfig::thesis(form)]
+            for (cfg, lag, move_steps) in [MpcConfig::fast(form), MpcConfig::thesis(form)]
                 .into_iter()
-                .flat_map(|c| [(c, false), (c, true)])
+                .flat_map(|c| [(c, false, 1), (c, true, 1), (c, true, 3)])
             {
                 let mut cfg = cfg;
                 cfg.rotor_lag_prediction = lag;
+                cfg.move_steps = move_steps;
                 let mpc = MpcFast::<f64>::new(p, cfg).unwrap();
                 let m = design::prediction_model(&cfg, &p);
                 // Arbitrary errors on every state at every step.
@@ -750,7 +769,7 @@ mod tests {
                     lambda = w + m.ad.transpose() * lambda;
                     let gk = m.bd.transpose() * lambda;
                     for c in 0..4 {
-                        dense[4 * block_of::<3>(k) + c] += gk[c];
+                        dense[4 * block_of::<3>(k, cfg.move_steps) + c] += gk[c];
                     }
                 }
                 // The lag state is driven by no state of the vehicle, as
@@ -763,8 +782,25 @@ mod tests {
                 let a = mpc.state_gradient(&e);
                 assert!(
                     (a - dense).amax() <= 1e-9 * dense.amax(),
-                    "{form:?} lag {lag}: {a} vs {dense}"
+                    "{form:?} lag {lag} moves of {move_steps}: {a} vs {dense}"
                 );
+            }
+        }
+    }
+
+    /// Moves of no step, or so long that the last move would start past
+    /// the horizon, are refused; the longest that leaves the last move one
+    /// step is designed.
+    #[test]
+    fn move_blocking_past_the_horizon_is_refused() {
+        let p = VehicleParams::<f64>::os4();
+        let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
+        for (move_steps, ok) in [(0, false), (1, true), (9, true), (10, false), (usize::MAX, false)] {
+            cfg.move_steps = move_steps;
+            let r = MpcFast::<f64>::new(p, cfg);
+            assert_eq!(r.is_ok(), ok, "moves of {move_steps} steps: {:?}", r.as_ref().err());
+            if let Err(e) = r {
+                assert_eq!(e, ControlError::InvalidParameter);
             }
         }
     }
