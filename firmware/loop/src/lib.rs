@@ -42,6 +42,7 @@ pub mod power;
 pub mod schedule;
 pub mod supervisor;
 pub mod telemetry;
+pub mod trajectory;
 
 mod flight_loop;
 mod jobs;

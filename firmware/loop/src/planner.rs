@@ -117,7 +117,7 @@ fn eval_axis(c: &[f32; 8], s: f32) -> (f32, f32, f32) {
 }
 
 /// `a − b` wrapped into (−π, π].
-fn wrap(a: f32) -> f32 {
+pub(crate) fn wrap(a: f32) -> f32 {
     let two_pi = 2.0 * core::f32::consts::PI;
     let w = a - two_pi * libm::floorf((a + core::f32::consts::PI) / two_pi);
     if w <= -core::f32::consts::PI {
