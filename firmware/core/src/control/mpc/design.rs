@@ -176,11 +176,12 @@ pub(super) fn prediction_model(cfg: &MpcConfig, p64: &VehicleParams<f64>) -> Pre
     }
 }
 
-/// A group design's matrices: state, input, terminal weight, and the
+/// A group design's matrices: state, input (with the disturbance
+/// columns after the four inputs), terminal weight, and the
 /// group's index of each prediction state (`usize::MAX`: not in it).
 type GroupDesign<'a> = (
     &'a SMatrix<f64, 12, 12>,
-    &'a SMatrix<f64, 12, 4>,
+    &'a SMatrix<f64, 12, 10>,
     &'a SMatrix<f64, 12, 12>,
     &'a [usize; PREDICTION_STATES],
 );
@@ -208,6 +209,110 @@ fn store_channel<T: RealField + Copy>(
         }
         b[r] = lit(if local[i] == usize::MAX { 0.0 } else { bd[(local[i], c)] });
     }
+}
+
+/// Where a group's design is stored: each channel's blocks
+/// ([`Channel::blocks`], thrust, roll, pitch, yaw) and the disturbance
+/// input's rows (`Wd`, 12 × 6, column-major).
+struct GroupOut<'a, T> {
+    blocks: [(&'a mut [T], &'a mut [T], &'a mut [T]); 4],
+    wd: &'a mut [T],
+}
+
+/// Designs the channels `chans` in one model of 12 states: their states
+/// and, with the rotors' time constant `tau`, their lag states; the rest
+/// of the 12 are states of their own that nothing drives or weighs,
+/// decaying at `1/pred_dt`, so the DARE sees them stable. The hover model
+/// alone (`tau` `None`, every channel) keeps its own state order. Its ZOH
+/// at `pred_dt` and terminal weight (the DARE of (Q, R), or Q) give each
+/// channel's blocks and the disturbance rows, stored in `out`. Generic in
+/// the scalar only: one copy in an image that carries two MPCs of
+/// different sizes.
+// Design-time code: kept out of line so that its large frames are not
+// merged into the callers' (stack) and not copied into each (flash).
+#[inline(never)]
+fn design_group_into<T: RealField + Copy>(
+    cfg: &MpcConfig,
+    hover: &HoverModel,
+    chans: &[usize],
+    tau: Option<f64>,
+    out: GroupOut<'_, T>,
+) -> Result<(), ControlError> {
+    // The group's states: (prediction state, its index in the group);
+    // `local` the reverse (usize::MAX: not in the group).
+    let mut states = [(0usize, 0usize); 12];
+    let mut local = [usize::MAX; PREDICTION_STATES];
+    let mut n = 0;
+    for &c in chans {
+        for &i in channel_states(c) {
+            if i >= 12 && tau.is_none() {
+                continue;
+            }
+            let li = if tau.is_some() { n } else { i };
+            *states.get_mut(n).ok_or(ControlError::InvalidParameter)? = (i, li);
+            local[i] = li;
+            n += 1;
+        }
+    }
+    let states = &states[..n];
+    let dt = cfg.pred_dt_s;
+    let mut w = ModelWork::<12>::blank();
+    for l in n..12 {
+        w.a[(l, l)] = -1.0 / dt;
+    }
+    for &(i, li) in states {
+        if i >= 12 {
+            // A lag state: `U̇_d = (U − U_d)/τ` of its own input.
+            let (c, tau) = (i - 12, tau.unwrap_or(dt));
+            w.a[(li, li)] = -1.0 / tau;
+            w.b_all[(li, c)] = 1.0 / tau;
+            continue;
+        }
+        for &(j, lj) in states {
+            // The vehicle's state matrix; its input matrix, into the lag
+            // states when they are there, else from the inputs.
+            w.a[(li, lj)] = if j < 12 {
+                hover.a[(i, j)]
+            } else {
+                hover.b_all[(i, j - 12)]
+            };
+        }
+        for col in 0..10 {
+            if col >= 4 || tau.is_none() {
+                w.b_all[(li, col)] = hover.b_all[(i, col)];
+            }
+        }
+    }
+    w.zoh(dt)?;
+    let mut q = SMatrix::<f64, 12, 12>::zeros();
+    for &(i, li) in states.iter().filter(|&&(i, _)| i < 12) {
+        q[(li, li)] = cfg.q[i];
+    }
+    let bd: SMatrix<f64, 12, 4> = w.bd_all.fixed_columns::<4>(0).into_owned();
+    let p = if cfg.terminal {
+        // A tiny input weight keeps R invertible when the config has
+        // zeros (and for the inputs of the channels not in the group,
+        // which move nothing here).
+        let rr = SMatrix::<f64, 4, 4>::from_diagonal(&Vector4::<f64>::from(cfg.r).map(|v| v.max(1e-6)));
+        solve_dare(&w.ad, &bd, &q, &rr)?.x
+    } else {
+        q
+    };
+    let m = (&w.ad, &w.bd_all, &p, &local);
+    let GroupOut { blocks, wd } = out;
+    for (c, b) in blocks.into_iter().enumerate() {
+        if chans.contains(&c) {
+            store_channel(b, channel_states(c), m, c);
+        }
+    }
+    for &(i, li) in states.iter().filter(|&&(i, _)| i < 12) {
+        for col in 0..6 {
+            if let Some(v) = wd.get_mut(col * 12 + i) {
+                *v = lit(w.bd_all[(li, 4 + col)]);
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The prediction states of channel `c` (0 thrust, 1 roll, 2 pitch, 3 yaw).
@@ -343,92 +448,14 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         }
     }
 
-    /// Designs the channels `chans` in one model of 12 states: their states
-    /// and, with the rotors' time constant `tau`, their lag states; the
-    /// rest of the 12 are states of their own that nothing drives or
-    /// weighs, decaying at `1/pred_dt`, so the DARE sees them stable. The
-    /// hover model alone (`tau` `None`, every channel) keeps its own state
-    /// order. Stores each channel's blocks and the disturbance rows.
-    // Design-time code: kept out of line so that its large frames are not
-    // merged into the callers' (stack) and not copied into each (flash).
-    #[inline(never)]
+    /// Designs the channels `chans` ([`design_group_into`]) into this
+    /// MPC's channel blocks and disturbance rows.
     fn design_group(&mut self, hover: &HoverModel, chans: &[usize], tau: Option<f64>) -> Result<(), ControlError> {
-        // The group's states: (prediction state, its index in the group);
-        // `local` the reverse (usize::MAX: not in the group).
-        let mut states = [(0usize, 0usize); 12];
-        let mut local = [usize::MAX; PREDICTION_STATES];
-        let mut n = 0;
-        for &c in chans {
-            for &i in channel_states(c) {
-                if i >= 12 && tau.is_none() {
-                    continue;
-                }
-                let li = if tau.is_some() { n } else { i };
-                *states.get_mut(n).ok_or(ControlError::InvalidParameter)? = (i, li);
-                local[i] = li;
-                n += 1;
-            }
-        }
-        let states = &states[..n];
-        let dt = self.cfg.pred_dt_s;
-        let mut w = ModelWork::<12>::blank();
-        for l in n..12 {
-            w.a[(l, l)] = -1.0 / dt;
-        }
-        for &(i, li) in states {
-            if i >= 12 {
-                // A lag state: `U̇_d = (U − U_d)/τ` of its own input.
-                let (c, tau) = (i - 12, tau.unwrap_or(dt));
-                w.a[(li, li)] = -1.0 / tau;
-                w.b_all[(li, c)] = 1.0 / tau;
-                continue;
-            }
-            for &(j, lj) in states {
-                // The vehicle's state matrix; its input matrix, into the lag
-                // states when they are there, else from the inputs.
-                w.a[(li, lj)] = if j < 12 {
-                    hover.a[(i, j)]
-                } else {
-                    hover.b_all[(i, j - 12)]
-                };
-            }
-            for col in 0..10 {
-                if col >= 4 || tau.is_none() {
-                    w.b_all[(li, col)] = hover.b_all[(i, col)];
-                }
-            }
-        }
-        w.zoh(dt)?;
-        let mut q = SMatrix::<f64, 12, 12>::zeros();
-        for &(i, li) in states.iter().filter(|&&(i, _)| i < 12) {
-            q[(li, li)] = self.cfg.q[i];
-        }
-        let bd: SMatrix<f64, 12, 4> = w.bd_all.fixed_columns::<4>(0).into_owned();
-        let p = if self.cfg.terminal {
-            // A tiny input weight keeps R invertible when the config has
-            // zeros (and for the inputs of the channels not in the group,
-            // which move nothing here).
-            let rr = SMatrix::<f64, 4, 4>::from_diagonal(&Vector4::<f64>::from(self.cfg.r).map(|v| v.max(1e-6)));
-            solve_dare(&w.ad, &bd, &q, &rr)?.x
-        } else {
-            q
+        let out = GroupOut {
+            blocks: [self.zc.blocks(), self.yc.blocks(), self.xc.blocks(), self.wc.blocks()],
+            wd: self.wd.as_mut_slice(),
         };
-        let (zi, yi, xi, wi) = CHANNELS;
-        let m = (&w.ad, &bd, &p, &local);
-        for &c in chans {
-            match c {
-                0 => store_channel(self.zc.blocks(), &zi, m, c),
-                1 => store_channel(self.yc.blocks(), &yi, m, c),
-                2 => store_channel(self.xc.blocks(), &xi, m, c),
-                _ => store_channel(self.wc.blocks(), &wi, m, c),
-            }
-        }
-        for &(i, li) in states.iter().filter(|&&(i, _)| i < 12) {
-            for col in 0..6 {
-                self.wd[(i, col)] = lit(w.bd_all[(li, 4 + col)]);
-            }
-        }
-        Ok(())
+        design_group_into(&self.cfg, hover, chans, tau, out)
     }
 
     /// Observer model (ZOH at `exec_dt`), its velocity and rate rows.
