@@ -105,15 +105,19 @@ fn axis(p0: f32, v0: f32, a0: f32, p1: f32, t: f32) -> [f32; 8] {
     c
 }
 
-/// Value, first and second derivative (in s) of `c` at `s`.
-fn eval_axis(c: &[f32; 8], s: f32) -> (f32, f32, f32) {
-    let (mut p, mut d, mut dd) = (0.0, 0.0, 0.0);
-    for k in (0..8).rev() {
-        dd = dd * s + d * 2.0;
-        d = d * s + p;
-        p = p * s + c[k];
+/// Value and first three derivatives of the degree-7 polynomial `c`
+/// (coefficients from the constant up) at `t`, in one Horner pass: the
+/// segments' (in their normalised time) and the uploaded trajectories'
+/// ([`crate::trajectory`], in seconds).
+pub(crate) fn eval_poly(c: &[f32; 8], t: f32) -> [f32; 4] {
+    let (mut p, mut d1, mut d2, mut d3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    for &ck in c.iter().rev() {
+        d3 = d3 * t + 3.0 * d2;
+        d2 = d2 * t + 2.0 * d1;
+        d1 = d1 * t + p;
+        p = p * t + ck;
     }
-    (p, d, dd)
+    [p, d1, d2, d3]
 }
 
 /// `a − b` wrapped into (−π, π].
@@ -211,12 +215,12 @@ impl Segment {
         let (inv_t, inv_t2) = (1.0 / self.duration_s, 1.0 / (self.duration_s * self.duration_s));
         let mut r = Reference::at_rest(Vector3::zeros(), 0.0);
         for i in 0..3 {
-            let (p, d, dd) = eval_axis(&self.coef[i], s);
+            let [p, d, dd, _] = eval_poly(&self.coef[i], s);
             r.pos_ned_m[i] = p;
             r.vel_ned_mps[i] = d * inv_t;
             r.acc_ned_mps2[i] = dd * inv_t2;
         }
-        let (y, dy, _) = eval_axis(&self.coef[3], s);
+        let [y, dy, _, _] = eval_poly(&self.coef[3], s);
         r.yaw_rad = wrap(y);
         r.yaw_rate_radps = dy * inv_t;
         if s >= 1.0 {

@@ -20,7 +20,7 @@
 //! the odd derivatives change sign; after the end, at rest at the end.
 //! Every loop is bounded by [`MAX_PIECES`] and the degree.
 
-use crate::planner::Reference;
+use crate::planner::{eval_poly, Reference};
 use nalgebra::Vector3;
 
 /// Coefficients per polynomial (degree 7).
@@ -83,18 +83,6 @@ pub struct Piece {
     pub poly: [[f32; COEFFICIENTS]; 4],
     /// Duration, s.
     pub duration_s: f32,
-}
-
-/// Value and first three derivatives of `c` at `t` (one Horner pass).
-fn eval_poly(c: &[f32; COEFFICIENTS], t: f32) -> [f32; 4] {
-    let (mut p, mut d1, mut d2, mut d3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    for &ck in c.iter().rev() {
-        d3 = d3 * t + 3.0 * d2;
-        d2 = d2 * t + 2.0 * d1;
-        d1 = d1 * t + p;
-        p = p * t + ck;
-    }
-    [p, d1, d2, d3]
 }
 
 /// A point of a trajectory: the reference and its jerk.

@@ -575,7 +575,6 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
 }
 
 impl<T: RealField + Copy, const K: usize, const M: usize> Channel<T, K, M> {
-    /// This channel's blocks of the f64 design (its states `idx`, input `c`).
     /// The channel's blocks as flat slices, for [`store_channel`].
     fn blocks(&mut self) -> (&mut [T], &mut [T], &mut [T]) {
         (self.a.as_flattened_mut(), &mut self.b, self.p.as_flattened_mut())
