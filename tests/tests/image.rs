@@ -89,8 +89,28 @@ fn footprint(elf: &std::path::Path) -> (u64, u64) {
     (flash, ram)
 }
 
+/// Symbols of core's float formatting (`flt2dec`: Grisu, Dragon4 and
+/// their tables, ≈ 17 KiB) in the ELF at `elf`, from its symbol table
+/// (binutils `nm`). A float's `Display` or `Debug` anywhere in an image
+/// links them; the images print their numbers as integers instead.
+fn float_formatting(elf: &std::path::Path) -> Vec<String> {
+    let out = Command::new("nm")
+        .arg(elf)
+        .output()
+        .expect("binutils `nm` (installed with gcc)");
+    assert!(out.status.success(), "nm failed");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.lines().count() > 100, "unexpected `nm` output:\n{text}");
+    text.lines()
+        .filter(|l| l.contains("flt2dec"))
+        .map(str::to_owned)
+        .collect()
+}
+
 fn check(name: &str, elf: &std::path::Path, flash_budget: u32, ram_budget: u32) {
     let (flash_budget, ram_budget) = (u64::from(flash_budget), u64::from(ram_budget));
+    let floats = float_formatting(elf);
+    assert!(floats.is_empty(), "{name} links core's float formatting: {floats:?}");
     let (flash, ram) = footprint(elf);
     eprintln!("{name}: flash {flash} B of {flash_budget}, static RAM {ram} B of {ram_budget}");
     let key = name.replace(' ', "_");

@@ -26,8 +26,10 @@ pub enum PlanError {
 impl core::fmt::Display for PlanError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            PlanError::Duration => write!(f, "duration must be in (0, {MAX_DURATION_S}] s"),
-            PlanError::Position => write!(f, "positions must be finite and within {MAX_DISTANCE_M} m"),
+            // Whole numbers, written as integers: a float's `Display` would
+            // link core's float formatting (≈ 17 KiB) into the images.
+            PlanError::Duration => write!(f, "duration must be in (0, {}] s", MAX_DURATION_S as u32),
+            PlanError::Position => write!(f, "positions must be finite and within {} m", MAX_DISTANCE_M as u32),
         }
     }
 }

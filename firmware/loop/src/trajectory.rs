@@ -62,12 +62,17 @@ impl core::fmt::Display for TrajectoryError {
         match self {
             TrajectoryError::NotFinite { piece } => write!(f, "trajectory piece {piece}: a coefficient is not finite"),
             TrajectoryError::Duration { piece } => {
-                write!(f, "trajectory piece {piece}: duration must be in (0, {MAX_PIECE_S}] s")
+                write!(
+                    f,
+                    "trajectory piece {piece}: duration must be in (0, {}] s",
+                    MAX_PIECE_S as u32
+                )
             }
             TrajectoryError::Full => write!(f, "a trajectory holds at most {MAX_PIECES} pieces"),
             TrajectoryError::Empty => write!(f, "the trajectory has no piece"),
             TrajectoryError::TimeScale => {
-                write!(f, "time scale must be in [1/{MAX_TIME_SCALE}, {MAX_TIME_SCALE}]")
+                let s = MAX_TIME_SCALE as u32;
+                write!(f, "time scale must be in [1/{s}, {s}]")
             }
             TrajectoryError::Shift => write!(f, "the trajectory's shift must be finite"),
         }
