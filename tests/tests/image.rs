@@ -43,11 +43,12 @@
 //! high-level commander's polynomial planner, syslink) and the four tasks
 //! add ≈ 77 KiB to the plain image (360 492 B against 283 256 B), the
 //! settings store for cflib's persistent parameters ≈ 20 KiB —, static
-//! RAM ≤ 28 KiB (the vehicle's log blocks, downlink queue of 16
+//! RAM ≤ 36 KiB (the vehicle's log blocks, downlink queue of 16
 //! packets and USART6's receive queue on top of the loop, and the tasks'
 //! queues: 8 steps or designs for the controller, 2 designs from the link,
 //! 8 answers for the simulator; 25 568 B before the settings' 2 KiB RAM
-//! stand-in).
+//! stand-in; 28 KiB until the trajectory memory, 4 KiB as the
+//! Crazyflie's).
 
 use fc_stm32f405::budgets::*;
 use std::process::Command;
@@ -172,7 +173,7 @@ fn load_segments(elf: &std::path::Path) -> Vec<(u64, u64)> {
 
 /// The Crazyflie 2.1 image (the CRTP images' RTIC application and the
 /// Crazyflie's motors, in the bootloader's layout): flash ≤ 392 KiB and
-/// static RAM ≤ 28 KiB, as `firmware-crtp` (the motors, their thrust
+/// static RAM ≤ 36 KiB, as `firmware-crtp` (the motors, their thrust
 /// curve, the fault hook and the LEDs add ≈ 5 KiB of flash); everything it
 /// puts in flash is at or above 0x08004000, so flashing it (`cfloader`, `dfu-util -s 0x08004000`)
 /// leaves Bitcraze's bootloader in sector 0 untouched, and its vector table

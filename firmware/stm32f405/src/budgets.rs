@@ -33,23 +33,25 @@ pub const MAVLINK_STATIC_RAM_BYTES: u32 = 22 * 1024;
 /// well below the settings' own sectors 10–11 (`flash::STORAGE`, from
 /// 768 KiB).
 pub const CRTP_FLASH_BYTES: u32 = 392 * 1024;
-/// `firmware-crtp`, static RAM: 28 KiB (the CRTP TOCs, the planner and the
-/// syslink queues over `firmware`'s, 26 KiB, and the settings' 2 KiB RAM
-/// stand-in, `flash::STAND_IN_BYTES`).
-pub const CRTP_STATIC_RAM_BYTES: u32 = 28 * 1024;
+/// `firmware-crtp`, static RAM: 36 KiB (the CRTP TOCs, the planner and the
+/// syslink queues over `firmware`'s, 26 KiB, the settings' 2 KiB RAM
+/// stand-in, `flash::STAND_IN_BYTES`, and the high-level commander's
+/// trajectory memory, 4 KiB as the Crazyflie's `TRAJECTORY_MEMORY_SIZE`,
+/// with its definitions: issue 70; it was 28 KiB until then).
+pub const CRTP_STATIC_RAM_BYTES: u32 = 36 * 1024;
 /// `firmware-crazyflie` built for QEMU, flash: 392 KiB, as `firmware-crtp`'s.
 pub const CRAZYFLIE_FLASH_BYTES: u32 = 392 * 1024;
-/// `firmware-crazyflie` built for QEMU, static RAM: 28 KiB, as `firmware-crtp`'s.
-pub const CRAZYFLIE_STATIC_RAM_BYTES: u32 = 28 * 1024;
+/// `firmware-crazyflie` built for QEMU, static RAM: 36 KiB, as `firmware-crtp`'s.
+pub const CRAZYFLIE_STATIC_RAM_BYTES: u32 = 36 * 1024;
 /// `firmware-crazyflie` as flashed (its own sensors, defmt over RTT),
 /// flash: 408 KiB of the 752 KiB between Bitcraze's 16 KiB bootloader and
 /// the settings' sectors 10–11: the QEMU build's, its drivers, and the
 /// flash driver that keeps the settings (the store's code built for it).
 pub const CRAZYFLIE_AS_FLASHED_FLASH_BYTES: u32 = 408 * 1024;
-/// `firmware-crazyflie` as flashed, static RAM: 28 KiB (RTT's buffers,
+/// `firmware-crazyflie` as flashed, static RAM: 36 KiB (RTT's buffers,
 /// 2.5 KiB, over the QEMU build's, less the RAM stand-in: the settings are
-/// in the flash).
-pub const CRAZYFLIE_AS_FLASHED_STATIC_RAM_BYTES: u32 = 28 * 1024;
+/// in the flash), as the QEMU build's.
+pub const CRAZYFLIE_AS_FLASHED_STATIC_RAM_BYTES: u32 = 36 * 1024;
 
 /// The whole image step of the fast MPC at 1 kHz (the IMU sample and a
 /// fix in, the estimator, the MPC, the output), instructions: one 1 kHz
