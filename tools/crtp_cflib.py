@@ -24,6 +24,13 @@ the firmware says of itself:
    (`sil-host crtp --imu-dead`): the vehicle flies the last good sample for
    10 ms, then says "failsafe descent" on the console and lands straight
    down; the samples are counted (sil-host's summary, the image's log).
+8. cflib's `autonomy/autonomous_sequence_high_level.py`, unchanged: it
+   uploads its figure-8 (ten Poly4D pieces) into the trajectory memory
+   (port mem), defines it, arms, takes off and flies it relative to where
+   it is; the truth against the path its pieces describe, worst and RMS
+   over the whole of it (≤ 10 cm). On the images, whose emulation runs
+   slower than the wall clock the example sleeps on, its own upload and its
+   sequence on the vehicle's clock.
 
 With `--qemu` the same sessions fly the `firmware-crtp` image in QEMU
 (`sil-host crtp --target qemu`): cflib reaches it through
@@ -38,6 +45,7 @@ Prints `crtp check: N passed, M failed` (`crtp-qemu check: ...` with --qemu,
 Usage: crtp_cflib.py SIL_HOST [--qemu | --qemu-crazyflie] [sil-host crtp options]
 """
 import importlib.metadata
+import importlib.util
 import itertools
 import math
 import os
@@ -66,6 +74,9 @@ PORT = 19850
 TRUTH_PORT = 19870
 URI = f'udp://127.0.0.1:{PORT}'
 TOL_M = 0.05
+# The uploaded figure-8 flown (session 5): the truth's distance from the
+# path its pieces describe, either way.
+TRAJ_TOL_M = 0.10
 # Session 4's dead IMU: when (plant time, s) and for how long.
 DEAD_AT_S = 8.0
 DEAD_S = 0.03
@@ -506,15 +517,7 @@ def session_dead_imu(sil_host, truth):
 def session_examples(sil_host):
     version = importlib.metadata.version('cflib')
     print(f'session 4: cflib {version}\'s own examples, unchanged')
-    work = pathlib.Path('target/cflib-examples').resolve()
-    work.mkdir(parents=True, exist_ok=True)
-    sdist = work / f'cflib-{version}.tar.gz'
-    if not sdist.exists():
-        subprocess.run([sys.executable, '-m', 'pip', 'download', '--quiet', '--no-deps', '--no-binary', ':all:',
-                        f'cflib=={version}', '-d', str(work)], check=True)
-    with tarfile.open(sdist) as tar:
-        tar.extractall(work, filter='data')
-    examples = work / f'cflib-{version}' / 'examples'
+    examples = cflib_examples()
     env = dict(os.environ, CFLIB_URI=URI)
     # What each prints when it worked (its own output, unchanged).
     for script, expect in (('logging/basiclog_sync.py', "'stabilizer.roll'"),
@@ -532,6 +535,138 @@ def session_examples(sil_host):
             sil.stop()
 
 
+def cflib_examples():
+    """cflib's examples, unchanged, from its PyPI source distribution (the
+    installed version): their directory."""
+    version = importlib.metadata.version('cflib')
+    work = pathlib.Path('target/cflib-examples').resolve()
+    work.mkdir(parents=True, exist_ok=True)
+    sdist = work / f'cflib-{version}.tar.gz'
+    if not sdist.exists():
+        subprocess.run([sys.executable, '-m', 'pip', 'download', '--quiet', '--no-deps', '--no-binary', ':all:',
+                        f'cflib=={version}', '-d', str(work)], check=True)
+    with tarfile.open(sdist) as tar:
+        tar.extractall(work, filter='data')
+    return work / f'cflib-{version}' / 'examples'
+
+
+def poly4d_path(rows, shift, dt=0.01):
+    """cflib's `Poly4D` rows (duration, then x, y, z and yaw's eight
+    coefficients each, from the constant up) evaluated every `dt` s from
+    the first piece's start and moved by `shift`: the positions a relative
+    start flies, the Crazyflie's frame, m, one row each `dt` s."""
+    import numpy as np
+    points = []
+    for row in rows:
+        t = np.arange(0.0, row[0], dt)
+        points.append(np.stack([np.polyval(row[1 + 8 * a:9 + 8 * a][::-1], t) + shift[a] for a in range(3)], 1))
+    return np.concatenate(points)
+
+
+def tracking_error(flown, path, dt=0.01):
+    """The truth `flown` (rows of plant time, x, y, z) against `path` (one
+    position each `dt` s from its start): the start time that fits it best
+    (least squares, on the plant's clock), then the worst and the RMS
+    distance over the path's whole span from there, m, and that start."""
+    import numpy as np
+    t = flown[:, 0]
+    best = (math.inf, math.inf, None)
+    span = (len(path) - 1) * dt
+    for t0 in np.arange(t[0], t[-1] - span, dt):
+        at = np.clip(np.round((t - t0) / dt).astype(int), 0, len(path) - 1)
+        inside = (t >= t0) & (t <= t0 + span)
+        err = np.linalg.norm(flown[inside, 1:] - path[at[inside]], axis=1)
+        rms = float(np.sqrt(np.mean(err ** 2)))
+        if rms < best[1]:
+            best = (float(err.max()), rms, float(t0))
+    return best
+
+
+def session_trajectory(sil_host, truth):
+    """cflib's `autonomy/autonomous_sequence_high_level.py`, unchanged: it
+    uploads its figure-8 (ten Poly4D pieces) into the trajectory memory,
+    defines it, resets the estimator, arms, takes off to 1 m, flies it with
+    a relative start and lands. The truth against the figure-8 its pieces
+    describe, in time: worst and RMS error over the whole trajectory from
+    the start that fits best."""
+    import numpy as np
+    print('session 5: cflib\'s autonomous_sequence_high_level.py, unchanged (an uploaded trajectory)')
+    failed_before = check.failed
+    script = cflib_examples() / 'autonomy' / 'autonomous_sequence_high_level.py'
+    spec = importlib.util.spec_from_file_location('cflib_example_figure8', script)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)  # only its definitions: it flies under __main__
+    sil = Sil(sil_host, truth=truth)
+    flown = []
+    recording = threading.Event()
+    recording.set()
+
+    def record_truth():
+        last = None
+        while recording.is_set():
+            m = truth.last
+            if m is not None and m is not last:
+                flown.append((m['t'], m['x'], m['y'], m['z']))
+                last = m
+            time.sleep(0.002)
+
+    recorder = threading.Thread(target=record_truth, daemon=True)
+    try:
+        while truth.last is None:
+            time.sleep(0.05)
+        start = truth.pos
+        recorder.start()
+        if not QEMU:
+            r = subprocess.run([sys.executable, str(script)], check=False, env=dict(os.environ, CFLIB_URI=URI),
+                               capture_output=True, text=True, timeout=180, cwd=script.parent)
+            check(r.returncode == 0 and 'The sequence is' in r.stdout and 'Upload failed' not in r.stdout,
+                  f'{script.name}: exit {r.returncode}, "{r.stdout.strip().splitlines()[0] if r.stdout else ""}"'
+                  + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+        else:
+            # The emulated image runs slower than the wall clock the
+            # example sleeps on (its take-off would be cut short, its
+            # trajectory landed half flown): its own upload, then its
+            # sequence with its durations on the vehicle's clock.
+            from cflib.utils.reset_estimator import reset_estimator
+            scf = connect()
+            cf = scf.cf
+            duration = example.upload_trajectory(cf, 1, example.figure8)
+            reset_estimator(cf)
+            cf.supervisor.send_arming_request(True)
+            truth.sleep(1.0)
+            cf.high_level_commander.takeoff(1.0, 2.0)
+            truth.sleep(3.0)
+            cf.high_level_commander.start_trajectory(1, 1.0, relative_position=True)
+            truth.sleep(duration)
+            cf.high_level_commander.land(0.0, 2.0)
+            truth.sleep(2.0)
+            cf.high_level_commander.stop()
+            print(f'  flown: {script.name}\'s upload_trajectory and sequence, on the vehicle\'s clock '
+                  f'(its trajectory {duration:.1f} s)')
+            scf.close_link()
+        truth.sleep(0.5)
+        recording.clear()
+        recorder.join()
+        path = poly4d_path(example.figure8, (start[0], start[1], 1.0))
+        track = np.array(flown) if flown else np.zeros((0, 4))
+        high = track[track[:, 3] > 0.5]
+        worst, rms, t0 = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
+        span = np.ptp(path, axis=0)
+        check(worst <= TRAJ_TOL_M,
+              f'the truth flew the uploaded figure-8 ({span[0]:.2f} x {span[1]:.2f} m, {len(example.figure8)} pieces, '
+              f'{len(path) / 100:.1f} s): worst {100 * worst:.1f} cm, RMS {100 * rms:.1f} cm over the whole of it, '
+              f'from plant time {t0 or math.nan:.2f} s (bound {100 * TRAJ_TOL_M:.0f} cm)')
+        image = 'crazyflie_qemu' if CRAZYFLIE else 'crtp_qemu' if QEMU else 'crtp_sil'
+        source = f'tools/crtp_cflib.py{" --qemu-crazyflie" if CRAZYFLIE else " --qemu" if QEMU else ""}'
+        record(f'{image}_figure8_worst_cm', round(100 * worst, 1), 'cm', source)
+        record(f'{image}_figure8_rms_cm', round(100 * rms, 1), 'cm', source)
+        check(truth.last['z'] < TOL_M and not truth.last['flying'],
+              f'landed after the trajectory: z {truth.last["z"]:.3f} m, motors off')
+    finally:
+        recording.clear()
+        report(sil, failed_before)
+
+
 def persistent(cf, call, name):
     """cflib's `param.persistent_*` `call` on `name`, waited for: its result."""
     done = threading.Event()
@@ -543,7 +678,7 @@ def persistent(cf, call, name):
 def session_persistent(sil_host):
     """cflib's persistent parameters against `sil-host crtp --storage FILE`:
     stored, read back after a restart with the same file, cleared."""
-    print('session 5: persistent parameters (cflib persistent_store / get_state / clear, sil-host --storage)')
+    print('session 6: persistent parameters (cflib persistent_store / get_state / clear, sil-host --storage)')
     if QEMU:
         # The images keep their settings in a RAM stand-in for flash (QEMU
         # models no flash controller), which a restart of QEMU loses.
@@ -605,6 +740,7 @@ def main():
     session_extpos(sil_host, truth)
     session_dead_imu(sil_host, truth)
     session_examples(sil_host)
+    session_trajectory(sil_host, truth)
     session_persistent(sil_host)
     truth.close()
     plant = sum(p for p, _ in truth.walls)

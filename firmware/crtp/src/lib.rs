@@ -298,6 +298,12 @@ pub(crate) fn f32_at(p: &[u8], at: usize) -> Option<f32> {
     Some(f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
 }
 
+/// Reads a little-endian `u32` at `at` of `p`, if it is there.
+pub(crate) fn u32_at(p: &[u8], at: usize) -> Option<u32> {
+    let b = p.get(at..at + 4)?;
+    Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+}
+
 /// Reads a little-endian `u16` at `at` of `p`, if it is there.
 pub(crate) fn u16_at(p: &[u8], at: usize) -> Option<u16> {
     let b = p.get(at..at + 2)?;

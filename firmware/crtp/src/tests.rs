@@ -226,7 +226,7 @@ fn a_session_answers_as_a_crazyflie() {
     let ver = ask(&mut v, pk(Port::Platform, 1, &[0]));
     assert_eq!(ver.payload(), &[0, 12, 0, 0, 0]);
     let mem = ask(&mut v, pk(Port::Mem, 0, &[1]));
-    assert_eq!(mem.payload(), &[1, 0]);
+    assert_eq!(mem.payload(), &[1, 1], "one memory: the trajectories'");
     // Param TOC info: count and CRC.
     let info = ask(&mut v, pk(Port::Param, 0, &[toc::CMD_GET_INFO_V2]));
     assert_eq!(
@@ -300,6 +300,123 @@ fn arming_waits_for_the_estimator_and_takeoff_for_arming() {
     rpyt.extend_from_slice(&0u16.to_le_bytes());
     v.handle(&pk(Port::Commander, 0, &rpyt), &mut out).unwrap();
     assert!(!v.flying() && v.armed());
+}
+
+/// cflib's memory write of `data` at `addr` of memory `id` (channel 2).
+fn mem_write(id: u8, addr: u32, data: &[u8]) -> Packet {
+    let mut d = vec![id];
+    d.extend_from_slice(&addr.to_le_bytes());
+    d.extend_from_slice(data);
+    pk(Port::Mem, 2, &d)
+}
+
+/// A trajectory as cflib's `autonomous_sequence_high_level.py` flies one:
+/// the memory listed as cflib's `TYPE_TRAJ` of 4096 bytes, a `Poly4D`
+/// piece written in cflib's 24-byte chunks and read back, defined, and
+/// started relative to where the take-off left the vehicle; the flight
+/// follows the piece (in NED), and while it flies the memory refuses
+/// writes (status `EBUSY`, said). Bad definitions are refused by name.
+#[test]
+fn a_trajectory_is_uploaded_defined_and_flown_as_cflib_does() {
+    let mut v = at_rest(3000);
+    let details = ask(&mut v, pk(Port::Mem, 0, &[2, 0]));
+    let mut want = vec![2u8, 0, 0x12];
+    want.extend_from_slice(&4096u32.to_le_bytes());
+    want.extend_from_slice(&[0; 8]);
+    assert_eq!(details.payload(), &want[..]);
+    assert_eq!(ask(&mut v, pk(Port::Mem, 0, &[2, 1])).payload(), &[2, 1], "no memory 1");
+    // One piece as cflib's Poly4D.pack writes it: x = 2 + 0.5 t, y = 0,
+    // z = 0 (the Crazyflie's frame), yaw 0, over 3 s.
+    let mut piece = Vec::new();
+    for c in [[2.0f32, 0.5], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]] {
+        let mut poly = [0.0f32; 8];
+        poly[..2].copy_from_slice(&c);
+        piece.extend(poly.iter().flat_map(|x| x.to_le_bytes()));
+    }
+    piece.extend(3.0f32.to_le_bytes());
+    for (i, chunk) in piece.chunks(24).enumerate() {
+        let addr = (i * 24) as u32;
+        let a = ask(&mut v, mem_write(0, addr, chunk));
+        let mut ok = vec![0u8];
+        ok.extend_from_slice(&addr.to_le_bytes());
+        ok.push(0);
+        assert_eq!(a.payload(), &ok[..], "chunk {i}");
+    }
+    let mut read = vec![0u8];
+    read.extend_from_slice(&24u32.to_le_bytes());
+    read.push(24);
+    let back = ask(&mut v, pk(Port::Mem, 1, &read));
+    assert_eq!(&back.payload()[..6], &[0, 24, 0, 0, 0, 0]);
+    assert_eq!(&back.payload()[6..], &piece[24..48]);
+    let past = ask(&mut v, mem_write(0, 4090, &[0; 8]));
+    assert_eq!(past.payload()[5], 5, "past the end: EIO");
+    // DEFINE_TRAJECTORY: id 1, in memory, poly4d, offset 0, 1 piece.
+    let define = |kind: u8, pieces: u8| {
+        let mut d = vec![6u8, 1, 1, kind];
+        d.extend_from_slice(&0u32.to_le_bytes());
+        d.push(pieces);
+        pk(Port::HighLevel, 0, &d)
+    };
+    let tell = |v: &mut CrtpVehicle, p: Packet| {
+        let mut out = Sent::default();
+        v.handle(&p, &mut out).unwrap();
+        console_of(&out.0) + &console(v)
+    };
+    let said = tell(&mut v, define(1, 1));
+    assert!(
+        said.contains("HL trajectory 1 refused: only uncompressed poly4d"),
+        "{said}"
+    );
+    let said = tell(&mut v, define(0, 32));
+    assert!(said.contains("past the trajectory memory's 4096 bytes"), "{said}");
+    let mut out = Sent::default();
+    v.handle(&define(0, 1), &mut out).unwrap();
+    assert_eq!(console_of(&out.0), "");
+    // Armed, take off to 1 m, then START_TRAJECTORY_2: relative, id 1.
+    assert_eq!(
+        ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1])).payload(),
+        &[0x81, 1, 1]
+    );
+    v.handle(&takeoff(1.0, 2.0), &mut out).unwrap();
+    rest(&mut v, 3000, 2500);
+    let mut start = vec![13u8, 0, 1, 0, 0, 1];
+    start.extend_from_slice(&1.0f32.to_le_bytes());
+    v.handle(&pk(Port::HighLevel, 0, &start), &mut out).unwrap();
+    assert_eq!(console_of(&out.0), "");
+    rest(&mut v, 5500, 1000);
+    let sp = v.flight_loop().setpoint();
+    assert!(
+        (sp.pos_ned_m - Vector3::new(0.5, 0.0, -1.0)).norm() < 0.01,
+        "{:?}",
+        sp.pos_ned_m
+    );
+    assert!(
+        (sp.vel_ned_mps - Vector3::new(0.5, 0.0, 0.0)).norm() < 1e-4,
+        "{:?}",
+        sp.vel_ned_mps
+    );
+    let (a, said) = ask_said(&mut v, mem_write(0, 0, &[0xff; 24]));
+    assert_eq!(a.payload()[5], 16, "flying: EBUSY");
+    assert!(said.contains("a trajectory flies from the memory"), "{said}");
+    assert_eq!(
+        &ask(&mut v, pk(Port::Mem, 1, &read)).payload()[6..],
+        &piece[24..48],
+        "unchanged"
+    );
+    // Land from where the trajectory is; then the memory takes writes.
+    let mut land = vec![8u8, 0];
+    for x in [0.0f32, 0.0] {
+        land.extend_from_slice(&x.to_le_bytes());
+    }
+    land.push(0);
+    land.extend_from_slice(&2.0f32.to_le_bytes());
+    v.handle(&pk(Port::HighLevel, 0, &land), &mut out).unwrap();
+    rest(&mut v, 6500, 100);
+    assert!(
+        v.flight_loop().setpoint().pos_ned_m[0] > 0.5,
+        "the landing starts where the trajectory was"
+    );
+    assert_eq!(ask(&mut v, mem_write(0, 0, &[0; 24])).payload()[5], 0);
 }
 
 /// The flight stack's one write rule ([`fc_loop::Loop::write_param`]) as a
@@ -379,6 +496,16 @@ fn a_million_bad_packets_are_counted_and_the_session_survives() {
     let mut out = Sent::default();
     v.handle(&pk(Port::Supervisor, 1, &[0x01, 1]), &mut out).unwrap();
     assert!(v.armed());
+    // A trajectory of one piece (at rest at 1 m, 1 s) in memory, defined as
+    // id 1, for the start seeds below to fly.
+    let mut piece = vec![0u8; 132];
+    piece[64..68].copy_from_slice(&1.0f32.to_le_bytes());
+    piece[128..].copy_from_slice(&1.0f32.to_le_bytes());
+    for (i, chunk) in piece.chunks(24).enumerate() {
+        v.handle(&mem_write(0, (i * 24) as u32, chunk), &mut out).unwrap();
+    }
+    v.handle(&pk(Port::HighLevel, 0, &[6, 1, 1, 0, 0, 0, 0, 0, 1]), &mut out)
+        .unwrap();
     // Valid packets of every service, to mutate (no write that re-designs).
     let nan = f32::NAN.to_le_bytes();
     let seeds: Vec<Vec<u8>> = vec![
@@ -395,6 +522,12 @@ fn a_million_bad_packets_are_counted_and_the_session_survives() {
         vec![0x22, 24, 0, 0, 0, 0x48, 0x42],
         vec![0x23, 8, 3, 0],
         vec![0x40, 1],
+        vec![0x40, 2, 0],
+        vec![0x41, 0, 24, 0, 0, 0, 24],
+        vec![0x42, 0, 0, 0, 0, 0, 0, 0, 0x80, 0x3F, 0, 0, 0x80, 0x7F],
+        vec![0x80, 6, 1, 1, 0, 0, 0, 0, 0, 1],
+        vec![0x80, 13, 0, 1, 0, 0, 1, 0, 0, 0x80, 0x3F],
+        vec![0x80, 5, 0, 0, 0, 1, 0, 0, 0x80, 0x3F],
         vec![0x80, 7, 0, 0, 0, 0, 0x3F, 0, 0, 0, 0, 0, 0, 0, 0, 0x40],
         vec![
             0x80, 12, 0, 0, 0, 0, 0, 0, 0x3F, 0, 0, 0, 0, 0, 0, 0x3F, 0, 0, 0, 0, 0, 0, 0x40, 0x40,
@@ -452,7 +585,9 @@ fn a_million_bad_packets_are_counted_and_the_session_survives() {
         }
     }
     let c = v.counters();
-    assert_eq!(c.total(), n + 1, "every packet counted once: {c:?}");
+    // The arming, the upload's chunks and the definition before the mix.
+    let before = 1 + piece.len().div_ceil(24) as u32 + 1;
+    assert_eq!(c.total(), n + before, "every packet counted once: {c:?}");
     assert!(
         c.handled > 0 && c.unsupported > 0 && c.short > 0 && c.malformed > 0,
         "{c:?}"
@@ -464,6 +599,7 @@ fn a_million_bad_packets_are_counted_and_the_session_survives() {
     assert_eq!(ver.payload(), &[0, 12, 0, 0, 0]);
     let r = ask(&mut v, pk(Port::Param, 1, &[0, 0]));
     assert_eq!(&r.payload()[..3], &[0, 0, 0]);
+    assert_eq!(ask(&mut v, pk(Port::Mem, 0, &[1])).payload(), &[1, 1]);
 }
 
 #[test]

@@ -10,6 +10,10 @@
 //!
 //! - **Arming** is the one check ([`Arming::arm`]); arming or disarming
 //!   stops whatever was flown, so nothing from before flies on.
+//! - **An uploaded trajectory** ([`crate::trajectory`]) is written into
+//!   the vehicle's trajectory memory, defined by id and started like a
+//!   segment; while one flies, the memory refuses writes, so what flies is
+//!   never changed under it.
 //! - **A streamed set-point** flies only while armed. It takes control from
 //!   the planner or from idle, as any command does ([`ClientCommander::plan`]).
 //! - **Taking control** is refused while disarmed or while a controller
@@ -26,9 +30,10 @@
 //! commander not idle, as a Crazyflie's do.
 
 use crate::arming::{ArmRefusal, Arming, ArmingState};
-use crate::commander::{Commander, Event, Priority, Watchdog};
+use crate::commander::{Commander, Event, Priority, Source, Watchdog};
 use crate::planner::{Reference, Segment};
 use crate::supervisor::{ImuCounters, ImuOutcome, Supervised, Supervisor};
+use crate::trajectory::{Definition, Flight, StartOptions, TrajectoryError, TrajectoryMemory};
 use fc_core::control::{Setpoint, StateEstimate};
 use fc_core::estimate::ImuSample;
 
@@ -39,14 +44,17 @@ pub enum CommandRefusal {
     NotArmed,
     /// A controller design is under way: no controller flies until it is done.
     Designing,
+    /// The trajectory cannot be flown (see the error).
+    Trajectory(TrajectoryError),
 }
 
 impl core::fmt::Display for CommandRefusal {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
-            CommandRefusal::NotArmed => "not armed",
-            CommandRefusal::Designing => "controller design under way",
-        })
+        match self {
+            CommandRefusal::NotArmed => f.write_str("not armed"),
+            CommandRefusal::Designing => f.write_str("controller design under way"),
+            CommandRefusal::Trajectory(e) => e.fmt(f),
+        }
     }
 }
 
@@ -60,13 +68,18 @@ pub enum Takeover {
     Reset,
 }
 
-/// Arming, the commander and the supervisor of a vehicle a client flies
-/// (see the module's documentation).
+/// Arming, the commander, the supervisor and the trajectory memory of a
+/// vehicle a client flies (see the module's documentation).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ClientCommander {
     arming: Arming,
     commander: Commander,
     supervisor: Supervisor,
+    memory: TrajectoryMemory,
+    /// The last step's reference: its time, the source it came from (as it
+    /// stood then) and the reference, so that a command in the same step
+    /// does not evaluate it again ([`ClientCommander::reference`]).
+    flown: Option<(u64, Source, Reference)>,
 }
 
 impl ClientCommander {
@@ -76,6 +89,8 @@ impl ClientCommander {
             arming: Arming::new(),
             commander: Commander::new(),
             supervisor: Supervisor::new(),
+            memory: TrajectoryMemory::new(),
+            flown: None,
         }
     }
 
@@ -186,6 +201,44 @@ impl ClientCommander {
         Ok(takeover)
     }
 
+    /// Writes `data` into the trajectory memory from byte `addr`: refused
+    /// while a trajectory flies ([`TrajectoryError::Flying`]) or past the
+    /// memory's end, and then nothing is written.
+    pub fn write_trajectory_memory(&mut self, addr: u32, data: &[u8]) -> Result<(), TrajectoryError> {
+        if self.commander.trajectory().is_some() {
+            return Err(TrajectoryError::Flying);
+        }
+        self.memory.write(addr, data)
+    }
+
+    /// The trajectory memory.
+    pub fn trajectory_memory(&self) -> &TrajectoryMemory {
+        &self.memory
+    }
+
+    /// Defines trajectory `id` as `pieces` pieces from byte `offset` of the
+    /// memory, after checking them ([`TrajectoryMemory::define`]).
+    pub fn define_trajectory(&mut self, id: u8, offset: u32, pieces: u8) -> Result<(), TrajectoryError> {
+        self.memory.define(id, Definition::new(offset, pieces)?)
+    }
+
+    /// Flies trajectory `id` from `now_us` with `options` (a relative one
+    /// from `from`, the reference flown), when control can be taken and the
+    /// trajectory starts ([`Flight::start`]).
+    pub fn start_trajectory(
+        &mut self,
+        id: u8,
+        options: StartOptions,
+        from: &Reference,
+        now_us: u64,
+        designing: bool,
+    ) -> Result<Takeover, CommandRefusal> {
+        let takeover = self.take_control(designing)?;
+        let flight = Flight::start(&self.memory, id, now_us, options, from).map_err(CommandRefusal::Trajectory)?;
+        self.commander.fly_trajectory(flight);
+        Ok(takeover)
+    }
+
     /// The IMU sample to step at `t_us` ([`Supervisor::take`]).
     pub fn take_sample(&mut self, t_us: u64, s: Option<&ImuSample>) -> (Option<ImuSample>, ImuOutcome) {
         self.supervisor.take(t_us, s)
@@ -199,18 +252,36 @@ impl ClientCommander {
     /// The set-point to fly at `t_us`, `dt_s` after the last step, with the
     /// stream's watchdog `wd` ([`Commander::setpoint_now`]).
     pub fn setpoint_now(&mut self, t_us: u64, dt_s: f32, wd: &Watchdog) -> (Option<Setpoint<f32>>, Option<Event>) {
-        self.commander.setpoint_now(t_us, dt_s, wd)
+        let (sp, event) = self.commander.setpoint_now(t_us, dt_s, wd, &self.memory);
+        self.flown = sp.map(|sp| (t_us, *self.commander.source(), Reference::from(&sp)));
+        (sp, event)
     }
 
     /// The supervisor's checks of the step at `t_us`, after its estimator
     /// (`est`; [`Supervisor::step`]).
     pub fn supervise(&mut self, t_us: u64, est: Option<&StateEstimate<f32>>) -> Supervised {
-        self.supervisor.step(t_us, &mut self.arming, &mut self.commander, est)
+        self.supervisor
+            .step(t_us, &mut self.arming, &mut self.commander, est, &self.memory)
     }
 
     /// What is flown at `now_us`, as a reference (`est` at rest when idle).
+    /// The last step's, if `now_us` is its time and the source has not
+    /// changed since: the same numbers, not evaluated again.
     pub fn reference(&self, now_us: u64, est: Option<&StateEstimate<f32>>) -> Reference {
-        self.commander.reference(now_us, est)
+        match self.flown(now_us) {
+            Some(r) => r,
+            None => self.commander.reference(now_us, est, &self.memory),
+        }
+    }
+
+    /// The last step's reference, if `now_us` is its time and the source
+    /// has not changed since ([`ClientCommander::reference`] without an
+    /// estimate to make).
+    pub fn flown(&self, now_us: u64) -> Option<Reference> {
+        match &self.flown {
+            Some((t, source, r)) if *t == now_us && source == self.commander.source() => Some(*r),
+            _ => None,
+        }
     }
 
     /// The IMU samples that were not good, by kind.
@@ -228,6 +299,7 @@ impl ClientCommander {
 mod tests {
     use super::*;
     use crate::arming::tests::ready;
+    use crate::commander::Watchdog;
     use nalgebra::Vector3;
 
     fn sp() -> Setpoint<f32> {
@@ -302,5 +374,71 @@ mod tests {
         assert!(!c.recover(), "locked");
         assert!(!c.can_fly(&ready()));
         assert_eq!(c.arm(&ready()), Err(ArmRefusal::Locked));
+    }
+
+    /// A trajectory flies only armed; while it flies the memory refuses
+    /// writes and what flies is unchanged; a segment (a landing, a go_to)
+    /// takes over from where the trajectory is, and the memory takes
+    /// writes again.
+    #[test]
+    fn a_trajectory_flies_armed_and_its_memory_is_not_written_under_it() {
+        use crate::trajectory::{Piece, StartOptions, PIECE_BYTES};
+        let mut c = ClientCommander::new();
+        // North at 1 m/s for 2 s, 1 m up.
+        let mut north = [0.0; 8];
+        north[1] = 1.0;
+        let mut down = [0.0; 8];
+        down[0] = -1.0;
+        let piece = Piece {
+            poly: [north, [0.0; 8], down, [0.0; 8]],
+            duration_s: 2.0,
+        };
+        c.write_trajectory_memory(0, &piece.to_bytes()).unwrap();
+        c.define_trajectory(1, 0, 1).unwrap();
+        let go = StartOptions {
+            time_scale: 1.0,
+            reversed: false,
+            relative_position: false,
+            relative_yaw: false,
+        };
+        let here = Reference::at_rest(Vector3::zeros(), 0.0);
+        assert_eq!(
+            c.start_trajectory(1, go, &here, 0, false),
+            Err(CommandRefusal::NotArmed)
+        );
+        assert_eq!(c.arm(&ready()), Ok(true));
+        assert_eq!(
+            c.start_trajectory(2, go, &here, 0, false),
+            Err(CommandRefusal::Trajectory(TrajectoryError::Undefined))
+        );
+        assert_eq!(c.start_trajectory(1, go, &here, 0, false), Ok(Takeover::Reset));
+        assert!(c.flying());
+        let wd = Watchdog {
+            level_ms: 500,
+            stop_ms: 2000,
+        };
+        let (flown, _) = c.setpoint_now(1_000_000, 0.001, &wd);
+        let flown = flown.unwrap();
+        assert_eq!(flown.pos_ned_m, Vector3::new(1.0, 0.0, -1.0));
+        assert_eq!(flown.vel_ned_mps, Vector3::new(1.0, 0.0, 0.0));
+        // The step's reference, as the commander evaluates it.
+        let evaluated = c.commander().reference(1_000_000, None, c.trajectory_memory());
+        assert_eq!(c.reference(1_000_000, None), evaluated);
+        assert_eq!(evaluated.vel_ned_mps, flown.vel_ned_mps);
+        let bytes = *c.trajectory_memory();
+        assert_eq!(c.write_trajectory_memory(0, &[0xff; 24]), Err(TrajectoryError::Flying));
+        assert_eq!(c.trajectory_memory(), &bytes, "nothing written");
+        assert_eq!(
+            c.setpoint_now(1_000_000, 0.0, &wd).0.unwrap().pos_ned_m,
+            flown.pos_ned_m
+        );
+        // A landing from where the trajectory is, at its speed.
+        let from = c.reference(1_500_000, None);
+        assert_eq!(from.pos_ned_m, Vector3::new(1.5, 0.0, -1.0));
+        let land = Segment::plan(1_500_000, &from, Vector3::new(1.5, 0.0, 0.0), 0.0, 2.0).unwrap();
+        assert_eq!(c.plan(land, true, false), Ok(Takeover::Continue));
+        assert!(c.commander().trajectory().is_none());
+        assert_eq!(c.reference(1_500_000, None).vel_ned_mps, Vector3::new(1.0, 0.0, 0.0));
+        c.write_trajectory_memory(PIECE_BYTES as u32, &[0; 24]).unwrap();
     }
 }

@@ -20,6 +20,7 @@
 //! design under way) is the vehicle's to say before it calls.
 
 use crate::planner::{Reference, Segment};
+use crate::trajectory::{Flight, Trajectories};
 use fc_core::control::{Setpoint, StateEstimate};
 use nalgebra::Vector3;
 
@@ -57,6 +58,12 @@ pub enum Source {
         seg: Segment,
         /// It is a landing.
         landing: bool,
+    },
+    /// An uploaded trajectory ([`crate::trajectory`]), under the planner,
+    /// evaluated from the memory the vehicle passes.
+    Trajectory {
+        /// The flight.
+        flight: Flight,
     },
     /// A client's set-point received at `last_us`; a velocity set-point
     /// moves its position at its velocity. `handover_us`: when control
@@ -112,7 +119,7 @@ impl Commander {
     pub fn priority(&self) -> Priority {
         match self.source {
             Source::Idle => Priority::Idle,
-            Source::Planned { .. } | Source::Held { .. } => Priority::Planned,
+            Source::Planned { .. } | Source::Trajectory { .. } | Source::Held { .. } => Priority::Planned,
             Source::Streamed { .. } => Priority::Streamed,
         }
     }
@@ -131,6 +138,14 @@ impl Commander {
     pub fn segment(&self) -> Option<&Segment> {
         match &self.source {
             Source::Planned { seg, .. } => Some(seg),
+            _ => None,
+        }
+    }
+
+    /// The trajectory flown, if one is.
+    pub fn trajectory(&self) -> Option<&Flight> {
+        match &self.source {
+            Source::Trajectory { flight } => Some(flight),
             _ => None,
         }
     }
@@ -178,6 +193,11 @@ impl Commander {
         self.source = Source::Planned { seg, landing };
     }
 
+    /// Flies the uploaded trajectory `flight`.
+    pub fn fly_trajectory(&mut self, flight: Flight) {
+        self.source = Source::Trajectory { flight };
+    }
+
     /// Holds `from`, brought to rest over half a second, under the planner
     /// (idle if it cannot be planned).
     pub fn hold_from(&mut self, from: &Reference, t_us: u64) {
@@ -202,9 +222,16 @@ impl Commander {
 
     /// The set-point to fly at `t_us`, `dt_s` after the last step (at most
     /// 0.1 s), `None` while idle; a stream is handed over, watched by `wd`
-    /// and moved by its velocity first. The event is what the step did
-    /// that the vehicle should say.
-    pub fn setpoint_now(&mut self, t_us: u64, dt_s: f32, wd: &Watchdog) -> (Option<Setpoint<f32>>, Option<Event>) {
+    /// and moved by its velocity first; a trajectory is evaluated from
+    /// `memory`. The event
+    /// is what the step did that the vehicle should say.
+    pub fn setpoint_now<M: Trajectories>(
+        &mut self,
+        t_us: u64,
+        dt_s: f32,
+        wd: &Watchdog,
+        memory: &M,
+    ) -> (Option<Setpoint<f32>>, Option<Event>) {
         let mut event = None;
         if let Source::Streamed {
             sp,
@@ -232,16 +259,23 @@ impl Commander {
                 sp.yaw_rad += sp.yaw_rate_radps * dt_s;
             }
         }
-        (self.setpoint_at(t_us), event)
+        (self.setpoint_at(t_us, memory), event)
     }
 
     /// The set-point flown at `t_us` as it stands (nothing advanced),
     /// `None` while idle: a segment's reference then, a stream's set-point
-    /// as a reference (its jerk dropped), a held set-point as given.
-    pub fn setpoint_at(&self, t_us: u64) -> Option<Setpoint<f32>> {
+    /// as a reference (its jerk dropped), a held set-point as given, a
+    /// trajectory's point with its jerk (evaluated from `memory`).
+    pub fn setpoint_at<M: Trajectories>(&self, t_us: u64, memory: &M) -> Option<Setpoint<f32>> {
         match &self.source {
             Source::Idle => None,
             Source::Planned { seg, .. } => Some(seg.eval(t_us).setpoint()),
+            Source::Trajectory { flight } => {
+                let s = memory.sample(flight, t_us);
+                let mut sp = s.reference.setpoint();
+                sp.jerk_ned_mps3 = s.jerk_ned_mps3;
+                Some(sp)
+            }
             Source::Streamed { sp, .. } => Some(Reference::from(sp).setpoint()),
             Source::Held { sp } => Some(*sp),
         }
@@ -265,11 +299,12 @@ impl Commander {
         }
     }
 
-    /// What is flown at `now_us`, as a reference; idle, `est` at rest
-    /// (the origin without one).
-    pub fn reference(&self, now_us: u64, est: Option<&StateEstimate<f32>>) -> Reference {
+    /// What is flown at `now_us`, as a reference (a trajectory evaluated
+    /// from `memory`); idle, `est` at rest (the origin without one).
+    pub fn reference<M: Trajectories>(&self, now_us: u64, est: Option<&StateEstimate<f32>>, memory: &M) -> Reference {
         match &self.source {
             Source::Planned { seg, .. } => seg.eval(now_us),
+            Source::Trajectory { flight } => memory.sample(flight, now_us).reference,
             Source::Streamed { sp, .. } | Source::Held { sp } => Reference::from(sp),
             Source::Idle => match est {
                 Some(e) => Reference::at_rest(e.pos_ned_m, e.euler()[2]),
@@ -364,6 +399,7 @@ impl Route {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::trajectory::NoTrajectories;
 
     const WD: Watchdog = Watchdog {
         level_ms: 500,
@@ -379,30 +415,30 @@ mod tests {
     #[test]
     fn a_stream_moves_by_its_velocity_then_levels_then_stops() {
         let mut c = Commander::new();
-        assert_eq!(c.setpoint_now(0, 0.001, &WD), (None, None));
+        assert_eq!(c.setpoint_now(0, 0.001, &WD, &NoTrajectories), (None, None));
         c.stream(moving(), 0);
         assert_eq!(c.priority(), Priority::Streamed);
         // 100 steps of 1 ms at 1 m/s north: 0.1 m.
         let mut sp = None;
         for k in 1..=100u64 {
-            sp = c.setpoint_now(k * 1000, 0.001, &WD).0;
+            sp = c.setpoint_now(k * 1000, 0.001, &WD, &NoTrajectories).0;
         }
         let sp = sp.unwrap();
         assert!((sp.pos_ned_m[0] - 1.1).abs() < 1e-4, "{}", sp.pos_ned_m);
         // Silent past 500 ms: level and still, where it was.
-        let (sp, ev) = c.setpoint_now(601_000, 0.001, &WD);
+        let (sp, ev) = c.setpoint_now(601_000, 0.001, &WD, &NoTrajectories);
         let sp = sp.unwrap();
         assert_eq!((sp.vel_ned_mps, ev), (Vector3::zeros(), None));
         let held = sp.pos_ned_m;
-        let sp = c.setpoint_now(1_500_000, 0.001, &WD).0.unwrap();
+        let sp = c.setpoint_now(1_500_000, 0.001, &WD, &NoTrajectories).0.unwrap();
         assert_eq!(sp.pos_ned_m, held);
         // Past 2 s: stopped, said once.
         assert_eq!(
-            c.setpoint_now(2_001_000, 0.001, &WD),
+            c.setpoint_now(2_001_000, 0.001, &WD, &NoTrajectories),
             (None, Some(Event::StreamStopped))
         );
         assert!(c.is_idle());
-        assert_eq!(c.setpoint_now(2_002_000, 0.001, &WD), (None, None));
+        assert_eq!(c.setpoint_now(2_002_000, 0.001, &WD, &NoTrajectories), (None, None));
     }
 
     #[test]
@@ -411,9 +447,9 @@ mod tests {
         c.stream(Setpoint::hold(Vector3::new(0.5, 0.0, -1.0), 0.3), 0);
         c.notify_stop(10_000, 100);
         assert_eq!(c.priority(), Priority::Streamed);
-        assert!(c.setpoint_now(109_000, 0.001, &WD).0.is_some());
+        assert!(c.setpoint_now(109_000, 0.001, &WD, &NoTrajectories).0.is_some());
         assert_eq!(c.priority(), Priority::Streamed);
-        let sp = c.setpoint_now(110_000, 0.001, &WD).0.unwrap();
+        let sp = c.setpoint_now(110_000, 0.001, &WD, &NoTrajectories).0.unwrap();
         assert_eq!(c.priority(), Priority::Planned);
         assert!(!c.is_landing());
         assert!((sp.pos_ned_m - Vector3::new(0.5, 0.0, -1.0)).norm() < 1e-6);
@@ -445,7 +481,7 @@ mod tests {
         assert!(c.landed(1_000_000, &est));
         assert!(c.is_idle());
         // Idle, the reference is the estimate at rest.
-        let r = c.reference(2_000_000, Some(&est));
+        let r = c.reference(2_000_000, Some(&est), &NoTrajectories);
         assert_eq!((r.pos_ned_m, r.vel_ned_mps), (est.pos_ned_m, Vector3::zeros()));
     }
 
@@ -465,7 +501,7 @@ mod tests {
         let mut leg = 0;
         loop {
             let done = c.follow(&mut r, t).unwrap();
-            let sp = c.setpoint_at(t).unwrap();
+            let sp = c.setpoint_at(t, &NoTrajectories).unwrap();
             if done {
                 assert!((sp.pos_ned_m - Vector3::new(0.0, 0.0, -2.0)).norm() < 1e-4);
                 break;
@@ -499,8 +535,8 @@ mod tests {
         assert_eq!(c.priority(), Priority::Planned);
         // Long silent, still as given: not moved, not levelled, not stopped.
         for t in [0u64, 1_000, 10_000_000] {
-            assert_eq!(c.setpoint_now(t, 0.001, &WD), (Some(sp), None));
+            assert_eq!(c.setpoint_now(t, 0.001, &WD, &NoTrajectories), (Some(sp), None));
         }
-        assert_eq!(c.reference(0, None).pos_ned_m, sp.pos_ned_m);
+        assert_eq!(c.reference(0, None, &NoTrajectories).pos_ned_m, sp.pos_ned_m);
     }
 }

@@ -261,13 +261,15 @@ impl Supervisor {
     /// estimate, if any): a silent IMU in flight sends the `commander`
     /// straight down from where it flies (every command but a landing
     /// overruled), a tumble stops it and latches on `arming`, a landing
-    /// that ended on its ground stops it.
+    /// that ended on its ground stops it. `memory`: what a trajectory flown
+    /// is evaluated from ([`Commander::reference`]).
     pub fn step(
         &mut self,
         t_us: u64,
         arming: &mut Arming,
         commander: &mut Commander,
         est: Option<&StateEstimate<f32>>,
+        memory: &impl crate::trajectory::Trajectories,
     ) -> Supervised {
         let mut done = Supervised::default();
         if !self.imu.silent() {
@@ -275,7 +277,7 @@ impl Supervisor {
         } else if flying(arming, commander) && !commander.is_landing() {
             done.descent_began = !self.descending;
             self.descending = true;
-            let here = commander.reference(t_us, est);
+            let here = commander.reference(t_us, est, memory);
             commander.descend(&here, t_us, FAILSAFE_DESCENT_MPS);
         }
         let Some(est) = est else {
@@ -294,6 +296,7 @@ impl Supervisor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::trajectory::NoTrajectories;
     use nalgebra::{Vector3, Vector4};
 
     /// The tumble threshold, held as a cosine, is the cosine of its angle
@@ -416,9 +419,12 @@ mod tests {
         let mut sup = Supervisor::new();
         let up = at(-2.0, LEVEL);
         sup.take(0, Some(&sample(0.0)));
-        assert_eq!(sup.step(0, &mut arming, &mut c, Some(&up)), Supervised::default());
+        assert_eq!(
+            sup.step(0, &mut arming, &mut c, Some(&up), &NoTrajectories),
+            Supervised::default()
+        );
         sup.take(IMU_TIMEOUT_US + 1, None);
-        let s = sup.step(IMU_TIMEOUT_US + 1, &mut arming, &mut c, Some(&up));
+        let s = sup.step(IMU_TIMEOUT_US + 1, &mut arming, &mut c, Some(&up), &NoTrajectories);
         assert!(s.descent_began && sup.failsafe() && c.is_landing());
         let seg = *c.segment().unwrap();
         assert_eq!(
@@ -429,18 +435,24 @@ mod tests {
         // Said once: the next silent step carries on.
         sup.take(IMU_TIMEOUT_US + 2, None);
         assert!(
-            !sup.step(IMU_TIMEOUT_US + 2, &mut arming, &mut c, Some(&up))
+            !sup.step(IMU_TIMEOUT_US + 2, &mut arming, &mut c, Some(&up), &NoTrajectories)
                 .descent_began
         );
         // Good samples back: the failsafe is over, the descent is not.
         sup.take(IMU_TIMEOUT_US + 3, Some(&sample(0.0)));
-        sup.step(IMU_TIMEOUT_US + 3, &mut arming, &mut c, Some(&up));
+        sup.step(IMU_TIMEOUT_US + 3, &mut arming, &mut c, Some(&up), &NoTrajectories);
         assert!(!sup.failsafe() && c.is_landing());
         // 2 m at 0.3 m/s: not landed before its end, landed on the ground after it.
         let end = IMU_TIMEOUT_US + 1 + (2.0 / FAILSAFE_DESCENT_MPS * 1e6) as u64;
         let ground = at(0.0, LEVEL);
-        assert!(!sup.step(end - 100_000, &mut arming, &mut c, Some(&ground)).landed);
-        assert!(sup.step(end + 1, &mut arming, &mut c, Some(&ground)).landed);
+        assert!(
+            !sup.step(end - 100_000, &mut arming, &mut c, Some(&ground), &NoTrajectories)
+                .landed
+        );
+        assert!(
+            sup.step(end + 1, &mut arming, &mut c, Some(&ground), &NoTrajectories)
+                .landed
+        );
         assert!(c.is_idle() && arming.armed(), "motors stopped, still armed");
     }
 
@@ -453,7 +465,7 @@ mod tests {
         let (mut arming, mut c) = flying();
         let mut sup = Supervisor::new();
         sup.take(0, Some(&sample(0.0)));
-        let s = sup.step(0, &mut arming, &mut c, Some(&tilted));
+        let s = sup.step(0, &mut arming, &mut c, Some(&tilted), &NoTrajectories);
         assert_eq!(
             s,
             Supervised {
@@ -465,7 +477,7 @@ mod tests {
         let mut on_ground = Arming::new();
         let mut idle = Commander::new();
         assert_eq!(
-            sup.step(1, &mut on_ground, &mut idle, Some(&tilted)),
+            sup.step(1, &mut on_ground, &mut idle, Some(&tilted), &NoTrajectories),
             Supervised::default()
         );
         assert!(!on_ground.tumbled());

@@ -22,6 +22,21 @@ impl CrtpShared {
         self.took(r, true)
     }
 
+    /// Flies uploaded trajectory `id` with `options` (a relative start from
+    /// `here`, the reference flown); `false` (refused, and said) when it
+    /// cannot ([`fc_loop::client::ClientCommander::start_trajectory`]).
+    pub(in crate::vehicle) fn start_trajectory(
+        &mut self,
+        id: u8,
+        options: fc_loop::trajectory::StartOptions,
+        here: &super::Reference,
+    ) -> bool {
+        let r = self
+            .client
+            .start_trajectory(id, options, here, self.now_us, self.busy());
+        self.took(r, true)
+    }
+
     /// What a command's answer `r` asks of the vehicle: the controller's
     /// reset queued ([`ControllerWork::Reset`]), or its refusal said (a
     /// disarmed one only if `say_disarmed`).

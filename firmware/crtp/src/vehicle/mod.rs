@@ -51,7 +51,7 @@ use crate::log::{self, LogBlocks};
 use crate::persist::PersistRequest;
 use crate::planner::{Reference, Segment};
 use crate::toc::{self, Name};
-use crate::{f32_at, frames, u16_at, CrtpCounters, CrtpError, Packet, Port};
+use crate::{f32_at, frames, u16_at, u32_at, CrtpCounters, CrtpError, Packet, Port};
 use core::borrow::BorrowMut;
 use core::fmt::Write as _;
 use fc_core::control::AnyController;

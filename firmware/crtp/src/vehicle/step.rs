@@ -95,7 +95,9 @@ impl CrtpShared {
 
     /// What is flown now, as a reference (the estimate at rest when idle).
     pub(in crate::vehicle) fn reference(&self) -> Reference {
-        let est = self.lp.navigator().estimate();
-        self.client.reference(self.now_us, est.as_ref())
+        self.client.flown(self.now_us).unwrap_or_else(|| {
+            let est = self.lp.navigator().estimate();
+            self.client.reference(self.now_us, est.as_ref())
+        })
     }
 }

@@ -299,7 +299,9 @@ impl ModeCommander {
     /// commander has none yet (before the first arming): where a new leg
     /// starts, the heading a set-point that masks its own keeps.
     pub fn setpoint(&self, t_us: u64, lp: &Loop) -> Setpoint<f32> {
-        self.commander.setpoint_at(t_us).unwrap_or(*lp.setpoint())
+        self.commander
+            .setpoint_at(t_us, &crate::trajectory::NoTrajectories)
+            .unwrap_or(*lp.setpoint())
     }
 
     /// Flies `legs` from the set-point `from` at `t_us`, at its heading
@@ -577,7 +579,7 @@ impl ModeCommander {
             return say(ModeEvent::Lockdown);
         }
         self.fly_mode(t_us, dt_s, lp, mission, say)?;
-        if let Some(sp) = self.commander.setpoint_at(t_us) {
+        if let Some(sp) = self.commander.setpoint_at(t_us, &crate::trajectory::NoTrajectories) {
             lp.set_setpoint(&sp);
         }
         Ok(())

@@ -1,7 +1,17 @@
 //! Port high-level commander (8): take-off, land, go_to and stop, flown as
-//! [`crate::planner`] segments.
+//! [`crate::planner`] segments; trajectories uploaded into the trajectory
+//! memory (port mem, [`super::mem`]) defined and started
+//! ([`fc_loop::trajectory`]).
 
 use crate::vehicle::*;
+use fc_loop::trajectory::{StartOptions, TrajectoryError};
+
+/// DEFINE_TRAJECTORY's location of a trajectory in the trajectory memory
+/// (cflib's `TRAJECTORY_LOCATION_MEM`).
+const TRAJECTORY_IN_MEMORY: u8 = 1;
+/// DEFINE_TRAJECTORY's type of uncompressed pieces (cflib's
+/// `TRAJECTORY_TYPE_POLY4D`; the compressed type, 1, is refused).
+const TRAJECTORY_POLY4D: u8 = 0;
 
 impl CrtpShared {
     pub(in crate::vehicle) fn on_high_level(&mut self, p: &Packet) -> Result<(), CrtpError> {
@@ -52,6 +62,48 @@ impl CrtpShared {
                     heading += here.yaw_rad;
                 }
                 self.fly_segment(p, &here, goal, heading, dur, false, linear)
+            }
+            // DEFINE_TRAJECTORY: id, location, type, offset (u32), pieces.
+            6 => {
+                let (Some(&id), Some(&location), Some(&kind), Some(offset), Some(&pieces)) =
+                    (d.get(1), d.get(2), d.get(3), u32_at(d, 4), d.get(8))
+                else {
+                    return Err(short(p));
+                };
+                let defined = if (location, kind) != (TRAJECTORY_IN_MEMORY, TRAJECTORY_POLY4D) {
+                    Err(TrajectoryError::Kind)
+                } else {
+                    self.client.define_trajectory(id, offset, pieces)
+                };
+                defined.map_err(|e| {
+                    self.say(format_args!("HL trajectory {id} refused: {e}"));
+                    CrtpError::BadValue { port: p.port() }
+                })
+            }
+            // START_TRAJECTORY: group, relative, reversed, id, time scale;
+            // START_TRAJECTORY_2 (13) adds relative yaw after relative.
+            5 | 13 => {
+                let at = if cmd == 5 { 2 } else { 3 };
+                let (Some(&relative), Some(&yaw), Some(&reversed), Some(&id), Some(time_scale)) = (
+                    d.get(2),
+                    if cmd == 5 { Some(&0) } else { d.get(3) },
+                    d.get(at + 1),
+                    d.get(at + 2),
+                    f32_at(d, at + 3),
+                ) else {
+                    return Err(short(p));
+                };
+                let options = StartOptions {
+                    time_scale,
+                    reversed: reversed != 0,
+                    relative_position: relative != 0,
+                    relative_yaw: yaw != 0,
+                };
+                if self.start_trajectory(id, options, &here) {
+                    Ok(())
+                } else {
+                    Err(CrtpError::Refused { port: p.port() })
+                }
             }
             _ => {
                 self.say(format_args!("HL command {cmd}: unsupported"));

@@ -1,6 +1,6 @@
-//! Ports link (15), platform (13) and mem (4): echo, source and sink;
-//! the protocol and firmware versions, the device type name, the legacy
-//! arming and recovery commands; no memories.
+//! Ports link (15) and platform (13): echo, source and sink; the protocol
+//! and firmware versions, the device type name, the legacy arming and
+//! recovery commands.
 
 use crate::vehicle::*;
 
@@ -52,16 +52,6 @@ impl CrtpShared {
                 let _ = r.extend(&text.as_bytes()[..text.len().min(r.room())]);
                 out.send(&r)?;
             }
-            _ => return Ok(Err(unsupported(p))),
-        }
-        Ok(Ok(()))
-    }
-
-    pub(in crate::vehicle) fn on_mem<S: CrtpSink>(&mut self, p: &Packet, out: &mut S) -> Handled<S::Error> {
-        match (p.channel(), p.payload().first()) {
-            // No memories.
-            (0, Some(&1)) => out.send(&reply(Port::Mem, 0, &[1, 0]))?,
-            (0, Some(&0)) => out.send(&reply(Port::Mem, 0, &[0, 1]))?,
             _ => return Ok(Err(unsupported(p))),
         }
         Ok(Ok(()))

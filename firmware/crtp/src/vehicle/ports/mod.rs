@@ -6,5 +6,6 @@ pub(super) mod high_level;
 pub(super) mod link;
 pub(super) mod localization;
 pub(super) mod logging;
+pub(super) mod mem;
 pub(super) mod param;
 pub(super) mod supervisor;
