@@ -77,6 +77,8 @@ TOL_M = 0.05
 # The uploaded figure-8 flown (session 5): the truth's distance from the
 # path its pieces describe, either way.
 TRAJ_TOL_M = 0.10
+# Session 7's velocity and hover moves: checked this long after each ends, s.
+MOTION_SETTLE_S = 3.0
 # Session 4's dead IMU: when (plant time, s) and for how long.
 DEAD_AT_S = 8.0
 DEAD_S = 0.03
@@ -667,6 +669,159 @@ def session_trajectory(sil_host, truth):
         report(sil, failed_before)
 
 
+def session_motion(sil_host, truth):
+    """cflib's velocity and hover set-points, the generic port's types 8
+    (velocity in the world) and 10 (hover: velocity in the body frame,
+    yaw rate, height), as cflib's `send_velocity_world_setpoint` and its
+    `MotionCommander` (the motion commander demos') send them: each move
+    against the truth, so that a sign or a frame wrong is a move the wrong
+    way. The motion commander times its moves on the wall clock (a velocity
+    for distance / speed seconds): in the SIL the plant keeps wall time.
+
+    A velocity set-point stops at once (a step to zero, as cflib sends it),
+    and the vehicle carries on past the goal before it settles there: each
+    move is checked `MOTION_SETTLE_S` after it ends, and the worst overshoot
+    along the move, from the truth, is measured and reported."""
+    from cflib.positioning.motion_commander import MotionCommander
+    print('session 7: velocity and hover set-points (send_velocity_world_setpoint, MotionCommander)')
+    failed_before = check.failed
+    sil = Sil(sil_host, truth=truth)
+    overshoots = []
+
+    def moved(since, start, goal, what):
+        """After the settle: the truth near `goal`; and how far past it, along
+        the move from `start`, the track went meanwhile."""
+        near(truth, goal, what)
+        d = [g - s for g, s in zip(goal, start)]
+        n = math.hypot(*d)
+        past = max((sum((p - g) * c / n for p, g, c in zip(q, goal, d)) for q in truth.track[since:]),
+                   default=math.nan)
+        overshoots.append(max(past, 0.0))
+
+    try:
+        scf = connect()
+        cf = scf.cf
+        check(estimator_settled(scf), 'estimator converged (kalman.varP* spread < 1e-3)')
+        cf.supervisor.send_arming_request(True)
+        time.sleep(0.3)
+        x0, y0, _ = truth.pos
+        cf.high_level_commander.takeoff(0.5, 2.0)
+        truth.sleep(3.0)
+        # Type 8: 0.25 m/s along the world's y (left) for 2 s, then still.
+        since, start = len(truth.track), truth.pos
+        truth.sleep(2.0, every=lambda: cf.commander.send_velocity_world_setpoint(0.0, 0.25, 0.0, 0.0))
+        truth.sleep(MOTION_SETTLE_S, every=lambda: cf.commander.send_velocity_world_setpoint(0.0, 0.0, 0.0, 0.0))
+        moved(since, start, (x0, y0 + 0.5, 0.5), 'send_velocity_world_setpoint(0, 0.25, 0, 0) for 2 s')
+        cf.commander.send_notify_setpoint_stop()
+        cf.high_level_commander.land(0.0, 2.0)
+        truth.sleep(3.0)
+        x0, y0, _ = truth.pos
+        # Type 10: MotionCommander takes off and moves in its body frame;
+        # after a quarter turn left, forward is the world's left.
+        with MotionCommander(scf, default_height=0.5) as mc:
+            time.sleep(MOTION_SETTLE_S)
+            near(truth, (x0, y0, 0.5), 'MotionCommander took off to 0.5 m')
+            moves = [
+                (lambda: mc.forward(0.4), (x0 + 0.4, y0, 0.5), 'mc.forward(0.4)'),
+                (lambda: mc.up(0.3), (x0 + 0.4, y0, 0.8), 'mc.up(0.3)'),
+                (lambda: mc.turn_left(90), None, None),
+                (lambda: mc.forward(0.4), (x0 + 0.4, y0 + 0.4, 0.8),
+                 'mc.turn_left(90) then mc.forward(0.4): the world\'s left'),
+                (lambda: mc.right(0.4), (x0 + 0.8, y0 + 0.4, 0.8),
+                 'mc.right(0.4) facing left: the world\'s forward'),
+            ]
+            for move, goal, what in moves:
+                since, start = len(truth.track), truth.pos
+                move()
+                time.sleep(MOTION_SETTLE_S)
+                if goal:
+                    moved(since, start, goal, what)
+        truth.sleep(1.0)
+        check(truth.last['z'] < TOL_M and not truth.last['flying'],
+              f'MotionCommander landed: z {truth.last["z"]:.3f} m, motors off')
+        scf.close_link()
+        worst = max(overshoots, default=math.nan)
+        check(len(overshoots) == 5 and math.isfinite(worst),
+              f'the moves\' overshoot past their goals, from the truth: worst {100 * worst:.1f} cm '
+              f'({", ".join(f"{100 * o:.1f}" for o in overshoots)})')
+        if len(overshoots) == 5 and math.isfinite(worst):
+            record('crtp_sil_motion_overshoot_cm', round(100 * worst, 1), 'cm', 'crtp_cflib.py session 7')
+    finally:
+        report(sil, failed_before)
+
+
+def run_example(script, timeout_s):
+    """cflib's example `script` (a path under its examples), unchanged,
+    against the SIL: its completed process."""
+    return subprocess.run([sys.executable, str(script)], check=False, env=dict(os.environ, CFLIB_URI=URI),
+                          capture_output=True, text=True, timeout=timeout_s, cwd=script.parent)
+
+
+def example_ran(r, script, expect):
+    check(r.returncode == 0 and expect in r.stdout,
+          f'{script.name}: exit {r.returncode}, "{expect}" in its output'
+          + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+
+
+def passed(truth, since, goal, what):
+    """The truth's track from entry `since` came within TOL_M of `goal`."""
+    d = truth.closest(goal, since)
+    check(d <= TOL_M, f'{what}: the truth passed {100 * d:.1f} cm from ({goal[0]}, {goal[1]}, {goal[2]}) '
+                      f'(bound {100 * TOL_M:.0f} cm)')
+
+
+def session_motion_examples(sil_host, truth):
+    """cflib's `autonomy/motion_commander_demo.py` (hover set-points: moves,
+    a half circle, a turn, a 3-D line, a started motion) and
+    `autonomy/autonomous_sequence.py` (a take-off on velocity set-points,
+    then position set-points, logging `kalman.stateX/Y/Z`), unchanged. The
+    vehicle starts at the truth's origin facing x. Neither example checks
+    for a deck: the SIL's position fixes are motion capture's (the deck
+    flags say none is attached)."""
+    print('session 8: cflib\'s motion_commander_demo.py and autonomous_sequence.py, unchanged')
+    examples = cflib_examples() / 'autonomy'
+
+    def demo(r, since):
+        example_ran(r, examples / 'motion_commander_demo.py', 'Doing other work')
+        # Its moves from the origin (MotionCommander's default height 0.3 m):
+        # forward 0.8 and back; up 0.5 and down; right 0.5 and left; half a
+        # circle right of radius 0.5 (to y -1, facing back); a quarter turn
+        # left (facing right); 1 m back and 0.5 m up (to the origin, at
+        # 0.8 m); left for a second at 0.5 m/s (the world's forward).
+        for goal, what in (((0.8, 0.0, 0.3), 'mc.forward(0.8)'), ((0.0, 0.0, 0.8), 'mc.up(0.5)'),
+                           ((0.0, -0.5, 0.3), 'mc.right(0.5, velocity=0.8)'),
+                           ((0.0, -1.0, 0.3), 'mc.circle_right(0.5, velocity=0.5, angle_degrees=180)'),
+                           ((0.0, 0.0, 0.8), 'mc.turn_left(90) then mc.move_distance(-1, 0.0, 0.5)')):
+            passed(truth, since, goal, what)
+        near(truth, (0.5, 0.0, 0.0), 'mc.start_left(velocity=0.5) for 1 s, then landed')
+        check(not truth.last['flying'], 'motors off after the demo')
+
+    def sequence(r, since):
+        example_ran(r, examples / 'autonomous_sequence.py', 'pos: (')
+        for goal in ((0.0, 0.0, 1.2), (0.5, -0.5, 1.2), (0.5, 0.5, 1.2), (-0.5, 0.5, 1.2), (-0.5, -0.5, 1.2),
+                     (0.0, 0.0, 1.2), (0.0, 0.0, 0.4)):
+            passed(truth, since, goal, f'send_position_setpoint{goal}')
+        logged = [tuple(float(v) for v in m.groups())
+                  for m in re.finditer(r'pos: \((\S+), (\S+), (\S+)\)', r.stdout)]
+        high = [p for p in logged if p[2] > 1.0]
+        check(len(high) >= 10, f'its kalman.stateX/Y/Z log: {len(logged)} positions, {len(high)} above 1 m')
+        check(truth.last['z'] < TOL_M and not truth.last['flying'],
+              f'send_stop_setpoint at the end: z {truth.last["z"]:.3f} m, motors off')
+
+    for script, checks in (('motion_commander_demo.py', demo), ('autonomous_sequence.py', sequence)):
+        failed_before = check.failed
+        sil = Sil(sil_host, truth=truth)
+        try:
+            while truth.last is None:
+                time.sleep(0.05)
+            since = len(truth.track)
+            r = run_example(examples / script, 120)
+            truth.sleep(1.0)
+            checks(r, since)
+        finally:
+            report(sil, failed_before)
+
+
 def persistent(cf, call, name):
     """cflib's `param.persistent_*` `call` on `name`, waited for: its result."""
     done = threading.Event()
@@ -742,6 +897,9 @@ def main():
     session_examples(sil_host)
     session_trajectory(sil_host, truth)
     session_persistent(sil_host)
+    if not QEMU:
+        session_motion(sil_host, truth)
+        session_motion_examples(sil_host, truth)
     truth.close()
     plant = sum(p for p, _ in truth.walls)
     wall = sum(w for _, w in truth.walls)

@@ -498,7 +498,7 @@ fn a_million_bad_packets_are_counted_and_the_session_survives() {
     assert!(v.armed());
     // A trajectory of one piece (at rest at 1 m, 1 s) in memory, defined as
     // id 1, for the start seeds below to fly.
-    let mut piece = vec![0u8; 132];
+    let mut piece = [0u8; 132];
     piece[64..68].copy_from_slice(&1.0f32.to_le_bytes());
     piece[128..].copy_from_slice(&1.0f32.to_le_bytes());
     for (i, chunk) in piece.chunks(24).enumerate() {

@@ -30,7 +30,7 @@
 //! commander not idle, as a Crazyflie's do.
 
 use crate::arming::{ArmRefusal, Arming, ArmingState};
-use crate::commander::{Commander, Event, Priority, Source, Watchdog};
+use crate::commander::{Commander, Event, Priority, Source, StreamVelocity, Watchdog};
 use crate::planner::{Reference, Segment};
 use crate::supervisor::{ImuCounters, ImuOutcome, Supervised, Supervisor};
 use crate::trajectory::{Definition, Flight, StartOptions, TrajectoryError, TrajectoryMemory};
@@ -179,17 +179,24 @@ impl ClientCommander {
         })
     }
 
-    /// Flies `sp`, a client's streamed set-point, from `now_us`: refused
+    /// Flies `sp`, a client's streamed set-point with its horizontal
+    /// velocity in `frame` ([`Commander::stream`]), from `now_us`: refused
     /// while disarmed, and when control cannot be taken from anything but
     /// a stream (a stream already flying goes on).
-    pub fn stream(&mut self, sp: Setpoint<f32>, now_us: u64, designing: bool) -> Result<Takeover, CommandRefusal> {
+    pub fn stream(
+        &mut self,
+        sp: Setpoint<f32>,
+        frame: StreamVelocity,
+        now_us: u64,
+        designing: bool,
+    ) -> Result<Takeover, CommandRefusal> {
         // A stream already flying goes on; anything else takes control.
         let takeover = if self.flying() && self.commander.priority() == Priority::Streamed {
             Takeover::Continue
         } else {
             self.take_control(designing)?
         };
-        self.commander.stream(sp, now_us);
+        self.commander.stream(sp, frame, now_us);
         Ok(takeover)
     }
 
@@ -322,7 +329,10 @@ mod tests {
     #[test]
     fn a_disarmed_vehicle_flies_no_command() {
         let mut c = ClientCommander::new();
-        assert_eq!(c.stream(sp(), 0, false), Err(CommandRefusal::NotArmed));
+        assert_eq!(
+            c.stream(sp(), StreamVelocity::Ned, 0, false),
+            Err(CommandRefusal::NotArmed)
+        );
         assert_eq!(c.plan(seg(), false, false), Err(CommandRefusal::NotArmed));
         assert!(c.commander().is_idle() && !c.flying());
         assert_eq!(CommandRefusal::NotArmed.to_string(), "not armed");
@@ -336,12 +346,12 @@ mod tests {
         assert_eq!(c.arm(&ready()), Ok(true));
         assert_eq!(c.arm(&ready()), Ok(false), "armed already");
         assert!(!c.flying(), "armed, nothing flown: motors off");
-        assert_eq!(c.stream(sp(), 0, false), Ok(Takeover::Reset));
+        assert_eq!(c.stream(sp(), StreamVelocity::Ned, 0, false), Ok(Takeover::Reset));
         assert!(c.flying());
-        assert_eq!(c.stream(sp(), 10, false), Ok(Takeover::Continue));
+        assert_eq!(c.stream(sp(), StreamVelocity::Ned, 10, false), Ok(Takeover::Continue));
         assert_eq!(c.plan(seg(), false, false), Ok(Takeover::Continue));
         assert_eq!(c.commander().priority(), Priority::Planned);
-        assert_eq!(c.stream(sp(), 20, false), Ok(Takeover::Continue));
+        assert_eq!(c.stream(sp(), StreamVelocity::Ned, 20, false), Ok(Takeover::Continue));
     }
 
     /// While a controller is designed, nothing takes control from idle or
@@ -350,7 +360,10 @@ mod tests {
     fn nothing_takes_control_while_a_controller_is_designed() {
         let mut c = ClientCommander::new();
         assert_eq!(c.arm(&ready()), Ok(true));
-        assert_eq!(c.stream(sp(), 0, true), Err(CommandRefusal::Designing));
+        assert_eq!(
+            c.stream(sp(), StreamVelocity::Ned, 0, true),
+            Err(CommandRefusal::Designing)
+        );
         assert_eq!(c.plan(seg(), false, true), Err(CommandRefusal::Designing));
         assert!(c.commander().is_idle());
         assert_eq!(CommandRefusal::Designing.to_string(), "controller design under way");
@@ -362,13 +375,13 @@ mod tests {
     fn arming_the_stop_and_recovery_end_what_was_flown() {
         let mut c = ClientCommander::new();
         assert_eq!(c.arm(&ready()), Ok(true));
-        assert_eq!(c.stream(sp(), 0, false), Ok(Takeover::Reset));
+        assert_eq!(c.stream(sp(), StreamVelocity::Ned, 0, false), Ok(Takeover::Reset));
         assert!(!c.recover(), "flying: no recovery");
         c.disarm();
         assert!(!c.armed() && c.commander().is_idle());
         assert!(c.recover(), "on the ground, unlocked");
         assert_eq!(c.arm(&ready()), Ok(true));
-        assert_eq!(c.stream(sp(), 0, false), Ok(Takeover::Reset));
+        assert_eq!(c.stream(sp(), StreamVelocity::Ned, 0, false), Ok(Takeover::Reset));
         c.emergency_stop();
         assert!(!c.armed() && c.commander().is_idle() && c.arming().locked());
         assert!(!c.recover(), "locked");

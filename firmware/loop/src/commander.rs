@@ -71,6 +71,8 @@ pub enum Source {
     Streamed {
         /// The set-point, moved by its velocity since it came.
         sp: Setpoint<f32>,
+        /// The frame its horizontal velocity was given in.
+        frame: StreamVelocity,
         /// When it came, µs.
         last_us: u64,
         /// When control returns to the planner, µs.
@@ -83,6 +85,37 @@ pub enum Source {
         /// The set-point.
         sp: Setpoint<f32>,
     },
+}
+
+/// The frame of a streamed set-point's horizontal velocity.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StreamVelocity {
+    /// North and east, as the set-point's `vel_ned_mps` gives them.
+    Ned,
+    /// Forward and right of the set-point's heading (m/s), turned into
+    /// north and east with that heading at every step, so that a yaw rate
+    /// turns the path with it (the Crazyflie's hover set-point, which its
+    /// controller rotates by the heading at every step).
+    Heading {
+        /// Along the heading, m/s.
+        forward_mps: f32,
+        /// To its right, m/s.
+        right_mps: f32,
+    },
+}
+
+impl StreamVelocity {
+    /// The north and east velocity (m/s) of `self` under heading `yaw_rad`
+    /// (NED, clockwise from north); `None` for [`StreamVelocity::Ned`].
+    pub fn ned_at(self, yaw_rad: f32) -> Option<[f32; 2]> {
+        match self {
+            StreamVelocity::Ned => None,
+            StreamVelocity::Heading { forward_mps, right_mps } => {
+                let (s, c) = (libm::sinf(yaw_rad), libm::cosf(yaw_rad));
+                Some([forward_mps * c - right_mps * s, forward_mps * s + right_mps * c])
+            }
+        }
+    }
 }
 
 /// Something a step of the commander did that the vehicle should say.
@@ -164,10 +197,17 @@ impl Commander {
     }
 
     /// Flies `sp`, a client's set-point received at `now_us`, above any
-    /// segment (the watchdog restarts).
-    pub fn stream(&mut self, sp: Setpoint<f32>, now_us: u64) {
+    /// segment (the watchdog restarts); its horizontal velocity in `frame`
+    /// (in [`StreamVelocity::Heading`], `sp`'s own horizontal velocity is
+    /// replaced by it, turned with `sp`'s heading).
+    pub fn stream(&mut self, mut sp: Setpoint<f32>, frame: StreamVelocity, now_us: u64) {
+        if let Some([n, e]) = frame.ned_at(sp.yaw_rad) {
+            sp.vel_ned_mps[0] = n;
+            sp.vel_ned_mps[1] = e;
+        }
         self.source = Source::Streamed {
             sp,
+            frame,
             last_us: now_us,
             handover_us: None,
         };
@@ -237,6 +277,7 @@ impl Commander {
             sp,
             last_us,
             handover_us,
+            ..
         } = self.source
         {
             let age_ms = t_us.saturating_sub(last_us) / 1000;
@@ -247,16 +288,22 @@ impl Commander {
                 event = Some(Event::StreamStopped);
             }
         }
-        if let Source::Streamed { sp, last_us, .. } = &mut self.source {
+        if let Source::Streamed { sp, frame, last_us, .. } = &mut self.source {
             if t_us.saturating_sub(*last_us) / 1000 > wd.level_ms {
                 // Level and still where it is.
                 sp.vel_ned_mps = Vector3::zeros();
                 sp.acc_ned_mps2 = Vector3::zeros();
                 sp.yaw_rate_radps = 0.0;
+                *frame = StreamVelocity::Ned;
             } else {
-                // A velocity set-point moves its position.
+                // A velocity set-point moves its position; one in the
+                // heading's frame turns with the heading.
                 sp.pos_ned_m += sp.vel_ned_mps * dt_s;
                 sp.yaw_rad += sp.yaw_rate_radps * dt_s;
+                if let Some([n, e]) = frame.ned_at(sp.yaw_rad) {
+                    sp.vel_ned_mps[0] = n;
+                    sp.vel_ned_mps[1] = e;
+                }
             }
         }
         (self.setpoint_at(t_us, memory), event)
@@ -413,10 +460,56 @@ mod tests {
     }
 
     #[test]
+    fn a_stream_in_the_heading_frame_turns_with_its_yaw_rate_as_a_circle() {
+        // 0.5 m/s forward at 1 rad/s clockwise (NED): a circle of radius
+        // 0.5 m to the right. Half a turn (π s) from north at the origin
+        // ends 1 m east, heading south; every point on the circle round
+        // (0, 0.5).
+        let mut c = Commander::new();
+        let mut sp = Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0);
+        sp.yaw_rate_radps = 1.0;
+        let frame = StreamVelocity::Heading {
+            forward_mps: 0.5,
+            right_mps: 0.0,
+        };
+        c.stream(sp, frame, 0);
+        let steps = (core::f64::consts::PI / 0.001).round() as u64;
+        let mut worst = 0.0f32;
+        let mut last = None;
+        for k in 1..=steps {
+            // A packet every 100 ms renews it, as cflib's motion commander does.
+            if k % 100 == 0 {
+                let mut again = *c.streamed().unwrap();
+                again.yaw_rate_radps = 1.0;
+                c.stream(again, frame, k * 1000);
+            }
+            let (now, _) = c.setpoint_now(k * 1000, 0.001, &WD, &NoTrajectories);
+            let now = now.unwrap();
+            let r = (now.pos_ned_m - Vector3::new(0.0, 0.5, -1.0)).norm();
+            worst = worst.max((r - 0.5).abs());
+            last = Some(now);
+        }
+        let end = last.unwrap();
+        assert!(worst < 1e-3, "off the circle by {worst} m");
+        assert!(
+            (end.pos_ned_m - Vector3::new(0.0, 1.0, -1.0)).norm() < 2e-3,
+            "{:?}",
+            end.pos_ned_m
+        );
+        assert!((end.yaw_rad - core::f32::consts::PI).abs() < 2e-3);
+        // Flying south: the velocity turned with the heading.
+        assert!(
+            (end.vel_ned_mps - Vector3::new(-0.5, 0.0, 0.0)).norm() < 2e-3,
+            "{:?}",
+            end.vel_ned_mps
+        );
+    }
+
+    #[test]
     fn a_stream_moves_by_its_velocity_then_levels_then_stops() {
         let mut c = Commander::new();
         assert_eq!(c.setpoint_now(0, 0.001, &WD, &NoTrajectories), (None, None));
-        c.stream(moving(), 0);
+        c.stream(moving(), StreamVelocity::Ned, 0);
         assert_eq!(c.priority(), Priority::Streamed);
         // 100 steps of 1 ms at 1 m/s north: 0.1 m.
         let mut sp = None;
@@ -444,7 +537,11 @@ mod tests {
     #[test]
     fn a_stream_hands_over_to_a_hold_where_it_was() {
         let mut c = Commander::new();
-        c.stream(Setpoint::hold(Vector3::new(0.5, 0.0, -1.0), 0.3), 0);
+        c.stream(
+            Setpoint::hold(Vector3::new(0.5, 0.0, -1.0), 0.3),
+            StreamVelocity::Ned,
+            0,
+        );
         c.notify_stop(10_000, 100);
         assert_eq!(c.priority(), Priority::Streamed);
         assert!(c.setpoint_now(109_000, 0.001, &WD, &NoTrajectories).0.is_some());

@@ -3,14 +3,15 @@
 //! and the controller's reset it asks for queued for the controller's side.
 //! What a command may do is the flight stack's to decide.
 
-use super::{CommandRefusal, ControllerWork, CrtpShared, Segment, Setpoint, Takeover, WorkState};
+use super::{CommandRefusal, ControllerWork, CrtpShared, Segment, Setpoint, StreamVelocity, Takeover, WorkState};
 
 impl CrtpShared {
-    /// Flies `sp`, a client's streamed set-point, from now; `false`
+    /// Flies `sp`, a client's streamed set-point (its horizontal velocity
+    /// in `frame`), from now; `false`
     /// (refused) while disarmed (not said: a client streams at its rate),
     /// or when control cannot be taken ([`fc_loop::client::ClientCommander::stream`]).
-    pub(in crate::vehicle) fn stream(&mut self, sp: Setpoint<f32>) -> bool {
-        let r = self.client.stream(sp, self.now_us, self.busy());
+    pub(in crate::vehicle) fn stream(&mut self, sp: Setpoint<f32>, frame: StreamVelocity) -> bool {
+        let r = self.client.stream(sp, frame, self.now_us, self.busy());
         self.took(r, false)
     }
 

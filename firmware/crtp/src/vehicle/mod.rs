@@ -59,7 +59,7 @@ use fc_core::control::Setpoint;
 use fc_core::estimate::{Fix, ImuSample};
 use fc_core::model::airframe::Mixer;
 use fc_loop::client::{ClientCommander, CommandRefusal, Takeover};
-use fc_loop::commander::{Event, Watchdog};
+use fc_loop::commander::{Event, StreamVelocity, Watchdog};
 use fc_loop::nav::NavMode;
 use fc_loop::params::{crtp_params, ParamType, Refusal, Settings, CRTP_ALIASED, CRTP_ALIASES, CRTP_PARAMS, PARAMS};
 use fc_loop::power::Power;

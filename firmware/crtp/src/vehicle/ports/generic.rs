@@ -44,6 +44,7 @@ impl CrtpShared {
             Some(sp) => *sp,
             None => Setpoint::hold(here.pos_ned_m, here.yaw_rad),
         };
+        let mut frame = StreamVelocity::Ned;
         match kind {
             // Position: x, y, z (m), yaw (deg).
             7 => {
@@ -55,19 +56,22 @@ impl CrtpShared {
                 sp.acc_ned_mps2 = Vector3::zeros();
                 sp.yaw_rate_radps = -e * deg;
             }
-            // Hover: vx, vy in the body frame (m/s), yaw rate (deg/s), height (m).
+            // Hover: vx, vy in the body frame (m/s; x forward, y left), yaw
+            // rate (deg/s), height (m). The commander turns the velocity
+            // with the heading at every step.
             10 => {
-                let yaw_cf = frames::heading_from_cf_yaw(sp.yaw_rad);
-                let (s, co) = (libm::sinf(yaw_cf), libm::cosf(yaw_cf));
-                let world = [a * co - b * s, a * s + b * co, 0.0];
-                sp.vel_ned_mps = frames::ned_from_cf(world);
+                frame = StreamVelocity::Heading {
+                    forward_mps: a,
+                    right_mps: -b,
+                };
+                sp.vel_ned_mps[2] = 0.0;
                 sp.acc_ned_mps2 = Vector3::zeros();
                 sp.pos_ned_m[2] = -e;
                 sp.yaw_rate_radps = -c * deg;
             }
             _ => return Err(unsupported(p)),
         }
-        if !self.stream(sp) {
+        if !self.stream(sp, frame) {
             return Err(CrtpError::Refused { port: p.port() });
         }
         Ok(())

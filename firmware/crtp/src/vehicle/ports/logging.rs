@@ -77,7 +77,9 @@ use crate::log::types::{FLOAT, I8, U16, U8};
 /// Positions and velocities are in the Crazyflie's world frame (x forward,
 /// y left, z up; m, m/s), angles in degrees (roll right-side-down, pitch
 /// nose-up and yaw counter-clockwise positive), `kalman.varP*` the
-/// estimator's position variances (m²), `pm.vbat` volts, `motor.m*` the
+/// estimator's position variances (m²), `kalman.state{X,Y,Z}` its position
+/// (the same as `stateEstimate.{x,y,z}`, as on a Crazyflie with the Kalman
+/// estimator), `pm.vbat` volts, `motor.m*` the
 /// commands as fractions of 65 535.
 pub const LOG_VARS: &[LogVar] = &[
     var("stateEstimate", "x", FLOAT, |s| estimated(s, &s.flight.pos_ned_m)[0]),
@@ -98,6 +100,9 @@ pub const LOG_VARS: &[LogVar] = &[
     var("kalman", "varPX", FLOAT, |s| s.flight.pos_var_m2[0]),
     var("kalman", "varPY", FLOAT, |s| s.flight.pos_var_m2[1]),
     var("kalman", "varPZ", FLOAT, |s| s.flight.pos_var_m2[2]),
+    var("kalman", "stateX", FLOAT, |s| estimated(s, &s.flight.pos_ned_m)[0]),
+    var("kalman", "stateY", FLOAT, |s| estimated(s, &s.flight.pos_ned_m)[1]),
+    var("kalman", "stateZ", FLOAT, |s| estimated(s, &s.flight.pos_ned_m)[2]),
     var("pm", "vbat", FLOAT, |s| s.battery_v),
     var("pm", "state", I8, |s| f32::from(s.pm_state)),
     var("motor", "m1", U16, |s| motor(s, 0)),
