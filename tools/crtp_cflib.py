@@ -75,8 +75,11 @@ TRUTH_PORT = 19870
 URI = f'udp://127.0.0.1:{PORT}'
 TOL_M = 0.05
 # The uploaded figure-8 flown (session 5): the truth's distance from the
-# path its pieces describe, either way.
-TRAJ_TOL_M = 0.10
+# path its pieces describe, either way, worst and RMS over the whole of it.
+# The MPC previews it over its horizon: without that preview (extrapolating
+# the set-point of the step) it flew 4.7-4.9 cm worst, 2.6-2.7 cm RMS.
+TRAJ_TOL_M = 0.04
+TRAJ_RMS_TOL_M = 0.02
 # Session 7's velocity and hover moves: checked this long after each ends, s.
 MOTION_SETTLE_S = 3.0
 # Session 4's dead IMU: when (plant time, s) and for how long.
@@ -654,10 +657,10 @@ def session_trajectory(sil_host, truth):
         high = track[track[:, 3] > 0.5]
         worst, rms, t0 = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
         span = np.ptp(path, axis=0)
-        check(worst <= TRAJ_TOL_M,
+        check(worst <= TRAJ_TOL_M and rms <= TRAJ_RMS_TOL_M,
               f'the truth flew the uploaded figure-8 ({span[0]:.2f} x {span[1]:.2f} m, {len(example.figure8)} pieces, '
               f'{len(path) / 100:.1f} s): worst {100 * worst:.1f} cm, RMS {100 * rms:.1f} cm over the whole of it, '
-              f'from plant time {t0 or math.nan:.2f} s (bound {100 * TRAJ_TOL_M:.0f} cm)')
+              f'from plant time {t0 or math.nan:.2f} s (bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm)')
         image = 'crazyflie_qemu' if CRAZYFLIE else 'crtp_qemu' if QEMU else 'crtp_sil'
         source = f'tools/crtp_cflib.py{" --qemu-crazyflie" if CRAZYFLIE else " --qemu" if QEMU else ""}'
         record(f'{image}_figure8_worst_cm', round(100 * worst, 1), 'cm', source)

@@ -129,6 +129,10 @@ pub enum Event {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Commander {
     source: Source,
+    /// Counts the sources flown: a new one (a new segment, trajectory,
+    /// stream or hold) is a new revision, so a preview of the one before
+    /// is not taken for it ([`Commander::revision`]).
+    revision: u32,
 }
 
 impl Default for Commander {
@@ -140,7 +144,10 @@ impl Default for Commander {
 impl Commander {
     /// Idle.
     pub const fn new() -> Self {
-        Self { source: Source::Idle }
+        Self {
+            source: Source::Idle,
+            revision: 0,
+        }
     }
 
     /// What is flown now.
@@ -191,9 +198,32 @@ impl Commander {
         }
     }
 
+    /// Flies `source`: a new revision.
+    fn set(&mut self, source: Source) {
+        self.source = source;
+        self.revision = self.revision.wrapping_add(1);
+    }
+
+    /// The revision of what is flown: it changes with every new source (a
+    /// stream's every packet too), never while one source is flown.
+    pub fn revision(&self) -> u32 {
+        self.revision
+    }
+
+    /// The reference at `t_us` (now or to come) of a source that knows its
+    /// future: a segment (held at its goal after its end) or a trajectory
+    /// (evaluated from `memory`); `None` for a stream, a held set-point or
+    /// nothing, whose future only extrapolating it can tell.
+    pub fn preview_at<M: Trajectories>(&self, t_us: u64, memory: &M) -> Option<Setpoint<f32>> {
+        match &self.source {
+            Source::Planned { .. } | Source::Trajectory { .. } => self.setpoint_at(t_us, memory),
+            Source::Streamed { .. } | Source::Held { .. } | Source::Idle => None,
+        }
+    }
+
     /// Stops: nothing flown, motors off.
     pub fn stop(&mut self) {
-        self.source = Source::Idle;
+        self.set(Source::Idle);
     }
 
     /// Flies `sp`, a client's set-point received at `now_us`, above any
@@ -205,12 +235,12 @@ impl Commander {
             sp.vel_ned_mps[0] = n;
             sp.vel_ned_mps[1] = e;
         }
-        self.source = Source::Streamed {
+        self.set(Source::Streamed {
             sp,
             frame,
             last_us: now_us,
             handover_us: None,
-        };
+        });
     }
 
     /// The stream's client stops streaming: `after_ms` after `now_us`,
@@ -224,27 +254,28 @@ impl Commander {
 
     /// Flies `sp` as given until it is replaced ([`Source::Held`]).
     pub fn hold(&mut self, sp: Setpoint<f32>) {
-        self.source = Source::Held { sp };
+        self.set(Source::Held { sp });
     }
 
     /// Flies the planner's segment `seg` (`landing`: stopped on the ground
     /// at its end).
     pub fn plan(&mut self, seg: Segment, landing: bool) {
-        self.source = Source::Planned { seg, landing };
+        self.set(Source::Planned { seg, landing });
     }
 
     /// Flies the uploaded trajectory `flight`.
     pub fn fly_trajectory(&mut self, flight: Flight) {
-        self.source = Source::Trajectory { flight };
+        self.set(Source::Trajectory { flight });
     }
 
     /// Holds `from`, brought to rest over half a second, under the planner
     /// (idle if it cannot be planned).
     pub fn hold_from(&mut self, from: &Reference, t_us: u64) {
-        self.source = match Segment::plan(t_us, from, from.pos_ned_m, from.yaw_rad, 0.5) {
+        let source = match Segment::plan(t_us, from, from.pos_ned_m, from.yaw_rad, 0.5) {
             Ok(seg) => Source::Planned { seg, landing: false },
             Err(_) => Source::Idle,
         };
+        self.set(source);
     }
 
     /// Straight down from `here` to the frame's z = 0 (the floor of a
@@ -254,10 +285,11 @@ impl Commander {
         let height_m = (-here.pos_ned_m[2]).max(0.0);
         let goal = Vector3::new(here.pos_ned_m[0], here.pos_ned_m[1], 0.0);
         let dur_s = (height_m / mps).max(0.5);
-        self.source = match Segment::plan(t_us, here, goal, here.yaw_rad, dur_s) {
+        let source = match Segment::plan(t_us, here, goal, here.yaw_rad, dur_s) {
             Ok(seg) => Source::Planned { seg, landing: true },
             Err(_) => Source::Idle,
         };
+        self.set(source);
     }
 
     /// The set-point to fly at `t_us`, `dt_s` after the last step (at most
@@ -284,7 +316,7 @@ impl Commander {
             if handover_us.is_some_and(|h| t_us >= h) {
                 self.hold_from(&Reference::from(&sp), t_us);
             } else if age_ms > wd.stop_ms {
-                self.source = Source::Idle;
+                self.set(Source::Idle);
                 event = Some(Event::StreamStopped);
             }
         }
@@ -368,7 +400,7 @@ impl Commander {
             Source::Planned { seg, landing: true }
                 if seg.finished(t_us) && crate::land::on_ground(est, seg.goal().pos_ned_m[2]) =>
             {
-                self.source = Source::Idle;
+                self.set(Source::Idle);
                 true
             }
             _ => false,
@@ -503,6 +535,33 @@ mod tests {
             "{:?}",
             end.vel_ned_mps
         );
+    }
+
+    #[test]
+    fn a_segment_is_previewed_exactly_a_stream_not_and_each_new_source_is_a_revision() {
+        let mut c = Commander::new();
+        let here = Reference::at_rest(Vector3::new(0.0, 0.0, -1.0), 0.0);
+        let seg = Segment::plan(1_000_000, &here, Vector3::new(2.0, 1.0, -1.5), 0.0, 2.0).unwrap();
+        let r0 = c.revision();
+        c.plan(seg, false);
+        let r1 = c.revision();
+        assert_ne!(r0, r1);
+        // Anywhere ahead, past its end too: the segment's own reference.
+        for t in [1_000_000u64, 1_437_000, 2_999_000, 4_000_000] {
+            let p = c.preview_at(t, &NoTrajectories).unwrap();
+            assert_eq!(p, seg.eval(t).setpoint());
+        }
+        // Flying it changes no revision.
+        let _ = c.setpoint_now(1_500_000, 0.001, &WD, &NoTrajectories);
+        assert_eq!(c.revision(), r1);
+        // A stream and a held set-point know no future.
+        c.stream(moving(), StreamVelocity::Ned, 2_000_000);
+        assert_ne!(c.revision(), r1);
+        assert_eq!(c.preview_at(2_100_000, &NoTrajectories), None);
+        c.hold(moving());
+        assert_eq!(c.preview_at(2_100_000, &NoTrajectories), None);
+        c.stop();
+        assert_eq!(c.preview_at(2_100_000, &NoTrajectories), None);
     }
 
     #[test]

@@ -39,6 +39,7 @@ pub mod nav;
 pub mod params;
 pub mod planner;
 pub mod power;
+pub mod preview;
 pub mod schedule;
 pub mod supervisor;
 pub mod telemetry;
@@ -184,7 +185,11 @@ pub struct Loop {
     takes_preview: bool,
     /// Preview set-points received since the controller last ran, applied
     /// before its next step ([`Loop::apply_previews`]).
-    previews: [Option<Setpoint<f32>>; PREVIEW_SLOTS],
+    previews: preview::PreviewSlots,
+    /// The commander's preview, given a few points a step ([`Loop::preview_from`]).
+    feed: preview::PreviewFeed,
+    /// The age of the preview to tell the controller after the slots, s.
+    preview_age: Option<f32>,
     sp: Setpoint<f32>,
     decoder: FrameDecoder<MAX_FRAME>,
     counters: Counters,
@@ -217,8 +222,9 @@ pub struct Loop {
 }
 
 /// Preview set-points a [`Loop`] holds between two controller steps, by
-/// index: 0..=N for the MPCs' horizon N (they take 1..=N).
-pub const PREVIEW_SLOTS: usize = fc_core::control::regulation::HORIZON + 1;
+/// index: 0 a preview moved on, 1..=N the MPCs' horizon N
+/// ([`preview::PreviewSlots`]).
+pub const PREVIEW_SLOTS: usize = preview::SLOTS;
 
 /// A [`Loop`] reached directly: the [`Mutex`] of a caller that owns it
 /// (in-process; RTIC's own proxies are the other kind).
@@ -243,7 +249,9 @@ impl Loop {
             spec: FALLBACK_CONTROLLER,
             period_us: schedule::period_us(cfg.control_period_s),
             takes_preview: false,
-            previews: [None; PREVIEW_SLOTS],
+            previews: preview::PreviewSlots::new(),
+            feed: preview::PreviewFeed::new(),
+            preview_age: None,
             sp: Setpoint::hold(Vector3::new(0.0, 0.0, -1.0), 0.0),
             decoder: FrameDecoder::new(),
             counters: Counters::default(),
@@ -499,18 +507,48 @@ impl Loop {
         }
         self.period_us = schedule::period_us(ctrl.period_s().unwrap_or(self.cfg.control_period_s));
         self.takes_preview = ctrl.preview_request().is_some();
-        self.previews = [None; PREVIEW_SLOTS];
+        self.previews.clear();
+        self.feed.configure(ctrl.preview_request(), self.period_us);
+        self.preview_age = None;
+    }
+
+    /// The controller's step `step`, when it is due, previews what the
+    /// commander flies: `sample(t)` the source's reference at `t` (µs;
+    /// [`commander::Commander::preview_at`]), `revision` the source's
+    /// ([`commander::Commander::revision`]). A few points a step
+    /// ([`preview::PreviewFeed`]); none while the estimator's failsafe
+    /// flies its own set-point (previewed along itself).
+    pub fn preview_from(&mut self, step: &Step, revision: u32, sample: impl FnMut(u64) -> Option<Setpoint<f32>>) {
+        let Some(job) = step.control.as_ref() else {
+            return;
+        };
+        if job.preview_along {
+            self.feed.drop_preview();
+            self.preview_age = None;
+            return;
+        }
+        self.preview_age = self.feed.step(job.now_us, revision, &mut self.previews, sample);
     }
 
     /// Hands the previews received since the controller's last step to
     /// `ctrl` (counted if it refuses one it takes).
     pub fn apply_previews(&mut self, ctrl: &mut AnyController<f32>) {
-        for (k, slot) in self.previews.iter_mut().enumerate() {
-            if let Some(sp) = slot.take() {
-                if ctrl.set_preview(k, &sp).is_err() && self.takes_preview {
-                    self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
-                }
+        let mut dropped = false;
+        for (k, sp) in self.previews.drain() {
+            if k == 0 {
+                // The feed's preview moves on; refused only when the
+                // controller dropped it (a reset).
+                dropped |= ctrl.roll_preview(&sp).is_err();
+            } else if ctrl.set_preview(k, &sp).is_err() && self.takes_preview {
+                self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1);
             }
+        }
+        if let Some(age_s) = self.preview_age.take() {
+            dropped |= ctrl.age_preview(age_s).is_err();
+        }
+        if dropped {
+            // It extrapolates this step, and the feed fills it anew.
+            self.feed.drop_preview();
         }
     }
 

@@ -177,8 +177,9 @@ impl Loop {
             },
             ToFc::Preview { k, sp } => {
                 // Held for the controller's next step ([`Loop::apply_previews`]).
-                match (setpoint_from_wire(&sp), self.previews.get_mut(usize::from(k))) {
-                    (Some(sp), Some(slot)) => *slot = Some(sp),
+                // Slot 0 is the feed's (a preview moved on): from 1.
+                match setpoint_from_wire(&sp) {
+                    Some(sp) if k >= 1 && self.previews.hold(usize::from(k), sp) => {}
                     _ if self.takes_preview => {
                         self.counters.invalid_values = self.counters.invalid_values.wrapping_add(1)
                     }

@@ -239,6 +239,16 @@ pub trait Controller<T: RealField + Copy> {
     fn set_preview(&mut self, _k: usize, _sp: &Setpoint<T>) -> Result<(), ControlError> {
         Err(ControlError::InvalidParameter)
     }
+    /// The preview given last began `age_s` ago: the next update uses it,
+    /// moved on by that long ([`crate::control::mpc::Mpc::age_preview`]).
+    fn age_preview(&mut self, _age_s: T) -> Result<(), ControlError> {
+        Err(ControlError::InvalidParameter)
+    }
+    /// Moves the preview on one step, `sp` its new last
+    /// ([`crate::control::mpc::Mpc::roll_preview`]).
+    fn roll_preview(&mut self, _sp: &Setpoint<T>) -> Result<(), ControlError> {
+        Err(ControlError::InvalidParameter)
+    }
     /// The period this controller is designed to run at, s (`None`: any).
     fn period_s(&self) -> Option<f64> {
         None
@@ -483,6 +493,20 @@ impl<T: RealField + Copy> Controller<T> for AnyController<T> {
         match self {
             AnyController::MpcThesis(c) => c.set_preview(k, sp),
             AnyController::MpcFast(c) => c.set_preview(k, sp),
+            _ => Err(ControlError::InvalidParameter),
+        }
+    }
+    fn age_preview(&mut self, age_s: T) -> Result<(), ControlError> {
+        match self {
+            AnyController::MpcThesis(c) => c.age_preview(age_s),
+            AnyController::MpcFast(c) => c.age_preview(age_s),
+            _ => Err(ControlError::InvalidParameter),
+        }
+    }
+    fn roll_preview(&mut self, sp: &Setpoint<T>) -> Result<(), ControlError> {
+        match self {
+            AnyController::MpcThesis(c) => c.roll_preview(sp),
+            AnyController::MpcFast(c) => c.roll_preview(sp),
             _ => Err(ControlError::InvalidParameter),
         }
     }

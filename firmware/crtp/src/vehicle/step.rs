@@ -46,6 +46,12 @@ impl CrtpShared {
             // The estimator's state goes out in log blocks, not with every
             // step's answer (our protocol's `Nav`): not built.
             .map(|step| fc_loop::Step { nav: false, ..step });
+        if let Some(step) = job.as_ref() {
+            // The controller previews what the commander will fly.
+            let (commander, memory) = (self.client.commander(), self.client.trajectory_memory());
+            self.lp
+                .preview_from(step, commander.revision(), |t| commander.preview_at(t, memory));
+        }
         // The controller changes nothing the supervisor reads.
         self.supervise(t_us);
         ImuStep {

@@ -284,6 +284,12 @@ impl ModeCommander {
         self.mode
     }
 
+    /// The commander the modes fly their set-points on (its source, and
+    /// the preview of what it will fly: [`Commander::preview_at`]).
+    pub fn commander(&self) -> &Commander {
+        &self.commander
+    }
+
     /// Armed (the motors turn).
     pub fn armed(&self) -> bool {
         self.arming.armed()

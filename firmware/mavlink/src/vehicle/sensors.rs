@@ -83,10 +83,15 @@ impl MavShared {
         }
         self.command(s.time_us, dt_s);
         self.seq = self.seq.wrapping_add(1);
-        Some(SensorStep {
-            t_us: s.time_us,
-            job: self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us),
-        })
+        let job = self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us);
+        if let Some(step) = job.as_ref() {
+            // The controller previews what the modes' commander will fly.
+            let c = self.modes.commander();
+            self.lp.preview_from(step, c.revision(), |t| {
+                c.preview_at(t, &fc_loop::trajectory::NoTrajectories)
+            });
+        }
+        Some(SensorStep { t_us: s.time_us, job })
     }
 
     /// The end of a sample's step whose controller gave `flown` (`None`:

@@ -402,6 +402,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         self.last_dt = lit(cfg.exec_dt_s);
         self.trend = [T::zero(); N];
         self.preview = [Setpoint::hold(Vector3::zeros(), T::zero()); N];
+        self.preview_head = 0;
         Controller::reset(self);
         self.q = Vec12::<f64>::from(cfg.q).map(lit);
         self.r = Vector4::<f64>::from(cfg.r).map(lit);

@@ -249,10 +249,14 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
     /// Setpoint `k` prediction steps ahead: the preview if complete, else the
     /// current setpoint extrapolated along its velocity, acceleration and jerk.
     pub(super) fn horizon_setpoint(&self, sp: &Setpoint<T>, k: usize) -> Setpoint<T> {
-        if self.preview_valid {
-            return self.preview[k - 1];
-        }
-        sp.extrapolate(lit::<T>(self.cfg.pred_dt_s) * lit::<T>(k as f64))
+        let (base, t) = if self.preview_valid && self.preview_fresh {
+            let i = self.preview_head + k - 1;
+            (&self.preview[if i >= N { i - N } else { i }], self.preview_age)
+        } else {
+            (sp, lit::<T>(self.cfg.pred_dt_s) * lit::<T>(k as f64))
+        };
+        // One call for both (a preview aged 0 is moved by nothing: as given).
+        base.extrapolate(t)
     }
 
     /// The disturbance estimate with its force part in `frame`.

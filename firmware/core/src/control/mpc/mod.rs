@@ -372,8 +372,18 @@ pub struct Mpc<T: RealField + Copy, const N: usize, const M: usize, const NZ: us
     /// The move of each prediction step ([`MpcConfig::move_steps`]).
     move_of: [u8; N],
     // Run-time state.
+    /// The preview, a ring: step `k` (1-based) is at `preview_head + k − 1`
+    /// (mod `N`); [`Mpc::roll_preview`] moves it on one step.
     preview: [Setpoint<T>; N],
+    preview_head: usize,
+    /// The preview is complete.
     preview_valid: bool,
+    /// The preview in force is used by the next update: completed or aged
+    /// ([`Mpc::age_preview`]) since the last one.
+    preview_fresh: bool,
+    /// How long ago the preview began, s: its step `k` is the reference at
+    /// `k·pred_dt` after that, extrapolated to now.
+    preview_age: T,
     z: SVector<T, NZ>,
     du_prev: Vector4<T>,
     /// The input deviation the rotors have delivered by the lag model
@@ -500,7 +510,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
                 [0; N]
             },
             preview: [Setpoint::hold(Vector3::zeros(), T::zero()); N],
+            preview_head: 0,
             preview_valid: false,
+            preview_fresh: false,
+            preview_age: T::zero(),
             z: SVector::zeros(),
             du_prev: Vector4::zeros(),
             du_delivered: Vector4::zeros(),
@@ -583,15 +596,57 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         Vector3::new(rate(0), rate(1), T::zero())
     }
 
-    /// Sets the reference for prediction step `k` (1-based: time `t + k·pred_dt`).
-    /// Once step `N` is set, the preview is used by the next update; without a
+    /// Sets the reference for prediction step `k` (1-based: time
+    /// `t + k·pred_dt`, `t` when the preview began). Once step `N` is set,
+    /// the preview is complete, begun now, and the next update uses it;
+    /// later updates use it only once told its age ([`Mpc::age_preview`]),
+    /// and it can be moved on a step at a time ([`Mpc::roll_preview`]). A
+    /// step below `N` leaves it incomplete until `N` is set. Without a
     /// complete preview the MPC extrapolates the current setpoint.
     pub fn set_preview(&mut self, k: usize, sp: &Setpoint<T>) -> Result<(), ControlError> {
         if k == 0 || k > N || !sp.is_valid() {
             return Err(ControlError::InvalidSetpoint);
         }
-        self.preview[k - 1] = *sp;
+        let i = self.preview_head + k - 1;
+        self.preview[if i >= N { i - N } else { i }] = *sp;
         self.preview_valid = k == N;
+        if k == N {
+            self.preview_fresh = true;
+            self.preview_age = T::zero();
+        }
+        Ok(())
+    }
+
+    /// Moves the complete preview on by one step: step 1 goes, the others
+    /// move down one, and `sp` is the new step `N` (the preview now begins
+    /// `pred_dt` later; its age is the caller's to tell). Refused without a
+    /// complete preview or for a set-point that is not finite.
+    pub fn roll_preview(&mut self, sp: &Setpoint<T>) -> Result<(), ControlError> {
+        if !self.preview_valid || !sp.is_valid() {
+            return Err(ControlError::InvalidSetpoint);
+        }
+        self.preview[self.preview_head] = *sp;
+        self.preview_head = if self.preview_head + 1 == N {
+            0
+        } else {
+            self.preview_head + 1
+        };
+        Ok(())
+    }
+
+    /// The preview began `age_s` ago (at most the horizon): the
+    /// next update uses it, each step extrapolated along its own
+    /// derivatives by `age_s`. Refused (and the next update extrapolates
+    /// the setpoint) without a complete preview or with an age that is
+    /// not finite, negative or past the horizon.
+    pub fn age_preview(&mut self, age_s: T) -> Result<(), ControlError> {
+        let horizon = lit::<T>(self.cfg.pred_dt_s * N as f64);
+        if !self.preview_valid || !age_s.is_finite() || age_s < T::zero() || age_s > horizon {
+            self.preview_fresh = false;
+            return Err(ControlError::InvalidSetpoint);
+        }
+        self.preview_age = age_s;
+        self.preview_fresh = true;
         Ok(())
     }
 }
@@ -662,7 +717,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
             warm,
             solution: sol,
         });
-        self.preview_valid = false;
+        self.preview_fresh = false;
         Ok(ControlOutput {
             u,
             status: ControlStatus {
@@ -679,6 +734,14 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
 
     fn set_preview(&mut self, k: usize, sp: &Setpoint<T>) -> Result<(), ControlError> {
         Mpc::set_preview(self, k, sp)
+    }
+
+    fn age_preview(&mut self, age_s: T) -> Result<(), ControlError> {
+        Mpc::age_preview(self, age_s)
+    }
+
+    fn roll_preview(&mut self, sp: &Setpoint<T>) -> Result<(), ControlError> {
+        Mpc::roll_preview(self, sp)
     }
 
     fn period_s(&self) -> Option<f64> {
@@ -711,6 +774,7 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
         self.next_dt = None;
         self.last_dt = lit(self.cfg.exec_dt_s);
         self.preview_valid = false;
+        self.preview_fresh = false;
     }
 }
 
@@ -1007,5 +1071,74 @@ mod tests {
         off.rotor_lag_prediction = false;
         mpc.redesign(p, off).unwrap();
         assert_eq!(mpc.lag_factors, (0.0, 1.0, 1.0));
+    }
+
+    /// A ramp north at 1 m/s, 1 m up: the reference at time `t` (s).
+    fn ramp(t: f64) -> Setpoint<f64> {
+        let mut sp = Setpoint::hold(Vector3::new(t, 0.0, -1.0), 0.0);
+        sp.vel_ned_mps = Vector3::new(1.0, 0.0, 0.0);
+        sp
+    }
+
+    /// A preview begun 10 ms ago and aged by that flies as one given now;
+    /// one rolled on a step flies as one given a step later; an update not
+    /// told the preview's age extrapolates the setpoint, as without one.
+    #[test]
+    fn a_preview_aged_or_rolled_flies_as_one_given_now() {
+        let p = VehicleParams::<f64>::os4();
+        let cfg = MpcConfig::fast(AttitudeForm::Quaternion);
+        let h = cfg.pred_dt_s;
+        let est = hover_at(-1.0);
+        let fresh = MpcFast::<f64>::new(p, cfg).unwrap();
+        let now = 0.5;
+        let sp = ramp(now);
+        let u = |mut m: MpcFast<f64>| m.update(&est, &sp).unwrap().u;
+        let given_from = |base: f64| {
+            let mut m = fresh.clone();
+            for k in 1..=20 {
+                m.set_preview(k, &ramp(base + k as f64 * h)).unwrap();
+                // Incomplete until step N.
+                assert_eq!(m.preview_valid, k == 20);
+            }
+            m
+        };
+        let given = given_from(now);
+        let u_now = u(given.clone());
+        // Begun 10 ms ago, then aged.
+        let mut aged = given_from(now - 0.01);
+        aged.age_preview(0.01).unwrap();
+        assert!((u_now - u(aged)).abs().max() < 1e-9);
+        // Begun a step and 10 ms ago, rolled on a step, aged 10 ms.
+        let mut rolled = given_from(now - h - 0.01);
+        rolled.roll_preview(&ramp(now - 0.01 + 20.0 * h)).unwrap();
+        rolled.age_preview(0.01).unwrap();
+        assert_eq!(rolled.preview_head, 1);
+        assert!((u_now - u(rolled)).abs().max() < 1e-9);
+        // The preview changes what the MPC asks: a held setpoint without one
+        // asks for something else.
+        let still = Setpoint::hold(sp.pos_ned_m, 0.0);
+        let u_held = fresh.clone().update(&est, &still).unwrap().u;
+        assert!((u_held - u_now).abs().max() > 1e-3, "the preview changed nothing");
+        // Used by that update; the next, untold, extrapolates the setpoint.
+        let mut used = given.clone();
+        used.update(&est, &still).unwrap();
+        let mut without = used.clone();
+        without.preview_valid = false;
+        let a = used.update(&est, &still).unwrap().u;
+        let b = without.update(&est, &still).unwrap().u;
+        assert!((a - b).abs().max() < 1e-12);
+        // Ages that are not finite, negative or past the horizon, and a
+        // roll or an age without a complete preview, are refused.
+        for bad in [f64::NAN, -0.001, 20.0 * h + 0.001] {
+            let mut m = given.clone();
+            assert!(m.age_preview(bad).is_err());
+            assert!(!m.preview_fresh);
+        }
+        let mut none = fresh.clone();
+        assert!(none.age_preview(0.0).is_err());
+        assert!(none.roll_preview(&sp).is_err());
+        let mut nan = sp;
+        nan.pos_ned_m[0] = f64::NAN;
+        assert!(given.clone().roll_preview(&nan).is_err());
     }
 }
