@@ -8,7 +8,15 @@
 //! the start of RAM (`_stack_end` = 0x2000_0000): an overflow runs into
 //! unmapped memory and faults instead of overwriting a static.
 
+use core::sync::atomic::{AtomicBool, Ordering};
+
 const PAINT: u32 = 0xA5A5_A5A5;
+
+/// The boot's paint is done ([`boot_done`]): a [`Watch`] reads only after
+/// it, or a pass that ran while the paint was under way would find the
+/// boot's frames not yet painted over and take the boot's mark for the
+/// tasks'.
+static PAINTED: AtomicBool = AtomicBool::new(false);
 
 extern "C" {
     static __sheap: u32;
@@ -55,6 +63,7 @@ pub fn high_water() -> usize {
 pub fn boot_done() -> usize {
     let boot = high_water();
     paint();
+    PAINTED.store(true, Ordering::Release);
     boot
 }
 
@@ -94,7 +103,11 @@ impl Watch {
     }
 
     /// Reads the pass's next slice; at its end, the mark is what it found.
+    /// Nothing before the boot's paint is done.
     pub fn poll(&mut self) {
+        if !PAINTED.load(Ordering::Acquire) {
+            return;
+        }
         let bottom = core::ptr::addr_of!(_stack_end) as usize;
         let top = core::ptr::addr_of!(_stack_start) as usize;
         let mut a = bottom + self.next;
