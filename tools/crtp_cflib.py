@@ -519,23 +519,32 @@ def session_dead_imu(sil_host, truth):
           f'IMU samples (missing, bad, flown on the last good one, silences): {got}, {n} NaN samples sent')
 
 
+def run_example(script, timeout_s):
+    """cflib's example `script` (a path under its examples), unchanged,
+    against the SIL: its completed process."""
+    return subprocess.run([sys.executable, str(script)], check=False, env=dict(os.environ, CFLIB_URI=URI),
+                          capture_output=True, text=True, timeout=timeout_s, cwd=script.parent)
+
+
+def example_ran(r, script, expect, refuse=None):
+    """The check that example `script` ran (`r`): exit 0, `expect` in its
+    output (and `refuse` not)."""
+    check(r.returncode == 0 and expect in r.stdout and (refuse is None or refuse not in r.stdout),
+          f'{script.name}: exit {r.returncode}, {r.stdout.count(chr(10))} lines, "{expect}" in its output'
+          + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+
+
 def session_examples(sil_host):
     version = importlib.metadata.version('cflib')
     print(f'session 4: cflib {version}\'s own examples, unchanged')
     examples = cflib_examples()
-    env = dict(os.environ, CFLIB_URI=URI)
     # What each prints when it worked (its own output, unchanged).
     for script, expect in (('logging/basiclog_sync.py', "'stabilizer.roll'"),
                            ('logging/basiclog.py', 'pm.vbat'),
                            ('parameters/basicparam.py', 'Parameters downloaded')):
         sil = Sil(sil_host)
         try:
-            r = subprocess.run([sys.executable, str(examples / script)], check=False, env=env, capture_output=True,
-                               text=True, timeout=60, cwd=examples / script.split('/')[0])
-            lines = r.stdout.count('\n')
-            check(r.returncode == 0 and expect in r.stdout,
-                  f'{script}: exit {r.returncode}, {lines} lines, "{expect}" in its output'
-                  + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+            example_ran(run_example(examples / script, 60), examples / script, expect)
         finally:
             sil.stop()
 
@@ -622,11 +631,7 @@ def session_trajectory(sil_host, truth):
         start = truth.pos
         recorder.start()
         if not QEMU:
-            r = subprocess.run([sys.executable, str(script)], check=False, env=dict(os.environ, CFLIB_URI=URI),
-                               capture_output=True, text=True, timeout=180, cwd=script.parent)
-            check(r.returncode == 0 and 'The sequence is' in r.stdout and 'Upload failed' not in r.stdout,
-                  f'{script.name}: exit {r.returncode}, "{r.stdout.strip().splitlines()[0] if r.stdout else ""}"'
-                  + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+            example_ran(run_example(script, 180), script, 'The sequence is', refuse='Upload failed')
         else:
             # The emulated image runs slower than the wall clock the
             # example sleeps on (its take-off would be cut short, its
@@ -751,19 +756,6 @@ def session_motion(sil_host, truth):
             record('crtp_sil_motion_overshoot_cm', round(100 * worst, 1), 'cm', 'crtp_cflib.py session 7')
     finally:
         report(sil, failed_before)
-
-
-def run_example(script, timeout_s):
-    """cflib's example `script` (a path under its examples), unchanged,
-    against the SIL: its completed process."""
-    return subprocess.run([sys.executable, str(script)], check=False, env=dict(os.environ, CFLIB_URI=URI),
-                          capture_output=True, text=True, timeout=timeout_s, cwd=script.parent)
-
-
-def example_ran(r, script, expect):
-    check(r.returncode == 0 and expect in r.stdout,
-          f'{script.name}: exit {r.returncode}, "{expect}" in its output'
-          + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
 
 
 def passed(truth, since, goal, what):

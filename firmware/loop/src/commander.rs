@@ -105,15 +105,14 @@ pub enum StreamVelocity {
 }
 
 impl StreamVelocity {
-    /// The north and east velocity (m/s) of `self` under heading `yaw_rad`
-    /// (NED, clockwise from north); `None` for [`StreamVelocity::Ned`].
-    pub fn ned_at(self, yaw_rad: f32) -> Option<[f32; 2]> {
-        match self {
-            StreamVelocity::Ned => None,
-            StreamVelocity::Heading { forward_mps, right_mps } => {
-                let (s, c) = (libm::sinf(yaw_rad), libm::cosf(yaw_rad));
-                Some([forward_mps * c - right_mps * s, forward_mps * s + right_mps * c])
-            }
+    /// Sets `sp`'s north and east velocity (m/s) from `self` under `sp`'s
+    /// heading (NED, clockwise from north); nothing for
+    /// [`StreamVelocity::Ned`], whose velocity `sp` holds already.
+    pub fn turn(self, sp: &mut Setpoint<f32>) {
+        if let StreamVelocity::Heading { forward_mps, right_mps } = self {
+            let (s, c) = (libm::sinf(sp.yaw_rad), libm::cosf(sp.yaw_rad));
+            sp.vel_ned_mps[0] = forward_mps * c - right_mps * s;
+            sp.vel_ned_mps[1] = forward_mps * s + right_mps * c;
         }
     }
 }
@@ -231,10 +230,7 @@ impl Commander {
     /// (in [`StreamVelocity::Heading`], `sp`'s own horizontal velocity is
     /// replaced by it, turned with `sp`'s heading).
     pub fn stream(&mut self, mut sp: Setpoint<f32>, frame: StreamVelocity, now_us: u64) {
-        if let Some([n, e]) = frame.ned_at(sp.yaw_rad) {
-            sp.vel_ned_mps[0] = n;
-            sp.vel_ned_mps[1] = e;
-        }
+        frame.turn(&mut sp);
         self.set(Source::Streamed {
             sp,
             frame,
@@ -332,10 +328,7 @@ impl Commander {
                 // heading's frame turns with the heading.
                 sp.pos_ned_m += sp.vel_ned_mps * dt_s;
                 sp.yaw_rad += sp.yaw_rate_radps * dt_s;
-                if let Some([n, e]) = frame.ned_at(sp.yaw_rad) {
-                    sp.vel_ned_mps[0] = n;
-                    sp.vel_ned_mps[1] = e;
-                }
+                frame.turn(sp);
             }
         }
         (self.setpoint_at(t_us, memory), event)

@@ -221,11 +221,6 @@ pub struct Loop {
     mixer: Option<Mixer<f32>>,
 }
 
-/// Preview set-points a [`Loop`] holds between two controller steps, by
-/// index: 0 a preview moved on, 1..=N the MPCs' horizon N
-/// ([`preview::PreviewSlots`]).
-pub const PREVIEW_SLOTS: usize = preview::SLOTS;
-
 /// A [`Loop`] reached directly: the [`Mutex`] of a caller that owns it
 /// (in-process; RTIC's own proxies are the other kind).
 pub use rtic_core::Exclusive;
@@ -512,13 +507,18 @@ impl Loop {
         self.preview_age = None;
     }
 
-    /// The controller's step `step`, when it is due, previews what the
-    /// commander flies: `sample(t)` the source's reference at `t` (µs;
-    /// [`commander::Commander::preview_at`]), `revision` the source's
-    /// ([`commander::Commander::revision`]). A few points a step
+    /// The controller's step `step`, when it is due, previews what
+    /// `commander` flies ([`commander::Commander::preview_at`], a trajectory
+    /// evaluated from `memory`; a new source known by its
+    /// [`commander::Commander::revision`]). A few points a step
     /// ([`preview::PreviewFeed`]); none while the estimator's failsafe
     /// flies its own set-point (previewed along itself).
-    pub fn preview_from(&mut self, step: &Step, revision: u32, sample: impl FnMut(u64) -> Option<Setpoint<f32>>) {
+    pub fn preview_from<M: trajectory::Trajectories>(
+        &mut self,
+        step: &Step,
+        commander: &commander::Commander,
+        memory: &M,
+    ) {
         let Some(job) = step.control.as_ref() else {
             return;
         };
@@ -527,7 +527,11 @@ impl Loop {
             self.preview_age = None;
             return;
         }
-        self.preview_age = self.feed.step(job.now_us, revision, &mut self.previews, sample);
+        self.preview_age = self
+            .feed
+            .step(job.now_us, commander.revision(), &mut self.previews, |t| {
+                commander.preview_at(t, memory)
+            });
     }
 
     /// Hands the previews received since the controller's last step to

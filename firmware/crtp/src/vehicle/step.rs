@@ -48,9 +48,8 @@ impl CrtpShared {
             .map(|step| fc_loop::Step { nav: false, ..step });
         if let Some(step) = job.as_ref() {
             // The controller previews what the commander will fly.
-            let (commander, memory) = (self.client.commander(), self.client.trajectory_memory());
             self.lp
-                .preview_from(step, commander.revision(), |t| commander.preview_at(t, memory));
+                .preview_from(step, self.client.commander(), self.client.trajectory_memory());
         }
         // The controller changes nothing the supervisor reads.
         self.supervise(t_us);

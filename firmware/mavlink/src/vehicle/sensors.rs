@@ -86,10 +86,8 @@ impl MavShared {
         let job = self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us);
         if let Some(step) = job.as_ref() {
             // The controller previews what the modes' commander will fly.
-            let c = self.modes.commander();
-            self.lp.preview_from(step, c.revision(), |t| {
-                c.preview_at(t, &fc_loop::trajectory::NoTrajectories)
-            });
+            self.lp
+                .preview_from(step, self.modes.commander(), &fc_loop::trajectory::NoTrajectories);
         }
         Some(SensorStep { t_us: s.time_us, job })
     }
