@@ -1347,3 +1347,41 @@ fn fixed_entries_take_one_value_and_a_reset_waits_for_the_motors() {
         "reset on the ground"
     );
 }
+
+/// `led.bitmask` (what `sbs_swarm.py`'s light check writes: 255, then 0)
+/// is a `uint8_t` kept as written and read back, in flight as on the
+/// ground; the SIL has no LED, and no flight state changes.
+#[test]
+fn led_bitmask_is_kept_and_read_back() {
+    let mut v = at_rest(3000);
+    let id = find(b"led", b"bitmask");
+    let (_, t, _) = param_entry(usize::from(id)).unwrap();
+    assert_eq!(
+        t,
+        crate::vehicle::param_types::U8,
+        "uint8_t, as the firmware declares it"
+    );
+    let b = id.to_le_bytes();
+    let before = *v.flight_loop().settings();
+    for value in [255u8, 128, 0] {
+        let (r, said) = ask_said(&mut v, pk(Port::Param, 2, &[b[0], b[1], value]));
+        assert_eq!(r.payload(), &[b[0], b[1], value], "the value in force");
+        assert_eq!(said, "");
+        assert_eq!(
+            ask(&mut v, pk(Port::Param, 1, &b)).payload(),
+            &[b[0], b[1], 0, value],
+            "read back"
+        );
+    }
+    assert_eq!(*v.flight_loop().settings(), before, "no flight setting moved");
+    assert_eq!(
+        ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1])).payload(),
+        &[0x81, 1, 1]
+    );
+    let mut out = Sent::default();
+    v.handle(&takeoff(0.5, 2.0), &mut out).unwrap();
+    assert!(v.flying());
+    let (r, _) = ask_said(&mut v, pk(Port::Param, 2, &[b[0], b[1], 255]));
+    assert_eq!(r.payload(), &[b[0], b[1], 255], "taken in flight");
+    assert!(v.flying());
+}

@@ -373,6 +373,9 @@ pub struct CrtpShared {
     motors: [f32; 4],
     /// A position source with heading has been seen (pose, or the host's).
     heading_seen: bool,
+    /// `led.bitmask` as last written (0 at boot): kept and read back; no
+    /// LED here to drive.
+    led_bitmask: u8,
     /// The battery voltage the radio chip last reported, V; `None` until
     /// it reports one (no reading is not a full battery).
     vbat_v: Option<f32>,
@@ -417,6 +420,7 @@ impl CrtpShared {
             u: Vector4::zeros(),
             motors: [0.0; 4],
             heading_seen: false,
+            led_bitmask: 0,
             vbat_v: None,
             pm_state: 0,
             counters: CrtpCounters::default(),

@@ -40,6 +40,11 @@ pub enum Extra {
     /// `deck.bc*`: read-only, 0: no expansion deck is attached. cfclient's
     /// flight tab reads them to offer height hold and command-based flight.
     Deck,
+    /// `led.bitmask`: the LED override a swarm's scripts write (cflib's
+    /// `sbs_swarm.py` writes 255, then 0; Crazyswarm's 128 turns the LEDs
+    /// off). Stored and read back as written; the SIL and the images in
+    /// QEMU have no LEDs, so nothing lights.
+    LedBitmask,
 }
 
 impl Extra {
@@ -50,7 +55,7 @@ impl Extra {
             Extra::Estimator => Some(2.0),
             Extra::EnHighLevel => Some(1.0),
             Extra::Deck => Some(0.0),
-            Extra::Alias(_) | Extra::ResetEstimation => None,
+            Extra::Alias(_) | Extra::ResetEstimation | Extra::LedBitmask => None,
         }
     }
 }
@@ -58,8 +63,8 @@ impl Extra {
 /// The Crazyflie-named entries that are not the flight stack's
 /// parameters, last in the param TOC: a command, the fixed choices of a
 /// Crazyflie (the Kalman estimator, the high-level commander) and the
-/// decks, none attached.
-pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 11] = [
+/// decks, none attached, and the LED override (no LEDs here).
+pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 12] = [
     ("kalman", "resetEstimation", param_types::U8, Extra::ResetEstimation),
     ("stabilizer", "estimator", param_types::U8, Extra::Estimator),
     ("commander", "enHighLevel", param_types::U8, Extra::EnHighLevel),
@@ -71,6 +76,7 @@ pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 11] = [
     ("deck", "bcLoco", DECK, Extra::Deck),
     ("deck", "bcDWM1000", DECK, Extra::Deck),
     ("deck", "bcLedRing", DECK, Extra::Deck),
+    ("led", "bitmask", param_types::U8, Extra::LedBitmask),
 ];
 
 /// A deck's attached flag: `PARAM_UINT8 | PARAM_RONLY`, as the firmware's deck drivers declare it.
@@ -224,6 +230,7 @@ impl CrtpShared {
         Some(match extra {
             None => (PARAMS[id].get)(s),
             Some(Extra::ResetEstimation) => 0.0,
+            Some(Extra::LedBitmask) => f32::from(self.led_bitmask),
             Some(Extra::Alias(i)) => (PARAMS[i].get)(s),
             Some(fixed) => fixed.fixed()?,
         })
@@ -235,6 +242,7 @@ impl CrtpShared {
         Some(match extra {
             None => (PARAMS[id].get)(&self.defaults),
             Some(Extra::Alias(i)) => (PARAMS[i].get)(&self.defaults),
+            Some(Extra::LedBitmask) => 0.0,
             Some(_) => self.param_value(id)?,
         })
     }
@@ -245,6 +253,15 @@ impl CrtpShared {
     /// controller work is under way.
     pub(in crate::vehicle) fn param_write(&mut self, id: usize, value: f32, reply: Reply) -> Result<Written, Refusal> {
         let (_, _, extra) = param_entry(id).ok_or(Refusal::Unknown)?;
+        // The LED override touches no flight state: taken even while the
+        // controller is busy, if it is a byte.
+        if extra == Some(Extra::LedBitmask) {
+            if !((0.0..=255.0).contains(&value) && value == f32::from(value as u8)) {
+                return Err(Refusal::Range { lo: 0.0, hi: 255.0 });
+            }
+            self.led_bitmask = value as u8;
+            return Ok(Written::Now);
+        }
         if self.busy() {
             return Err(Refusal::Busy);
         }
