@@ -31,6 +31,12 @@ the firmware says of itself:
    over the whole of it (≤ 10 cm). On the images, whose emulation runs
    slower than the wall clock the example sleeps on, its own upload and its
    sequence on the vehicle's clock.
+9. (SIL only) cflib's `step-by-step/sbs_swarm.py` with only its URIs changed
+   (four `udp://` ports for its four radio addresses), against `sil-host
+   crtp --count 4`: four vehicles in one world, each its own flight stack
+   and port; its light check (`led.bitmask`), estimator resets, take-off,
+   three relative moves each and landing, each vehicle's truth within 5 cm
+   of every corner; the least distance between two recorded, no collision.
 
 With `--qemu` the same sessions fly the `firmware-crtp` image in QEMU
 (`sil-host crtp --target qemu`): cflib reaches it through
@@ -47,6 +53,7 @@ Usage: crtp_cflib.py SIL_HOST [--qemu | --qemu-crazyflie] [sil-host crtp options
 import importlib.metadata
 import importlib.util
 import itertools
+import json
 import math
 import os
 import pathlib
@@ -67,7 +74,7 @@ from cflib.crazyflie.syncLogger import SyncLogger
 from children import EndsWithFlight
 from fctools.checks import Checks
 from fctools.image_log import link_hold, stack
-from fctools.truth import Truth
+from fctools.truth import Truth, position_of
 from measure import budgets, record
 
 PORT = 19850
@@ -817,6 +824,79 @@ def session_motion_examples(sil_host, truth):
             report(sil, failed_before)
 
 
+# Session 9's swarm: where each of the four starts (Crazyflie frame, m), a
+# square 1 m a side about the origin, in the order of the example's URIs.
+SWARM_STARTS = ((-0.5, 0.5), (0.5, 0.5), (0.5, -0.5), (-0.5, -0.5))
+
+
+def session_swarm(sil_host, truth):
+    """cflib's `step-by-step/sbs_swarm.py` with only its URIs changed (four
+    `udp://` ports for its four radio addresses): `Swarm` opens the four
+    links in parallel, writes `led.bitmask` (the light check), resets the
+    four estimators, arms, takes off to 1 m, flies each its sequence of
+    three relative go_to moves and lands. `sil-host crtp --count 4` flies
+    the four in one world, each its own flight stack, sensors and port;
+    each vehicle's truth against its take-off and the three corners its
+    moves reach from where it starts, the four apart throughout."""
+    print('session 9: cflib\'s sbs_swarm.py, its URIs only changed: four vehicles in one world '
+          '(sil-host crtp --count 4)')
+    failed_before = check.failed
+    script = cflib_examples() / 'step-by-step' / 'sbs_swarm.py'
+    uris = ''.join(f"    'udp://127.0.0.1:{PORT + i}',\n" for i in range(len(SWARM_STARTS)))
+    text, changed = re.subn(r'^uris = \[\n.*?^\]', f'uris = [\n{uris}]', script.read_text(), count=1,
+                            flags=re.DOTALL | re.MULTILINE)
+    check(changed == 1, f'{script.name}: its uris list replaced ({changed} found)')
+    work = pathlib.Path('target/cflib-swarm').resolve()
+    work.mkdir(parents=True, exist_ok=True)
+    (work / script.name).write_text(text)
+    at = [a for x, y in SWARM_STARTS for a in ('--at', f'{x},{y}')]
+    sil = Sil(sil_host, '--count', str(len(SWARM_STARTS)), *at, truth=truth)
+    out = ''
+    try:
+        while len(truth.lasts) < len(SWARM_STARTS):
+            time.sleep(0.05)
+        since = truth.t
+        # Its own cache (./cache) in the work directory, as a user's run.
+        r = subprocess.run([sys.executable, script.name], check=False, capture_output=True, text=True,
+                           timeout=180, cwd=work)
+        truth.sleep(1.0)
+        example_ran(r, script, 'Light check done')
+        # Each sequence's moves (relative, 3 s each) from the start at 1 m.
+        moves = (((-0.5, 0.5), (0.5, -0.5), (0.5, 0.0)), ((0.5, 0.5), (-0.5, -0.5), (0.0, -0.5)),
+                 ((0.5, -0.5), (-0.5, 0.5), (-0.5, 0.0)), ((-0.5, -0.5), (0.5, 0.5), (0.0, 0.5)))
+        for i, ((x, y), steps) in enumerate(zip(SWARM_STARTS, moves)):
+            goals = [(x, y, 1.0)]
+            for dx, dy in steps:
+                goals.append((goals[-1][0] + dx, goals[-1][1] + dy, 1.0))
+            misses = [truth.closest_of(i, g, since) for g in goals]
+            check(max(misses) <= TOL_M,
+                  f'vehicle {i} (udp port {PORT + i}, from ({x}, {y})): took off to 1 m and reached '
+                  + ', '.join(f'({g[0]}, {g[1]})' for g in goals[1:])
+                  + f', each within {100 * max(misses):.1f} cm (bound {100 * TOL_M:.0f} cm)')
+            last = truth.lasts.get(i, {})
+            end = (goals[-1][0], goals[-1][1], 0.0)
+            off = math.dist(position_of(last), end) if last else math.inf
+            check(off <= TOL_M and not last.get('flying', True),
+                  f'vehicle {i} landed: {100 * off:.1f} cm from ({end[0]}, {end[1]}, 0), motors off')
+        gap, when = truth.min_separation()
+        check(gap >= 0.5, f'the four kept apart: the least distance between two, {gap:.3f} m at plant time '
+                          f'{when} s (their moves bring two within 0.71 m; bound 0.5 m)')
+        record('crtp_sil_swarm_min_separation_m', round(gap, 3), 'm', 'tools/crtp_cflib.py')
+    finally:
+        out = report(sil, failed_before)
+    try:
+        summary, _ = json.JSONDecoder().raw_decode(out[out.index('{'):])
+    except ValueError:
+        summary = {}
+    vehicles = summary.get('vehicles', [])
+    check(len(vehicles) == len(SWARM_STARTS) and all(v['packets']['handled'] > 100 for v in vehicles)
+          and not summary.get('collisions') and not any(v['crashed'] for v in vehicles),
+          f'sil-host flew {len(vehicles)} flight stacks, each its own link: '
+          + ', '.join(f"{v['listen']} {v['packets']['handled']} packets" for v in vehicles)
+          + f'; no collision (least distance {summary.get("min_separation_m", math.nan):.3f} m at 1 kHz), '
+          f'{summary.get("late_steps")} steps late, real-time factor {summary.get("realtime_factor", 0):.2f}')
+
+
 def persistent(cf, call, name):
     """cflib's `param.persistent_*` `call` on `name`, waited for: its result."""
     done = threading.Event()
@@ -895,6 +975,7 @@ def main():
     if not QEMU:
         session_motion(sil_host, truth)
         session_motion_examples(sil_host, truth)
+        session_swarm(sil_host, truth)
     truth.close()
     plant = sum(p for p, _ in truth.walls)
     wall = sum(w for _, w in truth.walls)

@@ -87,9 +87,18 @@ pub(crate) struct PlotArgs {
 
 #[derive(Args, Debug, Clone)]
 pub(crate) struct CrtpArgs {
-    /// The UDP address to listen on (cflib scans ports 19850–19859 of 127.0.0.1).
+    /// The UDP address to listen on (cflib scans ports 19850–19859 of 127.0.0.1); with
+    /// `--count N`, vehicle i listens on its port + i.
     #[arg(long, default_value = "127.0.0.1:19850", value_name = "HOST:PORT")]
     pub(crate) listen: std::net::SocketAddr,
+    /// Fly N vehicles in one simulated world (1–16, in process): each its own flight stack,
+    /// sensors and UDP port, for cflib's `Swarm`. Vehicles whose rotor discs meet both fall.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub(crate) count: usize,
+    /// Where a vehicle starts on the ground, Crazyflie frame (x forward, y left), m: once per
+    /// vehicle, in order (default: rows of four, 1 m apart, the first at the origin).
+    #[arg(long = "at", value_name = "X,Y", value_parser = parse_xy, allow_hyphen_values = true)]
+    pub(crate) at: Vec<[f64; 2]>,
     /// The vehicle (a TOML file, see `sil-host fly --help`); rotorpy's Crazyflie by default.
     #[arg(long, default_value = "vehicles/crazyflie-rotorpy.toml", value_name = "FILE")]
     pub(crate) vehicle: PathBuf,
@@ -703,5 +712,17 @@ pub(crate) fn parse_window(s: &str) -> Result<(f64, f64), String> {
     match v[..] {
         [a, b] if a.is_finite() && b.is_finite() && a >= 0.0 && b > 0.0 => Ok((a, b)),
         _ => Err(format!("'{s}': need START,LENGTH in s with START ≥ 0 and LENGTH > 0")),
+    }
+}
+
+/// `X,Y` in m, each finite.
+pub(crate) fn parse_xy(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("'{x}': {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y] if x.is_finite() && y.is_finite() => Ok([x, y]),
+        _ => Err(format!("'{s}': need X,Y in m, both finite")),
     }
 }

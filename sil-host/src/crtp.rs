@@ -9,10 +9,18 @@
 //! `--position-source external`) step every millisecond of wall time; the
 //! vehicle is [`fc_crtp::vehicle::CrtpVehicle`], the same code a board runs.
 //!
+//! `--count N` flies N such vehicles in one world (a swarm, for cflib's
+//! `Swarm`): vehicle `i` answers on the listen port + `i`, starts where
+//! `--at` puts it, has sensors of its own (seed + `i`), and two whose rotor
+//! discs meet (centres within twice the hub distance plus a propeller's
+//! radius) both lose their rotors and fall. The vehicles do not otherwise
+//! touch: no downwash or wake of one reaches another.
+//!
 //! `--truth-to ADDR` sends the plant's true pose as one JSON datagram every
-//! 10 ms: a motion-capture system's stream, for a client that forwards it
-//! with `send_extpos`/`send_extpose` and for tests that compare the flight
-//! with the truth. Its frame is the Crazyflie's (x forward, y left, z up).
+//! 10 ms (one per vehicle, each with its `id`): a motion-capture system's
+//! stream, for a client that forwards it with `send_extpos`/`send_extpose`
+//! and for tests that compare the flight with the truth. Its frame is the
+//! Crazyflie's (x forward, y left, z up).
 
 use crate::plant::{Plant, PlantConfig};
 use crate::sensors::{FixProfile, SensorConfig, Sensors, IMU_PERIOD_S};
@@ -33,6 +41,18 @@ use std::time::{Duration, Instant};
 pub const DEFAULT_PORT: u16 = 19850;
 /// Truth datagrams, every this many IMU steps (10 ms).
 const TRUTH_EVERY: u64 = 10;
+/// The most vehicles one world flies (cflib's radio URIs and UDP scan name
+/// ten; a swarm's wall time grows with each flight stack stepped).
+pub const MAX_VEHICLES: usize = 16;
+/// A Crazyflie 2.x propeller's radius, m (its 45 mm propellers): with the
+/// hub distance, how far a rotor disc reaches from the centre.
+pub const PROP_RADIUS_M: f64 = 0.0225;
+
+/// The default start layout of `n` vehicles: rows of four, 1 m apart, the
+/// first at the origin (Crazyflie frame, x forward, y left, m).
+pub fn grid_starts(n: usize) -> Vec<[f64; 2]> {
+    (0..n).map(|i| [(i / 4) as f64, (i % 4) as f64]).collect()
+}
 
 /// Where the estimator's position comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,8 +66,12 @@ pub enum PositionSource {
 /// How `sil-host crtp` runs.
 #[derive(Debug, Clone)]
 pub struct CrtpConfig {
-    /// The UDP address to listen on.
+    /// The UDP address to listen on: vehicle `i` of a swarm on its port + `i`.
     pub listen: SocketAddr,
+    /// Where each vehicle starts on the ground, Crazyflie frame (x forward,
+    /// y left), m: one per vehicle (a swarm when more than one, in process
+    /// only; at most [`MAX_VEHICLES`]).
+    pub starts_m: Vec<[f64; 2]>,
     /// The flight controller's settings (vehicle, airframe, controller).
     pub settings: Settings,
     /// The plant's vehicle (the same file's, in f64).
@@ -117,8 +141,51 @@ pub struct CrtpSummary {
     /// taken and refused.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub storage: Option<(String, u16, u16)>,
-    /// The plant's final position, Crazyflie frame, m.
+    /// The plant's final position, Crazyflie frame, m (vehicle 0's in a
+    /// swarm).
     pub final_position_m: [f64; 3],
+    /// A swarm's vehicles, each its own flight stack and port (empty with
+    /// one vehicle).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub vehicles: Vec<VehicleSummary>,
+    /// A swarm's least distance between two vehicles' centres over the
+    /// flight, m (`None` with one vehicle).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_separation_m: Option<f64>,
+    /// Two vehicles' rotor discs touching: each pair once (empty with one
+    /// vehicle, or none met).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub collisions: Vec<Collision>,
+}
+
+/// One vehicle of a swarm, in [`CrtpSummary::vehicles`].
+#[derive(Debug, Clone, Serialize)]
+pub struct VehicleSummary {
+    /// Its index: its port is the first + `id`, its truth datagrams carry it.
+    pub id: usize,
+    /// The UDP address it answers on.
+    pub listen: SocketAddr,
+    /// Packets: handled, null, refused by kind.
+    pub packets: Counters,
+    /// Packets sent.
+    pub sent: u64,
+    /// IMU samples not good, as [`CrtpSummary::imu`].
+    pub imu: [u32; 4],
+    /// Its final position, Crazyflie frame, m.
+    pub final_position_m: [f64; 3],
+    /// It met another vehicle and fell (motors off).
+    pub crashed: bool,
+}
+
+/// Two vehicles whose rotor discs met: both lose their rotors and fall.
+#[derive(Debug, Clone, Serialize)]
+pub struct Collision {
+    /// The two vehicles.
+    pub ids: [usize; 2],
+    /// When, s of the plant's time.
+    pub t_s: f64,
+    /// Their centres' distance then, m.
+    pub distance_m: f64,
 }
 
 /// [`CrtpCounters`] for the JSON summary.
@@ -315,17 +382,127 @@ impl Fc<'_> {
     }
 }
 
+/// One vehicle of the world: its flight stack, its plant and sensors.
+struct Craft<'a> {
+    fc: Fc<'a>,
+    plant: Plant,
+    sensors: Sensors,
+    /// Seconds flown with the motors on (the battery's discharge).
+    flown_s: f64,
+    /// Met another vehicle: its rotors stop and it falls.
+    crashed: bool,
+}
+
+/// The in-process vehicle on `socket`: with `--storage`, booted from it.
+fn local<'a>(cfg: &CrtpConfig, socket: &'a UdpSocket, stored: &mut Option<(String, u16, u16)>) -> Result<Fc<'a>> {
+    let (mut settings, mut store) = (cfg.settings, None);
+    if let Some(path) = &cfg.storage {
+        let (mut st, boot) = crate::storage::open(path, "crtp")?;
+        let l = fc_storage::load_settings(&mut st, settings)
+            .map_err(|e| anyhow::anyhow!("--storage {}: {e}", path.display()))?;
+        eprintln!(
+            "crtp: storage: {} persistent parameter(s) taken, {} refused",
+            l.taken, l.refused.0
+        );
+        settings = l.settings;
+        *stored = Some((boot.to_string(), l.taken, l.refused.0));
+        store = Some(st);
+    }
+    let mut vehicle = Box::new(
+        CrtpVehicle::new(settings).map_err(|e| anyhow::anyhow!("the flight controller's settings are refused: {e}"))?,
+    );
+    // cflib's "default value": the command line's, not the stored.
+    vehicle.set_defaults(cfg.settings);
+    Ok(Fc::Local {
+        vehicle,
+        socket,
+        out: Udp {
+            socket,
+            to: None,
+            sent: 0,
+            store,
+        },
+        clock: MonotonicClock::default(),
+    })
+}
+
+/// The image in QEMU, up and with the vehicle's parameters written.
+fn image(cfg: &CrtpConfig, syslink: &str, wait_s: f64, crazyflie: bool) -> Result<Fc<'static>> {
+    let boot = if crazyflie {
+        crate::link::Boot::Shim {
+            shim: crate::link::boot_shim_elf()?,
+            image: crate::link::firmware_crazyflie_elf()?,
+        }
+    } else {
+        crate::link::Boot::Direct(crate::link::firmware_crtp_elf()?)
+    };
+    let mut qemu = crate::link::Qemu::start_with_syslink(&boot, syslink, wait_s)?;
+    eprintln!("crtp: the image's syslink (USART6) waits on tcp:{syslink} for tools/nrf51_bridge.py");
+    let stream = qemu.connect()?;
+    stream.set_read_timeout(Some(Duration::from_secs(10)))?;
+    let mut link = SimLink {
+        client: crate::link::FcClient::over(stream),
+        seq: 0,
+    };
+    link.set_params(&cfg.settings)?;
+    eprintln!("crtp: the image is up, the vehicle's parameters written");
+    Ok(Fc::Image { qemu, link })
+}
+
+/// Checks a configuration before anything is bound or booted.
+fn check(cfg: &CrtpConfig) -> Result<()> {
+    let n = cfg.starts_m.len();
+    if !(1..=MAX_VEHICLES).contains(&n) {
+        anyhow::bail!("{n} vehicles: one world flies 1 to {MAX_VEHICLES}");
+    }
+    if n > 1 && !matches!(cfg.target, CrtpTarget::InProcess) {
+        anyhow::bail!("a swarm ({n} vehicles) flies in process only: each image in QEMU is one vehicle");
+    }
+    if n > 1 && cfg.storage.is_some() {
+        anyhow::bail!("--storage keeps one vehicle's flash: a swarm ({n} vehicles) has none");
+    }
+    if cfg.storage.is_some() && !matches!(cfg.target, CrtpTarget::InProcess) {
+        anyhow::bail!("--storage is for the in-process vehicle: the images in QEMU keep their own (a RAM stand-in)");
+    }
+    for (i, s) in cfg.starts_m.iter().enumerate() {
+        if !s.iter().all(|v| v.is_finite() && v.abs() <= 100.0) {
+            anyhow::bail!("vehicle {i}'s start {s:?} is out of range: each of x, y in [-100, 100] m");
+        }
+    }
+    let reach = 2.0 * (cfg.settings.hub_m as f64 + PROP_RADIUS_M);
+    for i in 0..n {
+        for j in i + 1..n {
+            let (a, b) = (cfg.starts_m[i], cfg.starts_m[j]);
+            let d = (a[0] - b[0]).hypot(a[1] - b[1]);
+            if d < reach {
+                anyhow::bail!("vehicles {i} and {j} start {d:.3} m apart: their rotors reach {reach:.3} m");
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Runs the server until `duration_s` (or forever).
 pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
-    let socket = match cfg.target {
-        CrtpTarget::InProcess => {
-            let s = UdpSocket::bind(cfg.listen).with_context(|| format!("binding UDP {}", cfg.listen))?;
+    check(cfg)?;
+    let n = cfg.starts_m.len();
+    // One socket per vehicle, bound before any vehicle borrows one.
+    let mut sockets = Vec::new();
+    if matches!(cfg.target, CrtpTarget::InProcess) {
+        for i in 0..n {
+            let mut at = cfg.listen;
+            if at.port() != 0 {
+                let port = usize::from(at.port()) + i;
+                at.set_port(
+                    u16::try_from(port).map_err(|_| anyhow::anyhow!("vehicle {i}'s port {port} is past 65535"))?,
+                );
+            }
+            let s = UdpSocket::bind(at).with_context(|| format!("binding UDP {at}"))?;
             s.set_nonblocking(true)?;
-            eprintln!("crtp: listening on udp://{}", s.local_addr()?);
-            Some(s)
+            eprintln!("crtp: vehicle {i} listening on udp://{}", s.local_addr()?);
+            sockets.push(s);
         }
-        CrtpTarget::Qemu { .. } => None,
-    };
+    }
     let truth = match cfg.truth_to {
         Some(to) => {
             let s = UdpSocket::bind("127.0.0.1:0")?;
@@ -334,87 +511,46 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
         None => None,
     };
     let mut stored = None;
-    if cfg.storage.is_some() && !matches!(cfg.target, CrtpTarget::InProcess) {
-        anyhow::bail!("--storage is for the in-process vehicle: the images in QEMU keep their own (a RAM stand-in)");
-    }
-    let mut fc = match (&cfg.target, &socket) {
-        (
-            CrtpTarget::Qemu {
-                syslink,
-                wait_s,
-                crazyflie,
-            },
-            _,
-        ) => {
-            let boot = if *crazyflie {
-                crate::link::Boot::Shim {
-                    shim: crate::link::boot_shim_elf()?,
-                    image: crate::link::firmware_crazyflie_elf()?,
-                }
-            } else {
-                crate::link::Boot::Direct(crate::link::firmware_crtp_elf()?)
-            };
-            let mut qemu = crate::link::Qemu::start_with_syslink(&boot, syslink, *wait_s)?;
-            eprintln!("crtp: the image's syslink (USART6) waits on tcp:{syslink} for tools/nrf51_bridge.py");
-            let stream = qemu.connect()?;
-            stream.set_read_timeout(Some(Duration::from_secs(10)))?;
-            let mut link = SimLink {
-                client: crate::link::FcClient::over(stream),
-                seq: 0,
-            };
-            link.set_params(&cfg.settings)?;
-            eprintln!("crtp: the image is up, the vehicle's parameters written");
-            Fc::Image { qemu, link }
-        }
-        (CrtpTarget::InProcess, Some(socket)) => {
-            let (mut settings, mut store) = (cfg.settings, None);
-            if let Some(path) = &cfg.storage {
-                let (mut st, boot) = crate::storage::open(path, "crtp")?;
-                let l = fc_storage::load_settings(&mut st, settings)
-                    .map_err(|e| anyhow::anyhow!("--storage {}: {e}", path.display()))?;
-                eprintln!(
-                    "crtp: storage: {} persistent parameter(s) taken, {} refused",
-                    l.taken, l.refused.0
-                );
-                settings = l.settings;
-                stored = Some((boot.to_string(), l.taken, l.refused.0));
-                store = Some(st);
-            }
-            let mut vehicle = Box::new(
-                CrtpVehicle::new(settings)
-                    .map_err(|e| anyhow::anyhow!("the flight controller's settings are refused: {e}"))?,
-            );
-            // cflib's "default value": the command line's, not the stored.
-            vehicle.set_defaults(cfg.settings);
-            Fc::Local {
-                vehicle,
-                socket,
-                out: Udp {
-                    socket,
-                    to: None,
-                    sent: 0,
-                    store,
-                },
-                clock: MonotonicClock::default(),
-            }
-        }
-        (CrtpTarget::InProcess, None) => anyhow::bail!("no UDP socket"),
-    };
     let pc = PlantConfig {
         params: cfg.vehicle,
         ..PlantConfig::nominal(AttitudeForm::Quaternion)
     };
-    let mut plant = Plant::new(pc, &fc_core::hover_quat_state(&Vector3::zeros(), 0.0));
-    plant.set_rotor_speeds(nalgebra::Vector4::zeros());
-    plant.contact_ground(0.0);
-    let mut sensor_cfg = SensorConfig::new(FixProfile::Mocap, cfg.seed);
-    sensor_cfg.faults.imu_dead = cfg.imu_dead;
-    let mut sensors = Sensors::new(sensor_cfg, IMU_PERIOD_S)?;
+    let mut crafts = Vec::with_capacity(n);
+    for (i, start) in cfg.starts_m.iter().enumerate() {
+        let fc = match &cfg.target {
+            CrtpTarget::Qemu {
+                syslink,
+                wait_s,
+                crazyflie,
+            } => image(cfg, syslink, *wait_s, *crazyflie)?,
+            CrtpTarget::InProcess => local(cfg, &sockets[i], &mut stored)?,
+        };
+        // Crazyflie (x, y) → NED (x, −y), on the ground.
+        let mut plant = Plant::new(
+            pc,
+            &fc_core::hover_quat_state(&Vector3::new(start[0], -start[1], 0.0), 0.0),
+        );
+        plant.set_rotor_speeds(nalgebra::Vector4::zeros());
+        plant.contact_ground(0.0);
+        let mut sensor_cfg = SensorConfig::new(FixProfile::Mocap, cfg.seed.wrapping_add(i as u64));
+        sensor_cfg.faults.imu_dead = cfg.imu_dead;
+        let sensors = Sensors::new(sensor_cfg, IMU_PERIOD_S)?;
+        crafts.push(Craft {
+            fc,
+            plant,
+            sensors,
+            flown_s: 0.0,
+            crashed: false,
+        });
+    }
     let u1_max = 4.0 * cfg.vehicle.kf_ns2 * cfg.vehicle.omega_max_radps.powi(2);
+    let reach = 2.0 * (cfg.settings.hub_m as f64 + PROP_RADIUS_M);
+    let mut min_separation = f64::INFINITY;
+    let mut collisions: Vec<Collision> = Vec::new();
+    let mut positions = Vec::with_capacity(n);
     let start = Instant::now();
     let mut step: u64 = 0;
     let mut late: u64 = 0;
-    let mut flown_s = 0.0;
     let mut buf = [0u8; 256];
     loop {
         let t = step as f64 * IMU_PERIOD_S;
@@ -422,7 +558,9 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
             break;
         }
         // Packets that arrived, answered at once.
-        fc.serve(&mut buf)?;
+        for c in &mut crafts {
+            c.fc.serve(&mut buf)?;
+        }
         // The simulated millisecond, in step with the wall clock.
         let due = start + Duration::from_secs_f64(t);
         let now = Instant::now();
@@ -433,65 +571,235 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
         if now - due > Duration::from_millis(5) {
             late += 1;
         }
-        let mut readings = sensors.read(t, &plant);
-        if cfg.position_source == PositionSource::External {
-            readings.fixes.clear();
-        }
         let t_us = (t * 1e6).round() as u64;
-        let (u, flying) = fc.step(t_us, &readings, |u1| battery_v(flown_s, f64::from(u1) / u1_max))?;
-        if flying {
-            flown_s += IMU_PERIOD_S;
+        for (id, c) in crafts.iter_mut().enumerate() {
+            let mut readings = c.sensors.read(t, &c.plant);
+            if cfg.position_source == PositionSource::External {
+                readings.fixes.clear();
+            }
+            let flown_s = c.flown_s;
+            let (mut u, flying) =
+                c.fc.step(t_us, &readings, |u1| battery_v(flown_s, f64::from(u1) / u1_max))?;
+            if flying {
+                c.flown_s += IMU_PERIOD_S;
+            }
+            if c.crashed {
+                // Its rotors met another's: they stop, whatever is commanded.
+                u = nalgebra::Vector4::zeros();
+                c.plant.set_rotor_speeds(nalgebra::Vector4::zeros());
+            }
+            c.plant.step(&u.cast::<f64>(), IMU_PERIOD_S);
+            c.plant.contact_ground(0.0);
+            if let Some((s, to)) = &truth {
+                if step.is_multiple_of(TRUTH_EVERY) {
+                    let _ = s.send_to(truth_line(t, id, &c.plant, c.fc.armed(), flying).as_bytes(), to);
+                }
+            }
         }
-        plant.step(&u.cast::<f64>(), IMU_PERIOD_S);
-        plant.contact_ground(0.0);
-        if let Some((s, to)) = &truth {
-            if step.is_multiple_of(TRUTH_EVERY) {
-                let x = plant.quat_state();
-                let p = cf_of(&plant.position());
-                let armed = fc.armed().map_or("null".to_string(), |a| a.to_string());
-                // Body FRD → NED as body FLU → (x, y, z up): (w, x, −y, −z).
-                let line = format!(
-                    "{{\"t\":{t:.3},\"x\":{:.5},\"y\":{:.5},\"z\":{:.5},\"qx\":{:.6},\"qy\":{:.6},\"qz\":{:.6},\"qw\":{:.6},\"armed\":{armed},\"flying\":{flying}}}",
-                    p[0], p[1], p[2], x[7], -x[8], -x[9], x[6]
-                );
-                let _ = s.send_to(line.as_bytes(), to);
+        // Every pair of rotor discs, each millisecond.
+        if n > 1 {
+            positions.clear();
+            positions.extend(crafts.iter().map(|c| c.plant.position()));
+            let least = separations(&positions, reach, |i, j, d| {
+                if !collisions.iter().any(|k| k.ids == [i, j]) {
+                    eprintln!("crtp: vehicles {i} and {j} collide at t {t:.3} s, {d:.3} m apart: both fall");
+                    collisions.push(Collision {
+                        ids: [i, j],
+                        t_s: t,
+                        distance_m: d,
+                    });
+                }
+            });
+            min_separation = min_separation.min(least);
+            for k in &collisions {
+                crafts[k.ids[0]].crashed = true;
+                crafts[k.ids[1]].crashed = true;
             }
         }
         step += 1;
     }
-    let final_position_m = cf_of(&plant.position());
     let duration_s = step as f64 * IMU_PERIOD_S;
     let realtime_factor = duration_s / start.elapsed().as_secs_f64().max(1e-9);
-    Ok(match fc {
-        Fc::Local { vehicle, out, .. } => CrtpSummary {
-            duration_s,
-            late_steps: late,
-            realtime_factor,
-            target: "in-process",
-            packets: Some(vehicle.counters().into()),
-            sent: Some(out.sent),
-            imu: Some({
-                let c = vehicle.imu_counters();
-                [c.missing, c.bad, c.held, c.timeouts]
-            }),
-            firmware_log: Vec::new(),
-            storage: stored,
-            final_position_m,
-        },
-        Fc::Image { qemu, link } => {
-            drop(link);
-            CrtpSummary {
-                duration_s,
-                late_steps: late,
-                realtime_factor,
-                target: "qemu",
-                packets: None,
-                sent: None,
-                imu: None,
-                firmware_log: qemu.finish()?,
-                storage: None,
-                final_position_m,
+    let swarm = n > 1;
+    let mut vehicles = Vec::new();
+    let mut first = None;
+    for (id, c) in crafts.into_iter().enumerate() {
+        let final_position_m = cf_of(&c.plant.position());
+        let summary = match c.fc {
+            Fc::Local {
+                vehicle, out, socket, ..
+            } => {
+                let imu = {
+                    let k = vehicle.imu_counters();
+                    [k.missing, k.bad, k.held, k.timeouts]
+                };
+                if swarm {
+                    vehicles.push(VehicleSummary {
+                        id,
+                        listen: socket.local_addr()?,
+                        packets: vehicle.counters().into(),
+                        sent: out.sent,
+                        imu,
+                        final_position_m,
+                        crashed: c.crashed,
+                    });
+                }
+                CrtpSummary {
+                    duration_s,
+                    late_steps: late,
+                    realtime_factor,
+                    target: "in-process",
+                    packets: Some(vehicle.counters().into()),
+                    sent: Some(out.sent),
+                    imu: Some(imu),
+                    firmware_log: Vec::new(),
+                    storage: stored.clone(),
+                    final_position_m,
+                    vehicles: Vec::new(),
+                    min_separation_m: None,
+                    collisions: Vec::new(),
+                }
+            }
+            Fc::Image { qemu, link } => {
+                drop(link);
+                CrtpSummary {
+                    duration_s,
+                    late_steps: late,
+                    realtime_factor,
+                    target: "qemu",
+                    packets: None,
+                    sent: None,
+                    imu: None,
+                    firmware_log: qemu.finish()?,
+                    storage: None,
+                    final_position_m,
+                    vehicles: Vec::new(),
+                    min_separation_m: None,
+                    collisions: Vec::new(),
+                }
+            }
+        };
+        first.get_or_insert(summary);
+    }
+    let mut summary = first.context("no vehicle")?;
+    if swarm {
+        summary.vehicles = vehicles;
+        summary.min_separation_m = Some(min_separation);
+        summary.collisions = collisions;
+    }
+    Ok(summary)
+}
+
+/// The least distance between two of `positions` (NED, m; infinite with
+/// fewer than two), calling `touched(i, j, distance)` for each pair `i < j`
+/// closer than `reach`: two vehicles whose rotor discs meet.
+fn separations(positions: &[Vector3<f64>], reach: f64, mut touched: impl FnMut(usize, usize, f64)) -> f64 {
+    let mut least = f64::INFINITY;
+    for (i, a) in positions.iter().enumerate() {
+        for (j, b) in positions.iter().enumerate().skip(i + 1) {
+            let d = (a - b).norm();
+            least = least.min(d);
+            if d < reach {
+                touched(i, j, d);
             }
         }
-    })
+    }
+    least
+}
+
+/// One truth datagram: vehicle `id`'s true pose at `t`, Crazyflie frame.
+fn truth_line(t: f64, id: usize, plant: &Plant, armed: Option<bool>, flying: bool) -> String {
+    let x = plant.quat_state();
+    let p = cf_of(&plant.position());
+    let armed = armed.map_or("null".to_string(), |a| a.to_string());
+    // Body FRD → NED as body FLU → (x, y, z up): (w, x, −y, −z).
+    format!(
+        "{{\"t\":{t:.3},\"id\":{id},\"x\":{:.5},\"y\":{:.5},\"z\":{:.5},\"qx\":{:.6},\"qy\":{:.6},\"qz\":{:.6},\"qw\":{:.6},\"armed\":{armed},\"flying\":{flying}}}",
+        p[0], p[1], p[2], x[7], -x[8], -x[9], x[6]
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_layout_is_rows_of_four_a_metre_apart() {
+        assert_eq!(grid_starts(1), vec![[0.0, 0.0]]);
+        let g = grid_starts(6);
+        assert_eq!(g[3], [0.0, 3.0]);
+        assert_eq!(g[4], [1.0, 0.0]);
+        assert_eq!(g[5], [1.0, 1.0]);
+    }
+
+    #[test]
+    fn separations_are_the_least_pairwise_distance_and_the_pairs_in_reach() {
+        // A 3-4-5 triangle and a point 0.1 m from its first corner.
+        let p = [
+            Vector3::new(0.0, 0.0, -1.0),
+            Vector3::new(3.0, 0.0, -1.0),
+            Vector3::new(0.0, 4.0, -1.0),
+            Vector3::new(0.0, 0.0, -1.1),
+        ];
+        let mut met = Vec::new();
+        let least = separations(&p, 0.131, |i, j, d| met.push((i, j, d)));
+        assert!((least - 0.1).abs() < 1e-12);
+        assert_eq!(met.len(), 1);
+        assert_eq!((met[0].0, met[0].1), (0, 3));
+        let mut none = 0;
+        assert!((separations(&p[..3], 0.131, |_, _, _| none += 1) - 3.0).abs() < 1e-12);
+        assert_eq!(none, 0);
+        assert_eq!(separations(&p[..1], 1.0, |_, _, _| unreachable!()), f64::INFINITY);
+    }
+
+    fn config(starts_m: Vec<[f64; 2]>) -> CrtpConfig {
+        let mut settings = Settings::os4();
+        settings.hub_m = 0.043;
+        CrtpConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            starts_m,
+            settings,
+            vehicle: VehicleParams::os4(),
+            position_source: PositionSource::Mocap,
+            truth_to: None,
+            duration_s: Some(0.01),
+            seed: 1,
+            imu_dead: None,
+            target: CrtpTarget::InProcess,
+            stop: Arc::new(AtomicBool::new(false)),
+            storage: None,
+        }
+    }
+
+    #[test]
+    fn a_swarm_is_refused_by_name_where_it_cannot_fly() {
+        let err = |c: CrtpConfig| check(&c).unwrap_err().to_string();
+        assert!(err(config(vec![])).contains("1 to 16"));
+        assert!(err(config(grid_starts(17))).contains("1 to 16"));
+        assert!(err(config(vec![[0.0, 0.0], [0.1, 0.0]])).contains("rotors reach 0.131 m"));
+        assert!(err(config(vec![[0.0, 0.0], [f64::NAN, 0.0]])).contains("vehicle 1's start"));
+        let mut c = config(grid_starts(2));
+        c.storage = Some("x".into());
+        assert!(err(c).contains("--storage"));
+        let mut c = config(grid_starts(2));
+        c.target = CrtpTarget::Qemu {
+            syslink: String::new(),
+            wait_s: 1.0,
+            crazyflie: false,
+        };
+        assert!(err(c).contains("in process only"));
+        assert!(check(&config(grid_starts(16))).is_ok());
+    }
+
+    #[test]
+    fn each_vehicle_of_a_swarm_has_its_own_port_and_starts_where_it_was_put() {
+        let s = run(&config(vec![[0.0, 0.0], [2.0, -1.0], [-1.0, 3.0]])).unwrap();
+        assert_eq!(s.vehicles.len(), 3);
+        let ports: std::collections::BTreeSet<_> = s.vehicles.iter().map(|v| v.listen.port()).collect();
+        assert_eq!(ports.len(), 3, "three sockets");
+        assert_eq!(s.vehicles[1].final_position_m[..2], [2.0, -1.0]);
+        assert_eq!(s.vehicles[2].final_position_m[..2], [-1.0, 3.0]);
+        assert!((s.min_separation_m.unwrap() - 5f64.sqrt()).abs() < 1e-9);
+        assert!(s.collisions.is_empty());
+    }
 }

@@ -453,6 +453,17 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
             a.bridge_wait
         );
     }
+    let starts_m = if a.at.is_empty() {
+        sil_host::crtp::grid_starts(a.count)
+    } else if a.at.len() == a.count {
+        a.at.clone()
+    } else {
+        bail!(
+            "--count {} needs as many --at (one start per vehicle), not {}",
+            a.count,
+            a.at.len()
+        );
+    };
     // SIGINT/SIGTERM end the flight at the next step: the summary is written
     // and QEMU (with --target qemu) stopped, not left orphaned.
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -462,6 +473,7 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
     let summary = sil_host::crtp::run(&sil_host::crtp::CrtpConfig {
         stop,
         listen: a.listen,
+        starts_m,
         settings,
         vehicle,
         position_source,

@@ -5,9 +5,12 @@ Two streams carry it:
   east, down about the start, m;
 - `sil-host crtp --truth-to` (sil-host/src/crtp.rs): `t`, plant s; `x`,
   `y`, `z`, the Crazyflie's world frame (z up), m; the attitude quaternion;
-  `armed` and `flying`.
+  `armed` and `flying`; `id`, the vehicle (0 to N-1) of a swarm
+  (`--count N`), 0 when absent.
 
-`pos` is the position as the stream gives it, in the stream's frame.
+`pos` is the position as the stream gives it, in the stream's frame. `last`,
+`track` and what reads them are vehicle 0's; `lasts` and `tracks` hold
+every vehicle's, by id.
 """
 import asyncio
 import json
@@ -34,6 +37,8 @@ class Truth:
         self.sock.setblocking(False)
         self.last = None
         self.track = []
+        self.lasts = {}  # id -> the latest datagram
+        self.tracks = {}  # id -> [(t, position)]
         self.walls = []  # (simulated s, wall s) of each sleep()
         self._thread = None
         self._stop = False
@@ -46,10 +51,7 @@ class Truth:
     @property
     def pos(self):
         """The latest position, m, in the stream's frame (None before one)."""
-        m = self.last
-        if m is None:
-            return None
-        return m["ned"] if "ned" in m else (m["x"], m["y"], m["z"])
+        return None if self.last is None else position_of(self.last)
 
     def poll(self):
         """Takes every datagram that has arrived."""
@@ -58,12 +60,20 @@ class Truth:
                 data, _ = self.sock.recvfrom(1024)
             except BlockingIOError:
                 return
-            self.last = json.loads(data)
-            self.track.append(self.pos)
+            m = json.loads(data)
+            i = m.get("id", 0)
+            self.lasts[i] = m
+            self.tracks.setdefault(i, []).append((m["t"], position_of(m)))
+            if i == 0:
+                self.last = m
+                self.track.append(self.pos)
 
     def reset(self):
-        """Forgets the latest datagram (a new session's clock starts anew)."""
+        """Forgets the latest datagram (a new session's clock starts anew)
+        and every vehicle's track."""
         self.last = None
+        self.lasts = {}
+        self.tracks = {}
 
     def follow(self):
         """Reads the stream in a thread of its own from now on."""
@@ -126,3 +136,30 @@ class Truth:
         """The latest position's distance from `pos`, m (inf before one)."""
         self.poll()
         return math.inf if self.pos is None else math.dist(self.pos, pos)
+
+    def closest_of(self, i, pos, since_t):
+        """The closest vehicle `i`'s track came to `pos` from stream time
+        `since_t` on, m."""
+        self.poll()
+        return min((math.dist(p, pos) for t, p in list(self.tracks.get(i, [])) if t >= since_t), default=math.inf)
+
+    def min_separation(self):
+        """The least distance between two vehicles' positions at the same
+        stream time, m, and when (inf, None with fewer than two)."""
+        self.poll()
+        at = {}
+        for i, track in list(self.tracks.items()):
+            for t, p in track:
+                at.setdefault(round(t, 3), {})[i] = p
+        best = (math.inf, None)
+        for t, ps in at.items():
+            ps = list(ps.values())
+            for a in range(len(ps)):
+                for b in range(a + 1, len(ps)):
+                    best = min(best, (math.dist(ps[a], ps[b]), t), key=lambda x: x[0])
+        return best
+
+
+def position_of(m):
+    """A datagram's position, in the stream's frame."""
+    return m["ned"] if "ned" in m else (m["x"], m["y"], m["z"])

@@ -1323,13 +1323,7 @@ fn fixed_entries_take_one_value_and_a_reset_waits_for_the_motors() {
         assert_eq!(said, "", "its own value is taken");
     }
     let reset = find(b"kalman", b"resetEstimation").to_le_bytes();
-    assert_eq!(
-        ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1])).payload(),
-        &[0x81, 1, 1]
-    );
-    let mut out = Sent::default();
-    v.handle(&takeoff(0.5, 2.0), &mut out).unwrap();
-    assert!(v.flying());
+    let mut out = arm_and_take_off(&mut v);
     let (_, said) = ask_said(&mut v, pk(Port::Param, 2, &[reset[0], reset[1], 1]));
     assert!(said.contains("kalman.resetEstimation: disarm first"), "{said}");
     assert_eq!(
@@ -1346,6 +1340,15 @@ fn fixed_entries_take_one_value_and_a_reset_waits_for_the_motors() {
         fc_loop::nav::NavMode::Aligning,
         "reset on the ground"
     );
+}
+
+/// Arms `v` (answered as armed) and starts a take-off to 0.5 m: flying.
+fn arm_and_take_off(v: &mut CrtpVehicle) -> Sent {
+    assert_eq!(ask(v, pk(Port::Supervisor, 1, &[0x01, 1])).payload(), &[0x81, 1, 1]);
+    let mut out = Sent::default();
+    v.handle(&takeoff(0.5, 2.0), &mut out).unwrap();
+    assert!(v.flying());
+    out
 }
 
 /// `led.bitmask` (what `sbs_swarm.py`'s light check writes: 255, then 0)
@@ -1374,13 +1377,7 @@ fn led_bitmask_is_kept_and_read_back() {
         );
     }
     assert_eq!(*v.flight_loop().settings(), before, "no flight setting moved");
-    assert_eq!(
-        ask(&mut v, pk(Port::Supervisor, 1, &[0x01, 1])).payload(),
-        &[0x81, 1, 1]
-    );
-    let mut out = Sent::default();
-    v.handle(&takeoff(0.5, 2.0), &mut out).unwrap();
-    assert!(v.flying());
+    arm_and_take_off(&mut v);
     let (r, _) = ask_said(&mut v, pk(Port::Param, 2, &[b[0], b[1], 255]));
     assert_eq!(r.payload(), &[b[0], b[1], 255], "taken in flight");
     assert!(v.flying());
