@@ -31,7 +31,12 @@ the firmware says of itself:
    over the whole of it (≤ 10 cm). On the images, whose emulation runs
    slower than the wall clock the example sleeps on, its own upload and its
    sequence on the vehicle's clock.
-9. (SIL only) cflib's `step-by-step/sbs_swarm.py` with only its URIs changed
+9. (SIL only) cflib's `step-by-step/sbs_motion_commander.py`, unchanged:
+   without a deck it stops at its Flow deck check, as on a Crazyflie; with
+   `sil-host crtp --deck bcFlow2` (the flag only: a stand-in, the position
+   still the SIL's motion capture) it takes off to 0.5 m, hovers and lands,
+   the truth within 5 cm over the hover.
+10. (SIL only) cflib's `step-by-step/sbs_swarm.py` with only its URIs changed
    (four `udp://` ports for its four radio addresses), against `sil-host
    crtp --count 4`: four vehicles in one world, each its own flight stack
    and port; its light check (`led.bitmask`), estimator resets, take-off,
@@ -824,6 +829,51 @@ def session_motion_examples(sil_host, truth):
             report(sil, failed_before)
 
 
+def session_deck(sil_host, truth):
+    """cflib's `step-by-step/sbs_motion_commander.py`, unchanged: it waits 5 s
+    for `deck.bcFlow2` and stops without it ("No flow deck detected!", exit
+    1), as on a Crazyflie without a Flow deck. With `sil-host crtp --deck
+    bcFlow2` (the flag only, a stand-in: the position is the SIL's motion
+    capture) it arms, logs the estimate, takes off to 0.5 m with a
+    `MotionCommander`, hovers 3 s and lands; the truth holds 0.5 m over the
+    hover, within 5 cm at worst."""
+    print('session 9: cflib\'s sbs_motion_commander.py, unchanged: without a deck, then with the Flow deck\'s '
+          'flag (sil-host crtp --deck bcFlow2)')
+    script = cflib_examples() / 'step-by-step' / 'sbs_motion_commander.py'
+    failed_before = check.failed
+    sil = Sil(sil_host, truth=truth)
+    try:
+        r = run_example(script, 60)
+        check(r.returncode == 1 and 'No flow deck detected!' in r.stdout and 'Deck is NOT attached!' in r.stdout,
+              f'{script.name} without a deck: exit {r.returncode}, "No flow deck detected!" (as on a Crazyflie '
+              f'without one)' + ('' if r.returncode == 1 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+    finally:
+        report(sil, failed_before)
+    failed_before = check.failed
+    sil = Sil(sil_host, '--deck', 'bcFlow2', truth=truth)
+    try:
+        while truth.last is None:
+            time.sleep(0.05)
+        since = truth.t
+        r = run_example(script, 60)
+        truth.sleep(1.0)
+        example_ran(r, script, 'Deck is attached!')
+        goal = (0.0, 0.0, 0.5)
+        # The hover: from the first time the truth is within 1 cm of 0.5 m
+        # high to the last (the climb and the descent at 0.2 m/s apart).
+        track = [p for t, p in list(truth.tracks.get(0, [])) if t >= since]
+        near_height = [i for i, p in enumerate(track) if abs(p[2] - goal[2]) <= 0.01]
+        hover = track[near_height[0]:near_height[-1] + 1] if near_height else []
+        worst = max((math.dist(p, goal) for p in hover), default=math.inf)
+        check(len(hover) >= 200 and worst <= TOL_M,
+              f'its MotionCommander took off to 0.5 m and hovered: {len(hover) / 100:.1f} s at 0.5 m, '
+              f'worst {100 * worst:.1f} cm from (0, 0, 0.5) over it (bound {100 * TOL_M:.0f} cm)')
+        check(truth.last['z'] < TOL_M and not truth.last['flying'],
+              f'landed when the MotionCommander closed: z {truth.last["z"]:.3f} m, motors off')
+    finally:
+        report(sil, failed_before)
+
+
 # Session 9's swarm: where each of the four starts (Crazyflie frame, m), a
 # square 1 m a side about the origin, in the order of the example's URIs.
 SWARM_STARTS = ((-0.5, 0.5), (0.5, 0.5), (0.5, -0.5), (-0.5, -0.5))
@@ -837,8 +887,9 @@ def session_swarm(sil_host, truth):
     three relative go_to moves and lands. `sil-host crtp --count 4` flies
     the four in one world, each its own flight stack, sensors and port;
     each vehicle's truth against its take-off and the three corners its
-    moves reach from where it starts, the four apart throughout."""
-    print('session 9: cflib\'s sbs_swarm.py, its URIs only changed: four vehicles in one world '
+    moves reach from where it starts, the four apart throughout (session
+    10)."""
+    print('session 10: cflib\'s sbs_swarm.py, its URIs only changed: four vehicles in one world '
           '(sil-host crtp --count 4)')
     failed_before = check.failed
     script = cflib_examples() / 'step-by-step' / 'sbs_swarm.py'
@@ -975,6 +1026,7 @@ def main():
     if not QEMU:
         session_motion(sil_host, truth)
         session_motion_examples(sil_host, truth)
+        session_deck(sil_host, truth)
         session_swarm(sil_host, truth)
     truth.close()
     plant = sum(p for p, _ in truth.walls)

@@ -91,6 +91,11 @@ pub(crate) struct CrtpArgs {
     /// `--count N`, vehicle i listens on its port + i.
     #[arg(long, default_value = "127.0.0.1:19850", value_name = "HOST:PORT")]
     pub(crate) listen: std::net::SocketAddr,
+    /// Report this deck attached in its `deck.<NAME>` flag (repeatable; in process): `bcFlow2`
+    /// or `bcLighthouse4` for a script that waits for a positioning deck. A stand-in: no deck is
+    /// simulated, the position still comes from the SIL's motion capture (--position-source).
+    #[arg(long, value_name = "NAME", value_parser = fc_crtp::vehicle::DECK_NAMES)]
+    pub(crate) deck: Vec<String>,
     /// Fly N vehicles in one simulated world (1–16, in process): each its own flight stack,
     /// sensors and UDP port, for cflib's `Swarm`. Vehicles whose rotor discs meet both fall.
     #[arg(long, default_value_t = 1, value_name = "N")]

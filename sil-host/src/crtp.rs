@@ -9,6 +9,10 @@
 //! `--position-source external`) step every millisecond of wall time; the
 //! vehicle is [`fc_crtp::vehicle::CrtpVehicle`], the same code a board runs.
 //!
+//! `--deck NAME` reports a deck attached in its `deck.bc*` flag: a stand-in
+//! for the scripts that wait for a positioning deck; no deck is simulated,
+//! and the position is still the motion capture's.
+//!
 //! `--count N` flies N such vehicles in one world (a swarm, for cflib's
 //! `Swarm`): vehicle `i` answers on the listen port + `i`, starts where
 //! `--at` puts it, has sensors of its own (seed + `i`), and two whose rotor
@@ -72,6 +76,10 @@ pub struct CrtpConfig {
     /// y left), m: one per vehicle (a swarm when more than one, in process
     /// only; at most [`MAX_VEHICLES`]).
     pub starts_m: Vec<[f64; 2]>,
+    /// The decks each vehicle reports attached in its `deck.bc*` flags
+    /// (bit `i`: [`fc_crtp::vehicle::DECK_NAMES`]`[i]`; in process only):
+    /// flags only, no deck simulated.
+    pub decks: u8,
     /// The flight controller's settings (vehicle, airframe, controller).
     pub settings: Settings,
     /// The plant's vehicle (the same file's, in f64).
@@ -413,6 +421,7 @@ fn local<'a>(cfg: &CrtpConfig, socket: &'a UdpSocket, stored: &mut Option<(Strin
     );
     // cflib's "default value": the command line's, not the stored.
     vehicle.set_defaults(cfg.settings);
+    vehicle.report_decks(cfg.decks);
     Ok(Fc::Local {
         vehicle,
         socket,
@@ -460,6 +469,9 @@ fn check(cfg: &CrtpConfig) -> Result<()> {
     }
     if n > 1 && cfg.storage.is_some() {
         anyhow::bail!("--storage keeps one vehicle's flash: a swarm ({n} vehicles) has none");
+    }
+    if cfg.decks != 0 && !matches!(cfg.target, CrtpTarget::InProcess) {
+        anyhow::bail!("--deck is for the in-process vehicle: the images in QEMU report no deck");
     }
     if cfg.storage.is_some() && !matches!(cfg.target, CrtpTarget::InProcess) {
         anyhow::bail!("--storage is for the in-process vehicle: the images in QEMU keep their own (a RAM stand-in)");
@@ -758,6 +770,7 @@ mod tests {
         CrtpConfig {
             listen: "127.0.0.1:0".parse().unwrap(),
             starts_m,
+            decks: 0,
             settings,
             vehicle: VehicleParams::os4(),
             position_source: PositionSource::Mocap,
@@ -787,7 +800,10 @@ mod tests {
             wait_s: 1.0,
             crazyflie: false,
         };
-        assert!(err(c).contains("in process only"));
+        assert!(err(c.clone()).contains("in process only"));
+        c.starts_m = grid_starts(1);
+        c.decks = 1 << 1;
+        assert!(err(c).contains("--deck"));
         assert!(check(&config(grid_starts(16))).is_ok());
     }
 

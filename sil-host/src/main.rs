@@ -474,6 +474,10 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
         stop,
         listen: a.listen,
         starts_m,
+        decks: a.deck.iter().fold(0u8, |m, d| {
+            let bit = fc_crtp::vehicle::DECK_NAMES.iter().position(|n| n == d).unwrap_or(0);
+            m | 1 << bit
+        }),
         settings,
         vehicle,
         position_source,

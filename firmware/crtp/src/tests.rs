@@ -641,6 +641,25 @@ fn decks_are_read_only_and_absent() {
     }
 }
 
+/// A deck reported attached (`report_decks`, as a simulator standing in
+/// for a positioning deck does) reads 1 in its own flag only, and every
+/// flag stays read-only.
+#[test]
+fn a_reported_deck_reads_attached_in_its_own_flag_only() {
+    use crate::vehicle::DECK_NAMES;
+    let mut v = at_rest(10);
+    let flow2 = DECK_NAMES.iter().position(|n| *n == "bcFlow2").unwrap();
+    v.report_decks(1 << flow2);
+    for (bit, name) in DECK_NAMES.iter().enumerate() {
+        let id = find(b"deck", name.as_bytes()).to_le_bytes();
+        let want = u8::from(bit == flow2);
+        let r = ask(&mut v, pk(Port::Param, 1, &id));
+        assert_eq!(r.payload(), &[id[0], id[1], 0, want][..], "deck.{name}");
+        let r = ask(&mut v, pk(Port::Param, 2, &[id[0], id[1], 1 - want]));
+        assert_eq!(r.payload(), &[id[0], id[1], want][..], "deck.{name} is read-only");
+    }
+}
+
 /// Split as an image splits it (the shared part and the controller in two
 /// tasks): a parameter write that re-designs is not answered until the
 /// controller's side has run the design; a write that comes meanwhile is

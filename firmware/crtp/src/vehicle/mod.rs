@@ -76,7 +76,7 @@ mod step;
 
 pub use ports::logging::{LogSample, LogVar, LOG_VARS};
 pub(crate) use ports::param::put_typed;
-pub use ports::param::{param_entry, param_named, param_types, Extra, EXTRA_PARAMS, PARAM_COUNT};
+pub use ports::param::{param_entry, param_named, param_types, Extra, DECK_NAMES, EXTRA_PARAMS, PARAM_COUNT};
 pub use split::{fly_step, pass_step, run_work};
 
 /// A generic set-point older than this is held level where it is, ms.
@@ -276,6 +276,15 @@ impl CrtpVehicle {
         self.shared.defaults = defaults;
     }
 
+    /// Reports the decks of `mask` (bit `i`: [`DECK_NAMES`]`[i]`) attached
+    /// in their `deck.bc*` flags, as a Crazyflie's deck drivers do once
+    /// they have found their deck at boot. Only the flag: nothing here
+    /// drives a deck or reads its sensors; a simulator that calls it gives
+    /// the vehicle what the deck would stand in for (positions) itself.
+    pub fn report_decks(&mut self, mask: u8) {
+        self.shared.decks = mask;
+    }
+
     /// Checks the settings and designs the controller in place.
     pub fn start(&mut self) -> Result<(), Refusal> {
         fc_loop::start_front_end(&mut self.shared.lp, &mut self.ctrl)
@@ -376,6 +385,9 @@ pub struct CrtpShared {
     /// `led.bitmask` as last written (0 at boot): kept and read back; no
     /// LED here to drive.
     led_bitmask: u8,
+    /// The decks reported attached, a bit each of [`DECK_NAMES`] (none at
+    /// boot; [`CrtpVehicle::report_decks`]).
+    decks: u8,
     /// The battery voltage the radio chip last reported, V; `None` until
     /// it reports one (no reading is not a full battery).
     vbat_v: Option<f32>,
@@ -421,6 +433,7 @@ impl CrtpShared {
             motors: [0.0; 4],
             heading_seen: false,
             led_bitmask: 0,
+            decks: 0,
             vbat_v: None,
             pm_state: 0,
             counters: CrtpCounters::default(),

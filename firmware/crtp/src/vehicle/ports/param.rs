@@ -37,9 +37,12 @@ pub enum Extra {
     Estimator,
     /// `commander.enHighLevel`: 1, the high-level commander is always on.
     EnHighLevel,
-    /// `deck.bc*`: read-only, 0: no expansion deck is attached. cfclient's
-    /// flight tab reads them to offer height hold and command-based flight.
-    Deck,
+    /// `deck.bc*`, read-only: 1 if the deck with this bit of
+    /// [`DECK_NAMES`] is reported attached ([`CrtpVehicle::report_decks`]),
+    /// else 0; at boot none is. cfclient's flight tab reads them to offer
+    /// height hold and command-based flight; cflib's scripts wait for a
+    /// positioning deck's.
+    Deck(u8),
     /// `led.bitmask`: the LED override a swarm's scripts write (cflib's
     /// `sbs_swarm.py` writes 255, then 0; Crazyswarm's 128 turns the LEDs
     /// off). Stored and read back as written; the SIL and the images in
@@ -48,14 +51,13 @@ pub enum Extra {
 }
 
 impl Extra {
-    /// The one value a fixed choice or a read-only flag has (`None`: an
-    /// alias or a command, which read their own).
+    /// The one value a fixed choice has (`None`: an alias, a command, a
+    /// deck's flag or the LED override, which read their own).
     pub const fn fixed(self) -> Option<f32> {
         match self {
             Extra::Estimator => Some(2.0),
             Extra::EnHighLevel => Some(1.0),
-            Extra::Deck => Some(0.0),
-            Extra::Alias(_) | Extra::ResetEstimation | Extra::LedBitmask => None,
+            Extra::Alias(_) | Extra::ResetEstimation | Extra::Deck(_) | Extra::LedBitmask => None,
         }
     }
 }
@@ -68,15 +70,29 @@ pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 12] = [
     ("kalman", "resetEstimation", param_types::U8, Extra::ResetEstimation),
     ("stabilizer", "estimator", param_types::U8, Extra::Estimator),
     ("commander", "enHighLevel", param_types::U8, Extra::EnHighLevel),
-    ("deck", "bcFlow", DECK, Extra::Deck),
-    ("deck", "bcFlow2", DECK, Extra::Deck),
-    ("deck", "bcZRanger", DECK, Extra::Deck),
-    ("deck", "bcZRanger2", DECK, Extra::Deck),
-    ("deck", "bcLighthouse4", DECK, Extra::Deck),
-    ("deck", "bcLoco", DECK, Extra::Deck),
-    ("deck", "bcDWM1000", DECK, Extra::Deck),
-    ("deck", "bcLedRing", DECK, Extra::Deck),
+    ("deck", DECK_NAMES[0], DECK, Extra::Deck(0)),
+    ("deck", DECK_NAMES[1], DECK, Extra::Deck(1)),
+    ("deck", DECK_NAMES[2], DECK, Extra::Deck(2)),
+    ("deck", DECK_NAMES[3], DECK, Extra::Deck(3)),
+    ("deck", DECK_NAMES[4], DECK, Extra::Deck(4)),
+    ("deck", DECK_NAMES[5], DECK, Extra::Deck(5)),
+    ("deck", DECK_NAMES[6], DECK, Extra::Deck(6)),
+    ("deck", DECK_NAMES[7], DECK, Extra::Deck(7)),
     ("led", "bitmask", param_types::U8, Extra::LedBitmask),
+];
+
+/// The decks' flags in the param TOC (group `deck`), bit `i` of a deck
+/// mask is `DECK_NAMES[i]`: the Flow decks, the Z-rangers, Lighthouse, the
+/// Loco deck (two names) and the LED ring.
+pub const DECK_NAMES: [&str; 8] = [
+    "bcFlow",
+    "bcFlow2",
+    "bcZRanger",
+    "bcZRanger2",
+    "bcLighthouse4",
+    "bcLoco",
+    "bcDWM1000",
+    "bcLedRing",
 ];
 
 /// A deck's attached flag: `PARAM_UINT8 | PARAM_RONLY`, as the firmware's deck drivers declare it.
@@ -231,6 +247,7 @@ impl CrtpShared {
             None => (PARAMS[id].get)(s),
             Some(Extra::ResetEstimation) => 0.0,
             Some(Extra::LedBitmask) => f32::from(self.led_bitmask),
+            Some(Extra::Deck(bit)) => f32::from((self.decks >> bit) & 1),
             Some(Extra::Alias(i)) => (PARAMS[i].get)(s),
             Some(fixed) => fixed.fixed()?,
         })
@@ -275,10 +292,10 @@ impl CrtpShared {
                 self.say(format_args!("estimator reset"));
                 return Ok(Written::Now);
             }
-            // A fixed choice or a read-only flag takes its one value and
-            // refuses any other, naming it.
-            Some(fixed) => {
-                let v = fixed.fixed().ok_or(Refusal::Unknown)?;
+            // A fixed choice or a read-only flag takes its value in force
+            // and refuses any other, naming it.
+            Some(_) => {
+                let v = self.param_value(id).ok_or(Refusal::Unknown)?;
                 return if value == v {
                     Ok(Written::Now)
                 } else {
