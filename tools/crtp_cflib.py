@@ -15,7 +15,8 @@ the firmware says of itself:
    the end;
 5. cflib's own examples, unchanged, from cflib's PyPI source distribution
    (the installed version), with CFLIB_URI set: logging/basiclog_sync.py,
-   logging/basiclog.py, parameters/basicparam.py;
+   logging/basiclog.py, parameters/basicparam.py,
+   step-by-step/sbs_connect_log_param.py;
 6. a second session with `--position-source external`: `send_extpos` of the
    mocap stream is the only position source; `send_position_setpoint` climbs
    and moves, the truth within 5 cm of each set-point; then
@@ -28,9 +29,11 @@ the firmware says of itself:
    uploads its figure-8 (ten Poly4D pieces) into the trajectory memory
    (port mem), defines it, arms, takes off and flies it relative to where
    it is; the truth against the path its pieces describe, worst and RMS
-   over the whole of it (≤ 10 cm). On the images, whose emulation runs
-   slower than the wall clock the example sleeps on, its own upload and its
-   sequence on the vehicle's clock.
+   over the whole of it (≤ 4 cm worst, 2 cm RMS); then again with its
+   `--relative-yaw` (a take-off turning to 3.14 / 2 rad, the figure-8
+   turned by as much). On the images, whose emulation runs slower than the
+   wall clock the example sleeps on, its own upload and its sequence (both
+   forms) on the vehicle's clock.
 9. (SIL only) cflib's `step-by-step/sbs_motion_commander.py`, unchanged:
    without a deck it stops at its Flow deck check, as on a Crazyflie; with
    `sil-host crtp --deck bcFlow2` (the flag only: a stand-in, the position
@@ -42,6 +45,11 @@ the firmware says of itself:
    and port; its light check (`led.bitmask`), estimator resets, take-off,
    three relative moves each and landing, each vehicle's truth within 5 cm
    of every corner; the least distance between two recorded, no collision.
+11. the uploaded figure-8 again, on the same link a client asking as fast
+   as cflib's queues carry it: parameter reads, both TOCs downloaded again
+   and again, a log block at 100 Hz; every read answered, every TOC whole,
+   the figure-8 within session 5's bounds (on the images: the steps, holds
+   and stack checked as every session's).
 
 With `--qemu` the same sessions fly the `firmware-crtp` image in QEMU
 (`sil-host crtp --target qemu`): cflib reaches it through
@@ -531,10 +539,10 @@ def session_dead_imu(sil_host, truth):
           f'IMU samples (missing, bad, flown on the last good one, silences): {got}, {n} NaN samples sent')
 
 
-def run_example(script, timeout_s):
+def run_example(script, timeout_s, args=()):
     """cflib's example `script` (a path under its examples), unchanged,
-    against the SIL: its completed process."""
-    return subprocess.run([sys.executable, str(script)], check=False, env=dict(os.environ, CFLIB_URI=URI),
+    against the SIL, with its command-line `args`: its completed process."""
+    return subprocess.run([sys.executable, str(script), *args], check=False, env=dict(os.environ, CFLIB_URI=URI),
                           capture_output=True, text=True, timeout=timeout_s, cwd=script.parent)
 
 
@@ -551,9 +559,14 @@ def session_examples(sil_host):
     print(f'session 4: cflib {version}\'s own examples, unchanged')
     examples = cflib_examples()
     # What each prints when it worked (its own output, unchanged).
+    # sbs_connect_log_param.py writes stabilizer.estimator 2, then 1: the
+    # Kalman filter is the only estimator here, so 1 is refused (said on
+    # the console) and the value stays 2, which its callback prints.
     for script, expect in (('logging/basiclog_sync.py', "'stabilizer.roll'"),
                            ('logging/basiclog.py', 'pm.vbat'),
-                           ('parameters/basicparam.py', 'Parameters downloaded')):
+                           ('parameters/basicparam.py', 'Parameters downloaded'),
+                           ('step-by-step/sbs_connect_log_param.py',
+                            'The crazyflie has parameter stabilizer.estimator set at number: 2')):
         sil = Sil(sil_host)
         try:
             example_ran(run_example(examples / script, 60), examples / script, expect)
@@ -576,17 +589,25 @@ def cflib_examples():
     return work / f'cflib-{version}' / 'examples'
 
 
-def poly4d_path(rows, shift, dt=0.01):
+def poly4d_path(rows, shift, dt=0.01, turn=0.0):
     """cflib's `Poly4D` rows (duration, then x, y, z and yaw's eight
     coefficients each, from the constant up) evaluated every `dt` s from
-    the first piece's start and moved by `shift`: the positions a relative
-    start flies, the Crazyflie's frame, m, one row each `dt` s."""
+    the first piece's start, turned by `turn` (rad, counter-clockwise seen
+    from above) about that start and moved by `shift`: the positions a
+    relative start (with a relative yaw, `turn`) flies, the Crazyflie's
+    frame, m, one row each `dt` s."""
     import numpy as np
     points = []
     for row in rows:
         t = np.arange(0.0, row[0], dt)
-        points.append(np.stack([np.polyval(row[1 + 8 * a:9 + 8 * a][::-1], t) + shift[a] for a in range(3)], 1))
-    return np.concatenate(points)
+        points.append(np.stack([np.polyval(row[1 + 8 * a:9 + 8 * a][::-1], t) for a in range(3)], 1))
+    p = np.concatenate(points)
+    first = p[0].copy()
+    c, s = math.cos(turn), math.sin(turn)
+    d = p - first
+    p[:, 0] = first[0] + c * d[:, 0] - s * d[:, 1]
+    p[:, 1] = first[1] + s * d[:, 0] + c * d[:, 1]
+    return p + np.asarray(shift)
 
 
 def tracking_error(flown, path, dt=0.01):
@@ -608,15 +629,172 @@ def tracking_error(flown, path, dt=0.01):
     return best
 
 
-def session_trajectory(sil_host, truth):
+def fly_figure8(cf, example, truth, during=None, relative_yaw=False):
+    """`autonomous_sequence_high_level.py`'s upload (its `upload_trajectory`)
+    and sequence on `cf`, its durations on the vehicle's clock: reset the
+    estimator, arm, take off to 1 m (with `relative_yaw`, turning to its
+    3.14 / 2 rad), fly the figure-8 from where it is (and turned as it
+    heads), land. `during()` is called as the trajectory starts; the
+    trajectory's duration, s."""
+    from cflib.utils.reset_estimator import reset_estimator
+    duration = example.upload_trajectory(cf, 1, example.figure8)
+    reset_estimator(cf)
+    cf.supervisor.send_arming_request(True)
+    truth.sleep(1.0)
+    cf.high_level_commander.takeoff(1.0, 2.0, yaw=3.14 / 2 if relative_yaw else 0.0)
+    truth.sleep(3.0)
+    cf.high_level_commander.start_trajectory(1, 1.0, relative_position=True, relative_yaw=relative_yaw)
+    if during:
+        during()
+    truth.sleep(duration)
+    cf.high_level_commander.land(0.0, 2.0)
+    truth.sleep(2.0)
+    cf.high_level_commander.stop()
+    return duration
+
+
+class Flood:
+    """A client that asks as fast as cflib's own queues carry it, on one
+    link: parameter reads (cflib's updater: one in flight, resent until
+    answered) kept `depth` ahead of their answers, the parameter and log
+    TOCs downloaded again and again (cflib's `TocFetcher`, item by item,
+    each resent until answered, into TOCs of its own), and a log block of
+    the estimate at 100 Hz."""
+
+    def __init__(self, cf, depth=8):
+        from cflib.crazyflie.log import LogTocElement
+        from cflib.crazyflie.param import ParamTocElement
+        self.cf, self.depth = cf, depth
+        self.names = [f'{g}.{n}' for g, entries in cf.param.toc.toc.items() for n in entries]
+        self.kinds = ((ParamTocElement, 2, len(self.names)),
+                      (LogTocElement, 5, sum(len(e) for e in cf.log.toc.toc.values())))
+        self.asked = self.answered = 0
+        self.tocs = [0, 0]  # whole TOCs downloaded: param, log
+        self.short = []  # TOCs that came with fewer entries than the vehicle's
+        self.samples = []  # the log block's timestamps, ms
+        self.running = threading.Event()
+        cf.param.add_update_callback(cb=self._answered)
+        self.log = LogConfig(name='Flood', period_in_ms=10)
+        for v in ('stateEstimate.x', 'stateEstimate.y', 'stateEstimate.z'):
+            self.log.add_variable(v, 'float')
+        cf.log.add_config(self.log)
+        self.log.data_received_cb.add_callback(lambda ts, data, conf: self.samples.append(ts))
+
+    def _answered(self, name, value):
+        if self.running.is_set() or self.asked > self.answered:
+            self.answered += 1
+
+    def _tocs(self):
+        """Downloads the two TOCs in turn, each once the last is whole (a
+        fetcher started from another's callback is handed that one's last
+        answer as its first: cflib's TocFetcher reads any packet then as
+        the TOC's size)."""
+        from cflib.crazyflie.toc import Toc, TocFetcher
+        from cflib.crazyflie.toccache import TocCache
+        k = 0
+        while self.running.is_set():
+            element, port, want = self.kinds[k]
+            toc, done = Toc(), threading.Event()
+            TocFetcher(self.cf, element, port, toc, done.set, TocCache()).start()
+            if not done.wait(30):
+                self.short.append((port, 'no answer in 30 s'))
+                return
+            got = sum(len(e) for e in toc.toc.values())
+            self.tocs[k] += 1
+            if got != want:
+                self.short.append((port, got))
+            k = 1 - k
+
+    def start(self):
+        """Starts the flood: the log block, the TOCs' downloads, the reads."""
+        self.running.set()
+        self.log.start()
+        threading.Thread(target=self._tocs, daemon=True).start()
+        threading.Thread(target=self._reads, daemon=True).start()
+
+    def _reads(self):
+        i = 0
+        while self.running.is_set():
+            if self.asked - self.answered < self.depth:
+                self.cf.param.request_param_update(self.names[i % len(self.names)])
+                self.asked += 1
+                i += 1
+            else:
+                time.sleep(0.001)
+
+    def stop(self, wait_s):
+        """Stops asking; waits up to `wait_s` (wall) for the reads asked to
+        be answered."""
+        self.running.clear()
+        end = time.time() + wait_s
+        while self.answered < self.asked and time.time() < end:
+            time.sleep(0.05)
+        self.log.stop()
+
+
+def session_flood(sil_host, truth):
+    """The uploaded figure-8 flown (as session 5 flies it on the images)
+    while a client asks for parameters, TOCs and logs as fast as the link
+    carries them ([`Flood`]): every read answered, every TOC whole, the log
+    block's samples counted; on the images the steps, the link's holds and
+    the stack under that load (`report`), and the figure-8 within session
+    5's bounds."""
+    import numpy as np
+    print('session 11: the uploaded figure-8 flown under a flood of parameter reads, TOC downloads and a log block')
+    failed_before = check.failed
+    script = cflib_examples() / 'autonomy' / 'autonomous_sequence_high_level.py'
+    spec = importlib.util.spec_from_file_location('cflib_example_figure8_flood', script)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    sil = Sil(sil_host, truth=truth)
+    try:
+        while truth.last is None:
+            time.sleep(0.05)
+        start, since = truth.pos, truth.t
+        scf = connect()
+        flood = Flood(scf.cf)
+        t_flood = []
+        duration = fly_figure8(scf.cf, example, truth, during=lambda: (flood.start(), t_flood.append(truth.t)))
+        t_flood.append(truth.t)
+        flood.stop(30.0)
+        span_s = t_flood[1] - t_flood[0]
+        check(flood.asked > 0 and flood.answered == flood.asked,
+              f'{flood.answered} of {flood.asked} parameter reads answered over the {span_s:.1f} s of vehicle time '
+              f'the flood lasted ({flood.asked / max(span_s, 1e-9):.0f} a second, {flood.depth} queued ahead)')
+        check(min(flood.tocs) >= 1 and not flood.short,
+              f'the TOCs downloaded whole meanwhile: parameters {flood.tocs[0]} times, log {flood.tocs[1]} times'
+              + (f'; short: {flood.short}' if flood.short else ''))
+        ts = np.array(flood.samples, dtype=float)
+        gaps = np.diff(ts) if len(ts) > 1 else np.array([math.inf])
+        print(f'  the log block (10 ms): {len(ts)} samples, {len(ts) / max(span_s, 1e-9):.0f} a second of vehicle '
+              f'time, longest gap {gaps.max():.0f} ms (information: the Crazyflie drops log data its queue '
+              f'cannot take, by design)')
+        scf.close_link()
+        truth.sleep(0.5)
+        flown = np.array([(t, *p) for t, p in list(truth.tracks.get(0, [])) if t >= since])
+        path = poly4d_path(example.figure8, (start[0], start[1], 1.0))
+        high = flown[flown[:, 3] > 0.5] if len(flown) else np.zeros((0, 4))
+        worst, rms, _ = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
+        check(worst <= TRAJ_TOL_M and rms <= TRAJ_RMS_TOL_M,
+              f'the figure-8 ({duration:.1f} s) under the flood: worst {100 * worst:.1f} cm, RMS {100 * rms:.1f} cm '
+              f'(bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm, as session 5)')
+    finally:
+        report(sil, failed_before)
+
+
+def session_trajectory(sil_host, truth, relative_yaw=False):
     """cflib's `autonomy/autonomous_sequence_high_level.py`, unchanged: it
     uploads its figure-8 (ten Poly4D pieces) into the trajectory memory,
     defines it, resets the estimator, arms, takes off to 1 m, flies it with
-    a relative start and lands. The truth against the figure-8 its pieces
-    describe, in time: worst and RMS error over the whole trajectory from
-    the start that fits best."""
+    a relative start and lands; with `relative_yaw` (its `--relative-yaw`)
+    it takes off turning to 3.14 / 2 rad and flies the figure-8 turned by
+    as much. The truth against the figure-8 its pieces describe, in time:
+    worst and RMS error over the whole trajectory from the start that fits
+    best."""
     import numpy as np
-    print('session 5: cflib\'s autonomous_sequence_high_level.py, unchanged (an uploaded trajectory)')
+    form = ' --relative-yaw' if relative_yaw else ''
+    print(f'session 5{"b" if relative_yaw else ""}: cflib\'s autonomous_sequence_high_level.py{form}, unchanged '
+          f'(an uploaded trajectory)')
     failed_before = check.failed
     script = cflib_examples() / 'autonomy' / 'autonomous_sequence_high_level.py'
     spec = importlib.util.spec_from_file_location('cflib_example_figure8', script)
@@ -643,42 +821,34 @@ def session_trajectory(sil_host, truth):
         start = truth.pos
         recorder.start()
         if not QEMU:
-            example_ran(run_example(script, 180), script, 'The sequence is', refuse='Upload failed')
+            example_ran(run_example(script, 180, args=form.split()), script, 'The sequence is',
+                        refuse='Upload failed')
         else:
             # The emulated image runs slower than the wall clock the
             # example sleeps on (its take-off would be cut short, its
             # trajectory landed half flown): its own upload, then its
             # sequence with its durations on the vehicle's clock.
-            from cflib.utils.reset_estimator import reset_estimator
             scf = connect()
-            cf = scf.cf
-            duration = example.upload_trajectory(cf, 1, example.figure8)
-            reset_estimator(cf)
-            cf.supervisor.send_arming_request(True)
-            truth.sleep(1.0)
-            cf.high_level_commander.takeoff(1.0, 2.0)
-            truth.sleep(3.0)
-            cf.high_level_commander.start_trajectory(1, 1.0, relative_position=True)
-            truth.sleep(duration)
-            cf.high_level_commander.land(0.0, 2.0)
-            truth.sleep(2.0)
-            cf.high_level_commander.stop()
-            print(f'  flown: {script.name}\'s upload_trajectory and sequence, on the vehicle\'s clock '
+            duration = fly_figure8(scf.cf, example, truth, relative_yaw=relative_yaw)
+            print(f'  flown: {script.name}\'s upload_trajectory and sequence{form}, on the vehicle\'s clock '
                   f'(its trajectory {duration:.1f} s)')
             scf.close_link()
         truth.sleep(0.5)
         recording.clear()
         recorder.join()
-        path = poly4d_path(example.figure8, (start[0], start[1], 1.0))
+        turn = 3.14 / 2 if relative_yaw else 0.0
+        path = poly4d_path(example.figure8, (start[0], start[1], 1.0), turn=turn)
         track = np.array(flown) if flown else np.zeros((0, 4))
         high = track[track[:, 3] > 0.5]
         worst, rms, t0 = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
         span = np.ptp(path, axis=0)
         check(worst <= TRAJ_TOL_M and rms <= TRAJ_RMS_TOL_M,
               f'the truth flew the uploaded figure-8 ({span[0]:.2f} x {span[1]:.2f} m, {len(example.figure8)} pieces, '
-              f'{len(path) / 100:.1f} s): worst {100 * worst:.1f} cm, RMS {100 * rms:.1f} cm over the whole of it, '
-              f'from plant time {t0 or math.nan:.2f} s (bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm)')
+              f'{len(path) / 100:.1f} s{", turned " + format(turn, ".2f") + " rad" if turn else ""}): worst '
+              f'{100 * worst:.1f} cm, RMS {100 * rms:.1f} cm over the whole of it, from plant time '
+              f'{t0 or math.nan:.2f} s (bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm)')
         image = 'crazyflie_qemu' if CRAZYFLIE else 'crtp_qemu' if QEMU else 'crtp_sil'
+        image += '_turned' if relative_yaw else ''
         source = f'tools/crtp_cflib.py{" --qemu-crazyflie" if CRAZYFLIE else " --qemu" if QEMU else ""}'
         record(f'{image}_figure8_worst_cm', round(100 * worst, 1), 'cm', source)
         record(f'{image}_figure8_rms_cm', round(100 * rms, 1), 'cm', source)
@@ -1022,12 +1192,14 @@ def main():
     session_dead_imu(sil_host, truth)
     session_examples(sil_host)
     session_trajectory(sil_host, truth)
+    session_trajectory(sil_host, truth, relative_yaw=True)
     session_persistent(sil_host)
     if not QEMU:
         session_motion(sil_host, truth)
         session_motion_examples(sil_host, truth)
         session_deck(sil_host, truth)
         session_swarm(sil_host, truth)
+    session_flood(sil_host, truth)
     truth.close()
     plant = sum(p for p, _ in truth.walls)
     wall = sum(w for _, w in truth.walls)
