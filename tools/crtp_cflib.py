@@ -74,7 +74,6 @@ import re
 import signal
 import subprocess
 import sys
-import tarfile
 import threading
 import time
 
@@ -87,6 +86,7 @@ from cflib.crazyflie.syncLogger import SyncLogger
 from children import EndsWithFlight
 from fctools.checks import Checks
 from fctools.image_log import link_hold, stack
+from fctools.pieces import cflib_examples
 from fctools.truth import Truth, position_of
 from measure import budgets, record
 
@@ -572,21 +572,6 @@ def session_examples(sil_host):
             example_ran(run_example(examples / script, 60), examples / script, expect)
         finally:
             sil.stop()
-
-
-def cflib_examples():
-    """cflib's examples, unchanged, from its PyPI source distribution (the
-    installed version): their directory."""
-    version = importlib.metadata.version('cflib')
-    work = pathlib.Path('target/cflib-examples').resolve()
-    work.mkdir(parents=True, exist_ok=True)
-    sdist = work / f'cflib-{version}.tar.gz'
-    if not sdist.exists():
-        subprocess.run([sys.executable, '-m', 'pip', 'download', '--quiet', '--no-deps', '--no-binary', ':all:',
-                        f'cflib=={version}', '-d', str(work)], check=True)
-    with tarfile.open(sdist) as tar:
-        tar.extractall(work, filter='data')
-    return work / f'cflib-{version}' / 'examples'
 
 
 def poly4d_path(rows, shift, dt=0.01, turn=0.0):

@@ -40,13 +40,30 @@ def scenario_at(kind, tau):
 
 class Reference:
     """What a flight follows at `t` s after its first step: the waypoints'
-    last reached position (`waypoints`: (t, n, e, d) tuples) or the scenario
-    `kind` from `start_s` (its start point held before)."""
+    last reached position (`waypoints`: (t, n, e, d) tuples), the scenario
+    `kind` from `start_s` (its start point held before), or an uploaded
+    trajectory's `pieces` (`fctools.pieces.Pieces`, from its hover at
+    START_NED_M) from `start_s`."""
 
-    def __init__(self, waypoints=None, kind=None, start_s=3.0):
-        self.waypoints, self.kind, self.start_s = waypoints, kind, start_s
+    def __init__(self, waypoints=None, kind=None, start_s=3.0, pieces=None):
+        self.waypoints, self.kind, self.start_s, self.pieces = waypoints, kind, start_s, pieces
+
+    def yaw_enu(self, t):
+        """The heading flown at `t` as rotorpy's yaw (ENU: 0 east,
+        counter-clockwise) and its rate: a trajectory's own heading, which
+        starts north; otherwise east (rotorpy's start), held."""
+        if self.pieces is None:
+            return 0.0, 0.0
+        psi, rate = self.pieces.heading(max(t - self.start_s, 0.0))
+        return math.pi / 2 - psi, (-rate if t >= self.start_s else 0.0)
 
     def at(self, t):
+        if self.pieces is not None:
+            flat = self.pieces.at(max(t - self.start_s, 0.0))
+            if t < self.start_s:
+                zero = np.zeros(3)
+                return flat[0], zero, zero, zero, zero
+            return flat
         if self.waypoints:
             w = [p for p in self.waypoints if p[0] <= t] or self.waypoints[:1]
             zero = np.zeros(3)
@@ -61,7 +78,12 @@ class Reference:
         """The spans a flight is measured over, (name, from, to) in s: the
         whole (from the step, or the scenario's start) and the steady part
         (a step: 5 s after it; the circle: 5 s after its start; the eight:
-        after its first lap)."""
+        after its first lap; a trajectory: the whole of it, and the hold at
+        its end after it)."""
+        if self.pieces is not None:
+            # A trajectory: the whole of it, then the hold at its end.
+            t_end = self.start_s + self.pieces.duration_s
+            return [("whole", self.start_s, t_end), ("steady", t_end, end_s)]
         if self.waypoints:
             t_step = self.waypoints[-1][0]
             return [("whole", t_step, end_s), ("steady", t_step + 5.0, end_s)]

@@ -48,8 +48,9 @@ from scipy.spatial.transform import Rotation
 
 from children import EndsWithFlight
 from fctools.image_log import stack
+from fctools.pieces import Pieces, cflib_figure8, read_csv, write_csv
 from measure import budgets, record
-from reference import EIGHT_PERIOD_S, Reference, window_figures
+from reference import EIGHT_PERIOD_S, START_NED_M, Reference, window_figures
 
 # Motor layouts as each vendor numbers its motors: (forward, right) hub position
 # in units of the hub's x/y offset (the Crazyflie's 43 mm hubs at 45°: 30.4 mm),
@@ -147,8 +148,9 @@ class Peer:
     def step(self, state, t, dt):
         pos, vel, acc, jerk, snap = self.reference.at(t)
         enu = lambda v: np.array([v[1], v[0], -v[2]])
+        yaw, yaw_dot = self.reference.yaw_enu(t)
         flat = {"x": enu(pos), "x_dot": enu(vel), "x_ddot": enu(acc), "x_dddot": enu(jerk), "x_ddddot": enu(snap),
-                "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
+                "yaw": yaw, "yaw_dot": yaw_dot, "yaw_ddot": 0.0}
         control = self.controller.update(t, state, flat)
         self.commanded = np.asarray(control["cmd_motor_speeds"], dtype=float) / self.rotor_speed_max
         return self.vehicle.step(state, control, dt)
@@ -214,6 +216,14 @@ def main():
     ap.add_argument("--scenario", help="circle | eight | helix: its trajectory from --scenario-start s (RMSE "
                                        "reported from then, the eight's from the end of its first lap)")
     ap.add_argument("--scenario-start", type=float, default=3.0)
+    ap.add_argument("--trajectory", metavar="CSV|cflib:figure8",
+                    help="a Crazyflie trajectory file (or the figure-8 of cflib's "
+                         "autonomous_sequence_high_level.py, from its pinned sdist), handed to the vehicle as if "
+                         "uploaded (sil-host px4-hil --trajectory): it hovers 1 m above home heading north and "
+                         "flies it from there at --trajectory-start s; measured over the whole of it")
+    ap.add_argument("--trajectory-start", type=float, default=5.0)
+    ap.add_argument("--no-preview", action="store_true",
+                    help="sil-host px4-hil --no-preview: the controller extrapolates each step's set-point")
     ap.add_argument("--duration", type=float, default=12.0, help="simulated seconds")
     ap.add_argument("--dt", type=float, default=0.002, help="rotorpy's step, s")
     ap.add_argument("--port", type=int, default=4560)
@@ -223,9 +233,11 @@ def main():
                     help="s: the hold window's start (default: the last waypoint's time + 5 s, at most "
                          "1 s before the end)")
     ap.add_argument("--max-rmse", type=float, default=0.15, help="m (scenario tracking, 3-D)")
+    ap.add_argument("--max-whole", metavar="RMSE,WORST",
+                    help="m: the whole window's RMSE and worst distance must not exceed these")
     ap.add_argument("--beat", metavar="JSON",
                     help="another flight's summary (--json): this flight's RMSE over the steady window "
-                         "must not exceed that flight's")
+                         "(a trajectory's: the whole) must not exceed that flight's")
     ap.add_argument("--state", choices=("estimate", "truth"), default="estimate",
                     help="what our controller flies: its estimator's state (the whole flight controller) "
                          "or rotorpy's true state, sent as ODOMETRY (the controller alone, as SE3 flies)")
@@ -270,8 +282,8 @@ def main():
            "--vehicle", VEHICLES[a.vehicle][1], "--airframe", LAYOUTS[a.layout][0],
            "--hub-m", str(VEHICLES[a.vehicle][0]["rotor_pos"]["r1"][0] * 2 ** 0.5),
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
-    if (bool(a.waypoint) + bool(a.scenario) + a.gcs + a.signing + a.mavsdk + a.mavproxy) != 1:
-        ap.error("give --waypoint(s), --scenario, --gcs, --signing, --mavsdk or --mavproxy")
+    if (bool(a.waypoint) + bool(a.scenario) + bool(a.trajectory) + a.gcs + a.signing + a.mavsdk + a.mavproxy) != 1:
+        ap.error("give --waypoint(s), --scenario, --trajectory, --gcs, --signing, --mavsdk or --mavproxy")
     gcs = None
     truth_sock = None
     here = os.path.dirname(__file__)
@@ -299,6 +311,15 @@ def main():
         cmd += ["--param", p]
     if a.scenario:
         cmd += ["--scenario", a.scenario, "--scenario-start", str(a.scenario_start)]
+    pieces = None
+    if a.trajectory:
+        rows = cflib_figure8() if a.trajectory == "cflib:figure8" else read_csv(a.trajectory)
+        path = os.path.join(tempfile.mkdtemp(prefix="rotorpy-traj-"), "trajectory.csv")
+        write_csv(rows, path)
+        pieces = Pieces(rows, START_NED_M)
+        cmd += ["--trajectory", path, "--trajectory-start", str(a.trajectory_start)]
+    if a.no_preview:
+        cmd += ["--no-preview"]
     # The flight controller's trace (time, reported, estimated and set-point
     # NED): its set-points are the reference rotorpy's truth is measured to.
     csv_path = a.csv or os.path.join(tempfile.mkdtemp(prefix="rotorpy-hil-"), "trace.csv")
@@ -312,12 +333,14 @@ def main():
     np.random.seed(a.seed)
     waypoints = [tuple(float(v) for v in w.split(",")) for w in a.waypoint or []]
     reference = None
-    if waypoints or a.scenario in ("circle", "eight"):
+    if pieces is not None:
+        reference = Reference(pieces=pieces, start_s=a.trajectory_start)
+    elif waypoints or a.scenario in ("circle", "eight"):
         reference = Reference(waypoints=waypoints, kind=a.scenario, start_s=a.scenario_start)
     peer = a.controller == "se3"
     if peer:
         if reference is None or gcs is not None:
-            ap.error("--controller se3 flies --waypoint(s) or --scenario circle|eight")
+            ap.error("--controller se3 flies --waypoint(s), --scenario circle|eight or --trajectory")
         vehicle = Peer(params_for(a.vehicle, "rotorpy"), reference, a.dt)
     else:
         fc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
@@ -433,6 +456,8 @@ def main():
         # The eight's first lap is its entry: its error counts from the end
         # of that lap (sil-host's Scenario::tracking_from_s).
         from_s = a.scenario_start + (EIGHT_PERIOD_S if a.scenario == "eight" else 0.0)
+        if pieces is not None:
+            from_s = a.trajectory_start
         if peer:
             # The peer's reference at each of rotorpy's steps.
             t_rows = track[:, 0][track[:, 0] >= from_s]
@@ -484,14 +509,25 @@ def main():
     if a.beat:
         with open(a.beat) as f:
             other = json.load(f)
-        theirs = other["rotorpy"]["windows"]["steady"]["rmse_m"]
-        mine = r["windows"]["steady"]["rmse_m"]
+        # A trajectory's whole window is the trajectory; a scenario's steady one its laps.
+        window = "whole" if pieces is not None else "steady"
+        theirs = other["rotorpy"]["windows"][window]["rmse_m"]
+        mine = r["windows"][window]["rmse_m"]
         beats = mine <= theirs
         ok = ok and beats
-        w = r["windows"]["steady"]["window_s"]
+        w = r["windows"][window]["window_s"]
         print(f"rotorpy check: {int(beats)} passed, {int(not beats)} failed ({a.controller} "
               f"{100 * mine:.2f} cm RMSE over {w[0]:g}-{w[1]:.0f} s against {other.get('controller', a.beat)}'s "
               f"{100 * theirs:.2f} cm on the same vehicle and reference, rotorpy's truth)")
+    if a.max_whole:
+        bound_rmse, bound_worst = (float(v) for v in a.max_whole.split(","))
+        w = r["windows"]["whole"]
+        within = w["rmse_m"] <= bound_rmse and w["worst_m"] <= bound_worst
+        ok = ok and within
+        print(f"rotorpy check: {int(within)} passed, {int(not within)} failed ({a.controller} "
+              f"{100 * w['rmse_m']:.2f} cm RMSE, worst {100 * w['worst_m']:.2f} cm over {w['window_s'][0]:g}-"
+              f"{w['window_s'][1]:.2f} s, bounds {100 * bound_rmse:.2f} and {100 * bound_worst:.2f} cm, "
+              f"rotorpy's truth)")
     mismatch = r.get("reference_mismatch_m", 0.0)
     if mismatch > 1e-3:
         ok = False

@@ -195,7 +195,7 @@ pub(crate) struct Px4HilArgs {
     #[arg(long, requires = "gcs", conflicts_with_all = ["waypoints", "scenario"])]
     pub(crate) gcs_only: bool,
     /// Mission: `T,N,E,D` (from T s, hold N, E, D m about home; heading: the one it has at take-off), repeatable, in time order.
-    #[arg(long = "waypoint", value_name = "T,N,E,D", required_unless_present_any = ["scenario", "gcs_only"])]
+    #[arg(long = "waypoint", value_name = "T,N,E,D", required_unless_present_any = ["scenario", "gcs_only", "trajectory"])]
     pub(crate) waypoints: Vec<String>,
     /// Or a scenario's trajectory (`circle`, `helix`, `setpoint`, `eight`; docs/book/src/model.md §9, starting 1 m
     /// above home), flown from --scenario-start s after holding its start point.
@@ -204,6 +204,20 @@ pub(crate) struct Px4HilArgs {
     /// When the scenario starts, s.
     #[arg(long, default_value_t = 3.0, value_name = "S")]
     pub(crate) scenario_start: f64,
+    /// Or a Crazyflie trajectory file (one piece a row: duration, then the eight coefficients of
+    /// x, y, z and yaw, the Crazyflie's frame; `uav_trajectories`' CSV), handed to the vehicle as if
+    /// uploaded: it hovers 1 m above home heading north, then at --trajectory-start flies the
+    /// trajectory on board from there (relative, as `autonomous_sequence_high_level.py` starts it),
+    /// its controller previewing it. In process only.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["waypoints", "scenario", "gcs_only"])]
+    pub(crate) trajectory: Option<PathBuf>,
+    /// When the trajectory starts, s.
+    #[arg(long, default_value_t = 5.0, value_name = "S")]
+    pub(crate) trajectory_start: f64,
+    /// The controller extrapolates each step's set-point instead of previewing what the commander
+    /// flies: a measurement of what the preview is worth, not a flight mode (in process only).
+    #[arg(long)]
+    pub(crate) no_preview: bool,
     /// Stop after this much simulated time, s.
     #[arg(long, default_value_t = 10.0, value_name = "S")]
     pub(crate) duration: f64,

@@ -567,6 +567,24 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
     }
     let mission = match a.scenario {
         _ if a.gcs_only => None,
+        _ if a.trajectory.is_some() => {
+            if !(a.trajectory_start.is_finite() && (1.0..=1e5).contains(&a.trajectory_start)) {
+                bail!("--trajectory-start {:?} must be in [1, 1e5] s", a.trajectory_start);
+            }
+            if a.target != "in-process" {
+                bail!("--trajectory is handed to the vehicle in this process: the image speaks no trajectory upload");
+            }
+            let path = a.trajectory.as_deref().unwrap_or(std::path::Path::new(""));
+            let (memory, duration_s) = sil_host::hil::trajectory::load(path)?;
+            let hover_ned_m = [0.0, 0.0, -1.0];
+            let flown = sil_host::hil::trajectory::Flown::new(memory, duration_s, a.trajectory_start, hover_ned_m)
+                .with_context(|| format!("--trajectory {}", path.display()))?;
+            Some(sil_host::hil::Mission::Trajectory {
+                flown,
+                hover_ned_m,
+                from_s: a.trajectory_start,
+            })
+        }
         Some(kind) => {
             if !(a.scenario_start.is_finite() && (0.0..=1e5).contains(&a.scenario_start)) {
                 bail!("--scenario-start {:?} must be in [0, 1e5] s", a.scenario_start);
@@ -603,6 +621,7 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
             }
             (other, _) => bail!("unknown --state '{other}': use estimate or truth"),
         },
+        exact_preview: !a.no_preview,
         target: match a.target.as_str() {
             "in-process" => sil_host::hil::Target::InProcess,
             "qemu" => sil_host::hil::Target::Qemu(sil_host::link::firmware_mavlink_elf()?),

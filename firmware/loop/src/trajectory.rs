@@ -406,7 +406,18 @@ impl Trajectories for TrajectoryMemory {
     }
 }
 
-/// No trajectory memory (a PX4 vehicle's modes): no flight starts without
+/// A memory some vehicles have: a PX4 vehicle's modes fly one only when
+/// its host hands one over ([`crate::modes::ModeCommander::fly_trajectory`]).
+impl<T: Trajectories + ?Sized> Trajectories for Option<&T> {
+    fn sample(&self, flight: &Flight, now_us: u64) -> Sample {
+        match self {
+            Some(m) => m.sample(flight, now_us),
+            None => NoTrajectories.sample(flight, now_us),
+        }
+    }
+}
+
+/// No trajectory memory (a PX4 vehicle's modes on the images): no flight starts without
 /// one, and none is evaluated (one would rest where it started), so a
 /// vehicle without one links no evaluation.
 #[derive(Debug, Clone, Copy, Default)]

@@ -78,6 +78,16 @@ impl Vehicle for InProcess {
     fn refused(&self) -> u32 {
         0
     }
+    fn fly_trajectory(&mut self, flown: &super::trajectory::Flown, start_us: u64) -> Result<()> {
+        self.v
+            .fly_trajectory(
+                flown.memory,
+                super::trajectory::TRAJECTORY_ID,
+                super::trajectory::START,
+                start_us,
+            )
+            .map_err(|e| anyhow::anyhow!("the vehicle refused the trajectory: {e}"))
+    }
     fn keep_signing(&mut self, signing: &Signing) -> Result<(), fc_storage::StoreError> {
         match (&mut self.store, signing.key()) {
             (Some(st), Some(key)) => st.set_signing(key, signing.timestamp()),

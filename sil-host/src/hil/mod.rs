@@ -28,6 +28,7 @@ use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
 
 mod backends;
+pub mod trajectory;
 
 pub use backends::truth_from_odometry;
 use backends::{write_parameters, InProcess, InQemu};
@@ -73,6 +74,18 @@ pub enum Mission {
         /// When it starts, s after the first sample.
         from_s: f64,
     },
+    /// Hold `hover_ned_m` heading north, then at `from_s` hand the vehicle
+    /// the trajectory as if a client had uploaded it ([`trajectory`]): it
+    /// flies it on board, its controller previewing it, and nothing more
+    /// is streamed. The host evaluates the same pieces for its trace.
+    Trajectory {
+        /// The trajectory, as flown from `hover_ned_m` at `from_s`.
+        flown: trajectory::Flown,
+        /// The hover it starts from, NED about home, m.
+        hover_ned_m: [f64; 3],
+        /// When it starts, s after the first sample.
+        from_s: f64,
+    },
 }
 
 impl Mission {
@@ -95,7 +108,24 @@ impl Mission {
                 }
                 (sp, tracking)
             }
+            Mission::Trajectory {
+                flown,
+                hover_ned_m,
+                from_s,
+            } => {
+                if t < *from_s {
+                    return (Setpoint::hold(Vector3::from(*hover_ned_m).cast(), 0.0), false);
+                }
+                let tracking = t <= from_s + f64::from(flown.duration_s);
+                (flown.setpoint_at(t), tracking)
+            }
         }
+    }
+
+    /// Its headings are the mission's own (north 0), not about the
+    /// take-off heading (a trajectory's, as a Crazyflie flies it).
+    fn absolute_heading(&self) -> bool {
+        matches!(self, Mission::Trajectory { .. })
     }
 }
 
@@ -140,6 +170,10 @@ pub struct HilConfig {
     /// in place of the estimate: the controller alone, as a peer given
     /// perfect state flies. In process only.
     pub truth_state: bool,
+    /// The controller previews what the commander flies (`false`: it
+    /// extrapolates each step's set-point; a measurement of what the
+    /// preview is worth, in process only).
+    pub exact_preview: bool,
 }
 
 /// What `--storage` did.
@@ -289,6 +323,11 @@ trait Vehicle {
     fn fly_truth(&mut self, _truth: StateEstimate<f32>) -> Result<()> {
         bail!("only the flight controller in this process can fly the true state")
     }
+    /// Hands it a trajectory to fly from `start_us` (the simulator's µs),
+    /// as if uploaded ([`Mission::Trajectory`]).
+    fn fly_trajectory(&mut self, _flown: &trajectory::Flown, _start_us: u64) -> Result<()> {
+        bail!("only the flight controller in this process takes a trajectory (MAVLink uploads none)")
+    }
     /// Ends it; the image's log.
     fn finish(self: Box<Self>) -> Result<Vec<String>>;
 }
@@ -426,8 +465,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 res.storage = Some(sum);
                 store = Some(st);
             }
-            let v = MavVehicle::new(settings, SYSTEM_ID)
+            let mut v = MavVehicle::new(settings, SYSTEM_ID)
                 .map_err(|e| anyhow::anyhow!("the vehicle's parameters are refused: {e}"))?;
+            v.set_exact_preview(cfg.exact_preview);
             if let Some(sum) = res.storage.as_ref() {
                 eprintln!(
                     "px4-hil: storage: {} parameter(s) taken, {} refused; signing key: {}",
@@ -442,6 +482,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 wall: Instant::now(),
                 store,
             })
+        }
+        Target::Qemu(_) if !cfg.exact_preview => {
+            bail!("the preview is switched off in process only: the image flies its own")
         }
         Target::Qemu(_) if cfg.storage.is_some() => {
             bail!("--storage is for the in-process vehicle: the image in QEMU keeps its own (a RAM stand-in)")
@@ -509,6 +552,9 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
     let mut gcs_reader = MavReader::new(SYSTEM_ID);
     let (mut sq_sum, mut sq_n) = (0.0, 0usize);
     let (mut t0_us, mut next_arm_s, mut next_sp_s, mut armed) = (None::<u64>, 0.0, 0.0, false);
+    // A trajectory mission's pieces handed to the vehicle (from then on
+    // nothing is streamed: it flies them on board).
+    let mut handed_over = false;
     // The set-point last sent, and the mission's reference now.
     let (mut home, mut truth, mut sp) = (None, Vector3::<f64>::zeros(), None::<Setpoint<f32>>);
     let mut reference = None::<Setpoint<f32>>;
@@ -599,12 +645,22 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             if let Some(mission) = &cfg.mission {
                 let (mut s, track) = mission.setpoint_at(t);
                 tracking = track;
-                if let Some(h) = takeoff_yaw {
+                if let (Some(h), false) = (takeoff_yaw, mission.absolute_heading()) {
                     s.yaw_rad = fc_core::control::wrap_pi(s.yaw_rad + h);
                 }
                 reference = Some(s);
+                if let Mission::Trajectory { flown, from_s, .. } = mission {
+                    if t >= *from_s - 1e-9 && !handed_over {
+                        if !armed {
+                            bail!("the trajectory was to start at {from_s} s, and the vehicle is not armed");
+                        }
+                        v.fly_trajectory(flown, t0 + (from_s * 1e6).round() as u64)?;
+                        handed_over = true;
+                    }
+                }
                 let changed = sp.is_none_or(|old| old != s);
-                if (changed && t >= next_sp_s - 1e-9) || t >= next_sp_s + SETPOINT_REPEAT_S {
+                let due = (changed && t >= next_sp_s - 1e-9) || t >= next_sp_s + SETPOINT_REPEAT_S;
+                if due && !handed_over {
                     let heading = takeoff_yaw.map(|_| s.yaw_rad);
                     v.deliver(&position_target(&s, heading, (t * 1e3) as u32), &mut out)?;
                     if let Some(log) = ulog.as_mut() {

@@ -14,7 +14,7 @@
 //! | Takeoff | straight up to [`NavSettings::takeoff_alt_m`] above home, then Hold |
 //! | Land | straight down to the ground it armed on at [`NavSettings::land_mps`], then disarms |
 //! | Return | up to [`NavSettings::rtl_alt_m`] above home (if lower), over home at [`NavSettings::cruise_mps`], then down and disarmed |
-//! | Offboard | a client's streamed set-points ([`ModeCommander::offboard`]); entered only while they stream, Hold when they stop for [`NavSettings::offboard_loss_s`] |
+//! | Offboard | a client's streamed set-points ([`ModeCommander::offboard`]); entered only while they stream, Hold when they stop for [`NavSettings::offboard_loss_s`]; or a trajectory its host handed the vehicle (`ModeCommander::fly_trajectory`, feature `handover`), not watched for a stream while it flies |
 //! | Mission | the uploaded mission ([`MissionItems`]), item by item; then Hold |
 //!
 //! The modes are a source of set-points on the [`Commander`], as CRTP's
@@ -41,6 +41,9 @@ use crate::arming::{ArmRefusal, Arming, ArmingState};
 use crate::commander::{Commander, Legs, Route};
 use crate::nav::NavMode;
 use crate::planner::Reference;
+use crate::trajectory::TrajectoryError;
+#[cfg(feature = "handover")]
+use crate::trajectory::{Flight, StartOptions, TrajectoryMemory};
 use crate::{AnyController, Exclusive, Loop};
 use fc_core::control::Setpoint;
 use nalgebra::Vector3;
@@ -125,6 +128,8 @@ pub enum ModeRefusal {
     NoPosition,
     /// A leg's goal is not finite or out of the planner's reach.
     OutOfRange,
+    /// A trajectory outside Offboard, or one that cannot start (see the error).
+    Trajectory(Option<TrajectoryError>),
 }
 
 impl core::fmt::Display for ModeRefusal {
@@ -135,6 +140,8 @@ impl core::fmt::Display for ModeRefusal {
             ModeRefusal::Disarmed => "disarmed",
             ModeRefusal::NoPosition => "no position",
             ModeRefusal::OutOfRange => "goal out of range",
+            ModeRefusal::Trajectory(None) => "a trajectory flies in Offboard only",
+            ModeRefusal::Trajectory(Some(e)) => return write!(f, "trajectory: {e}"),
         })
     }
 }
@@ -253,6 +260,11 @@ pub struct ModeCommander {
     home_ned_m: Vector3<f32>,
     /// When it was first in the air since it armed (the take-off), µs.
     takeoff_us: Option<u64>,
+    /// The trajectory memory a host handed over with a trajectory to fly
+    /// (`ModeCommander::fly_trajectory`, feature `handover`); the images
+    /// speak no trajectory upload over MAVLink and have none.
+    #[cfg(feature = "handover")]
+    trajectories: Option<&'static TrajectoryMemory>,
 }
 
 impl Default for ModeCommander {
@@ -276,6 +288,8 @@ impl ModeCommander {
             gcs_seen_us: None,
             home_ned_m: Vector3::new(0.0, 0.0, 0.0),
             takeoff_us: None,
+            #[cfg(feature = "handover")]
+            trajectories: None,
         }
     }
 
@@ -306,7 +320,7 @@ impl ModeCommander {
     /// starts, the heading a set-point that masks its own keeps.
     pub fn setpoint(&self, t_us: u64, lp: &Loop) -> Setpoint<f32> {
         self.commander
-            .setpoint_at(t_us, &crate::trajectory::NoTrajectories)
+            .setpoint_at(t_us, &self.trajectories())
             .unwrap_or(*lp.setpoint())
     }
 
@@ -322,6 +336,50 @@ impl ModeCommander {
         };
         self.commander.plan(seg, landing);
         true
+    }
+
+    /// The trajectory memory the commander's trajectory is evaluated from
+    /// (none unless a host handed one over).
+    #[cfg(feature = "handover")]
+    pub fn trajectories(&self) -> Option<&'static TrajectoryMemory> {
+        self.trajectories
+    }
+
+    /// No trajectory memory: no trajectory is handed over without the
+    /// feature `handover`, and none is evaluated.
+    #[cfg(not(feature = "handover"))]
+    pub fn trajectories(&self) -> crate::trajectory::NoTrajectories {
+        crate::trajectory::NoTrajectories
+    }
+
+    /// Flies trajectory `id` of `memory` from `start_us` with `options` (a
+    /// relative start from the set-point flown at `t_us`): a trajectory a
+    /// host hands the vehicle as if uploaded, as a Crazyflie's
+    /// high-level commander flies one. Offboard and armed only; while it
+    /// flies (and rests at its end) Offboard's stream is not watched, and a
+    /// streamed set-point takes over. Nothing changes if it is refused.
+    #[cfg(feature = "handover")]
+    pub fn fly_trajectory(
+        &mut self,
+        memory: &'static TrajectoryMemory,
+        id: u8,
+        options: StartOptions,
+        start_us: u64,
+        t_us: u64,
+        lp: &Loop,
+    ) -> Result<(), ModeRefusal> {
+        if !self.armed() {
+            return Err(ModeRefusal::Disarmed);
+        }
+        if self.mode != FlightMode::Offboard {
+            return Err(ModeRefusal::Trajectory(None));
+        }
+        let from = Reference::from(&self.setpoint(t_us, lp));
+        let flight =
+            Flight::start(memory, id, start_us, options, &from).map_err(|e| ModeRefusal::Trajectory(Some(e)))?;
+        self.trajectories = Some(memory);
+        self.commander.fly_trajectory(flight);
+        Ok(())
     }
 
     /// The last streamed set-point and when it came, if any.
@@ -585,7 +643,7 @@ impl ModeCommander {
             return say(ModeEvent::Lockdown);
         }
         self.fly_mode(t_us, dt_s, lp, mission, say)?;
-        if let Some(sp) = self.commander.setpoint_at(t_us, &crate::trajectory::NoTrajectories) {
+        if let Some(sp) = self.commander.setpoint_at(t_us, &self.trajectories()) {
             lp.set_setpoint(&sp);
         }
         Ok(())
@@ -625,9 +683,10 @@ impl ModeCommander {
             }
             FlightMode::Mission => self.fly_mission(t_us, lp, mission, say),
             FlightMode::Offboard => {
-                let lost = self
-                    .offboard
-                    .is_none_or(|(_, at)| t_us.saturating_sub(at) > Self::offboard_loss_us(&nav));
+                let lost = self.commander.trajectory().is_none()
+                    && self
+                        .offboard
+                        .is_none_or(|(_, at)| t_us.saturating_sub(at) > Self::offboard_loss_us(&nav));
                 if lost {
                     let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
                     return say(ModeEvent::OffboardLost);

@@ -291,6 +291,9 @@ pub struct MavShared {
     reported_ned_m: Option<Vector3<f64>>,
     counters: VehicleCounters,
     system_id: u8,
+    /// The controller previews what the commander will fly (off: it
+    /// extrapolates each step's set-point; [`MavShared::set_exact_preview`]).
+    exact_preview: bool,
 }
 
 /// Milliseconds since boot of simulated time `t_us` (MAVLink's `time_boot_ms`).
@@ -332,6 +335,7 @@ impl MavShared {
             reported_ned_m: None,
             counters: VehicleCounters::default(),
             system_id,
+            exact_preview: true,
         }
     }
 
@@ -363,6 +367,32 @@ impl MavShared {
     /// changes this one, the loop's at the next).
     pub fn setpoint(&self) -> Setpoint<f32> {
         self.modes.setpoint(self.last_sensor_us.unwrap_or(0), &self.lp)
+    }
+
+    /// Flies trajectory `id` of `memory` from `start_us` (the simulator's
+    /// µs) as if a client had uploaded it, relative to the set-point flown
+    /// when `options` say so (`ModeCommander::fly_trajectory`: Offboard
+    /// and armed; nothing changes if refused). A host's way in
+    /// (`sil-host px4-hil --trajectory`, feature `handover`): no MAVLink
+    /// message uploads one.
+    #[cfg(feature = "handover")]
+    pub fn fly_trajectory(
+        &mut self,
+        memory: &'static fc_loop::trajectory::TrajectoryMemory,
+        id: u8,
+        options: fc_loop::trajectory::StartOptions,
+        start_us: u64,
+    ) -> Result<(), fc_loop::modes::ModeRefusal> {
+        let t_us = self.last_sensor_us.unwrap_or(0);
+        self.modes.fly_trajectory(memory, id, options, start_us, t_us, &self.lp)
+    }
+
+    /// Whether the controller previews what the commander will fly (on
+    /// from boot), or extrapolates each step's set-point along its own
+    /// derivatives as it does a stream's: a measurement's switch, what the
+    /// preview is worth (`sil-host px4-hil --no-preview`), not a parameter.
+    pub fn set_exact_preview(&mut self, on: bool) {
+        self.exact_preview = on;
     }
 
     /// What was done with what arrived.

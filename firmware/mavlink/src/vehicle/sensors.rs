@@ -85,9 +85,16 @@ impl MavShared {
         self.seq = self.seq.wrapping_add(1);
         let job = self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us);
         if let Some(step) = job.as_ref() {
-            // The controller previews what the modes' commander will fly.
-            self.lp
-                .preview_from(step, self.modes.commander(), &fc_loop::trajectory::NoTrajectories);
+            // The controller previews what the modes' commander will fly;
+            // with the preview off, what an idle commander previews:
+            // nothing, so that the controller extrapolates.
+            if self.exact_preview {
+                self.lp
+                    .preview_from(step, self.modes.commander(), &self.modes.trajectories());
+            } else {
+                const IDLE: fc_loop::commander::Commander = fc_loop::commander::Commander::new();
+                self.lp.preview_from(step, &IDLE, &fc_loop::trajectory::NoTrajectories);
+            }
         }
         Some(SensorStep { t_us: s.time_us, job })
     }

@@ -1832,3 +1832,91 @@ fn a_vehicle_that_flips_as_it_lifts_off_is_locked_down() {
         }
     }
 }
+
+/// A trajectory a host hands the vehicle (`sil-host px4-hil --trajectory`)
+/// flies in Offboard from its pieces, against the polynomial's own values
+/// and derivatives: north = 1 + t², heading 0.2 rad over 1 s, started 0.1 s
+/// after it is handed over, relative to the hold it starts from. Refused
+/// disarmed, outside Offboard and when undefined, and then nothing changes;
+/// while it flies the missing stream is no loss of Offboard; a streamed
+/// set-point takes over.
+#[cfg(feature = "handover")]
+#[test]
+fn a_trajectory_handed_over_flies_in_offboard_from_its_pieces() {
+    use fc_loop::modes::ModeRefusal;
+    use fc_loop::trajectory::{Definition, Piece, StartOptions, TrajectoryError, TrajectoryMemory};
+    let mut poly = [[0.0f32; 8]; 4];
+    poly[0][0] = 1.0;
+    poly[0][2] = 1.0;
+    poly[3][0] = 0.2;
+    let memory: &'static mut TrajectoryMemory = Box::leak(Box::new(TrajectoryMemory::new()));
+    memory.write(0, &Piece { poly, duration_s: 1.0 }.to_bytes()).unwrap();
+    memory.define(1, Definition::new(0, 1).unwrap()).unwrap();
+    let memory: &'static TrajectoryMemory = memory;
+    let options = StartOptions {
+        time_scale: 1.0,
+        reversed: false,
+        relative_position: true,
+        relative_yaw: false,
+    };
+    let mut v = MavVehicle::new(Settings::os4(), 1).unwrap();
+    let mut out = Sent::default();
+    let mut t = rest(&mut v, &mut out, 0, 2_000);
+    assert_eq!(v.fly_trajectory(memory, 1, options, t), Err(ModeRefusal::Disarmed));
+    v.handle(&set_mode(FlightMode::Hold), &mut out, &Still, 0).unwrap();
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(v.armed());
+    assert_eq!(
+        v.fly_trajectory(memory, 1, options, t),
+        Err(ModeRefusal::Trajectory(None))
+    );
+    let hold = SET_POSITION_TARGET_LOCAL_NED_DATA {
+        x: 0.5,
+        y: 2.0,
+        z: -1.0,
+        target_system: 1,
+        type_mask: PositionTargetTypemask::empty(),
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..Default::default()
+    };
+    let stream = MavMessage::SET_POSITION_TARGET_LOCAL_NED(hold);
+    v.handle(&stream, &mut out, &Still, 0).unwrap();
+    v.handle(&set_mode(FlightMode::Offboard), &mut out, &Still, 0).unwrap();
+    assert_eq!(v.mode(), FlightMode::Offboard);
+    assert_eq!(
+        v.fly_trajectory(memory, 2, options, t),
+        Err(ModeRefusal::Trajectory(Some(TrajectoryError::Undefined)))
+    );
+    assert_eq!(v.setpoint().pos_ned_m, Vector3::new(0.5, 2.0, -1.0), "nothing changed");
+    let start_us = t + 100_000;
+    v.handle(&stream, &mut out, &Still, 0).unwrap();
+    v.fly_trajectory(memory, 1, options, start_us).unwrap();
+    // 1.6 s without a streamed set-point (Offboard's loss is 1 s): the
+    // pieces fly, then rest at their end.
+    for _ in 0..1_600 {
+        t = rest(&mut v, &mut out, t, 1);
+        let tau = (t - 1000).saturating_sub(start_us) as f32 * 1e-6;
+        let s = tau.min(1.0);
+        let sp = v.setpoint();
+        let want_n = 0.5 + s * s;
+        let want_v = if tau <= 1.0 { 2.0 * s } else { 0.0 };
+        assert!(
+            (sp.pos_ned_m - Vector3::new(want_n, 2.0, -1.0)).amax() < 1e-5,
+            "{tau} s: {sp:?}"
+        );
+        assert!((sp.vel_ned_mps[0] - want_v).abs() < 1e-4, "{tau} s: {sp:?}");
+        if tau < 1.0 {
+            assert!((sp.acc_ned_mps2[0] - 2.0).abs() < 1e-3, "{tau} s: {sp:?}");
+        }
+        // Relative position only: the heading is the trajectory's.
+        assert!((sp.yaw_rad - 0.2).abs() < 1e-6, "{tau} s: {sp:?}");
+        assert_eq!(v.mode(), FlightMode::Offboard, "{tau} s");
+    }
+    assert_eq!(*v.flight_loop().setpoint(), v.setpoint());
+    v.handle(&stream, &mut out, &Still, 0).unwrap();
+    assert_eq!(
+        v.setpoint().pos_ned_m,
+        Vector3::new(0.5, 2.0, -1.0),
+        "the stream took over"
+    );
+}
