@@ -547,11 +547,17 @@ def run_example(script, timeout_s, args=()):
 
 
 def example_ran(r, script, expect, refuse=None):
-    """The check that example `script` ran (`r`): exit 0, `expect` in its
-    output (and `refuse` not)."""
-    check(r.returncode == 0 and expect in r.stdout and (refuse is None or refuse not in r.stdout),
-          f'{script.name}: exit {r.returncode}, {r.stdout.count(chr(10))} lines, "{expect}" in its output'
-          + ('' if r.returncode == 0 else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
+    """The check that example `script` ran (`r`): exit 0, `expect` (a
+    string, or several in turn) in its output (and `refuse` not)."""
+    expect = (expect,) if isinstance(expect, str) else expect
+    at, found = 0, True
+    for e in expect:
+        i = r.stdout.find(e, at)
+        found, at = found and i >= 0, max(at, i + len(e))
+    ok = r.returncode == 0 and found and (refuse is None or refuse not in r.stdout)
+    check(ok, f'{script.name}: exit {r.returncode}, {r.stdout.count(chr(10))} lines, '
+              + ', then '.join(f'"{e}"' for e in expect) + ' in its output'
+              + ('' if ok else f'\n{r.stdout[-800:]}\n{r.stderr[-1500:]}'))
 
 
 def session_examples(sil_host):
@@ -566,8 +572,19 @@ def session_examples(sil_host):
                            ('logging/basiclog.py', 'pm.vbat'),
                            ('parameters/basicparam.py', 'Parameters downloaded'),
                            ('step-by-step/sbs_connect_log_param.py',
-                            'The crazyflie has parameter stabilizer.estimator set at number: 2')):
-        sil = Sil(sil_host)
+                            'The crazyflie has parameter stabilizer.estimator set at number: 2'),
+                           # Every persistent parameter's state, then ring.effect
+                           # set to 10, stored (its state says so), cleared.
+                           ('parameters/persistent_params.py',
+                            ('Persisted ring.effect!',
+                             'ring.effect: PersistentParamState(is_stored=True, default_value=6, stored_value=10)',
+                             'Cleared ring.effect!',
+                             'ring.effect: PersistentParamState(is_stored=False, default_value=6, stored_value=None)'))):
+        # A store to keep what persistent_params.py stores: a file in
+        # process; the images keep theirs (a RAM stand-in in QEMU).
+        store = pathlib.Path('target/cflib-example-store.bin').resolve()
+        store.unlink(missing_ok=True)
+        sil = Sil(sil_host, *(['--storage', str(store)] if 'persistent' in script and not QEMU else []))
         try:
             example_ran(run_example(examples / script, 60), examples / script, expect)
         finally:
@@ -1139,6 +1156,10 @@ def session_persistent(sil_host):
         check(ok is True and state and state.is_stored and abs(state.stored_value - kept) < 1e-6
               and abs(state.default_value - default) < 1e-6,
               f'mpc.W_POS = {kept:g} stored ({ok}); its state: {state}')
+        cf.param.set_value('ring.effect', 10)
+        time.sleep(0.3)
+        ok = persistent(cf, 'store', 'ring.effect')
+        check(ok is True, f'ring.effect = 10 stored ({ok}), beside the flight parameters')
         cf.close_link()
     finally:
         report(sil, failed_before)
@@ -1149,6 +1170,11 @@ def session_persistent(sil_host):
         check(abs(w_pos - kept) < 1e-6 and abs(roll - unkept) > 1e-6,
               f'after a restart with the same file mpc.W_POS is {w_pos:g} (stored), pd.ROLL_P {roll:g} '
               f'(set, not stored: its default)')
+        effect = int(cf.param.get_value('ring.effect'))
+        check(effect == 10 and 'other persistent parameter(s) taken' in ''.join(sil.err),
+              f'and ring.effect is {effect} (stored; the console: taken at boot)')
+        ok = persistent(cf, 'clear', 'ring.effect')
+        check(ok is True, f'ring.effect cleared ({ok})')
         ok = persistent(cf, 'clear', 'mpc.W_POS')
         state = persistent(cf, 'get_state', 'mpc.W_POS')
         check(ok is True and state and not state.is_stored, f'cleared ({ok}); its state: {state}')

@@ -422,6 +422,12 @@ fn local<'a>(cfg: &CrtpConfig, socket: &'a UdpSocket, stored: &mut Option<(Strin
     // cflib's "default value": the command line's, not the stored.
     vehicle.set_defaults(cfg.settings);
     vehicle.report_decks(cfg.decks);
+    if let Some(st) = store.as_mut() {
+        let (taken, refused) = vehicle.load_stored(st).map_err(|e| anyhow::anyhow!("--storage: {e}"))?;
+        if taken + refused > 0 {
+            eprintln!("crtp: storage: {taken} other persistent parameter(s) taken (ring.effect), {refused} refused");
+        }
+    }
     Ok(Fc::Local {
         vehicle,
         socket,

@@ -39,7 +39,7 @@
 //!
 //! `firmware-crtp` (the same loop behind CRTP over syslink, the Crazyflie's
 //! radio link, on the CRTP images' RTIC tasks): flash ≤ 392 KiB — the CRTP
-//! services (TOCs of 70 parameters and 28 log variables, log blocks, the
+//! services (TOCs of 72 parameters and 28 log variables, log blocks, the
 //! high-level commander's polynomial planner, syslink) and the four tasks
 //! add ≈ 77 KiB to the plain image (360 492 B against 283 256 B), the
 //! settings store for cflib's persistent parameters ≈ 20 KiB —, static

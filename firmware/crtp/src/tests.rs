@@ -1401,3 +1401,65 @@ fn led_bitmask_is_kept_and_read_back() {
     assert_eq!(r.payload(), &[b[0], b[1], 255], "taken in flight");
     assert!(v.flying());
 }
+
+/// `ring.effect`, as `persistent_params.py` flies it: a `uint8_t` marked
+/// persistent in the TOC (extended type, then the persistent flag, as the
+/// firmware's `PARAM_UINT8 | PARAM_PERSISTENT`), the Crazyflie's default 6,
+/// 10 kept and stored under its TOC id, 256 refused; after a power-off the
+/// stored 10 is taken at boot (`CrtpVehicle::load_stored`), and a value
+/// the write's check refuses stored under it is not.
+#[test]
+fn ring_effect_persists_as_cflib_stores_it() {
+    use fc_storage::{RamFlash, Store};
+    let (store, _) = Store::open(RamFlash::blank(), 0..4096).unwrap();
+    let mut kept = Kept {
+        sent: Sent::default(),
+        store,
+    };
+    let mut v = at_rest(3000);
+    let id = find(b"ring", b"effect");
+    let (_, t, _) = param_entry(usize::from(id)).unwrap();
+    assert_eq!(t, 0x18, "uint8_t, extended: cflib asks for the extended type");
+    let b = id.to_le_bytes();
+    let misc = |cmd: u8| pk(Port::Param, 3, &[cmd, b[0], b[1]]);
+    assert_eq!(
+        kept.ask(&mut v, misc(7)).payload(),
+        &[7, b[0], b[1], 0, 1],
+        "persistent"
+    );
+    assert_eq!(kept.ask(&mut v, misc(8)).payload()[3..], [0, 6], "its default");
+    assert_eq!(kept.ask(&mut v, misc(4)).payload()[3..], [0, 6], "not stored");
+    let (r, said) = ask_said(&mut v, pk(Port::Param, 2, &[b[0], b[1], 10]));
+    assert_eq!((r.payload(), said.as_str()), (&[b[0], b[1], 10][..], ""));
+    assert_eq!(kept.ask(&mut v, misc(3)).payload(), &[3, b[0], b[1], 0], "stored");
+    assert_eq!(
+        kept.ask(&mut v, misc(4)).payload()[3..],
+        [1, 6, 10],
+        "stored 10, default 6"
+    );
+    // A set by name (cflib's MISC_SETBYNAME) of 256 in a uint16 is refused.
+    let mut by_name = vec![0u8];
+    by_name.extend(b"ring\0effect\0");
+    by_name.extend([crate::vehicle::param_types::U16, 0, 1]);
+    let r = kept.ask(&mut v, pk(Port::Param, 3, &by_name));
+    assert_ne!(r.payload().last(), Some(&0), "256 refused");
+    assert_eq!(ask(&mut v, pk(Port::Param, 1, &b)).payload(), &[b[0], b[1], 0, 10]);
+    // Power off: the flash's bytes are all that is left.
+    let bytes = *kept.store.into_flash().bytes();
+    let (mut st, _) = Store::open(RamFlash::<4096>::holding(&bytes), 0..4096).unwrap();
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    assert_eq!(v.load_stored(&mut st), Ok((1, 0)));
+    assert_eq!(
+        ask(&mut v, pk(Port::Param, 1, &b)).payload(),
+        &[b[0], b[1], 0, 10],
+        "taken at boot"
+    );
+    st.set_param(id, 300.0).unwrap();
+    let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
+    assert_eq!(v.load_stored(&mut st), Ok((0, 1)), "300 is no byte: refused, counted");
+    assert_eq!(
+        ask(&mut v, pk(Port::Param, 1, &b)).payload(),
+        &[b[0], b[1], 0, 6],
+        "the default stands"
+    );
+}

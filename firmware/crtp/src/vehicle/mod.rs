@@ -285,6 +285,29 @@ impl CrtpVehicle {
         self.shared.decks = mask;
     }
 
+    /// Takes the stored values of the persistent parameters that are not
+    /// the flight stack's (`ring.effect`) from `store`, each through the
+    /// check a write from cflib passes (a value it refuses is left out and
+    /// counted: the default stands); the flight parameters are the
+    /// settings' ([`fc_storage::load_settings`]). How many were taken and
+    /// refused; Err only if the store cannot be read.
+    pub fn load_stored(&mut self, store: &mut dyn fc_storage::Persist) -> Result<(u16, u16), fc_storage::StoreError> {
+        let (mut taken, mut refused) = (0, 0);
+        for id in fc_loop::params::CRTP_PARAMS..ports::param::PARAM_COUNT {
+            if !ports::param::persistent(id) {
+                continue;
+            }
+            let Some(v) = store.param(id as u16)? else {
+                continue;
+            };
+            match self.shared.param_write(id, v, Reply::Caller) {
+                Ok(_) => taken += 1,
+                Err(_) => refused += 1,
+            }
+        }
+        Ok((taken, refused))
+    }
+
     /// Checks the settings and designs the controller in place.
     pub fn start(&mut self) -> Result<(), Refusal> {
         fc_loop::start_front_end(&mut self.shared.lp, &mut self.ctrl)
@@ -385,6 +408,8 @@ pub struct CrtpShared {
     /// `led.bitmask` as last written (0 at boot): kept and read back; no
     /// LED here to drive.
     led_bitmask: u8,
+    /// `ring.effect` as written, or stored (no LED ring here).
+    ring_effect: u8,
     /// The decks reported attached, a bit each of [`DECK_NAMES`] (none at
     /// boot; [`CrtpVehicle::report_decks`]).
     decks: u8,
@@ -433,6 +458,7 @@ impl CrtpShared {
             motors: [0.0; 4],
             heading_seen: false,
             led_bitmask: 0,
+            ring_effect: ports::param::RING_EFFECT_DEFAULT,
             decks: 0,
             vbat_v: None,
             pm_state: 0,

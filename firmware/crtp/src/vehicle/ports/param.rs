@@ -48,16 +48,26 @@ pub enum Extra {
     /// off). Stored and read back as written; the SIL and the images in
     /// QEMU have no LEDs, so nothing lights.
     LedBitmask,
+    /// `ring.effect`, persistent as on a Crazyflie: the LED ring deck's
+    /// effect (its default 6, the Crazyflie's), kept, read back and
+    /// stored by cflib's persistent parameters (`persistent_params.py`
+    /// stores it). No LED ring is attached here (`deck.bcLedRing` reads
+    /// 0), so nothing lights.
+    RingEffect,
 }
+
+/// `ring.effect` at boot: the Crazyflie's `LEDRING_DEFAULT_EFFECT`.
+pub const RING_EFFECT_DEFAULT: u8 = 6;
 
 impl Extra {
     /// The one value a fixed choice has (`None`: an alias, a command, a
-    /// deck's flag or the LED override, which read their own).
+    /// deck's flag, the LED override or the ring's effect, which read
+    /// their own).
     pub const fn fixed(self) -> Option<f32> {
         match self {
             Extra::Estimator => Some(2.0),
             Extra::EnHighLevel => Some(1.0),
-            Extra::Alias(_) | Extra::ResetEstimation | Extra::Deck(_) | Extra::LedBitmask => None,
+            Extra::Alias(_) | Extra::ResetEstimation | Extra::Deck(_) | Extra::LedBitmask | Extra::RingEffect => None,
         }
     }
 }
@@ -65,8 +75,9 @@ impl Extra {
 /// The Crazyflie-named entries that are not the flight stack's
 /// parameters, last in the param TOC: a command, the fixed choices of a
 /// Crazyflie (the Kalman estimator, the high-level commander) and the
-/// decks, none attached, and the LED override (no LEDs here).
-pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 12] = [
+/// decks, none attached, the LED override and the LED ring's effect (no
+/// LEDs here).
+pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 13] = [
     ("kalman", "resetEstimation", param_types::U8, Extra::ResetEstimation),
     ("stabilizer", "estimator", param_types::U8, Extra::Estimator),
     ("commander", "enHighLevel", param_types::U8, Extra::EnHighLevel),
@@ -79,7 +90,20 @@ pub const EXTRA_PARAMS: [(&str, &str, u8, Extra); 12] = [
     ("deck", DECK_NAMES[6], DECK, Extra::Deck(6)),
     ("deck", DECK_NAMES[7], DECK, Extra::Deck(7)),
     ("led", "bitmask", param_types::U8, Extra::LedBitmask),
+    // Extended (persistent), as the firmware's `PARAM_UINT8 | PARAM_PERSISTENT`.
+    (
+        "ring",
+        "effect",
+        param_types::U8 | param_types::EXTENDED,
+        Extra::RingEffect,
+    ),
 ];
+
+/// Whether parameter `id` persists (cflib's `persistent_store` keeps it,
+/// under its TOC id): the flight parameters and `ring.effect`.
+pub fn persistent(id: usize) -> bool {
+    id < CRTP_PARAMS || matches!(param_entry(id), Some((_, _, Some(Extra::RingEffect))))
+}
 
 /// The decks' flags in the param TOC (group `deck`), bit `i` of a deck
 /// mask is `DECK_NAMES[i]`: the Flow decks, the Z-rangers, Lighthouse, the
@@ -247,6 +271,7 @@ impl CrtpShared {
             None => (PARAMS[id].get)(s),
             Some(Extra::ResetEstimation) => 0.0,
             Some(Extra::LedBitmask) => f32::from(self.led_bitmask),
+            Some(Extra::RingEffect) => f32::from(self.ring_effect),
             Some(Extra::Deck(bit)) => f32::from((self.decks >> bit) & 1),
             Some(Extra::Alias(i)) => (PARAMS[i].get)(s),
             Some(fixed) => fixed.fixed()?,
@@ -260,6 +285,7 @@ impl CrtpShared {
             None => (PARAMS[id].get)(&self.defaults),
             Some(Extra::Alias(i)) => (PARAMS[i].get)(&self.defaults),
             Some(Extra::LedBitmask) => 0.0,
+            Some(Extra::RingEffect) => f32::from(RING_EFFECT_DEFAULT),
             Some(_) => self.param_value(id)?,
         })
     }
@@ -270,13 +296,17 @@ impl CrtpShared {
     /// controller work is under way.
     pub(in crate::vehicle) fn param_write(&mut self, id: usize, value: f32, reply: Reply) -> Result<Written, Refusal> {
         let (_, _, extra) = param_entry(id).ok_or(Refusal::Unknown)?;
-        // The LED override touches no flight state: taken even while the
-        // controller is busy, if it is a byte.
-        if extra == Some(Extra::LedBitmask) {
+        // The LED override and the ring's effect touch no flight state:
+        // taken even while the controller is busy, if they are a byte.
+        if let Some(led @ (Extra::LedBitmask | Extra::RingEffect)) = extra {
             if !((0.0..=255.0).contains(&value) && value == f32::from(value as u8)) {
                 return Err(Refusal::Range { lo: 0.0, hi: 255.0 });
             }
-            self.led_bitmask = value as u8;
+            if led == Extra::LedBitmask {
+                self.led_bitmask = value as u8;
+            } else {
+                self.ring_effect = value as u8;
+            }
             return Ok(Written::Now);
         }
         if self.busy() {
@@ -423,8 +453,8 @@ impl CrtpShared {
         let mut r = reply(Port::Param, 3, &[cmd, idb[0], idb[1]]);
         let index = usize::from(id);
         let known = param_entry(index).is_some();
-        // Persistent: the flight parameters (the TOC's extended flag).
-        let persistent = index < CRTP_PARAMS;
+        // Persistent: the flight parameters and `ring.effect` (the TOC's extended flag).
+        let persistent = persistent(index);
         match cmd {
             // Extended type: 1, persistent (status 0 first, protocol 11+).
             7 if known => {
