@@ -133,41 +133,11 @@ cargo cf-build  # the Crazyflie 2.1 image as flashed (the book's "The Crazyflie 
 # image's vector table (the initial SP inside the 128 KiB SRAM, below the
 # statics flip-link put at its top; a Thumb reset vector inside the image).
 arm-none-eabi-objcopy -O binary target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie target/hardware/firmware-crazyflie.bin
-python3 - target/hardware/firmware-crazyflie.bin <<'PY'
-import struct, sys
-b = open(sys.argv[1], "rb").read()
-sp, reset = struct.unpack("<II", b[:8])
-assert 0x20000000 < sp < 0x20020000 and sp % 8 == 0, hex(sp)
-assert 0x08004000 < reset < 0x08004000 + len(b) and reset & 1, hex(reset)
-print(f"firmware-crazyflie.bin: {len(b)} B for 0x08004000, SP {sp:#x}, reset {reset:#x}")
-PY
+python3 tools/check_images.py bin target/hardware/firmware-crazyflie.bin | tee -a "$log"
 # The image as flashed (its own sensors on I2C3, defmt over RTT) within its
 # budgets (firmware/stm32f405/src/budgets.rs; the QEMU builds' are
 # tests/tests/image.rs's).
-python3 - target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie <<'PY'
-import subprocess, sys
-sys.path.insert(0, "tools")
-from measure import budgets, record
-out = subprocess.run(["size", "-A", sys.argv[1]], capture_output=True, text=True, check=True).stdout
-flash = ram = 0
-for line in out.splitlines():
-    f = line.split()
-    if len(f) != 3 or not f[1].isdigit() or not f[2].isdigit():
-        continue
-    name, size, addr = f[0], int(f[1]), int(f[2])
-    if 0x08000000 <= addr < 0x08100000 and name not in (".uninit",):
-        flash += size
-    if name == ".data":
-        flash += size
-    if 0x20000000 <= addr < 0x20020000:
-        ram += size
-b = budgets()
-budget = (b["budget_crazyflie_as_flashed_flash_bytes"], b["budget_crazyflie_as_flashed_static_ram_bytes"])
-print(f"firmware-crazyflie as flashed: flash {flash} B of {budget[0]}, static RAM {ram} B of {budget[1]}")
-for key, v in (("flash", flash), ("static_ram", ram), ("flash_headroom", budget[0] - flash)):
-    record(f"crazyflie_image_as_flashed_{key}_bytes", v, "B", "test.sh: size -A")
-assert flash <= budget[0] and ram <= budget[1], "over budget"
-PY
+python3 tools/check_images.py as-flashed target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie | tee -a "$log"
 echo "image size (flash = text + data, static RAM = data + bss): QEMU image, then the hardware image"
 size target/firmware-image/thumbv7em-none-eabihf/release/firmware target/firmware-image/thumbv7em-none-eabihf/release/firmware-crtp target/firmware-image/thumbv7em-none-eabihf/release/firmware-crazyflie target/hardware/thumbv7em-none-eabihf/release/firmware target/hardware/thumbv7em-none-eabihf/release/firmware-crazyflie  # binutils (with gcc) reads the ARM ELF
 stage "API docs (warnings denied; the doctests run with the tests below)"
@@ -453,12 +423,6 @@ else
     python3 tools/measure.py "$FC_MEASUREMENTS" target/measurements.json
 fi
 # Each image's headroom under its budgets (firmware/stm32f405/src/budgets.rs).
-python3 - target/measurements.json <<'PY'
-import json, sys
-m = json.load(open(sys.argv[1]))["measurements"]
-rows = [(k[: -len("_flash_headroom_bytes")], v["value"]) for k, v in m.items() if k.endswith("_flash_headroom_bytes")]
-for name, headroom in sorted(rows):
-    print(f"headroom: {name}: {headroom:.0f} B of flash under its budget")
-PY
+python3 tools/check_images.py headroom target/measurements.json
 echo "tests: $passed passed, $failed failed, $skipped skipped"
 [ "$failed" = 0 ]

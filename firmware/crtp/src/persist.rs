@@ -8,10 +8,28 @@ use crate::log::EIO;
 use crate::vehicle::{put_typed, CrtpSink};
 use crate::{Packet, Port};
 
+/// The param port's misc channel's commands (cflib's `param.py`
+/// `MISC_*`; the firmware's `param_logic.c`).
+pub mod misc {
+    /// Set a parameter by its name.
+    pub const SET_BY_NAME: u8 = 0;
+    /// Store the value in force.
+    pub const PERSISTENT_STORE: u8 = 3;
+    /// The stored state: stored or not, the default, the stored value.
+    pub const PERSISTENT_GET_STATE: u8 = 4;
+    /// Forget the stored value.
+    pub const PERSISTENT_CLEAR: u8 = 5;
+    /// The extended type: persistent or not (protocol 11+).
+    pub const GET_EXTENDED_TYPE_V2: u8 = 7;
+    /// The default value (protocol 11+).
+    pub const GET_DEFAULT_VALUE_V2: u8 = 8;
+}
+
 /// What a persistent-parameter request asks, with what its answer needs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PersistRequest {
-    /// 3 store, 4 get the state, 5 clear.
+    /// [`misc::PERSISTENT_STORE`], [`misc::PERSISTENT_GET_STATE`] or
+    /// [`misc::PERSISTENT_CLEAR`].
     pub cmd: u8,
     /// The parameter's TOC id (its index in the settings store).
     pub id: u16,
@@ -32,17 +50,17 @@ impl PersistRequest {
         let id = self.id.to_le_bytes();
         let mut r = Packet::new(Port::Param, 3, &[self.cmd, id[0], id[1]]).unwrap_or(Packet::NULL);
         let done = match (self.cmd, out.storage()) {
-            (4, None) => Ok(None),
+            (misc::PERSISTENT_GET_STATE, None) => Ok(None),
             (_, None) => Err(()),
-            (3, Some(st)) => st.set_param(self.id, self.now).map(|()| None).map_err(|_| ()),
-            (4, Some(st)) => st.param(self.id).map_err(|_| ()),
+            (misc::PERSISTENT_STORE, Some(st)) => st.set_param(self.id, self.now).map(|()| None).map_err(|_| ()),
+            (misc::PERSISTENT_GET_STATE, Some(st)) => st.param(self.id).map_err(|_| ()),
             (_, Some(st)) => st.remove_param(self.id).map(|()| None).map_err(|_| ()),
         };
         match (self.cmd, done) {
             (_, Err(())) => {
                 let _ = r.extend(&[EIO]);
             }
-            (4, Ok(stored)) => {
+            (misc::PERSISTENT_GET_STATE, Ok(stored)) => {
                 let _ = r.extend(&[u8::from(stored.is_some())]);
                 put_typed(&mut r, self.ty, self.default);
                 if let Some(v) = stored {

@@ -3,6 +3,7 @@
 //! one, [`fc_loop::params::CRTP_ALIASED`]) and of [`EXTRA_PARAMS`]; read,
 //! write, set by name, default values, extended types, persistent storage.
 
+use crate::persist::misc;
 use crate::vehicle::*;
 
 /// Param type bytes (cflib's `ParamTocElement.types`).
@@ -443,7 +444,7 @@ impl CrtpShared {
         let Some(&cmd) = d.first() else {
             return Ok(Err(short(p)));
         };
-        if cmd == 0 {
+        if cmd == misc::SET_BY_NAME {
             return self.on_set_by_name(p, out);
         }
         let Some(id) = u16_at(d, 1) else {
@@ -457,10 +458,10 @@ impl CrtpShared {
         let persistent = persistent(index);
         match cmd {
             // Extended type: 1, persistent (status 0 first, protocol 11+).
-            7 if known => {
+            misc::GET_EXTENDED_TYPE_V2 if known => {
                 let _ = r.extend(&[0, u8::from(persistent)]);
             }
-            8 if known => {
+            misc::GET_DEFAULT_VALUE_V2 if known => {
                 let _ = r.extend(&[0]);
                 let v = self.param_default(index).unwrap_or(0.0);
                 self.put_value(&mut r, index, v);
@@ -469,7 +470,7 @@ impl CrtpShared {
             // Crazyflie's persistent parameters, answered by the link's
             // owner with its storage ([`CrtpShared::take_persist`]). One at
             // a time: another is not answered (cflib asks again).
-            3..=5 if persistent => {
+            misc::PERSISTENT_STORE..=misc::PERSISTENT_CLEAR if persistent => {
                 if self.persist.is_some() {
                     return Ok(Err(CrtpError::Refused { port: p.port() }));
                 }
@@ -483,7 +484,9 @@ impl CrtpShared {
                 return Ok(Ok(()));
             }
             // Not persistent, and unknown ids.
-            3..=5 | 7 | 8 => {
+            misc::PERSISTENT_STORE..=misc::PERSISTENT_CLEAR
+            | misc::GET_EXTENDED_TYPE_V2
+            | misc::GET_DEFAULT_VALUE_V2 => {
                 let _ = r.extend(&[log::ENOENT]);
             }
             _ => return Ok(Err(unsupported(p))),
