@@ -576,14 +576,9 @@ fn px4_hil(a: Px4HilArgs) -> Result<()> {
             }
             let path = a.trajectory.as_deref().unwrap_or(std::path::Path::new(""));
             let (memory, duration_s) = sil_host::hil::trajectory::load(path)?;
-            let hover_ned_m = [0.0, 0.0, -1.0];
-            let flown = sil_host::hil::trajectory::Flown::new(memory, duration_s, a.trajectory_start, hover_ned_m)
+            let flown = sil_host::hil::trajectory::Flown::new(memory, duration_s, a.trajectory_start, [0.0, 0.0, -1.0])
                 .with_context(|| format!("--trajectory {}", path.display()))?;
-            Some(sil_host::hil::Mission::Trajectory {
-                flown,
-                hover_ned_m,
-                from_s: a.trajectory_start,
-            })
+            Some(sil_host::hil::Mission::Trajectory(flown))
         }
         Some(kind) => {
             if !(a.scenario_start.is_finite() && (0.0..=1e5).contains(&a.scenario_start)) {

@@ -74,18 +74,12 @@ pub enum Mission {
         /// When it starts, s after the first sample.
         from_s: f64,
     },
-    /// Hold `hover_ned_m` heading north, then at `from_s` hand the vehicle
-    /// the trajectory as if a client had uploaded it ([`trajectory`]): it
-    /// flies it on board, its controller previewing it, and nothing more
-    /// is streamed. The host evaluates the same pieces for its trace.
-    Trajectory {
-        /// The trajectory, as flown from `hover_ned_m` at `from_s`.
-        flown: trajectory::Flown,
-        /// The hover it starts from, NED about home, m.
-        hover_ned_m: [f64; 3],
-        /// When it starts, s after the first sample.
-        from_s: f64,
-    },
+    /// Hold the trajectory's hover heading north, then at its start hand
+    /// the vehicle the trajectory as if a client had uploaded it
+    /// ([`trajectory`]): it flies it on board, its controller previewing
+    /// it, and nothing more is streamed. The host evaluates the same pieces
+    /// for its trace.
+    Trajectory(trajectory::Flown),
 }
 
 impl Mission {
@@ -108,15 +102,8 @@ impl Mission {
                 }
                 (sp, tracking)
             }
-            Mission::Trajectory {
-                flown,
-                hover_ned_m,
-                from_s,
-            } => {
-                if t < *from_s {
-                    return (Setpoint::hold(Vector3::from(*hover_ned_m).cast(), 0.0), false);
-                }
-                let tracking = t <= from_s + f64::from(flown.duration_s);
+            Mission::Trajectory(flown) => {
+                let tracking = (flown.from_s..=flown.from_s + f64::from(flown.duration_s)).contains(&t);
                 (flown.setpoint_at(t), tracking)
             }
         }
@@ -125,7 +112,7 @@ impl Mission {
     /// Its headings are the mission's own (north 0), not about the
     /// take-off heading (a trajectory's, as a Crazyflie flies it).
     fn absolute_heading(&self) -> bool {
-        matches!(self, Mission::Trajectory { .. })
+        matches!(self, Mission::Trajectory(_))
     }
 }
 
@@ -649,12 +636,15 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                     s.yaw_rad = fc_core::control::wrap_pi(s.yaw_rad + h);
                 }
                 reference = Some(s);
-                if let Mission::Trajectory { flown, from_s, .. } = mission {
-                    if t >= *from_s - 1e-9 && !handed_over {
+                if let Mission::Trajectory(flown) = mission {
+                    if t >= flown.from_s - 1e-9 && !handed_over {
                         if !armed {
-                            bail!("the trajectory was to start at {from_s} s, and the vehicle is not armed");
+                            bail!(
+                                "the trajectory was to start at {} s, and the vehicle is not armed",
+                                flown.from_s
+                            );
                         }
-                        v.fly_trajectory(flown, t0 + (from_s * 1e6).round() as u64)?;
+                        v.fly_trajectory(flown, t0 + (flown.from_s * 1e6).round() as u64)?;
                         handed_over = true;
                     }
                 }

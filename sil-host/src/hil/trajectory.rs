@@ -106,6 +106,10 @@ pub struct Flown {
     pub flight: Flight,
     /// Its duration, s.
     pub duration_s: f32,
+    /// When it starts, s after the first sample.
+    pub from_s: f64,
+    /// The hover it starts from (heading north), NED about home, m.
+    pub hover_ned_m: [f64; 3],
 }
 
 impl Flown {
@@ -118,11 +122,17 @@ impl Flown {
             memory,
             flight,
             duration_s,
+            from_s,
+            hover_ned_m,
         })
     }
 
-    /// Its set-point at `t` s on the mission's clock (at its start before it).
+    /// Its set-point at `t` s on the mission's clock: the hover before it
+    /// starts, then the trajectory's point with its jerk.
     pub fn setpoint_at(&self, t: f64) -> Setpoint<f32> {
+        if t < self.from_s {
+            return Setpoint::hold(Vector3::from(self.hover_ned_m).cast(), 0.0);
+        }
         let s = self
             .flight
             .sample(self.memory.bytes(), (t.max(0.0) * 1e6).round() as u64);
