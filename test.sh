@@ -344,15 +344,21 @@ lane_beside() {
     bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
     # The CRTP ports are free from here: cfclient may take 19850 (in this shell).
     touch target/lane-beside.crtp-done
-    stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage, then firmware-mavlink in QEMU"
+    stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage and a power cut in flight, then firmware-mavlink in QEMU"
     # In process with --storage: the owner then sets a second key and a parameter; the vehicle,
-    # started again on the same file, must demand signatures at once and keep both.
+    # started again on the same file, must sign nothing until it hears the owner and keep both.
     local ports=(--port 4562 --gcs-port 14552 --truth-port 14562)
     rm -f target/px4-storage.bin target/px4-storage.bin.json
     hil "${ports[@]}" --signing --storage target/px4-storage.bin --duration 120 \
         --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
     hil "${ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
         --json target/rotorpy-hil-restart.json | grep "^signing check:" | tee -a "$log"
+    # A power cut in flight: killed while armed in the air (nothing stored on the way out), then
+    # started again on the file: its first signature must be above the last one seen in the air.
+    hil "${ports[@]}" --signing --cut --storage target/px4-storage.bin --duration 40 \
+        --json target/rotorpy-hil-cut.json | grep "^signing check:" | tee -a "$log"
+    hil "${ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
+        --json target/rotorpy-hil-after-cut.json | grep "^signing check:" | tee -a "$log"
     hil "${ports[@]}" --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json \
         | grep "^signing check:" | tee -a "$log"
     end_stage

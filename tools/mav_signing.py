@@ -24,10 +24,15 @@ With `--keep FILE` (the vehicle runs with `sil-host px4-hil --storage`) the
 owner then provisions a second key and sets a parameter, and writes both,
 with the last signature timestamp it saw from the vehicle, to FILE. With
 `--after-restart FILE`, against the vehicle started again on the same
-storage, it checks that the vehicle demands signatures from its first frame
-(an unsigned parameter read and arm are ignored), that its frames verify
-with the kept key and their timestamps go on from the last session's, and
-that the parameter kept its value.
+storage, it checks that the vehicle signs nothing until it hears a frame
+signed with the kept key (it sends only its HEARTBEAT, unsigned; an
+unsigned parameter read and arm go unanswered), that its first frame then verifies with the key with a
+timestamp above the last one the owner saw from it, and that the parameter
+kept its value. With `--cut FILE` the owner flies on
+that key and, in the air, notes the vehicle's last signature timestamp in
+FILE; the flight controller is then killed there (`rotorpy_hil.py --cut`,
+a power cut in flight), and `--after-restart` checks that the vehicle's
+first frame after it is signed above that timestamp.
 
 In process (`sil-host px4-hil`) the host's link checks and signs; with
 `--target qemu` the host forwards the ground station's frames whole and
@@ -254,28 +259,71 @@ class Session(Gcs):
         self.check(kept == fs + 200.0, f"FS_TIMEOUT_MS set to {kept}, to be kept")
         self.settle(1.0)
         with open(path, "w") as f:
-            json.dump({"FS_TIMEOUT_MS": kept, "default": fs, "timestamp": self.vehicle_timestamp()}, f)
+            json.dump({"FS_TIMEOUT_MS": kept, "default": fs, "timestamp": self.vehicle_timestamp(),
+                       "sys": self.sys, "comp": self.comp}, f)
 
-    def after_restart(self, path):
-        """The vehicle started again on the storage `keep` wrote to."""
+    def cut(self, path):
+        """The owner, with the key `keep` left, arms and takes off; in the
+        air it adds the last timestamp it verified on the vehicle's frames to
+        `path` and stops, for the flight controller to be killed there (a
+        power cut in flight)."""
         with open(path) as f:
             kept = json.load(f)
+        # Booted on the stored key, it answers only once it hears the owner.
+        self.m.setup_signing(KEPT_KEY, sign_outgoing=True, initial_timestamp=now_2015(), link_id=0)
         hb = self.recv(["HEARTBEAT"])
-        if not self.check(hb is not None, "after a restart the vehicle's HEARTBEAT arrives"):
+        if not self.check(hb is not None and getattr(hb, "_signed", False), "the vehicle's HEARTBEAT arrives, signed"):
             return
         self.sys, self.comp = hb.get_srcSystem(), hb.get_srcComponent()
-        # Not signing: the vehicle's frames are read unverified; ours go unsigned.
-        self.check(self.param("FS_TIMEOUT_MS") is None, "unsigned: a parameter read is ignored (signing on from boot)")
+        # Refused for now until the estimator has aligned at rest.
+        result, end = None, time.time() + self.timeout
+        while time.time() < end and result in (None, TEMPORARILY_REJECTED):
+            result = self.command(ARM_DISARM, 1)
+            if result == TEMPORARILY_REJECTED:
+                time.sleep(0.2)
+        self.check(result == ACCEPTED and self.until(lambda hb: hb.base_mode & ARMED),
+                   f"owner (signed, the kept key): arm accepted (result {result})")
+        self.check(self.command(NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 1.0) == ACCEPTED,
+                   "owner: take-off accepted")
+        end = time.time() + self.timeout
+        while time.time() < end and (self.z is None or self.z > -0.8):
+            self.recv(["LOCAL_POSITION_NED"], timeout=2.0)
+        self.settle(2.0)
+        ts = self.vehicle_timestamp()
+        self.check(self.armed() and self.z is not None and self.z < -0.5 and ts is not None,
+                   f"in the air ({self.z} m down, armed), the vehicle's last timestamp {ts}: the power is cut now")
+        kept.update(timestamp=ts, cut=True)
+        with open(path, "w") as f:
+            json.dump(kept, f)
+
+    def after_restart(self, path):
+        """The vehicle started again on the storage `keep` (or `cut`) wrote to."""
+        with open(path) as f:
+            kept = json.load(f)
+        self.sys, self.comp = kept["sys"], kept["comp"]
+        # Its frames verified (pymavlink from timestamp 0 takes a stream
+        # however far behind it is), ours not signed yet.
+        self.m.setup_signing(KEPT_KEY, sign_outgoing=False, initial_timestamp=0, link_id=0,
+                             allow_unsigned_callback=lambda mav, msg_id: msg_id == 0)
+        self.settle(3.0)
+        self.m.mav.param_request_read_send(self.sys, self.comp, b"FS_TIMEOUT_MS", -1)
         self.m.mav.command_long_send(self.sys, self.comp, ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
         self.settle(1.5)
-        self.check(not self.armed(), "unsigned: arm ignored")
-        ts = now_2015()
-        self.m.setup_signing(KEPT_KEY, sign_outgoing=True, initial_timestamp=ts, link_id=0)
+        self.check(self.hb is not None and not getattr(self.hb, "_signed", True) and not self.seen.get("PARAM_VALUE")
+                   and self.vehicle_timestamp() is None and sorted(self.seen) == ["HEARTBEAT"],
+                   "booted on the stored key, it signs nothing until a frame signed with the key is heard: only "
+                   f"its HEARTBEAT, unsigned; an unsigned parameter read and arm go unanswered (heard {sorted(self.seen)})")
+        self.m.mav.signing.allow_unsigned_callback = None
+        self.m.mav.signing.sign_outgoing = True
+        self.m.mav.signing.timestamp = max(self.m.mav.signing.timestamp, now_2015())
         hb = self.recv(["HEARTBEAT"], timeout=30.0)
         first = self.vehicle_timestamp()
+        before = "the last seen in flight before the power cut" if kept.get("cut") else "the last seen before"
         self.check(hb is not None and getattr(hb, "_signed", False) and first is not None
                    and kept["timestamp"] is not None and first > kept["timestamp"],
-                   f"its frames verify with the kept key, timestamps going on: {first} after {kept['timestamp']}")
+                   f"once the owner signs, its first frame verifies with the kept key, its timestamp {first} "
+                   f"above {kept['timestamp']} ({before})")
+        self.check(not self.armed(), "the unsigned arm was ignored")
         value = self.param("FS_TIMEOUT_MS")
         self.check(value == kept["FS_TIMEOUT_MS"] and value != kept["default"],
                    f"FS_TIMEOUT_MS kept: {value} (default {kept['default']})")
@@ -288,11 +336,15 @@ def main():
     ap.add_argument("--url", default="udpin:127.0.0.1:14550")
     ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per exchange")
     ap.add_argument("--keep", metavar="FILE", help="then set a key and a parameter to keep; note them in FILE")
-    ap.add_argument("--after-restart", metavar="FILE", help="only check what --keep left in FILE")
+    ap.add_argument("--after-restart", metavar="FILE", help="only check what --keep (or --cut) left in FILE")
+    ap.add_argument("--cut", metavar="FILE", help="only fly with the key --keep left, to be cut off in the air; "
+                                                  "note the vehicle's last timestamp in FILE")
     a = ap.parse_args()
     s = Session(a.url, a.timeout, name="signing")
     if a.after_restart:
         s.after_restart(a.after_restart)
+    elif a.cut:
+        s.cut(a.cut)
     else:
         s.run()
         if a.keep:

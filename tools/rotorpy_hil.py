@@ -262,6 +262,10 @@ def main():
     ap.add_argument("--restart", action="store_true",
                     help="with --signing and --storage: only check that the key, its timestamps and the "
                          "parameter survived the restart")
+    ap.add_argument("--cut", action="store_true",
+                    help="with --signing and --storage: the owner arms, takes off and, in flight, notes the "
+                         "vehicle's last signature timestamp; then the flight controller is killed (SIGKILL), "
+                         "as a power cut would stop it. A --restart run after it checks the timestamps go on")
     ap.add_argument("--gcs-port", type=int, default=14550)
     ap.add_argument("--mavsdk", action="store_true",
                     help="like --gcs, with tools/mavsdk_flight.py (MAVSDK, PyPI) as the ground station; "
@@ -302,7 +306,8 @@ def main():
             name = "mav_signing.py" if a.signing else "mav_gcs.py"
             script = [os.path.join(here, name), "--url", f"udpin:127.0.0.1:{a.gcs_port}"]
             if a.signing and a.storage:
-                script += ["--after-restart" if a.restart else "--keep", a.storage + ".json"]
+                script += ["--after-restart" if a.restart else "--cut" if a.cut else "--keep",
+                           a.storage + ".json"]
         gcs = subprocess.Popen([sys.executable] + script, stdout=subprocess.PIPE, text=True)
         cmd += ["--gcs", f"127.0.0.1:{a.gcs_port}", "--gcs-only"]
     for w in a.waypoint or []:
@@ -372,6 +377,15 @@ def main():
             break
     if peer:
         out = json.dumps({"controller": "se3", "target": "rotorpy (true state)", "steps": len(track)})
+    elif a.cut:
+        # A power cut: the flight controller stops where it is, armed and in
+        # the air, with no summary and nothing stored on the way out.
+        fc_watch.done()
+        fc.kill()
+        fc.communicate(timeout=60)
+        vehicle.conn.close()
+        out = json.dumps({"controller": a.controller, "target": "in-process", "steps": len(track),
+                          "end": "killed (SIGKILL) in flight, as a power cut"})
     else:
         # Hanging up ends the flight controller's session (and its summary).
         fc_watch.done()

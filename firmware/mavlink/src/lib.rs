@@ -47,6 +47,10 @@ pub enum MavError {
     Unused(u32),
     /// The output buffer is smaller than the frame.
     BufferTooSmall,
+    /// Not sent: booted on a stored signing key, the vehicle signs nothing
+    /// until it has accepted a frame signed with it ([`Signing::may_sign`]);
+    /// only its `HEARTBEAT` goes out meanwhile, unsigned.
+    Unclocked,
 }
 
 impl core::fmt::Display for MavError {
@@ -65,6 +69,10 @@ impl core::fmt::Display for MavError {
             MavError::OtherSystem(t) => write!(f, "MAVLink message addressed to system {t}, not this one"),
             MavError::Unused(id) => write!(f, "MAVLink message {id} is not one this flight controller uses"),
             MavError::BufferTooSmall => write!(f, "the buffer is smaller than the MAVLink frame"),
+            MavError::Unclocked => write!(
+                f,
+                "not sent: signing waits for a frame signed with the stored key (its timestamp may be behind)"
+            ),
         }
     }
 }
@@ -216,7 +224,7 @@ impl MavReader {
             MavError::Malformed(_) => &mut c.malformed,
             MavError::OtherSystem(_) => &mut c.other_system,
             MavError::Unused(_) => &mut c.unused,
-            MavError::BufferTooSmall => return e,
+            MavError::BufferTooSmall | MavError::Unclocked => return e,
         };
         *n = n.wrapping_add(1);
         e
@@ -352,6 +360,8 @@ pub fn encode(header: MavHeader, msg: &MavMessage, out: &mut [u8]) -> Result<usi
 
 /// [`encode`], then signed by `signing` when it has a key
 /// ([`Signing::sign`]); `out` needs [`MAX_FRAME`] bytes for any message.
+/// While `signing` may not sign yet, a `HEARTBEAT` goes unsigned and
+/// anything else is [`MavError::Unclocked`].
 pub fn encode_signed(
     header: MavHeader,
     msg: &MavMessage,
@@ -359,6 +369,14 @@ pub fn encode_signed(
     signing: &mut Signing,
 ) -> Result<usize, MavError> {
     let n = encode(header, msg, out)?;
+    if !signing.may_sign() {
+        // Its HEARTBEAT goes unsigned (it carries no timestamp), so that a
+        // ground station listening on UDP learns where the vehicle is.
+        return match msg {
+            MavMessage::HEARTBEAT(_) => Ok(n),
+            _ => Err(MavError::Unclocked),
+        };
+    }
     let extra = <MavMessage as Message>::extra_crc(msg.message_id());
     signing.sign(out, n, extra).ok_or(MavError::BufferTooSmall)
 }

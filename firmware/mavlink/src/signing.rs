@@ -18,6 +18,20 @@
 //!   current key; every change is refused while armed ([`Signing::setup`]).
 //!
 //! No allocation; the stream table is a `heapless::Vec` of `STREAMS`.
+//!
+//! **Never back, across a power cut.** A side's timestamps must never go
+//! back. A vehicle with no calendar clock keeps its timestamp in flash, but
+//! not while armed (a write stalls the control loop), so after a power cut
+//! in flight the timestamp it stored is behind the ones it signed in the
+//! air. A side made from a stored key ([`Signing::stored`]) therefore
+//! signs nothing until it has accepted a frame signed with the key
+//! ([`Signing::may_sign`]; only its `HEARTBEAT` goes out meanwhile,
+//! unsigned, so that a ground station on UDP learns where it is): its
+//! clock is then at least that frame's
+//! timestamp, which a ground station that heard it before the cut has
+//! taken above every one it signed (mavlink.io: each side keeps the newest
+//! timestamp it has heard), and a ground station started afresh stamps with
+//! the time of day, later than the cut.
 
 use sha2::{Digest, Sha256};
 
@@ -164,6 +178,9 @@ pub struct Signing {
     also_unsigned: &'static [u32],
     /// Microseconds not yet a whole timestamp unit (10 µs).
     rem_us: u64,
+    /// Its clock is one it can sign with: not made from a stored key, or a
+    /// frame signed with the key accepted since ([`Signing::may_sign`]).
+    clocked: bool,
 }
 
 impl core::fmt::Debug for Signing {
@@ -172,6 +189,7 @@ impl core::fmt::Debug for Signing {
         f.debug_struct("Signing")
             .field("on", &self.key.is_some())
             .field("timestamp", &self.timestamp)
+            .field("clocked", &self.clocked)
             .field("streams", &self.streams.len())
             .field("counters", &self.counters)
             .finish()
@@ -204,12 +222,13 @@ impl Signing {
             last_authenticated: false,
             also_unsigned: &[],
             rem_us: 0,
+            clocked: true,
         }
     }
 
-    /// With `key` and this side's `timestamp` (10 µs since 2015, as stored):
-    /// signing on. An all-zero key with a zero timestamp is no key (PX4's
-    /// rule for a blank key file).
+    /// With `key` and this side's `timestamp` (10 µs since 2015): signing
+    /// on. An all-zero key with a zero timestamp is no key (PX4's rule for a
+    /// blank key file).
     pub fn with_key(key: Key, timestamp: u64) -> Self {
         let mut s = Self::new();
         if key != [0; 32] || timestamp != 0 {
@@ -217,6 +236,25 @@ impl Signing {
             s.timestamp = timestamp.min(TIMESTAMP_MAX);
         }
         s
+    }
+
+    /// [`Signing::with_key`] for a key and timestamp read from storage at
+    /// boot: the timestamp may be behind what was signed before a power
+    /// cut, so nothing is signed until a frame signed with the key is
+    /// accepted ([`Signing::may_sign`]).
+    pub fn stored(key: Key, timestamp: u64) -> Self {
+        let mut s = Self::with_key(key, timestamp);
+        s.clocked = s.key.is_none();
+        s
+    }
+
+    /// Whether frames may be sent: no key, or a clock to sign with (after a
+    /// boot on a stored key, once a frame signed with it has been accepted,
+    /// or a `SETUP_SIGNING` has given one). Until then [`crate::encode_signed`]
+    /// holds every frame ([`crate::MavError::Unclocked`]) but the
+    /// `HEARTBEAT`, which goes unsigned.
+    pub fn may_sign(&self) -> bool {
+        self.key.is_none() || self.clocked
     }
 
     /// Whether a key is set (frames sent are signed, frames heard must be).
@@ -328,6 +366,7 @@ impl Signing {
             }
         }
         self.timestamp = self.timestamp.max(timestamp);
+        self.clocked = true;
         Ok(true)
     }
 
@@ -381,6 +420,7 @@ impl Signing {
         } else {
             self.key = Some(*key);
             self.timestamp = self.timestamp.max(initial_timestamp.min(TIMESTAMP_MAX));
+            self.clocked = true;
             Ok(SetupOutcome::KeySet)
         };
         if r.is_err() {

@@ -408,6 +408,64 @@ mod signing {
     }
 
     #[test]
+    fn booted_on_a_stored_key_it_signs_nothing_until_its_owner_is_heard() {
+        // The timestamp stored at its last landing (1000) is behind what it
+        // signed in the air before a power cut; pymavlink's owner, which
+        // keeps the newest timestamp it heard, is above both.
+        let mut s = Signing::stored(KEY, 1_000);
+        assert!(s.is_on() && !s.may_sign());
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: 7,
+        };
+        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            base_mode: MavModeFlag::from_bits_truncate(0x81),
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        });
+        let text = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+            severity: MavSeverity::MAV_SEVERITY_INFO,
+            text: [b'a'; 50].into(),
+        });
+        let mut out = [0u8; MAX_FRAME];
+        // Its heartbeat goes out unsigned, anything else is held.
+        let n = encode_signed(header, &hb, &mut out, &mut s).unwrap();
+        assert_eq!((out[2] & crate::signing::FLAG_SIGNED, n), (0, 21));
+        assert_eq!(encode_signed(header, &text, &mut out, &mut s), Err(MavError::Unclocked));
+        // Neither an unsigned frame nor one signed with another key clocks it.
+        let mut r = MavReader::new(1);
+        let gcs = MavHeader {
+            system_id: 255,
+            component_id: 190,
+            sequence: 0,
+        };
+        let mut unsigned = [0u8; MAX_FRAME];
+        let m = encode(gcs, &hb, &mut unsigned).unwrap();
+        let e = read(&mut r, &mut s, &unsigned[..m]).unwrap().unwrap_err();
+        assert_eq!(e, MavError::Signing(SignError::Unsigned(0)));
+        let mut other = Signing::stored([7; 32], 1_000);
+        assert!(read(&mut r, &mut other, &hex(GCS_HEARTBEAT)).unwrap().is_err());
+        assert!(!s.may_sign() && !other.may_sign());
+        // The owner's signed heartbeat (timestamp 123 456 790) does.
+        assert!(read(&mut r, &mut s, &hex(GCS_HEARTBEAT)).unwrap().is_ok());
+        assert!(s.may_sign());
+        let n = encode_signed(header, &text, &mut out, &mut s).unwrap();
+        let mut ts = [0u8; 8];
+        ts[..6].copy_from_slice(&out[n - 12..n - 6]);
+        assert!(u64::from_le_bytes(ts) > 123_456_790, "{ts:?}");
+        // No key stored: nothing to wait for.
+        assert!(Signing::stored([0; 32], 0).may_sign());
+        // A key given by SETUP_SIGNING comes with its timestamp.
+        let mut fresh = Signing::new();
+        assert_eq!(fresh.setup(&KEY, 5, false, false), Ok(SetupOutcome::KeySet));
+        assert!(fresh.may_sign());
+    }
+
+    #[test]
     fn setup_provisions_then_needs_the_key_and_never_while_armed() {
         let mut s = Signing::new();
         assert_eq!(s.setup(&KEY, 5, false, true), Err(SetupRefusal::Armed));

@@ -444,7 +444,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
                 }
                 if let Some((key, ts)) = st.signing().map_err(|e| anyhow::anyhow!("--storage: {e}"))? {
                     if key != [0; 32] {
-                        gcs_signing = Signing::with_key(key, ts);
+                        gcs_signing = Signing::stored(key, ts);
                         sum.key_loaded = true;
                         sum.timestamps[0] = ts;
                     }
@@ -508,7 +508,11 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
         let n = if to_sim {
             encode(header, msg, &mut out)
         } else {
-            encode_signed(header, msg, &mut out, signing)
+            match encode_signed(header, msg, &mut out, signing) {
+                // Booted on a stored key: nothing goes out until the owner is heard.
+                Err(fc_mavlink::MavError::Unclocked) => return Ok(()),
+                r => r,
+            }
         }
         .map_err(|e| anyhow::anyhow!("{e}"))?;
         if to_sim {

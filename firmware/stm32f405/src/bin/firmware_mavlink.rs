@@ -98,7 +98,8 @@ mod app {
             let mut out = [0u8; MAX_FRAME];
             match encode_signed(header, msg, &mut out, &mut self.signing) {
                 Ok(n) => self.usart.write_all(&out[..n]),
-                // Every message fits MAX_FRAME; nothing to send otherwise.
+                // Every message fits MAX_FRAME; held until the owner is heard
+                // after a boot on a stored key (MavError::Unclocked).
                 Err(_) => Ok(()),
             }
         }
@@ -330,7 +331,7 @@ mod app {
         }
         let key = match st.signing() {
             Ok(Some((key, ts))) if key != [0; 32] => {
-                *signing = Signing::with_key(key, ts);
+                *signing = Signing::stored(key, ts);
                 true
             }
             _ => false,
