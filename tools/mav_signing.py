@@ -204,13 +204,7 @@ class Session(Gcs):
             if result != TEMPORARILY_REJECTED:
                 break
             time.sleep(0.2)
-        self.check(result == ACCEPTED and self.until(lambda hb: hb.base_mode & ARMED),
-                   f"owner (signed): arm accepted (result {result})")
-        self.check(self.command(NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 1.0) == ACCEPTED,
-                   "owner: take-off accepted")
-        end = time.time() + self.timeout
-        while time.time() < end and (self.z is None or self.z > -0.8):
-            self.recv(["LOCAL_POSITION_NED"], timeout=2.0)
+        self.take_off(result, "owner (signed)")
         self.check(self.z is not None and self.z <= -0.8, f"climbing: {self.z} m down")
 
         i = self.intruder(None)
@@ -238,6 +232,17 @@ class Session(Gcs):
         self.settle(1.0)
         self.check(any("key cleared" in t for t in self.texts[n:]),
                    f"owner: a signed blank SETUP_SIGNING clears the key ({self.texts[n:][:1]})")
+
+    def take_off(self, arm_result, who):
+        """Checks the arm (`arm_result`, its ack) took, asks for a take-off
+        to 1 m and reads positions until 0.8 m up (or the timeout)."""
+        self.check(arm_result == ACCEPTED and self.until(lambda hb: hb.base_mode & ARMED),
+                   f"{who}: arm accepted (result {arm_result})")
+        self.check(self.command(NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 1.0) == ACCEPTED,
+                   "owner: take-off accepted")
+        end = time.time() + self.timeout
+        while time.time() < end and (self.z is None or self.z > -0.8):
+            self.recv(["LOCAL_POSITION_NED"], timeout=2.0)
 
     def vehicle_timestamp(self):
         """The last signature timestamp verified on the vehicle's frames."""
@@ -281,13 +286,7 @@ class Session(Gcs):
             result = self.command(ARM_DISARM, 1)
             if result == TEMPORARILY_REJECTED:
                 time.sleep(0.2)
-        self.check(result == ACCEPTED and self.until(lambda hb: hb.base_mode & ARMED),
-                   f"owner (signed, the kept key): arm accepted (result {result})")
-        self.check(self.command(NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 1.0) == ACCEPTED,
-                   "owner: take-off accepted")
-        end = time.time() + self.timeout
-        while time.time() < end and (self.z is None or self.z > -0.8):
-            self.recv(["LOCAL_POSITION_NED"], timeout=2.0)
+        self.take_off(result, "owner (signed, the kept key)")
         self.settle(2.0)
         ts = self.vehicle_timestamp()
         self.check(self.armed() and self.z is not None and self.z < -0.5 and ts is not None,

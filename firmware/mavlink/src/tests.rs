@@ -295,6 +295,18 @@ mod signing {
     /// timestamp 1000): `heartbeat_send(2, 12, 0x81, 0, 4)`.
     const VEHICLE_HEARTBEAT: &str = "fd09010007010100000000000000020c810403c7c600e80300000000982cf5b010eb";
 
+    /// pymavlink's `heartbeat_send(2, 12, 0x81, 0, 4)` (VEHICLE_HEARTBEAT's message).
+    fn vehicle_heartbeat() -> MavMessage {
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            base_mode: MavModeFlag::from_bits_truncate(0x81),
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        })
+    }
+
     fn read(reader: &mut MavReader, s: &mut Signing, frame: &[u8]) -> Option<Result<MavMessage, MavError>> {
         let mut last = None;
         for &b in frame {
@@ -384,14 +396,7 @@ mod signing {
         // pymavlink signs with its timestamp, then adds one; ours adds one,
         // then signs.
         let mut s = Signing::with_key(KEY, 999);
-        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
-            base_mode: MavModeFlag::from_bits_truncate(0x81),
-            system_status: MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        });
+        let hb = vehicle_heartbeat();
         let header = MavHeader {
             system_id: 1,
             component_id: 1,
@@ -419,14 +424,7 @@ mod signing {
             component_id: 1,
             sequence: 7,
         };
-        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
-            base_mode: MavModeFlag::from_bits_truncate(0x81),
-            system_status: MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        });
+        let hb = vehicle_heartbeat();
         let text = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
             severity: MavSeverity::MAV_SEVERITY_INFO,
             text: [b'a'; 50].into(),
