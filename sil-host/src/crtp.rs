@@ -230,7 +230,7 @@ struct Udp<'a> {
     socket: &'a UdpSocket,
     to: Option<SocketAddr>,
     sent: u64,
-    store: Option<fc_storage::Store<crate::storage::FileFlash>>,
+    store: Option<crate::storage::FileStore>,
 }
 
 impl CrtpSink for Udp<'_> {

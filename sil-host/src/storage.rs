@@ -4,10 +4,11 @@
 
 use anyhow::{Context, Result};
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-use fc_storage::{Boot, RamFlash, RamFlashError, Store};
+use fc_storage::{Boot, Journaled, RamFlash, RamFlashError, Store};
 use std::path::{Path, PathBuf};
 
-/// The file's size: 32 KiB of NOR flash (1 KiB pages, 32-bit words).
+/// The file's size: 32 KiB of NOR flash (1 KiB pages, 32-bit words), the
+/// last page the store's erase journal.
 pub const FILE_BYTES: usize = 32 * 1024;
 
 /// A NOR flash kept in a file: [`RamFlash`]'s rules, every write and erase
@@ -87,12 +88,25 @@ impl NorFlash for FileFlash {
     }
 }
 
+/// The settings store over a file: its last page is the store's erase
+/// journal ([`fc_storage::Journaled`]), the rest the store.
+pub type FileStore = Store<Journaled<FileFlash>>;
+
+/// The erase journal's page: the file's last.
+const JOURNAL: std::ops::Range<u32> = (FILE_BYTES - RamFlash::<FILE_BYTES>::PAGE) as u32..FILE_BYTES as u32;
+
 /// The settings store in `path` (made if missing), and what opening it
 /// found, said on stderr as `storage: FILE: …` (`who`: the command).
-pub fn open(path: &Path, who: &str) -> Result<(Store<FileFlash>, Boot)> {
+pub fn open(path: &Path, who: &str) -> Result<(FileStore, Boot)> {
     let flash = FileFlash::open(path)?;
-    let (store, boot) =
-        Store::open(flash, 0..FILE_BYTES as u32).map_err(|e| anyhow::anyhow!("--storage {}: {e}", path.display()))?;
-    eprintln!("{who}: storage {}: {boot}", path.display());
+    let fail = |e: &dyn std::fmt::Display| anyhow::anyhow!("--storage {}: {e}", path.display());
+    let (flash, finished) = Journaled::open(flash, JOURNAL).map_err(|e| fail(&e))?;
+    let (store, boot) = Store::open(flash, 0..JOURNAL.start).map_err(|e| fail(&e))?;
+    let finished = if finished {
+        "an erase a power cut left undone finished; "
+    } else {
+        ""
+    };
+    eprintln!("{who}: storage {}: {finished}{boot}", path.display());
     Ok((store, boot))
 }

@@ -8,7 +8,9 @@ use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
+mod journal;
 mod ram;
+pub use journal::{Journaled, JournaledError, JOURNAL_MARK};
 pub use ram::{RamFlash, RamFlashError};
 
 /// Largest record: a key (2 bytes) and the signing record (40), with the

@@ -16,7 +16,7 @@ pub(super) struct InProcess {
     pub(super) v: MavVehicle,
     pub(super) clock: hal_shim::host::MonotonicClock,
     pub(super) wall: Instant,
-    pub(super) store: Option<fc_storage::Store<crate::storage::FileFlash>>,
+    pub(super) store: Option<crate::storage::FileStore>,
 }
 
 pub(super) struct Collect<'a>(
