@@ -2,11 +2,11 @@
 //! search path as `board-memory.x` (cortex-m-rt's `link.x` includes the
 //! workspace's `memory.x`, which includes that):
 //!
-//! - `firmware-crazyflie`: flash from 0x08004000 (752 KiB), behind the
+//! - `firmware-crazyflie`: flash from 0x08004000 (624 KiB), behind the
 //!   Crazyflie bootloader's 16 KiB sector 0, as Bitcraze's own image is
 //!   linked, so `cfloader` (radio) and `dfu-util -s 0x08004000` flash it
-//!   and the bootloader stays; it ends below sectors 10–11, which keep the
-//!   settings (`fc_stm32f405::flash::STORAGE`);
+//!   and the bootloader stays; it ends below sectors 9–11, which keep the
+//!   settings and their erase journal (`fc_stm32f405::flash::STORAGE`);
 //!   (`fault-crazyflie`, the fault test's program, is linked the same way);
 //! - `boot-shim`: the 16 KiB at 0x08000000 (QEMU's stand-in for that bootloader).
 //!
@@ -15,10 +15,10 @@
 use std::{env, fs, path::PathBuf};
 
 const IMAGE: &str =
-    "/* Crazyflie 2.1 (STM32F405RG): sector 0 holds Bitcraze's bootloader, sectors 10-11 the settings. */
+    "/* Crazyflie 2.1 (STM32F405RG): sector 0 holds Bitcraze's bootloader, sectors 9-11 the settings. */
 MEMORY
 {
-  FLASH : ORIGIN = 0x08004000, LENGTH = 752K
+  FLASH : ORIGIN = 0x08004000, LENGTH = 624K
   RAM   : ORIGIN = 0x20000000, LENGTH = 128K
 }
 ";

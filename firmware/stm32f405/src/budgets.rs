@@ -22,7 +22,7 @@ pub const FIRMWARE_STATIC_RAM_BYTES: u32 = 22 * 1024;
 /// `firmware-mavlink`, flash: 392 KiB, the MAVLink dialect's messages
 /// included, with MAVLink signing (SHA-256 and the signing state) and the
 /// settings store that keeps the parameters and the key (≈ 22 KiB), well
-/// below the settings' own sectors 10–11 (from 768 KiB).
+/// below the settings' own sectors 9–11 (from 640 KiB).
 pub const MAVLINK_FLASH_BYTES: u32 = 392 * 1024;
 /// `firmware-mavlink`, static RAM: 22 KiB, as `firmware`'s, less the
 /// RTIC queues it does without, and the settings' 2 KiB RAM stand-in in
@@ -30,8 +30,8 @@ pub const MAVLINK_FLASH_BYTES: u32 = 392 * 1024;
 pub const MAVLINK_STATIC_RAM_BYTES: u32 = 22 * 1024;
 /// `firmware-crtp`, flash: 392 KiB, with cflib's persistent parameters
 /// (the settings store, `sequential-storage`'s map, ≈ 20 KiB of code),
-/// well below the settings' own sectors 10–11 (`flash::STORAGE`, from
-/// 768 KiB).
+/// well below the settings' own sectors 9–11 (`flash::STORAGE`, from
+/// 640 KiB).
 pub const CRTP_FLASH_BYTES: u32 = 392 * 1024;
 /// `firmware-crtp`, static RAM: 36 KiB (the CRTP TOCs, the planner and the
 /// syslink queues over `firmware`'s, 26 KiB, the settings' 2 KiB RAM
@@ -44,8 +44,8 @@ pub const CRAZYFLIE_FLASH_BYTES: u32 = 392 * 1024;
 /// `firmware-crazyflie` built for QEMU, static RAM: 36 KiB, as `firmware-crtp`'s.
 pub const CRAZYFLIE_STATIC_RAM_BYTES: u32 = 36 * 1024;
 /// `firmware-crazyflie` as flashed (its own sensors, defmt over RTT),
-/// flash: 408 KiB of the 752 KiB between Bitcraze's 16 KiB bootloader and
-/// the settings' sectors 10–11: the QEMU build's, its drivers, and the
+/// flash: 408 KiB of the 624 KiB between Bitcraze's 16 KiB bootloader and
+/// the settings' sectors 9–11: the QEMU build's, its drivers, and the
 /// flash driver that keeps the settings (the store's code built for it).
 pub const CRAZYFLIE_AS_FLASHED_FLASH_BYTES: u32 = 408 * 1024;
 /// `firmware-crazyflie` as flashed, static RAM: 36 KiB (RTT's buffers,

@@ -76,10 +76,19 @@ pub const SECTORS: [(u32, u32); 12] = [
     (0x080E_0000, 128 << 10),
 ];
 
-/// Where both boards keep their settings: sectors 10 and 11, the top
-/// 256 KiB (the images are linked below it; the Crazyflie's bootloader is
-/// sector 0 and its image starts at sector 1).
-pub const STORAGE: Range<u32> = 0x080C_0000..0x0810_0000;
+/// Where both boards keep their settings: sectors 9 to 11, the top
+/// 384 KiB (the images are linked below it; the Crazyflie's bootloader is
+/// sector 0 and its image starts at sector 1): sector 9 the store's erase
+/// journal ([`STORAGE_JOURNAL`]), sectors 10 and 11 the store
+/// ([`STORAGE_STORE`]).
+pub const STORAGE: Range<u32> = 0x080A_0000..0x0810_0000;
+
+/// The store's erase journal (`fc_storage::Journaled`), as offsets in
+/// [`STORAGE`]: sector 9.
+pub const STORAGE_JOURNAL: Range<u32> = 0..(128 << 10);
+
+/// The store, as offsets in [`STORAGE`]: sectors 10 and 11.
+pub const STORAGE_STORE: Range<u32> = (128 << 10)..(384 << 10);
 
 /// The Crazyflie 2.1's bootloader: sector 0, never erased.
 pub const CRAZYFLIE_BOOTLOADER: Range<u32> = 0x0800_0000..0x0800_4000;
@@ -97,7 +106,7 @@ pub type StandInStore = fc_storage::Store<fc_storage::RamFlash<STAND_IN_BYTES>>;
 pub const STAND_IN_NOTE: &str = "a 2 KiB RAM stand-in (QEMU models no flash controller): settings last until power-off";
 
 /// The boot log's words for the board's flash.
-pub const BOARD_NOTE: &str = "flash sectors 10-11 (written only while disarmed)";
+pub const BOARD_NOTE: &str = "flash sectors 10-11, their erase journal in sector 9 (written only while disarmed)";
 
 /// A settings store written only on the ground: a write while `armed`
 /// reads true is refused ([`fc_storage::StoreError::Armed`]), since
@@ -151,9 +160,28 @@ impl<S: fc_storage::Persist> fc_storage::Persist for Grounded<S> {
 /// linked (`memory.x`), the Crazyflie's bootloader included.
 pub const IMAGES: Range<u32> = 0x0800_0000..STORAGE.start;
 
-/// The settings store in the board's flash, sectors 10–11 (128 KiB each).
+/// The board's settings flash ([`STORAGE`], 128 KiB sectors) through the
+/// flash interface `R`, its erases journaled in [`STORAGE_JOURNAL`].
+pub type BoardFlash<R> = fc_storage::Journaled<F4Flash<R, { 128 << 10 }>>;
+
+/// The settings store in the board's flash, sectors 10–11, its erase
+/// journal in sector 9.
 #[cfg(target_os = "none")]
-pub type BoardStore = fc_storage::Store<F4Flash<Registers, { 128 << 10 }>>;
+pub type BoardStore = fc_storage::Store<BoardFlash<Registers>>;
+
+/// Opens the settings store over the flash interface `regs`
+/// ([`STORAGE_STORE`] of [`STORAGE`]), an erase a power cut left undone
+/// first finished from the journal ([`STORAGE_JOURNAL`]).
+pub fn open_store<R: FlashRegs>(
+    regs: R,
+) -> Result<(fc_storage::Store<BoardFlash<R>>, fc_storage::Boot), fc_storage::StoreError> {
+    let flash = F4Flash::new(regs, STORAGE, IMAGES).map_err(|_| fc_storage::StoreError::BadRange)?;
+    let (flash, _) = fc_storage::Journaled::open(flash, STORAGE_JOURNAL).map_err(|e| match e {
+        fc_storage::JournaledError::Journal => fc_storage::StoreError::BadRange,
+        fc_storage::JournaledError::Flash(_) => fc_storage::StoreError::Flash,
+    })?;
+    fc_storage::Store::open(flash, STORAGE_STORE)
+}
 
 /// What an image keeps its settings in: built for QEMU (the `qemu`
 /// feature) the RAM stand-in, for a board the flash; either written only
@@ -200,8 +228,7 @@ pub fn open_settings(armed: &'static core::sync::atomic::AtomicBool, widen: fn(b
 #[cfg(target_os = "none")]
 #[inline]
 pub fn open_board_store() -> Result<(BoardStore, fc_storage::Boot), fc_storage::StoreError> {
-    let flash = F4Flash::new(Registers, STORAGE, IMAGES).map_err(|_| fc_storage::StoreError::BadRange)?;
-    fc_storage::Store::open(flash, 0..STORAGE.end - STORAGE.start)
+    open_store(Registers)
 }
 
 /// Polls of `FLASH_SR` before a sector erase is given up: at ≥ 4 cycles a

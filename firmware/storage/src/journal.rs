@@ -132,7 +132,8 @@ impl<F: NorFlash> Journaled<F> {
     async fn renew(&mut self) -> Result<(), JournaledError<F::Error>> {
         let mut at = self.journal.start;
         while at < self.journal.end {
-            if self.word(at).await? != 0 {
+            // An erased word holds no event; a zero one is void already.
+            if !matches!(self.word(at).await?, 0 | ERASED) {
                 self.flash.write(at, &[0; 4]).await.map_err(JournaledError::Flash)?;
             }
             at += 4;
