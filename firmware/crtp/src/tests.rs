@@ -1072,7 +1072,26 @@ fn the_barometer_is_fused_as_its_change_from_the_first_reading() {
 /// A sink whose owner keeps parameters (the RAM stand-in store).
 struct Kept {
     sent: Sent,
-    store: fc_storage::Store<fc_storage::RamFlash<4096>>,
+    store: KeptStore,
+}
+
+/// The tests' settings store: 4 KiB of the RAM stand-in.
+type KeptStore = fc_storage::Store<fc_storage::RamFlash<4096>>;
+
+/// A [`Kept`] sink over a blank store.
+fn kept() -> Kept {
+    let (store, _) = fc_storage::Store::open(fc_storage::RamFlash::blank(), 0..4096).unwrap();
+    Kept {
+        sent: Sent::default(),
+        store,
+    }
+}
+
+/// The store `kept` leaves after a power-off (its flash's bytes are all
+/// that is left), opened again, and what opening it found.
+fn after_power_off(kept: Kept) -> (KeptStore, fc_storage::Boot) {
+    let bytes = *kept.store.into_flash().bytes();
+    fc_storage::Store::open(fc_storage::RamFlash::<4096>::holding(&bytes), 0..4096).unwrap()
 }
 
 impl CrtpSink for Kept {
@@ -1105,12 +1124,8 @@ impl Kept {
 /// `_GET_STATE`, `_CLEAR`), and a value stored surviving a reboot.
 #[test]
 fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
-    use fc_storage::{load_settings, RamFlash, Store};
-    let (store, _) = Store::open(RamFlash::blank(), 0..4096).unwrap();
-    let mut kept = Kept {
-        sent: Sent::default(),
-        store,
-    };
+    use fc_storage::load_settings;
+    let mut kept = kept();
     let mut v = at_rest(3000);
     let w_pos = (0..PARAM_COUNT)
         .find(|&i| param_entry(i).is_some_and(|(n, _, _)| n.is(b"mpc", b"W_POS")))
@@ -1152,9 +1167,7 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
     // Without storage: the store fails (EIO), the state is "not stored".
     let r = ask(&mut v, misc(3));
     assert_eq!(r.payload()[3..], [5]);
-    // Power off: the flash's bytes are all that is left.
-    let bytes = *kept.store.into_flash().bytes();
-    let (mut st, boot) = Store::open(RamFlash::<4096>::holding(&bytes), 0..4096).unwrap();
+    let (mut st, boot) = after_power_off(kept);
     assert_eq!(boot, fc_storage::Boot::Found);
     let loaded = load_settings(&mut st, Settings::os4()).unwrap();
     let mut v = CrtpVehicle::new(loaded.settings).unwrap();
@@ -1410,12 +1423,7 @@ fn led_bitmask_is_kept_and_read_back() {
 /// the write's check refuses stored under it is not.
 #[test]
 fn ring_effect_persists_as_cflib_stores_it() {
-    use fc_storage::{RamFlash, Store};
-    let (store, _) = Store::open(RamFlash::blank(), 0..4096).unwrap();
-    let mut kept = Kept {
-        sent: Sent::default(),
-        store,
-    };
+    let mut kept = kept();
     let mut v = at_rest(3000);
     let id = find(b"ring", b"effect");
     let (_, t, _) = param_entry(usize::from(id)).unwrap();
@@ -1444,9 +1452,7 @@ fn ring_effect_persists_as_cflib_stores_it() {
     let r = kept.ask(&mut v, pk(Port::Param, 3, &by_name));
     assert_ne!(r.payload().last(), Some(&0), "256 refused");
     assert_eq!(ask(&mut v, pk(Port::Param, 1, &b)).payload(), &[b[0], b[1], 0, 10]);
-    // Power off: the flash's bytes are all that is left.
-    let bytes = *kept.store.into_flash().bytes();
-    let (mut st, _) = Store::open(RamFlash::<4096>::holding(&bytes), 0..4096).unwrap();
+    let (mut st, _) = after_power_off(kept);
     let mut v = CrtpVehicle::new(Settings::os4()).unwrap();
     assert_eq!(v.load_stored(&mut st), Ok((1, 0)));
     assert_eq!(
