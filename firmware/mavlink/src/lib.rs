@@ -368,14 +368,16 @@ pub fn encode_signed(
     out: &mut [u8],
     signing: &mut Signing,
 ) -> Result<usize, MavError> {
+    // Until it may sign, only its HEARTBEAT goes, unsigned (it carries no
+    // timestamp), so that a ground station listening on UDP learns where
+    // the vehicle is; nothing else is encoded.
+    let held = !signing.may_sign();
+    if held && !matches!(msg, MavMessage::HEARTBEAT(_)) {
+        return Err(MavError::Unclocked);
+    }
     let n = encode(header, msg, out)?;
-    if !signing.may_sign() {
-        // Its HEARTBEAT goes unsigned (it carries no timestamp), so that a
-        // ground station listening on UDP learns where the vehicle is.
-        return match msg {
-            MavMessage::HEARTBEAT(_) => Ok(n),
-            _ => Err(MavError::Unclocked),
-        };
+    if held {
+        return Ok(n);
     }
     let extra = <MavMessage as Message>::extra_crc(msg.message_id());
     signing.sign(out, n, extra).ok_or(MavError::BufferTooSmall)
