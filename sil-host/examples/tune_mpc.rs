@@ -1,6 +1,6 @@
 //! Tuning aid: flies the fast MPC on the hardest cases with the preset
 //! changed by `KEY=VALUE` arguments (tau, q0..q11, r0..r3, s0..s3, pred, exec,
-//! yawlim, trend, trendmax, ratelp; lag = 1/0 the rotors' lag in the
+//! yawlim, poslim, trend, trendmax, ratelp; lag = 1/0 the rotors' lag in the
 //! prediction, moves = the prediction steps each move but the last spans;
 //! noise = scale of the typical sensor noise).
 //! `cargo run --release -p sil-host --example tune_mpc -- tau=0.1 q2=80`
@@ -22,6 +22,7 @@ fn main() {
             match k {
                 "noise" => noise = Some(SensorNoise::typical(v, 1).expect("noise scale")),
                 "yawlim" => c.max_heading_error_rad = v,
+                "poslim" => c.max_position_error_m = v,
                 "lag" => c.rotor_lag_prediction = v != 0.0,
                 "moves" => c.move_steps = v as usize,
                 "mtau" => c.observer_moment_tau_s = v,

@@ -385,6 +385,10 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         {
             return Err(ControlError::InvalidParameter);
         }
+        // A position cap is a distance (infinite: none).
+        if cfg.max_position_error_m.is_nan() || cfg.max_position_error_m <= 0.0 {
+            return Err(ControlError::InvalidParameter);
+        }
         // Every move but the last spans `move_steps` steps, and the last
         // at least one.
         if cfg.move_steps == 0 || (M - 1).saturating_mul(cfg.move_steps) >= N {

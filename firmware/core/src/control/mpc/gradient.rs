@@ -246,6 +246,16 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Mpc<T
         (r, du)
     }
 
+    /// The shift of the reference positions that brings the first within
+    /// [`MpcConfig::max_position_error_m`] of the vehicle, from its
+    /// position error `e1` (reference − vehicle, heading frame); `None`
+    /// when it is within.
+    pub(super) fn reference_shift(&self, e1: &Vector3<T>) -> Option<Vector3<T>> {
+        let lim = lit::<T>(self.cfg.max_position_error_m);
+        let d = e1.norm();
+        (d > lim).then(|| e1 * ((d - lim) / d))
+    }
+
     /// Setpoint `k` prediction steps ahead: the preview if complete, else the
     /// current setpoint extrapolated along its velocity, acceleration and jerk.
     pub(super) fn horizon_setpoint(&self, sp: &Setpoint<T>, k: usize) -> Setpoint<T> {

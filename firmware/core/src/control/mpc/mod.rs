@@ -134,6 +134,16 @@ pub struct MpcConfig {
     /// one horizon and destabilises a combined turn-and-translate. Capping the
     /// error turns at a bounded rate instead (π: no cap).
     pub max_heading_error_rad: f64,
+    /// Largest distance between the vehicle and the reference position
+    /// the prediction starts from, m (`f64::INFINITY`: no cap). A farther
+    /// reference is moved, whole horizon alike, towards the vehicle until
+    /// its first step is this far: the prediction is linear about hover,
+    /// and a target metres away asks for a tilt the linear model does not
+    /// hold (a 4.9 m target at −120° under the 0.178 s rotors of
+    /// `mismatch` saturated every torque from the first step and tumbled).
+    /// The reference's velocity and acceleration are kept, so a trajectory
+    /// is still followed, only from nearer.
+    pub max_position_error_m: f64,
     /// Stop each QP as soon as its accuracy is proved (`false`: run the
     /// a-priori bound every time, a fixed-time solve).
     pub qp_early_exit: bool,
@@ -179,6 +189,7 @@ impl MpcConfig {
             disturbance_rate_filter_s: 0.1,
             reference: ReferenceMode::Thesis,
             max_heading_error_rad: core::f64::consts::PI,
+            max_position_error_m: f64::INFINITY,
             qp_early_exit: true,
             qp_accuracy: 1e-6,
             qp_max_iterations: 2000,
@@ -258,6 +269,7 @@ impl MpcConfig {
             disturbance_rate_filter_s: 0.05,
             reference: ReferenceMode::Feedforward,
             max_heading_error_rad: 0.35,
+            max_position_error_m: f64::INFINITY,
             qp_early_exit: true,
             qp_accuracy: 1e-5,
             // With `qp_enumerate = false` (the iterative solver): no cap,
@@ -690,6 +702,19 @@ impl<T: RealField + Copy, const N: usize, const M: usize, const NZ: usize> Contr
                 g[4 * b + ch] -= self.r[ch] * du_ref[ch];
             }
         }
+        // The reference brought within `max_position_error_m` of the
+        // vehicle, by the shift its first step needs (no work without a
+        // cap).
+        if self.cfg.max_position_error_m.is_finite() {
+            let e1 = -(es[0].fixed_rows::<3>(0) + x0.fixed_rows::<3>(0));
+            if let Some(d) = self.reference_shift(&e1) {
+                for ek in es.iter_mut() {
+                    for i in 0..3 {
+                        ek[i] += d[i];
+                    }
+                }
+            }
+        }
         g += self.state_gradient(&es);
         for ch in 0..4 {
             g[ch] -= self.s[ch] * self.du_prev[ch];
@@ -866,6 +891,40 @@ mod tests {
             if let Err(e) = r {
                 assert_eq!(e, ControlError::InvalidParameter);
             }
+        }
+    }
+
+    /// A reference farther than [`MpcConfig::max_position_error_m`] is
+    /// flown as the one at that distance in its direction: from hover, a
+    /// target 5 m away (x and y) under a 1.5 m cap asks for the very input
+    /// an uncapped MPC asks for a target 1.5 m away; one nearer than the
+    /// cap is not moved; a cap of no distance (0, negative, NaN) is refused.
+    #[test]
+    fn a_far_reference_is_flown_as_one_at_the_cap() {
+        let p = VehicleParams::<f64>::os4();
+        let est = hover_at(-1.0);
+        let dir = Vector3::new(0.6, 0.8, 0.0);
+        let at = |d: f64| Setpoint::hold(est.pos_ned_m + dir * d, 0.0);
+        let mut capped_cfg = MpcConfig::fast(AttitudeForm::Euler);
+        capped_cfg.max_position_error_m = 1.5;
+        let first = |cfg: MpcConfig, sp: Setpoint<f64>| {
+            let mut mpc = MpcFast::<f64>::new(p, cfg).unwrap();
+            mpc.update(&est, &sp).unwrap().u
+        };
+        let free = MpcConfig::fast(AttitudeForm::Euler);
+        let (far, at_cap) = (first(capped_cfg, at(5.0)), first(free, at(1.5)));
+        assert!((far - at_cap).amax() < 1e-9, "{far} vs {at_cap}");
+        assert!((far - first(free, at(5.0))).amax() > 1e-3, "the cap changed nothing");
+        let (near, near_free) = (first(capped_cfg, at(1.0)), first(free, at(1.0)));
+        assert_eq!(near, near_free);
+        for bad in [0.0, -1.0, f64::NAN] {
+            let mut cfg = MpcConfig::fast(AttitudeForm::Euler);
+            cfg.max_position_error_m = bad;
+            assert_eq!(
+                MpcFast::<f64>::new(p, cfg).err(),
+                Some(ControlError::InvalidParameter),
+                "{bad}"
+            );
         }
     }
 
