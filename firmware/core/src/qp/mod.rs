@@ -391,8 +391,8 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
             return Self::invalid(lb, ub, z0);
         }
         if let (Some(blocks), true) = (&self.blocks, settings.enumerate) {
-            let z = blocks.solve(&self.h, g, lb, ub);
-            return self.exact(g, lb, ub, z);
+            let (z, dual) = blocks.solve(&self.h, g, lb, ub);
+            return self.exact(g, lb, ub, z, dual);
         }
         let eps = settings.accuracy;
         let bound = self.iteration_bound(lb, ub, eps);
@@ -536,12 +536,22 @@ impl<T: RealField + Copy, const N: usize> BoxQp<T, N> {
     }
 
     /// The answer of the enumeration, with its certificate: one pass, no
-    /// iterations to bound.
-    fn exact(&self, g: &SVector<T, N>, lb: &SVector<T, N>, ub: &SVector<T, N>, z: SVector<T, N>) -> QpSolution<T, N> {
+    /// iterations to bound. The certificate is the lesser of the
+    /// strong-convexity bound ([`BoxQp::certificate`]) and the blocks'
+    /// duality gap `dual` (both bound the same gap).
+    fn exact(
+        &self,
+        g: &SVector<T, N>,
+        lb: &SVector<T, N>,
+        ub: &SVector<T, N>,
+        z: SVector<T, N>,
+        dual: Option<T>,
+    ) -> QpSolution<T, N> {
         let grad = self.h * z + g;
+        let strong = self.certificate(&z, &grad, lb, ub);
         QpSolution {
             objective: z.dot(&(grad + g)) * lit::<T>(0.5),
-            gap: self.certificate(&z, &grad, lb, ub),
+            gap: dual.map_or(strong, |d| d.min(strong)),
             residual: Self::residual_at(&z, &grad, lb, ub),
             z,
             iterations: 1,

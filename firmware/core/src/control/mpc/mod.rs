@@ -109,8 +109,9 @@ pub struct MpcConfig {
     /// Move blocking: with the rotors in the prediction, two moves one
     /// 50 ms step apart behind a 178 ms lag are nearly one move to the
     /// prediction, and the QP's Hessian nearly singular in their direction
-    /// (the f32 certificate then fails to prove its accuracy); moves two
-    /// steps apart are not.
+    /// (the strong-convexity certificate alone then fails to prove its
+    /// accuracy; the blocks' duality gap proves it); moves two steps apart
+    /// are not.
     pub move_steps: usize,
     /// Damped-trend prediction of the horizontal disturbance force: its
     /// horizon `T`, s (`None`: the estimate is held constant over the
