@@ -276,7 +276,7 @@ for vehicle in crazyflie hummingbird; do
     done
 done
 # The fast MPC's circles held to the LQR's RMSE on the same vehicle, and its
-# circle and figure-8 in their steady part to SE3's, through its own
+# circle and figure-8, whole and steady, to SE3's, through its own
 # estimator and on rotorpy's true state (the controller alone, as SE3 flies:
 # --state truth). No wait for those flights: two fly at a time, so a flight
 # starts once the one two before it has ended, and each flight below reads
@@ -316,6 +316,12 @@ hil_start --vehicle crazyflie --controller mpc --no-preview $TRAJ8 --measure mpc
     --json target/rotorpy-hil-crazyflie-mpc-nopreview-traj8.json
 fi
 hil_wait
+if full; then
+# The fast MPC's step (flown first, through its estimator) held to SE3's,
+# flown after it: the whole window's RMSE and settling into 2 cm.
+python3 tools/beat.py target/rotorpy-hil-crazyflie-mpc.json target/rotorpy-hil-crazyflie-se3-step.json \
+    --windows whole | tee -a "$log"
+fi
 if full; then
 stage "flight logs: the rotorpy flight's ULog and a SIL flight's, read back with pyulog"
 # pyulog's ulog_info (its console script may not be on PATH; its main() is the same).

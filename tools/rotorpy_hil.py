@@ -236,8 +236,9 @@ def main():
     ap.add_argument("--max-whole", metavar="RMSE,WORST",
                     help="m: the whole window's RMSE and worst distance must not exceed these")
     ap.add_argument("--beat", metavar="JSON",
-                    help="another flight's summary (--json): this flight's RMSE over the steady window "
-                         "(a trajectory's: the whole) must not exceed that flight's")
+                    help="another flight's summary (--json): this flight's RMSE over each window both have "
+                         "(whole and steady) must not exceed that flight's, nor its step's settling time "
+                         "(tools/beat.py)")
     ap.add_argument("--state", choices=("estimate", "truth"), default="estimate",
                     help="what our controller flies: its estimator's state (the whole flight controller) "
                          "or rotorpy's true state, sent as ODOMETRY (the controller alone, as SE3 flies)")
@@ -521,18 +522,15 @@ def main():
             record(f"rotorpy_{a.measure}_{name}_effort", w["effort"], "fraction of the maximum rotor speed", src)
     ok = bool(np.all(np.isfinite(track)))
     if a.beat:
+        from beat import beat
         with open(a.beat) as f:
             other = json.load(f)
-        # A trajectory's whole window is the trajectory; a scenario's steady one its laps.
-        window = "whole" if pieces is not None else "steady"
-        theirs = other["rotorpy"]["windows"][window]["rmse_m"]
-        mine = r["windows"][window]["rmse_m"]
-        beats = mine <= theirs
-        ok = ok and beats
-        w = r["windows"][window]["window_s"]
-        print(f"rotorpy check: {int(beats)} passed, {int(not beats)} failed ({a.controller} "
-              f"{100 * mine:.2f} cm RMSE over {w[0]:g}-{w[1]:.0f} s against {other.get('controller', a.beat)}'s "
-              f"{100 * theirs:.2f} cm on the same vehicle and reference, rotorpy's truth)")
+        # A trajectory's whole window is the trajectory; a scenario's
+        # whole span and steady laps, a step's settling too.
+        windows = ("whole",) if pieces is not None else ("whole", "steady")
+        for beats, line in beat(r, other["rotorpy"], a.controller, other.get("controller", a.beat), windows):
+            ok = ok and beats
+            print(line)
     if a.max_whole:
         bound_rmse, bound_worst = (float(v) for v in a.max_whole.split(","))
         w = r["windows"]["whole"]

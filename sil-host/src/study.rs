@@ -506,10 +506,10 @@ stay near its undisturbed ones, so its disturbance was much smaller or had no co
 thesis' 6.9–8.5 s (the thesis' MPC had no reference preview and, in MATLAB, a soft output constraint). `fast` \
 re-solves at 1 kHz (every IMU sample) over a 1 s horizon with preview, feed-forward and a disturbance estimate: offset-free under \
 `wind` (the set-point ends within 2 cm while the gust still blows), and stable under `mismatch` and on the \
-robustness sweep's slowest rotors thanks to heavy roll/pitch-rate weights (600; 30 lost the sweep's worst corner, \
-docs/book/src/model.md §8.6). Its helix RMSE with `wind` is \
-within 15 % of the calm one: the 0.5 Hz, 0.2 N gust sits above the position loop's bandwidth, so feedback alone cannot \
-hold it off (a disturbance estimate held constant over the horizon left 1.46×); the estimate's rate is \
+robustness sweep's slowest rotors: the rotors' first-order lag (the vehicle's `rotor_tau_s`) is in its prediction, so \
+light roll/pitch-rate weights (1.8) keep its attitude loop damped (blind to its rotors it needed 600, \
+docs/book/src/mpc.md). The wind adds a few millimetres to its helix RMSE: the 0.5 Hz, 0.2 N gust sits above the \
+position loop's bandwidth, so feedback alone cannot hold it off; the estimate's rate is \
 extrapolated with a damped trend (T = 0.3 s), so the MPC anticipates where the gust is going rather than chasing it.
 - **The `thesis` MPC is unstable under `mismatch`.** It re-plans every 0.25 s and holds \
 each input for that long (zero-order hold), so the 0.178 s rotor lag and the 15 % heavier vehicle of `mismatch` \

@@ -29,8 +29,12 @@
 use crate::math::clamp;
 use nalgebra::{RealField, SMatrix, SVector};
 
-/// Largest block solved by enumeration (3⁴ = 81 active sets).
-pub const MAX_BLOCK: usize = 4;
+/// Largest block solved by enumeration (3³ = 27 active sets). The MPC's
+/// blocks are its moves per channel, three in the fast preset; a block of
+/// four (81 active sets) would cost three times the solve and about
+/// 3.5 KiB of flash for a size of its own, so it is left to the
+/// iterative solver.
+pub const MAX_BLOCK: usize = 3;
 
 /// The independent blocks of a Hessian, found once at design time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -122,7 +126,7 @@ impl<const N: usize> Blocks<N> {
 
     /// The exact minimiser of `½zᵀHz + gᵀz` over `lb ≤ z ≤ ub` (data checked
     /// finite with `lb ≤ ub` by the caller), inside the box, and its
-    /// duality gap (the sum of the blocks' [`dual_gap`]s; `None` when a
+    /// duality gap (the sum of the blocks' `dual_gap`s; `None` when a
     /// block's Hessian did not invert).
     pub fn solve<T: RealField + Copy>(
         &self,
@@ -153,7 +157,6 @@ impl<const N: usize> Blocks<N> {
             let (zb, gb) = match idx.len() {
                 1 => solve_block::<T, 1>(&hb, &gb),
                 2 => solve_block::<T, 2>(&hb, &gb),
-                3 => solve_block::<T, 3>(&hb, &gb),
                 _ => solve_block::<T, MAX_BLOCK>(&hb, &gb),
             };
             for (a, &i) in idx.iter().enumerate() {
@@ -208,9 +211,12 @@ fn solve_block<T: RealField + Copy, const K: usize>(
         let mut up = 0u8;
         loop {
             let c = candidate(&h, &g, &lo, &hi, &inv, free, up);
-            if change(&h, &best_grad, &best, &c) < T::zero() {
+            let (df, hd) = change(&h, &best_grad, &best, &c);
+            if df < T::zero() {
                 best = c;
-                best_grad = gradient(&h, &g, &best);
+                for i in 0..K {
+                    best_grad[i] += hd[i];
+                }
             }
             up = up.wrapping_sub(fixed) & fixed;
             if up == 0 {
@@ -367,21 +373,22 @@ fn gradient<T: RealField + Copy, const K: usize>(h: &[[T; K]; K], g: &[T; K], c:
 /// larger than itself (`gᵢcᵢ` against `½cᵢ(Hc)ᵢ`), and with a weakly
 /// curved block two candidates' objectives then differ by less than
 /// their own rounding, so the comparison picked a candidate far from the
-/// minimiser; the difference's rounding shrinks with `d`.
+/// minimiser; the difference's rounding shrinks with `d`. Also returns
+/// `Hd`, the gradient's change (`∇f(c) = ∇f(b) + Hd`).
 #[inline(always)]
-fn change<T: RealField + Copy, const K: usize>(h: &[[T; K]; K], grad: &[T; K], b: &[T; K], c: &[T; K]) -> T {
+fn change<T: RealField + Copy, const K: usize>(h: &[[T; K]; K], grad: &[T; K], b: &[T; K], c: &[T; K]) -> (T, [T; K]) {
     let half = T::one() / (T::one() + T::one());
     let mut d = [T::zero(); K];
     for i in 0..K {
         d[i] = c[i] - b[i];
     }
     let mut f = T::zero();
+    let mut hd = [T::zero(); K];
     for i in 0..K {
-        let mut hd = T::zero();
         for j in 0..K {
-            hd += h[i][j] * d[j];
+            hd[i] += h[i][j] * d[j];
         }
-        f += d[i] * (grad[i] + half * hd);
+        f += d[i] * (grad[i] + half * hd[i]);
     }
-    f
+    (f, hd)
 }

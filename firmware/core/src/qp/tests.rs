@@ -505,11 +505,11 @@ fn exact_solves_with_optima_on_the_bounds() {
 
 #[test]
 fn blocks_are_found_or_refused() {
-    // A dense 5×5 is one block larger than MAX_BLOCK: no enumeration.
-    assert!(BoxQp::new(&spd::<5>(1, 10.0)).unwrap().blocks().is_none());
-    // A dense 4×4 is one block of 4 (81 active sets).
-    let b = *BoxQp::new(&spd::<4>(1, 10.0)).unwrap().blocks().unwrap();
-    assert_eq!((b.count(), b.active_sets()), (1, 81));
+    // A dense 4×4 is one block larger than MAX_BLOCK: no enumeration.
+    assert!(BoxQp::new(&spd::<4>(1, 10.0)).unwrap().blocks().is_none());
+    // A dense 3×3 is one block of 3 (27 active sets).
+    let b = *BoxQp::new(&spd::<3>(1, 10.0)).unwrap().blocks().unwrap();
+    assert_eq!((b.count(), b.active_sets()), (1, 27));
     // Diagonal: N blocks of 1.
     let b = *BoxQp::new(&SMatrix::<f64, 6, 6>::identity()).unwrap().blocks().unwrap();
     assert_eq!((b.count(), b.active_sets()), (6, 18));
