@@ -154,7 +154,7 @@ impl<const N: usize> Blocks<N> {
                     hb[a][c] = h[(i, j as usize)];
                 }
             }
-            let (zb, gb) = match idx.len() {
+            let (zb, block_gap) = match idx.len() {
                 1 => solve_block::<T, 1>(&hb, &gb),
                 2 => solve_block::<T, 2>(&hb, &gb),
                 _ => solve_block::<T, MAX_BLOCK>(&hb, &gb),
@@ -162,7 +162,7 @@ impl<const N: usize> Blocks<N> {
             for (a, &i) in idx.iter().enumerate() {
                 z[i as usize] = zb[a];
             }
-            gap = match (gap, gb) {
+            gap = match (gap, block_gap) {
                 (Some(a), Some(b)) => Some(a + b),
                 _ => None,
             };
