@@ -18,7 +18,10 @@ use tinympc_rs::Solver;
 /// Our MPC over one episode of the shared regulation problem; its cost.
 fn ours_episode(mpc: &mut MpcFast<f32>, a: &SMatrix<f32, 12, 12>, b: &SMatrix<f32, 12, 4>) -> f64 {
     mpc.reset();
-    regulation::episode(a, b, |x| regulation::ours(mpc, black_box(x)).map(|(u, _)| u)).unwrap()
+    regulation::episode(&regulation::config(), a, b, |x| {
+        regulation::ours(mpc, black_box(x)).map(|(u, _)| u)
+    })
+    .unwrap()
 }
 
 fn bench(c: &mut Criterion) {
@@ -53,7 +56,7 @@ fn bench(c: &mut Criterion) {
         let mut iters = 0;
         let mut xc = [xbox.dyn_constraint()];
         let mut uc = [ubox.dyn_constraint()];
-        let cost = regulation::episode(&a, &b, |x| {
+        let cost = regulation::episode(&cfg, &a, &b, |x| {
             let sol = tiny.solve(black_box(*x), Some(&xref), None, Some(&mut xc), Some(&mut uc));
             iters += sol.iterations;
             Some(sol.u_now())

@@ -3,10 +3,12 @@
 //! chip's `peer` harness (`fc-stm32f405`, in QEMU) both fly this one
 //! definition, so "the same problem" is the same code.
 //!
-//! The OS4's Euler hover model, exact ZOH at 50 ms; the fast preset's Q and
-//! R with no input-rate cost (TinyMPC has none); the OS4's input box around
-//! hover; a 20-step horizon; [`STEPS`] closed-loop steps on the linear model
-//! from [`start`], no disturbance.
+//! The OS4's Euler hover model, exact ZOH at 50 ms; the benchmark's own Q
+//! ([`Weights::Benchmark`]) and the fast preset's R, with no input-rate cost
+//! (TinyMPC has none); the OS4's input box around hover; a 20-step horizon;
+//! [`STEPS`] closed-loop steps on the linear model from [`start`], no
+//! disturbance. Our MPC predicts with the plant's own model (no rotor lag:
+//! this linear plant has none).
 
 use super::{AttitudeForm, ControlError, Controller, MpcConfig, MpcFast, ReferenceMode, Setpoint, StateEstimate};
 use crate::model::{euler_hover_model, euler_to_quat, hover_input, zoh, VehicleParams};
@@ -40,11 +42,38 @@ pub fn start() -> State {
     x
 }
 
-/// The fast preset as a pure regulator: one closed-loop step per
-/// prediction step, no disturbance estimate, no input-rate cost, every QP
-/// solve certified (no iteration cap).
+/// The roll/pitch-rate weights (Q's p and q entries) of the problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Weights {
+    /// 600 on roll and pitch rate: the benchmark's own, fixed when it was
+    /// introduced (the fast preset's of then), so that the peer table
+    /// stays comparable while the flight preset is tuned.
+    Benchmark,
+    /// The fast flight preset's rate weights ([`MpcConfig::fast`], 1.8):
+    /// light, because the flight MPC predicts its rotors' lag.
+    Flight,
+}
+
+/// Roll/pitch-rate weight of [`Weights::Benchmark`].
+pub const BENCHMARK_RATE_WEIGHT: f64 = 600.0;
+
+/// The fast preset as a pure regulator of the linear plant, with the
+/// benchmark's rate weights ([`config_with`] of [`Weights::Benchmark`]).
 pub fn config() -> MpcConfig {
+    config_with(Weights::Benchmark)
+}
+
+/// The fast preset as a pure regulator of the linear plant: one
+/// closed-loop step per prediction step, the plant's model (no rotor lag),
+/// no disturbance estimate, no input-rate cost, every QP solve certified
+/// (no iteration cap); roll/pitch-rate weights as `w` says.
+pub fn config_with(w: Weights) -> MpcConfig {
     let mut c = MpcConfig::fast(AttitudeForm::Euler);
+    if w == Weights::Benchmark {
+        c.q[9] = BENCHMARK_RATE_WEIGHT;
+        c.q[10] = BENCHMARK_RATE_WEIGHT;
+    }
+    c.rotor_lag_prediction = false;
     c.exec_dt_s = c.pred_dt_s;
     c.observer_tau_s = None;
     c.disturbance_trend_s = None;
@@ -61,7 +90,7 @@ pub fn input_box() -> (Input, Input) {
     (bx.lo - uh, bx.hi - uh)
 }
 
-/// Stage cost `xᵀQx + uᵀRu` with the weights of `c` ([`config`]).
+/// Stage cost `xᵀQx + uᵀRu` with the weights of `c` ([`config_with`]).
 pub fn stage_cost(c: &MpcConfig, x: &State, u: &Input) -> f64 {
     let sq = |v: f32| (v as f64) * (v as f64);
     (0..12).map(|i| c.q[i] * sq(x[i])).sum::<f64>() + (0..4).map(|i| c.r[i] * sq(u[i])).sum::<f64>()
@@ -69,19 +98,20 @@ pub fn stage_cost(c: &MpcConfig, x: &State, u: &Input) -> f64 {
 
 /// One episode: [`STEPS`] closed-loop steps from [`start`] on the linear
 /// model, `solve(x)` giving each step's input (clamped into the box here);
-/// returns the closed-loop cost, or `None` when `solve` fails.
+/// returns the closed-loop cost with the weights of `c`, or `None` when
+/// `solve` fails.
 pub fn episode(
+    c: &MpcConfig,
     a: &SMatrix<f32, 12, 12>,
     b: &SMatrix<f32, 12, 4>,
     mut solve: impl FnMut(&State) -> Option<Input>,
 ) -> Option<f64> {
     let (lo, hi) = input_box();
-    let c = config();
     let mut x = start();
     let mut cost = 0.0;
     for _ in 0..STEPS {
         let u = solve(&x)?.zip_zip_map(&lo, &hi, |v, l, h| v.max(l).min(h));
-        cost += stage_cost(&c, &x, &u);
+        cost += stage_cost(c, &x, &u);
         x = a * x + b * u;
     }
     Some(cost)

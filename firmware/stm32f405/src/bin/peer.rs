@@ -4,10 +4,12 @@
 //! `-icount shift=0`), each in closed loop on the same linear model.
 //!
 //! The problem (as `sil-host/benches/mpc.rs` flies it on the host): the
-//! Euler hover model of the OS4, exact ZOH at 50 ms, the fast preset's Q and
-//! R (no input-rate cost: TinyMPC has none), the OS4's input box around
-//! hover, horizon 20 prediction steps, 60 closed-loop steps from a
-//! (1.5, −1, 0.8) m offset, no disturbance. Ours: 3 moves (12 QP variables),
+//! Euler hover model of the OS4, exact ZOH at 50 ms, the benchmark's Q and
+//! the fast preset's R (no input-rate cost: TinyMPC has none), the OS4's
+//! input box around hover, horizon 20 prediction steps, 60 closed-loop steps
+//! from a (1.5, −1, 0.8) m offset, no disturbance. A second pair of rows
+//! flies it with the flight preset's light rate weights
+//! ([`fc_core::control::regulation::Weights`]). Ours: 3 moves (12 QP variables),
 //! every solve exact (the four input channels' 3-variable blocks, every
 //! active set tried: [`fc_core::qp::Blocks`]).
 //! tinympc-rs: 19 free inputs (76 variables), primal and dual tolerance
@@ -31,7 +33,8 @@ use stm32f4 as _;
 mod target {
     use cortex_m_rt::entry;
     use cortex_m_semihosting::hprintln;
-    use fc_core::control::regulation::{self, HORIZON, STEPS};
+    use fc_core::control::regulation::{self, Weights, HORIZON, STEPS};
+    use fc_core::control::MpcConfig;
     use fc_core::control::{Controller, MpcFast};
     use fc_core::{hover_input, VehicleParams};
     use fc_stm32f405::SYSCLK_HZ;
@@ -70,12 +73,13 @@ mod target {
     /// input, the solver's iterations and the instructions its solve took
     /// (timed with [`measure`] around the solver call alone).
     fn timed(
+        cfg: &MpcConfig,
         a: &SMatrix<f32, 12, 12>,
         b: &SMatrix<f32, 12, 4>,
         mut solve: impl FnMut(&regulation::State) -> Option<(regulation::Input, usize, f32)>,
     ) -> Option<Run> {
         let (mut total, mut worst, mut its) = (0.0f32, 0.0f32, 0usize);
-        let cost = regulation::episode(a, b, |x| {
+        let cost = regulation::episode(cfg, a, b, |x| {
             let (u, n, ins) = solve(x)?;
             total += ins;
             worst = worst.max(ins);
@@ -90,12 +94,13 @@ mod target {
         })
     }
 
-    fn ours(a: &SMatrix<f32, 12, 12>, b: &SMatrix<f32, 12, 4>, clock: &SysTickClock) -> Option<Run> {
+    fn ours(w: Weights, a: &SMatrix<f32, 12, 12>, b: &SMatrix<f32, 12, 4>, clock: &SysTickClock) -> Option<Run> {
         let p = VehicleParams::<f32>::os4();
         let uh = hover_input(&p);
         let target = regulation::target();
-        let mut mpc = MpcFast::<f32>::new(p, regulation::config()).ok()?;
-        timed(a, b, |x| {
+        let cfg = regulation::config_with(w);
+        let mut mpc = MpcFast::<f32>::new(p, cfg).ok()?;
+        timed(&cfg, a, b, |x| {
             let est = regulation::estimate(x);
             let (out, ins) = measure(clock, || mpc.update(&est, &target));
             let out = out.ok()?;
@@ -106,8 +111,14 @@ mod target {
     /// The peer's solver and workspace, in static RAM (≈ 30 KiB).
     static mut TINY: Option<Tiny> = None;
 
-    fn tiny(a: &SMatrix<f32, 12, 12>, b: &SMatrix<f32, 12, 4>, clock: &SysTickClock, tol: f32) -> Option<Run> {
-        let cfg = regulation::config();
+    fn tiny(
+        w: Weights,
+        a: &SMatrix<f32, 12, 12>,
+        b: &SMatrix<f32, 12, 4>,
+        clock: &SysTickClock,
+        tol: f32,
+    ) -> Option<Run> {
+        let cfg = regulation::config_with(w);
         let (lo, hi) = regulation::input_box();
         let q = SMatrix::<f32, 12, 12>::from_diagonal(&SVector::from(cfg.q.map(|v| v as f32)));
         let r = SMatrix::<f32, 4, 4>::from_diagonal(&Vector4::from(cfg.r.map(|v| v as f32)));
@@ -127,7 +138,7 @@ mod target {
         let ubox = Fixed::new(UBox { lower: lo, upper: hi });
         let mut xc = [xbox.dyn_constraint()];
         let mut uc = [ubox.dyn_constraint()];
-        timed(a, b, |x| {
+        timed(&cfg, a, b, |x| {
             let (sol, ins) = measure(clock, || {
                 tiny.solve(*x, Some(&xref), None, Some(&mut xc), Some(&mut uc))
             });
@@ -143,11 +154,19 @@ mod target {
                 hprintln!("peer: hover regulation, {} closed-loop steps, instructions per MPC step under QEMU -icount shift=0", STEPS);
                 hprintln!("| solver | variables | iterations per step | mean instructions | worst instructions | closed-loop cost |");
                 hprintln!("|---|---|---|---|---|---|");
+                let bench = Weights::Benchmark;
+                let flight = Weights::Flight;
                 let rows = [
-                    ("ours (exact QP: 108 active sets)", 12, ours(&a, &b, &clock)),
-                    ("tinympc-rs 0.2 (ADMM, tol 1e-4)", 76, tiny(&a, &b, &clock, 1e-4)),
-                    ("tinympc-rs 0.2 (ADMM, tol 1e-5)", 76, tiny(&a, &b, &clock, 1e-5)),
-                    ("tinympc-rs 0.2 (ADMM, tol 1e-6)", 76, tiny(&a, &b, &clock, 1e-6)),
+                    ("ours (exact QP: 108 active sets)", 12, ours(bench, &a, &b, &clock)),
+                    ("tinympc-rs 0.2 (ADMM, tol 1e-4)", 76, tiny(bench, &a, &b, &clock, 1e-4)),
+                    ("tinympc-rs 0.2 (ADMM, tol 1e-5)", 76, tiny(bench, &a, &b, &clock, 1e-5)),
+                    ("tinympc-rs 0.2 (ADMM, tol 1e-6)", 76, tiny(bench, &a, &b, &clock, 1e-6)),
+                    ("flight rate weights: ours", 12, ours(flight, &a, &b, &clock)),
+                    (
+                        "flight rate weights: tinympc-rs 0.2 (tol 1e-4)",
+                        76,
+                        tiny(flight, &a, &b, &clock, 1e-4),
+                    ),
                 ];
                 let mut all = true;
                 for (name, vars, run) in rows.iter() {
