@@ -52,6 +52,7 @@ TOLERANCES = [
     (r"_pct", 0.0, 0.5, "a share of flights, shown to a tenth"),
     (r"_s$", 0.05, 0.01, "a flight's settling time; the last bit of the platform's libm moves it"),
     (r"_effort$", 0.10, 0.0005, "a flight's motor effort; the last bit of the platform's libm moves it"),
+    (r"_(peak|hover)_rotor$", 0.05, 0.005, "a flight's fastest rotor, or hover's speed; the last bit of the platform's libm moves it"),
     (r"_ratio$", 0.02, 0.0, "a ratio of two flights' errors, shown to a hundredth"),
     (r"_(deg|mps)$", 0.10, 0.005, "an estimator's RMS error; the last bit of the platform's libm moves it"),
     (r"^nees_mean$", 0.02, 0.0, "a mean over 50 seeded flights, shown to a tenth"),

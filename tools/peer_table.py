@@ -2,7 +2,8 @@
 """The peer table: our controllers (PD, LQR, the fast MPC) and rotorpy's SE3
 on rotorpy's vehicles and references, every figure from rotorpy's true
 state (`tools/rotorpy_hil.py`'s windows: RMSE, worst and final distance,
-settling, motor effort, over the whole span and its steady part).
+settling, motor effort, peak rotor speed, over the whole span and its
+steady part).
 
 Ours fly twice: through their own sensors and estimator (the whole flight
 controller, `--state estimate`) and on rotorpy's true state (the controller
@@ -92,7 +93,7 @@ def measure_name(controller, state, vehicle, ref):
 
 
 def header(ref):
-    cols = HEADER + (["settling s"] if ref == "step" else []) + ["effort"]
+    cols = HEADER + (["settling s"] if ref == "step" else []) + ["effort", "peak rotor"]
     return ["| controller | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
 
 
@@ -102,6 +103,7 @@ def cells(ref, get):
     if ref == "step":
         out.append(get(None, "settling_s"))
     out.append(get("whole", "effort"))
+    out.append(get("whole", "peak_rotor"))
     return out
 
 

@@ -91,14 +91,17 @@ class Reference:
         return [("whole", self.start_s, end_s), ("steady", self.start_s + settle, end_s)]
 
 
-def window_figures(ref, track, commands, hover_frac, end_s):
+def window_figures(ref, track, commands, hover_frac, end_s, rotors):
     """The peer table's figures of one flight, per window: RMSE, worst and
-    final 3-D distance to the reference (m), and the motor effort (RMS of
-    the commanded rotor speeds' departure from hover, as fractions of the
-    maximum, over the four rotors). `track` rows: t, north, east, down
-    (rotorpy's truth at each step); `commands`: the rotor speeds commanded
-    at each step, fractions of the maximum. A step adds its settling time:
-    from the step until the distance stays within 2 cm (2 % of its 1 m)."""
+    final 3-D distance to the reference (m), the motor effort (RMS of the
+    commanded rotor speeds' departure from hover, as fractions of the
+    maximum, over the four rotors) and the peak rotor speed (the fastest
+    of the four true rotor speeds, fraction of the maximum: 1 is
+    saturated). `track` rows: t, north, east, down (rotorpy's truth at each
+    step); `commands`: the rotor speeds commanded at each step, fractions
+    of the maximum; `rotors`: rotorpy's true rotor speeds at each step,
+    fractions of the maximum. A step adds its settling time: from the step
+    until the distance stays within 2 cm (2 % of its 1 m)."""
     t = track[:, 0]
     ref_pos = np.array([ref.at(ti)[0] for ti in t])
     dist = np.linalg.norm(track[:, 1:4] - ref_pos, axis=1)
@@ -114,6 +117,7 @@ def window_figures(ref, track, commands, hover_frac, end_s):
             "worst_m": float(dist[w].max()),
             "final_m": float(dist[w][-1]),
             "effort": float(np.sqrt(np.mean(eff**2))),
+            "peak_rotor": float(rotors[w].max()),
         }
     if ref.waypoints:
         t_step = ref.waypoints[-1][0]

@@ -360,13 +360,15 @@ def main():
         wn, we, wd = (float(v) for v in a.wind.split(","))
         wind = ConstantWind(we, wn, -wd)  # rotorpy's world frame is ENU
     zero = {"cmd_motor_speeds": np.zeros(4)}
-    track, commands = [], []
+    track, commands, rotors = [], [], []
+    omega_max = params_for(a.vehicle, "rotorpy")["rotor_speed_max"]
     steps = round(a.duration / a.dt)
     for k in range(steps):
         if wind is not None:
             state["wind"] = wind.update(k * a.dt, state["x"])
         state = vehicle.step(state, k * a.dt, a.dt) if peer else vehicle.step(state, zero, a.dt)
         commands.append(vehicle.commanded)
+        rotors.append(np.asarray(state["rotor_speeds"], dtype=float) / omega_max)
         x = np.asarray(state["x"], dtype=float)  # ENU
         track.append([k * a.dt, x[1], x[0], -x[2]])  # t, north, east, down
         if truth_sock is not None and k % 10 == 0:
@@ -494,7 +496,9 @@ def main():
             worst_m=float(dist.max()) if len(dist) else None, final_error_m=err, rows=len(dist))
     if reference is not None:
         q = params_for(a.vehicle, "rotorpy")
-        res["rotorpy"]["windows"] = window_figures(reference, track, np.array(commands), hover_fraction(q), end_s)
+        res["rotorpy"]["hover_rotor"] = hover_fraction(q)
+        res["rotorpy"]["windows"] = window_figures(reference, track, np.array(commands), hover_fraction(q), end_s,
+                                                     np.array(rotors))
     text = json.dumps(res, indent=2)
     print(text)
     if a.json:
@@ -512,6 +516,8 @@ def main():
         if res.get("max_estimate_error_m") is not None:
             record(f"rotorpy_{a.measure}_estimate_error_max_m", res["max_estimate_error_m"], "m", src)
         # The peer table's figures (tools/peer_table.py).
+        if "hover_rotor" in r:
+            record(f"rotorpy_{a.measure}_hover_rotor", r["hover_rotor"], "fraction of the maximum rotor speed", src)
         for name, w in r.get("windows", {}).items():
             if name == "settling_s":
                 if w is not None:
@@ -520,6 +526,8 @@ def main():
             for fig in ("rmse_m", "worst_m", "final_m"):
                 record(f"rotorpy_{a.measure}_{name}_{fig}", w[fig], "m", src)
             record(f"rotorpy_{a.measure}_{name}_effort", w["effort"], "fraction of the maximum rotor speed", src)
+            record(f"rotorpy_{a.measure}_{name}_peak_rotor", w["peak_rotor"], "fraction of the maximum rotor speed",
+                   src)
     ok = bool(np.all(np.isfinite(track)))
     if a.beat:
         from beat import beat

@@ -2,7 +2,8 @@
 //! changed by `KEY=VALUE` arguments (tau, q0..q11, r0..r3, s0..s3, pred, exec,
 //! yawlim, poslim, trend, trendmax, ratelp; lag = 1/0 the rotors' lag in the
 //! prediction, moves = the prediction steps each move but the last spans;
-//! noise = scale of the typical sensor noise).
+//! noise = scale of the typical sensor noise; thesis = 1 starts from the
+//! thesis preset instead of the fast one).
 //! `cargo run --release -p sil-host --example tune_mpc -- tau=0.1 q2=80`
 
 use fc_core::control::Family;
@@ -14,12 +15,18 @@ use sil_host::{DisturbanceSet, Scenario, ScenarioKind};
 fn main() {
     for model in AttitudeForm::ALL {
         let form = model;
-        let mut c = MpcConfig::fast(form);
+        let thesis = std::env::args().any(|a| a == "thesis=1");
+        let mut c = if thesis {
+            MpcConfig::thesis(form)
+        } else {
+            MpcConfig::fast(form)
+        };
         let mut noise = None;
         for arg in std::env::args().skip(1) {
             let (k, v) = arg.split_once('=').expect("KEY=VALUE");
             let v: f64 = v.parse().expect("number");
             match k {
+                "thesis" => {}
                 "noise" => noise = Some(SensorNoise::typical(v, 1).expect("noise scale")),
                 "yawlim" => c.max_heading_error_rad = v,
                 "poslim" => c.max_position_error_m = v,
@@ -58,6 +65,9 @@ fn main() {
             };
             let mut f = FlightConfig::new(Family::Mpc, model, sc);
             f.disturbance = d.parse::<DisturbanceSet>().unwrap();
+            if thesis {
+                f.spec.preset = fc_core::control::Preset::Thesis;
+            }
             f.mpc_override = Some(c);
             f.noise = noise;
             let r = fly(&f).unwrap();

@@ -442,3 +442,54 @@ fn a_far_target_is_approached_within_the_linear_models_reach() {
         );
     }
 }
+
+/// Why the thesis preset does not hold `mismatch` (issue 68): re-planning
+/// at 4 Hz, it holds only the rotors it predicts. On the helix under
+/// `wind,mismatch` (the plant with the OS4's 0.178 s rotor lag) it diverges
+/// blind to the lag, as the study shows, and holds with the lag in its
+/// prediction ([`fc_core::control::MpcConfig::rotor_lag_prediction`]);
+/// but with the lag in its prediction it diverges on the nominal plant,
+/// whose rotors deliver at once. A model error of 0.178 s is most of a
+/// 250 ms step, either way; the fast preset re-plans every 1 ms and holds
+/// both (`fast_mpc_tracks_the_helix_nearly_as_well_in_wind_as_in_calm`,
+/// `fast_mpc_flies_unlisted_cases_with_wind_and_mismatch`).
+/// "Fails": diverged, or ending more than 1 m from the reference.
+#[test]
+fn the_thesis_preset_holds_only_the_rotors_it_predicts() {
+    let helix = Scenario::default_for(ScenarioKind::Helix);
+    for m in MODELS {
+        let fly_thesis = |d: &str, lag: bool| {
+            let mut cfg = FlightConfig::new(Family::Mpc, m, helix);
+            cfg.spec.preset = Preset::Thesis;
+            let mut c = fc_core::control::MpcConfig::thesis(m);
+            c.rotor_lag_prediction = lag;
+            cfg.mpc_override = Some(c);
+            cfg.disturbance = d.parse().unwrap();
+            fly(&cfg).unwrap()
+        };
+        let fails = |r: &FlightResult| r.diverged || r.metrics.final_error_m > 1.0;
+        let verdict = |r: &FlightResult| if fails(r) { "fails" } else { "holds" };
+        let blind = fly_thesis("wind,mismatch", false);
+        let knows = fly_thesis("wind,mismatch", true);
+        let knows_nominal = fly_thesis("none", true);
+        let worst_axis = |r: &FlightResult| r.metrics.x.rmse_m.max(r.metrics.y.rmse_m).max(r.metrics.z.rmse_m);
+        eprintln!(
+            "{m:?}: thesis preset on the helix: wind,mismatch blind {} / knowing the lag {} (worst axis {:.4} m); \
+             nominal knowing the lag {}",
+            verdict(&blind),
+            verdict(&knows),
+            worst_axis(&knows),
+            verdict(&knows_nominal),
+        );
+        assert!(fails(&blind), "{m:?}: blind to the lag it held wind,mismatch");
+        assert!(!fails(&knows), "{m:?}: knowing the lag it failed wind,mismatch");
+        assert_eq!(knows.metrics.max_box_violation, 0.0, "{m:?}: input outside the box");
+        assert!(fails(&knows_nominal), "{m:?}: knowing a lag the plant lacks it held");
+        measure(
+            &format!("mpc_thesis_lag_wind_mismatch_helix_worst_axis_{}_m", m.name()),
+            worst_axis(&knows),
+            "m",
+            "mpc::the_thesis_preset_holds_only_the_rotors_it_predicts",
+        );
+    }
+}
