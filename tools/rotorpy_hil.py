@@ -361,7 +361,9 @@ def main():
         wind = ConstantWind(we, wn, -wd)  # rotorpy's world frame is ENU
     zero = {"cmd_motor_speeds": np.zeros(4)}
     track, commands, rotors = [], [], []
-    omega_max = params_for(a.vehicle, "rotorpy")["rotor_speed_max"]
+    # rotorpy's own parameters: the speeds the figures are fractions of.
+    rotorpy_q = params_for(a.vehicle, "rotorpy")
+    omega_max = rotorpy_q["rotor_speed_max"]
     steps = round(a.duration / a.dt)
     for k in range(steps):
         if wind is not None:
@@ -495,9 +497,9 @@ def main():
             window_s=[from_s, end_s], rmse_m=float(np.sqrt(np.mean(dist**2))) if len(dist) else None,
             worst_m=float(dist.max()) if len(dist) else None, final_error_m=err, rows=len(dist))
     if reference is not None:
-        q = params_for(a.vehicle, "rotorpy")
-        res["rotorpy"]["hover_rotor"] = hover_fraction(q)
-        res["rotorpy"]["windows"] = window_figures(reference, track, np.array(commands), hover_fraction(q), end_s,
+        hover = hover_fraction(rotorpy_q)
+        res["rotorpy"]["hover_rotor"] = hover
+        res["rotorpy"]["windows"] = window_figures(reference, track, np.array(commands), hover, end_s,
                                                      np.array(rotors))
     text = json.dumps(res, indent=2)
     print(text)

@@ -13,9 +13,9 @@ use sil_host::noise::SensorNoise;
 use sil_host::{DisturbanceSet, Scenario, ScenarioKind};
 
 fn main() {
+    let thesis = std::env::args().any(|a| a == "thesis=1");
     for model in AttitudeForm::ALL {
         let form = model;
-        let thesis = std::env::args().any(|a| a == "thesis=1");
         let mut c = if thesis {
             MpcConfig::thesis(form)
         } else {

@@ -282,12 +282,15 @@ fn every_controller_fits_its_cycle_budget() {
 fn ours_beats_tinympc_on_the_same_chip() {
     let (out, ok) = run_harness_in_qemu("peer");
     assert!(ok, "{out}");
-    // | solver | variables | iterations | mean | worst | cost |
-    let rows: Vec<Vec<&str>> = out
-        .lines()
-        .filter(|l| l.starts_with("| ours") || l.starts_with("| tinympc"))
-        .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
-        .collect();
+    // | solver | variables | iterations | mean | worst | cost |, the rows
+    // whose solver starts with one of `prefixes`.
+    let table = |prefixes: &[&str]| -> Vec<Vec<&str>> {
+        out.lines()
+            .filter(|l| prefixes.iter().any(|p| l.starts_with(&format!("| {p}"))))
+            .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
+            .collect()
+    };
+    let rows = table(&["ours", "tinympc"]);
     assert_eq!(rows.len(), 4, "{out}");
     let num = |r: &Vec<&str>, k: usize| -> f64 { r[k].parse().unwrap_or_else(|_| panic!("{r:?}")) };
     let (ours, tiny) = (&rows[0], &rows[1]);
@@ -322,11 +325,7 @@ fn ours_beats_tinympc_on_the_same_chip() {
     assert!(num(tiny, 4) >= f64::from(PEER_MIN_RATIO) * num(ours, 4), "worst: {out}");
     assert!(num(ours, 5) <= num(tiny, 5) * 1.001, "cost: {out}");
     // The flight preset's rate weights: ours, then tinympc-rs at 1e-4.
-    let light: Vec<Vec<&str>> = out
-        .lines()
-        .filter(|l| l.starts_with("| flight rate weights:"))
-        .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
-        .collect();
+    let light = table(&["flight rate weights:"]);
     assert_eq!(light.len(), 2, "{out}");
     let (lo, lt) = (&light[0], &light[1]);
     assert!(lo[0].ends_with("ours") && lt[0].contains("1e-4"), "{out}");
