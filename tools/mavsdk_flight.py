@@ -119,159 +119,164 @@ class Flight:
             self.check(abs(await param.get_param_float(name) - value) < 1e-3, f"{name} lengthened to {value}")
 
     async def run(self, url):
+        """Connects to the first autopilot on `url` (checked) as a ground
+        station and flies it (`fly`)."""
         cfg = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
         async with Mavsdk(cfg) as mavsdk:
             await mavsdk.add_any_connection(url)
             system = await mavsdk.first_autopilot(timeout_s=self.timeout)
-            if not self.check(system is not None, "an autopilot connects"):
-                return
-            self.check(await system.autopilot_type() == Autopilot.PX4, "it is a PX4 autopilot")
-            tel, action = TelemetryAsync(system), ActionAsync(system)
-            offboard, param = OffboardAsync(system), ParamAsync(system)
-            await self.pace(system, param)
+            if self.check(system is not None, "an autopilot connects"):
+                await self.fly(system)
 
-            async def healthy():
-                h = await tel.health()
-                return (h.is_local_position_ok and h.is_global_position_ok and h.is_home_position_ok
-                        and h.is_armable)
+    async def fly(self, system):
+        """Flies `system` (see the module's documentation)."""
+        self.check(await system.autopilot_type() == Autopilot.PX4, "it is a PX4 autopilot")
+        tel, action = TelemetryAsync(system), ActionAsync(system)
+        offboard, param = OffboardAsync(system), ParamAsync(system)
+        await self.pace(system, param)
 
-            await self.until(healthy, "health: local and global position, home, armable")
-            home = await tel.home()
-            pos = await tel.position()
-            self.check(abs(pos.relative_altitude_m) < 0.05 and abs(pos.latitude_deg - home.latitude_deg) < 1e-6
-                       and abs(pos.longitude_deg - home.longitude_deg) < 1e-6,
-                       f"position at home ({pos.latitude_deg:.7f}, {pos.longitude_deg:.7f}, "
-                       f"{pos.relative_altitude_m:.3f} m up), home {home.latitude_deg:.7f}, "
-                       f"{home.longitude_deg:.7f}")
-            att = await tel.attitude_euler()
-            self.check(abs(att.roll_deg) < 2 and abs(att.pitch_deg) < 2,
-                       f"attitude level (roll {att.roll_deg:.2f}, pitch {att.pitch_deg:.2f} deg)")
-            # The vehicle measures no battery and reports none (no modelled
-            # pack passed off as measured): no BATTERY_STATUS, and SYS_STATUS's
-            # voltage UINT16_MAX, MAVLink's "not sent". MAVSDK 4.1 reads that
-            # as 65.535 V (it does not test for UINT16_MAX), or has nothing.
-            try:
-                bat = await asyncio.wait_for(tel.battery(), 3.0)
-                none = math.isnan(bat.voltage_v) or abs(bat.voltage_v - 65.535) < 1e-3
-                said = f"{bat.voltage_v:.3f} V, {bat.remaining_percent} %"
-            except TimeoutError:
-                none, said = True, "nothing in 3 s"
-            self.check(none, f"no battery reported: MAVLink's 'not sent' ({said})")
-            mode = await tel.flight_mode()
-            self.check(mode == FlightMode.POSCTL, f"flight mode {mode} (Position)")
-            landed = await tel.landed_state()
-            self.check(landed == LandedState.ON_GROUND and not await tel.armed(),
-                       f"landed state {landed}, disarmed")
+        async def healthy():
+            h = await tel.health()
+            return (h.is_local_position_ok and h.is_global_position_ok and h.is_home_position_ok
+                    and h.is_armable)
 
-            mass = await param.get_param_float("VEH_MASS")
-            self.check(mass > 0, f"param VEH_MASS = {mass}")
-            await param.set_param_float("MPC_XY_CRUISE", 1.0)
-            self.check(await param.get_param_float("MPC_XY_CRUISE") == 1.0, "param MPC_XY_CRUISE set and read back")
-            await action.set_takeoff_altitude(1.5)
-            self.check(await action.get_takeoff_altitude() == 1.5, "takeoff altitude 1.5 m (MIS_TAKEOFF_ALT)")
+        await self.until(healthy, "health: local and global position, home, armable")
+        home = await tel.home()
+        pos = await tel.position()
+        self.check(abs(pos.relative_altitude_m) < 0.05 and abs(pos.latitude_deg - home.latitude_deg) < 1e-6
+                   and abs(pos.longitude_deg - home.longitude_deg) < 1e-6,
+                   f"position at home ({pos.latitude_deg:.7f}, {pos.longitude_deg:.7f}, "
+                   f"{pos.relative_altitude_m:.3f} m up), home {home.latitude_deg:.7f}, "
+                   f"{home.longitude_deg:.7f}")
+        att = await tel.attitude_euler()
+        self.check(abs(att.roll_deg) < 2 and abs(att.pitch_deg) < 2,
+                   f"attitude level (roll {att.roll_deg:.2f}, pitch {att.pitch_deg:.2f} deg)")
+        # The vehicle measures no battery and reports none (no modelled
+        # pack passed off as measured): no BATTERY_STATUS, and SYS_STATUS's
+        # voltage UINT16_MAX, MAVLink's "not sent". MAVSDK 4.1 reads that
+        # as 65.535 V (it does not test for UINT16_MAX), or has nothing.
+        try:
+            bat = await asyncio.wait_for(tel.battery(), 3.0)
+            none = math.isnan(bat.voltage_v) or abs(bat.voltage_v - 65.535) < 1e-3
+            said = f"{bat.voltage_v:.3f} V, {bat.remaining_percent} %"
+        except TimeoutError:
+            none, said = True, "nothing in 3 s"
+        self.check(none, f"no battery reported: MAVLink's 'not sent' ({said})")
+        mode = await tel.flight_mode()
+        self.check(mode == FlightMode.POSCTL, f"flight mode {mode} (Position)")
+        landed = await tel.landed_state()
+        self.check(landed == LandedState.ON_GROUND and not await tel.armed(),
+                   f"landed state {landed}, disarmed")
 
-            await action.arm()
-            await self.until(tel.armed, "armed")
+        mass = await param.get_param_float("VEH_MASS")
+        self.check(mass > 0, f"param VEH_MASS = {mass}")
+        await param.set_param_float("MPC_XY_CRUISE", 1.0)
+        self.check(await param.get_param_float("MPC_XY_CRUISE") == 1.0, "param MPC_XY_CRUISE set and read back")
+        await action.set_takeoff_altitude(1.5)
+        self.check(await action.get_takeoff_altitude() == 1.5, "takeoff altitude 1.5 m (MIS_TAKEOFF_ALT)")
 
-            async def mode_is(m):
-                return await tel.flight_mode() == m
+        await action.arm()
+        await self.until(tel.armed, "armed")
 
-            await action.takeoff()
-            await self.until(lambda: mode_is(FlightMode.HOLD), "takeoff, then Hold")
-            await self.settle_at([0.0, 0.0, -1.5], 0.05, 1.0, "rotorpy within 5 cm of 1.5 m up (1 s)")
-            self.check(await tel.landed_state() == LandedState.IN_AIR, "landed state IN_AIR")
+        async def mode_is(m):
+            return await tel.flight_mode() == m
 
-            # The joystick, streamed at 20 Hz as MAVSDK's examples do.
-            manual = ManualControlAsync(system)
-            stick = [0.0, 0.0, 0.5, 0.0]
-            streaming = True
+        await action.takeoff()
+        await self.until(lambda: mode_is(FlightMode.HOLD), "takeoff, then Hold")
+        await self.settle_at([0.0, 0.0, -1.5], 0.05, 1.0, "rotorpy within 5 cm of 1.5 m up (1 s)")
+        self.check(await tel.landed_state() == LandedState.IN_AIR, "landed state IN_AIR")
 
-            async def stream():
-                while streaming:
-                    await manual.set_manual_control_input(*stick)
-                    await asyncio.sleep(0.05)
+        # The joystick, streamed at 20 Hz as MAVSDK's examples do.
+        manual = ManualControlAsync(system)
+        stick = [0.0, 0.0, 0.5, 0.0]
+        streaming = True
 
-            task = asyncio.create_task(stream())
-            await asyncio.sleep(0.5)
-            await manual.start_position_control()
-            await self.until(lambda: mode_is(FlightMode.POSCTL), "joystick: Position mode")
-            self.truth.poll()
-            start = list(self.truth.pos)
-            yaw = math.radians((await tel.attitude_euler()).yaw_deg)
-            ahead = (math.cos(yaw), math.sin(yaw))  # forward, NED
-            stick[0] = 0.6  # forward: (0.6 - 0.05) / 0.95 of MPC_VEL_MANUAL, 0.58 m/s
-            low = [start[2]]
+        async def stream():
+            while streaming:
+                await manual.set_manual_control_input(*stick)
+                await asyncio.sleep(0.05)
 
-            def along():
-                d = (self.truth.pos[0] - start[0], self.truth.pos[1] - start[1])
-                return d[0] * ahead[0] + d[1] * ahead[1], d[1] * ahead[0] - d[0] * ahead[1]
+        task = asyncio.create_task(stream())
+        await asyncio.sleep(0.5)
+        await manual.start_position_control()
+        await self.until(lambda: mode_is(FlightMode.POSCTL), "joystick: Position mode")
+        self.truth.poll()
+        start = list(self.truth.pos)
+        yaw = math.radians((await tel.attitude_euler()).yaw_deg)
+        ahead = (math.cos(yaw), math.sin(yaw))  # forward, NED
+        stick[0] = 0.6  # forward: (0.6 - 0.05) / 0.95 of MPC_VEL_MANUAL, 0.58 m/s
+        low = [start[2]]
 
-            async def moved():
-                low.append(self.truth.pos[2])
-                return along()[0] >= 0.8
+        def along():
+            d = (self.truth.pos[0] - start[0], self.truth.pos[1] - start[1])
+            return d[0] * ahead[0] + d[1] * ahead[1], d[1] * ahead[0] - d[0] * ahead[1]
 
-            await self.until(moved, f"joystick forward: rotorpy 0.8 m along its heading ({math.degrees(yaw):.0f} deg)")
-            stick[0] = 0.0
-            cross = abs(along()[1])
-            dz = max(abs(z - start[2]) for z in low)
-            self.check(cross < 0.1 and dz < 0.1, f"on its track and height: {100 * cross:.1f} cm across, "
-                       f"{100 * dz:.1f} cm up or down (10 cm)")
+        async def moved():
+            low.append(self.truth.pos[2])
+            return along()[0] >= 0.8
 
-            await offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.5, 0.0))
-            await offboard.start()
-            await self.until(lambda: mode_is(FlightMode.OFFBOARD), "offboard started")
-            # The joystick goes quiet only once Offboard flies (its loss in
-            # Position mode would land).
-            streaming = False
-            await task
-            await offboard.set_position_ned(PositionNedYaw(2.0, 0.0, -1.5, 0.0))
-            await self.settle_at([2.0, 0.0, -1.5], 0.05, 1.0, "offboard: rotorpy within 5 cm of 2 m north (1 s)")
-            await offboard.stop()
-            await self.until(lambda: mode_is(FlightMode.HOLD), "offboard stopped: Hold")
+        await self.until(moved, f"joystick forward: rotorpy 0.8 m along its heading ({math.degrees(yaw):.0f} deg)")
+        stick[0] = 0.0
+        cross = abs(along()[1])
+        dz = max(abs(z - start[2]) for z in low)
+        self.check(cross < 0.1 and dz < 0.1, f"on its track and height: {100 * cross:.1f} cm across, "
+                   f"{100 * dz:.1f} cm up or down (10 cm)")
 
-            # The mission: a 2 m square's corners and its centre, 1.5 m up,
-            # as WGS-84 about home (the flight controller's flat earth,
-            # WGS-84's equatorial radius).
-            mission = MissionAsync(system)
-            r = 6378137.0
-            lat0, lon0 = home.latitude_deg, home.longitude_deg
-            corners = [(2.0, 2.0), (0.0, 2.0), (0.0, 0.0), (1.0, 1.0)]
-            items = [MissionItem(latitude_deg=lat0 + math.degrees(n / r),
-                                 longitude_deg=lon0 + math.degrees(e / (r * math.cos(math.radians(lat0)))),
-                                 relative_altitude_m=1.5, loiter_time_s=1.0, acceptance_radius_m=0.05)
-                     for n, e in corners]
-            await mission.upload_mission(MissionPlan(items))
-            back = await mission.download_mission()
-            self.check(len(back.mission_items) == 4 and all(
-                abs(a.latitude_deg - b.latitude_deg) < 1e-7 and abs(a.relative_altitude_m - 1.5) < 1e-3
-                for a, b in zip(back.mission_items, items)), "mission uploaded, downloaded back the same")
-            since = len(self.truth.track)
-            await mission.start_mission()
-            await self.until(lambda: mode_is(FlightMode.MISSION), "mission started")
-            seen = set()
+        await offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.5, 0.0))
+        await offboard.start()
+        await self.until(lambda: mode_is(FlightMode.OFFBOARD), "offboard started")
+        # The joystick goes quiet only once Offboard flies (its loss in
+        # Position mode would land).
+        streaming = False
+        await task
+        await offboard.set_position_ned(PositionNedYaw(2.0, 0.0, -1.5, 0.0))
+        await self.settle_at([2.0, 0.0, -1.5], 0.05, 1.0, "offboard: rotorpy within 5 cm of 2 m north (1 s)")
+        await offboard.stop()
+        await self.until(lambda: mode_is(FlightMode.HOLD), "offboard stopped: Hold")
 
-            async def finished():
-                p = await mission.mission_progress()
-                seen.add(p.current)
-                return await mission.is_mission_finished()
+        # The mission: a 2 m square's corners and its centre, 1.5 m up,
+        # as WGS-84 about home (the flight controller's flat earth,
+        # WGS-84's equatorial radius).
+        mission = MissionAsync(system)
+        r = 6378137.0
+        lat0, lon0 = home.latitude_deg, home.longitude_deg
+        corners = [(2.0, 2.0), (0.0, 2.0), (0.0, 0.0), (1.0, 1.0)]
+        items = [MissionItem(latitude_deg=lat0 + math.degrees(n / r),
+                             longitude_deg=lon0 + math.degrees(e / (r * math.cos(math.radians(lat0)))),
+                             relative_altitude_m=1.5, loiter_time_s=1.0, acceptance_radius_m=0.05)
+                 for n, e in corners]
+        await mission.upload_mission(MissionPlan(items))
+        back = await mission.download_mission()
+        self.check(len(back.mission_items) == 4 and all(
+            abs(a.latitude_deg - b.latitude_deg) < 1e-7 and abs(a.relative_altitude_m - 1.5) < 1e-3
+            for a, b in zip(back.mission_items, items)), "mission uploaded, downloaded back the same")
+        since = len(self.truth.track)
+        await mission.start_mission()
+        await self.until(lambda: mode_is(FlightMode.MISSION), "mission started")
+        seen = set()
 
-            await self.until(finished, "mission finished", timeout=3 * self.timeout)
+        async def finished():
             p = await mission.mission_progress()
-            self.check(p.total == 4 and p.current == 4 and {1, 2, 3} <= seen,
-                       f"mission progress went through {sorted(seen)} to {p.current} of {p.total}")
-            for k, (n, e) in enumerate(corners):
-                d = self.truth.closest([n, e, -1.5], since)
-                self.check(d <= 0.05, f"waypoint {k + 1} ({n}, {e}, 1.5 m up): rotorpy within {100 * d:.1f} cm (5 cm)")
+            seen.add(p.current)
+            return await mission.is_mission_finished()
 
-            await action.return_to_launch()
-            await self.until(lambda: mode_is(FlightMode.RETURN_TO_LAUNCH), "return to launch")
+        await self.until(finished, "mission finished", timeout=3 * self.timeout)
+        p = await mission.mission_progress()
+        self.check(p.total == 4 and p.current == 4 and {1, 2, 3} <= seen,
+                   f"mission progress went through {sorted(seen)} to {p.current} of {p.total}")
+        for k, (n, e) in enumerate(corners):
+            d = self.truth.closest([n, e, -1.5], since)
+            self.check(d <= 0.05, f"waypoint {k + 1} ({n}, {e}, 1.5 m up): rotorpy within {100 * d:.1f} cm (5 cm)")
 
-            async def down():
-                return await tel.landed_state() == LandedState.ON_GROUND and not await tel.armed()
+        await action.return_to_launch()
+        await self.until(lambda: mode_is(FlightMode.RETURN_TO_LAUNCH), "return to launch")
 
-            await self.until(down, "landed and disarmed", timeout=3 * self.timeout)
-            d = self.truth.dist([0.0, 0.0, 0.0])
-            self.check(d <= 0.2, f"rotorpy landed {d:.3f} m from home (20 cm)")
+        async def down():
+            return await tel.landed_state() == LandedState.ON_GROUND and not await tel.armed()
+
+        await self.until(down, "landed and disarmed", timeout=3 * self.timeout)
+        d = self.truth.dist([0.0, 0.0, 0.0])
+        self.check(d <= 0.2, f"rotorpy landed {d:.3f} m from home (20 cm)")
 
 
 def main():

@@ -271,6 +271,9 @@ def main():
     ap.add_argument("--mavsdk", action="store_true",
                     help="like --gcs, with tools/mavsdk_flight.py (MAVSDK, PyPI) as the ground station; "
                          "rotorpy's position is sent to it on UDP --truth-port")
+    ap.add_argument("--mavsdk-failure", metavar="TABLE",
+                    help="like --mavsdk, with tools/mavsdk_failure.py (MAVSDK's Failure plugin) injecting sensor "
+                         "faults in flight; the faults' rows to TABLE (JSON)")
     ap.add_argument("--mavproxy", action="store_true",
                     help="like --mavsdk, with tools/mavproxy_session.py (MAVProxy, PyPI) as the ground station")
     ap.add_argument("--truth-port", type=int, default=14560)
@@ -287,18 +290,23 @@ def main():
            "--vehicle", VEHICLES[a.vehicle][1], "--airframe", LAYOUTS[a.layout][0],
            "--hub-m", str(VEHICLES[a.vehicle][0]["rotor_pos"]["r1"][0] * 2 ** 0.5),
            "--motor-unit", "speed", "--duration", str(a.duration + 1.0), "--target", a.target]
-    if (bool(a.waypoint) + bool(a.scenario) + bool(a.trajectory) + a.gcs + a.signing + a.mavsdk + a.mavproxy) != 1:
-        ap.error("give --waypoint(s), --scenario, --trajectory, --gcs, --signing, --mavsdk or --mavproxy")
+    if (bool(a.waypoint) + bool(a.scenario) + bool(a.trajectory) + a.gcs + a.signing + a.mavsdk + a.mavproxy
+            + bool(a.mavsdk_failure)) != 1:
+        ap.error("give --waypoint(s), --scenario, --trajectory, --gcs, --signing, --mavsdk, --mavsdk-failure "
+                 "or --mavproxy")
     gcs = None
     truth_sock = None
     here = os.path.dirname(__file__)
-    if a.gcs or a.signing or a.mavsdk or a.mavproxy:
+    if a.gcs or a.signing or a.mavsdk or a.mavproxy or a.mavsdk_failure:
         # The ground station listens first, as QGroundControl does.
-        if a.mavsdk or a.mavproxy:
+        if a.mavsdk or a.mavproxy or a.mavsdk_failure:
             # MAVSDK's URL and MAVProxy's (pymavlink's) spell UDP differently.
             name, url = (("mavsdk_flight.py", f"udpin://127.0.0.1:{a.gcs_port}") if a.mavsdk
+                         else ("mavsdk_failure.py", f"udpin://127.0.0.1:{a.gcs_port}") if a.mavsdk_failure
                          else ("mavproxy_session.py", f"udpin:127.0.0.1:{a.gcs_port}"))
             script = [os.path.join(here, name), "--url", url, "--truth-port", str(a.truth_port)]
+            if a.mavsdk_failure:
+                script += ["--table", a.mavsdk_failure]
             if a.target == "qemu":
                 # The image in QEMU flies about 5x slower than real time.
                 script += ["--timeout", "180"]
@@ -408,7 +416,8 @@ def main():
             gcs.kill()
         gcs_out, _ = gcs.communicate(timeout=60)
         sys.stderr.write(gcs_out)
-        prefix = ("mavsdk check:" if a.mavsdk else "mavproxy check:" if a.mavproxy
+        prefix = ("mavsdk check:" if a.mavsdk else "fault check:" if a.mavsdk_failure
+                  else "mavproxy check:" if a.mavproxy
                   else "signing check:" if a.signing else "gcs check:")
         line = [ln for ln in gcs_out.splitlines() if ln.startswith(prefix)]
         res["gcs"] = line[-1] if line else f"{prefix} 0 passed, 1 failed (the ground station did not finish)"

@@ -11,6 +11,48 @@
 
 use fc_core::control::StateEstimate;
 
+/// Below this fraction of hover thrust, a landing vehicle is pressing on
+/// the ground (PX4's land detector's low-thrust test): no descent flies
+/// on so little.
+pub const GROUND_THRUST: f32 = 0.3;
+
+/// That long below [`GROUND_THRUST`], a landing vehicle is on the ground
+/// whatever its estimate says (a vehicle without a height reference, whose
+/// dead-reckoned height drifts), µs.
+pub const GROUND_CONTACT_US: u64 = 1_000_000;
+
+/// Ground contact by thrust (see [`GROUND_THRUST`]): a landing vehicle
+/// whose collective thrust has stayed below it for [`GROUND_CONTACT_US`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct GroundContact {
+    since_us: Option<u64>,
+}
+
+impl GroundContact {
+    /// No contact yet.
+    pub const fn new() -> Self {
+        Self { since_us: None }
+    }
+
+    /// A landing step at `t_us` with collective thrust `thrust_n` (hover:
+    /// `hover_n`), N: whether it has pressed on the ground long enough. A
+    /// NaN thrust is no contact.
+    pub fn step(&mut self, t_us: u64, thrust_n: f32, hover_n: f32) -> bool {
+        if thrust_n < GROUND_THRUST * hover_n {
+            let since = *self.since_us.get_or_insert(t_us);
+            t_us.saturating_sub(since) >= GROUND_CONTACT_US
+        } else {
+            self.since_us = None;
+            false
+        }
+    }
+
+    /// Not landing: forgotten.
+    pub fn reset(&mut self) {
+        self.since_us = None;
+    }
+}
+
 /// Within this height of the ground it comes down to, a landing vehicle is
 /// on it, m.
 pub const LANDED_M: f32 = 0.05;
@@ -58,6 +100,24 @@ mod tests {
         assert!(!on_ground(&at(-0.01, -0.3), 0.0));
         // On another ground than the one it comes down to.
         assert!(!on_ground(&at(0.0, 0.0), -0.5));
+    }
+
+    #[test]
+    fn a_second_of_low_thrust_is_ground_contact_and_a_descent_is_not() {
+        let mut g = GroundContact::new();
+        // A descent at hover thrust, then touching down.
+        for k in 0..5_000u64 {
+            assert!(!g.step(k * 1000, 0.9, 1.0));
+        }
+        for k in 0..1_000u64 {
+            assert!(!g.step(5_000_000 + k * 1000, 0.29, 1.0), "{k}");
+        }
+        assert!(g.step(6_000_000, 0.0, 1.0));
+        // One step of thrust starts it again.
+        assert!(!g.step(6_001_000, 0.5, 1.0));
+        assert!(!g.step(6_002_000, 0.1, 1.0));
+        assert!(!g.step(6_003_000, f32::NAN, 1.0));
+        assert!(!g.step(7_003_000, 0.1, 1.0));
     }
 
     #[test]

@@ -33,6 +33,7 @@ pub mod arming;
 pub mod baro;
 pub mod client;
 pub mod commander;
+pub mod health;
 pub mod land;
 pub mod modes;
 pub mod nav;

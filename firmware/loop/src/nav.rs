@@ -279,6 +279,11 @@ impl Navigator {
         }
     }
 
+    /// The settings.
+    pub fn config(&self) -> &NavConfig {
+        &self.cfg
+    }
+
     /// The mode of the last step.
     pub fn mode(&self) -> NavMode {
         self.mode

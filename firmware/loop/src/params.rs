@@ -217,7 +217,7 @@ fn pwm(s: &Settings) -> (u16, u16) {
 }
 
 /// Every parameter, in `param_index` order.
-pub const PARAMS: [Param; 63] = [
+pub const PARAMS: [Param; 64] = [
     real!("VEH_MASS", "mass, kg", true, vehicle.mass_kg),
     real!(
         "VEH_IXX",
@@ -620,6 +620,19 @@ pub const PARAMS: [Param; 63] = [
         60.0,
         manual_loss_s
     ),
+    Param {
+        id: "SYS_FAILURE_EN",
+        doc: "failure injection (MAV_CMD_INJECT_FAILURE) obeyed, 0/1",
+        get: |s| f32::from(u8::from(s.nav.failure_injection)),
+        set: |s, v| {
+            s.nav.failure_injection = whole(v, 0, 1)? == 1;
+            Ok(())
+        },
+        redesign: false,
+        ty: ParamType::U8,
+        crtp: false,
+        crazyflie_alias: "",
+    },
 ];
 
 /// How many of [`PARAMS`] CRTP serves: the first ones (its param TOC's

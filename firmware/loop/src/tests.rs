@@ -814,7 +814,7 @@ fn every_parameter_takes_what_its_type_says() {
             }
         }
     }
-    assert_eq!(integers, 10);
+    assert_eq!(integers, 11);
     let ctl = params::index_of(b"CTL_ID").unwrap();
     assert_eq!(PARAMS[ctl].ty, ParamType::U8);
 }
@@ -856,9 +856,10 @@ fn one_parameter_table_names_each_for_every_protocol_and_checks_the_modes() {
         ]
     );
     assert_eq!(params::crtp_params().len(), CRTP_PARAMS);
-    // The modes' settings: the eleven after CRTP's, unknown to it.
+    // The modes' settings and SYS_FAILURE_EN: the twelve after CRTP's,
+    // unknown to it.
     let modes = PARAMS.len() - CRTP_PARAMS;
-    assert_eq!((CRTP_PARAMS, modes), (52, 11));
+    assert_eq!((CRTP_PARAMS, modes), (52, 12));
     let s = Settings::os4();
     let i = params::index_of(b"MIS_TAKEOFF_ALT\0").unwrap();
     assert_eq!(i, CRTP_PARAMS);

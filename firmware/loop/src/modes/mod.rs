@@ -161,6 +161,10 @@ impl core::fmt::Display for DisarmRefusal {
     }
 }
 
+/// A landing without a position ends this long after the descent its
+/// height needed ([`ModeCommander::watch_position`]), µs.
+pub const BLIND_LANDING_MARGIN_US: u64 = 3_000_000;
+
 /// Something a step did that the ground station should hear of.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ModeEvent {
@@ -174,6 +178,10 @@ pub enum ModeEvent {
     JoystickLost,
     /// The ground station went silent while armed: Land.
     GroundStationLost,
+    /// The position is not known (its fix lost or refused, the
+    /// estimator's failsafe) while armed: Land (PX4's failsafe without a
+    /// position: descend).
+    PositionLost,
     /// Mission item `seq` is done; item `next` is current now (as the
     /// mission store has it: never past its end).
     ItemReached {
@@ -198,7 +206,7 @@ impl ModeEvent {
     pub fn is_failsafe(self) -> bool {
         matches!(
             self,
-            ModeEvent::JoystickLost | ModeEvent::GroundStationLost | ModeEvent::Lockdown
+            ModeEvent::JoystickLost | ModeEvent::GroundStationLost | ModeEvent::PositionLost | ModeEvent::Lockdown
         )
     }
 }
@@ -211,6 +219,7 @@ impl core::fmt::Display for ModeEvent {
             ModeEvent::OffboardLost => f.write_str("offboard set-points lost: hold"),
             ModeEvent::JoystickLost => f.write_str("joystick lost: landing"),
             ModeEvent::GroundStationLost => f.write_str("ground station lost: landing"),
+            ModeEvent::PositionLost => f.write_str("no position: landing"),
             ModeEvent::ItemReached { seq, .. } => write!(f, "mission item {seq} reached"),
             ModeEvent::MissionDone => f.write_str("mission done: hold"),
             ModeEvent::ItemNotFlyable(seq) => write!(f, "mission item {seq} cannot be flown: hold"),
@@ -260,6 +269,13 @@ pub struct ModeCommander {
     home_ned_m: Vector3<f32>,
     /// When it was first in the air since it armed (the take-off), µs.
     takeoff_us: Option<u64>,
+    /// A landing's ground contact by thrust ([`crate::land::GroundContact`]).
+    #[cfg(feature = "sensor-faults")]
+    contact: crate::land::GroundContact,
+    /// A landing without a position ends by this time, µs
+    /// ([`ModeCommander::watch_position`]).
+    #[cfg(feature = "sensor-faults")]
+    blind_until_us: Option<u64>,
     /// The trajectory memory a host handed over with a trajectory to fly
     /// (`ModeCommander::fly_trajectory`, feature `handover`); the images
     /// speak no trajectory upload over MAVLink and have none.
@@ -288,6 +304,10 @@ impl ModeCommander {
             gcs_seen_us: None,
             home_ned_m: Vector3::new(0.0, 0.0, 0.0),
             takeoff_us: None,
+            #[cfg(feature = "sensor-faults")]
+            contact: crate::land::GroundContact::new(),
+            #[cfg(feature = "sensor-faults")]
+            blind_until_us: None,
             #[cfg(feature = "handover")]
             trajectories: None,
         }
@@ -497,6 +517,10 @@ impl ModeCommander {
     /// Disarms (an automatic mode becomes Hold).
     pub fn disarm(&mut self) {
         self.arming.disarm();
+        #[cfg(feature = "sensor-faults")]
+        {
+            self.blind_until_us = None;
+        }
         if !matches!(self.mode, FlightMode::Position | FlightMode::Offboard) {
             self.mode = FlightMode::Hold;
         }
@@ -622,6 +646,40 @@ impl ModeCommander {
         None
     }
 
+    /// The failsafe without a position: armed, in the air, and `known`
+    /// false (the vehicle's position fix lost or refused, or the
+    /// estimator's own failsafe) → Land, where the estimate says it is, as
+    /// PX4 descends without a position. Once; a position again does not
+    /// cancel it. A dead-reckoned height drifts, and a simulator's ground
+    /// may stop the vehicle without the jolt an accelerometer would feel
+    /// (rotorpy's does): so this landing also ends by time, as the
+    /// Crazyflie's failsafe descent does, once the height the estimate had
+    /// above home when the position was lost has been descended at the
+    /// slower of the two descents (Land's, the estimator's failsafe's) and
+    /// [`BLIND_LANDING_MARGIN_US`] more. Host builds only (`sensor-faults`).
+    #[cfg(feature = "sensor-faults")]
+    pub fn watch_position<M: MissionItems + ?Sized>(
+        &mut self,
+        t_us: u64,
+        known: bool,
+        lp: &mut Loop,
+        mission: &mut M,
+    ) -> Option<ModeEvent> {
+        if known || !self.armed() || self.mode == FlightMode::Land || self.takeoff_us.is_none() {
+            return None;
+        }
+        let up_m = lp
+            .navigator()
+            .estimate()
+            .map_or(0.0, |e| (self.home_ned_m[2] - e.pos_ned_m[2]).max(0.0));
+        let speed = lp.settings().nav.land_mps.min(lp.navigator().config().descent_mps);
+        self.set_mode(FlightMode::Land, t_us, f32::NAN, lp, mission).ok()?;
+        // At most a minute: a height the estimate got wrong is not flown for ever.
+        let descent_us = (up_m / speed * 1e6).min(60e6) as u64;
+        self.blind_until_us = Some(t_us + descent_us + BLIND_LANDING_MARGIN_US);
+        Some(ModeEvent::PositionLost)
+    }
+
     /// Each step (at `t_us`, `dt_s` after the last): what the mode flies
     /// (a takeoff then holds; a landing disarms on the ground), its
     /// failsafes (Offboard's loss of set-points, then Hold; Position's lost
@@ -675,7 +733,7 @@ impl ModeCommander {
                     .navigator()
                     .estimate()
                     .is_some_and(|e| crate::land::on_ground(&e, self.home_ned_m[2]));
-                if self.landing() && on_ground {
+                if self.landing() && (on_ground || self.blind_landed(t_us, lp)) {
                     self.disarm();
                     return say(ModeEvent::Landed);
                 }
@@ -694,6 +752,28 @@ impl ModeCommander {
                 Ok(())
             }
             FlightMode::Hold => Ok(()),
+        }
+    }
+
+    /// A landing that has pressed on the ground long enough
+    /// ([`crate::land::GroundContact`]) or, without a position, has had
+    /// its time ([`ModeCommander::watch_position`]). Host builds only
+    /// (`sensor-faults`): otherwise never.
+    fn blind_landed(&mut self, t_us: u64, lp: &Loop) -> bool {
+        #[cfg(feature = "sensor-faults")]
+        {
+            if !self.landing() {
+                self.contact.reset();
+                return false;
+            }
+            let hover_n = lp.settings().vehicle.hover_thrust_n();
+            let pressing = self.contact.step(t_us, lp.output()[0], hover_n);
+            pressing || self.blind_until_us.is_some_and(|d| t_us >= d)
+        }
+        #[cfg(not(feature = "sensor-faults"))]
+        {
+            let _ = (t_us, lp);
+            false
         }
     }
 

@@ -33,6 +33,9 @@ pub struct NavSettings {
     pub manual_yaw_dps: f32,
     /// `COM_RC_LOSS_T`: a joystick silent this long is lost (then Land), s (PX4: 0.5).
     pub manual_loss_s: f32,
+    /// `SYS_FAILURE_EN`: failure injection (`MAV_CMD_INJECT_FAILURE`)
+    /// obeyed; off, every injection is denied (PX4: off).
+    pub failure_injection: bool,
 }
 
 impl Default for NavSettings {
@@ -49,6 +52,7 @@ impl Default for NavSettings {
             manual_z_mps: 0.5,
             manual_yaw_dps: 60.0,
             manual_loss_s: 0.5,
+            failure_injection: false,
         }
     }
 }

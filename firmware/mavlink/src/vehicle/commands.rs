@@ -50,19 +50,33 @@ impl MavShared {
         let result = match c.command {
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 1.0 => {
                 let started = self.lp.mixer().is_some();
-                match self.modes.arm(&mut self.lp, ctrl, started) {
-                    Ok(()) => {
-                        self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
-                        MavResult::MAV_RESULT_ACCEPTED
-                    }
-                    Err(why) => {
+                let sensors = match self.faults.arming_refusal() {
+                    Some((s, f)) if !self.modes.armed() => {
                         self.say(
                             out,
                             MavSeverity::MAV_SEVERITY_WARNING,
-                            format_args!("arming refused: {why}"),
+                            format_args!("arming refused: {s} {f}"),
                         )?;
-                        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+                        Err(())
                     }
+                    _ => Ok(()),
+                };
+                match sensors.map(|()| self.modes.arm(&mut self.lp, ctrl, started)) {
+                    Err(()) => MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
+                    Ok(r) => match r {
+                        Ok(()) => {
+                            self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("armed"))?;
+                            MavResult::MAV_RESULT_ACCEPTED
+                        }
+                        Err(why) => {
+                            self.say(
+                                out,
+                                MavSeverity::MAV_SEVERITY_WARNING,
+                                format_args!("arming refused: {why}"),
+                            )?;
+                            MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+                        }
+                    },
                 }
             }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if p[0] == 0.0 => {
@@ -156,6 +170,7 @@ impl MavShared {
                     None => MavResult::MAV_RESULT_UNSUPPORTED,
                 }
             }
+            MavCmd::MAV_CMD_INJECT_FAILURE => self.inject(p, out)?,
             MavCmd::MAV_CMD_MISSION_START => self.mode_command(FlightMode::Mission, f32::NAN, out)?,
             _ => MavResult::MAV_RESULT_UNSUPPORTED,
         };

@@ -7,6 +7,8 @@ use super::{
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use fc_loop::modes::LandedState;
+#[cfg(feature = "sensor-faults")]
+use fc_loop::nav::NavMode;
 
 /// The longest gap between two streamed accelerations that still gives a
 /// jerk, ms (an Offboard stream comes at 10–50 Hz; PX4 leaves Offboard
@@ -116,6 +118,13 @@ impl MavShared {
             .watch_ground_station(t_us, limit_ms, &mut self.lp, &mut flown)
         {
             let _ = keep(e);
+        }
+        #[cfg(feature = "sensor-faults")]
+        {
+            let known = self.faults.position_known() && self.lp.navigator().mode() != NavMode::Failsafe;
+            if let Some(e) = self.modes.watch_position(t_us, known, &mut self.lp, &mut flown) {
+                let _ = keep(e);
+            }
         }
         let _ = self.modes.fly(t_us, dt_s, &mut self.lp, &mut flown, &mut keep);
     }

@@ -56,6 +56,7 @@ use mavlink::dialects::common::*;
 use nalgebra::Vector3;
 
 mod commands;
+mod faults;
 mod flight;
 mod missions;
 mod parameters;
@@ -69,7 +70,7 @@ pub use flight::{setpoint_from_target, streamed_jerk, JERK_GAP_MAX_MS, JERK_MAX_
 #[cfg(test)]
 use parameters::param_id;
 pub use parameters::{param_index_of, PARAM_COUNT};
-pub use sensors::{fly_sensor_step, SensorStep};
+pub use sensors::{fly_sensor_step, SensorStep, MAG_IMPLAUSIBLE_RAD, POSITION_IMPLAUSIBLE_M};
 pub use streams::{Stream, MIN_INTERVAL_US, STREAMS};
 
 /// Who a message is for.
@@ -294,6 +295,10 @@ pub struct MavShared {
     /// The controller previews what the commander will fly (off: it
     /// extrapolates each step's set-point; [`MavShared::set_exact_preview`]).
     exact_preview: bool,
+    /// The faults injected into the simulator's data, and each source's
+    /// health (`faults`; host builds only, `sensor-faults`: the images
+    /// hold a stand-in that does nothing).
+    faults: faults::Faults,
 }
 
 /// Milliseconds since boot of simulated time `t_us` (MAVLink's `time_boot_ms`).
@@ -336,6 +341,7 @@ impl MavShared {
             counters: VehicleCounters::default(),
             system_id,
             exact_preview: true,
+            faults: faults::Faults::new(),
         }
     }
 
@@ -609,3 +615,5 @@ fn say<S: MavSink>(out: &mut S, severity: MavSeverity, text: core::fmt::Argument
 
 #[cfg(test)]
 mod tests;
+#[cfg(all(test, feature = "sensor-faults"))]
+mod tests_faults;

@@ -9,6 +9,14 @@ use super::{
 use core::borrow::BorrowMut;
 use fc_loop::{Actuation, LoopOf, Mutex, Step};
 
+/// A position fix farther than this from the estimate (and outside its
+/// gate) is implausible ([`fc_loop::health::plausible`]), m.
+pub const POSITION_IMPLAUSIBLE_M: f32 = 0.5;
+
+/// A magnetic heading farther than this from the estimate (and outside
+/// its gate) is implausible, rad (20°).
+pub const MAG_IMPLAUSIBLE_RAD: f32 = 0.35;
+
 /// A `HIL_SENSOR`'s step between its halves: what the estimator's half
 /// ([`MavShared::sensor_begin`]) hands the controller's.
 #[derive(Debug, Clone, Copy)]
@@ -67,6 +75,7 @@ impl MavShared {
             self.last_fix_us = None;
             self.mag_ref_rad = None;
             self.mag_due.reset();
+            self.faults.restart();
             for (k, st) in self.streams.iter_mut().enumerate() {
                 *st = (STREAMS[k].interval_us, s.time_us);
             }
@@ -75,15 +84,17 @@ impl MavShared {
             .last_sensor_us
             .map_or(0.0, |t| s.time_us.saturating_sub(t) as f32 * 1e-6);
         self.last_sensor_us = Some(s.time_us);
-        if let Some(alt) = s.baro_alt_m {
+        if let Some(alt) = s.baro_alt_m.and_then(|a| self.faults.baro(s.time_us, a)) {
             self.on_baro(s.time_us, alt);
         }
-        if let Some(mag) = s.mag_frd_gauss {
+        if let Some(mag) = s.mag_frd_gauss.and_then(|m| self.faults.mag(s.time_us, &m)) {
             self.on_mag(s.time_us, &mag);
         }
         self.command(s.time_us, dt_s);
         self.seq = self.seq.wrapping_add(1);
         let job = self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us);
+        let (airborne, armed) = (self.modes.in_air(&self.lp), self.modes.armed());
+        self.faults.after_step(s.time_us, airborne, armed);
         if let Some(step) = job.as_ref() {
             // The controller previews what the modes' commander will fly;
             // with the preview off, what an idle commander previews:
@@ -125,6 +136,7 @@ impl MavShared {
             Peer::Simulator,
             &MavMessage::HIL_ACTUATOR_CONTROLS(hil::actuator_controls(t_us, &self.motors, self.modes.armed())),
         )?;
+        self.tell_health(out)?;
         self.tell_events(out)?;
         self.mission.tick(t_us, out)?;
         self.telemetry(t_us, out)
@@ -158,8 +170,10 @@ impl MavShared {
             return;
         }
         let reference = *self.mag_ref_rad.get_or_insert(psi_mag - e[2]);
+        let psi = fc_core::control::wrap_pi(psi_mag - reference);
+        self.judge_mag(fc_core::control::wrap_pi(psi - e[2]));
         let fix = Fix {
-            yaw_rad: Some(fc_core::control::wrap_pi(psi_mag - reference)),
+            yaw_rad: Some(psi),
             yaw_sigma_rad: MAG_SIGMA_RAD,
             ..Fix::EMPTY
         };
@@ -167,7 +181,17 @@ impl MavShared {
         self.counters.mag_fixes = self.counters.mag_fixes.wrapping_add(1);
     }
 
+    /// A `HIL_STATE_QUATERNION`: the position fix as an injected fault
+    /// leaves it, taken while its source is healthy
+    /// (`faults::Faults::position_usable`, host builds) at most every
+    /// `HIL_FIX_MS`; the first one is home.
     pub(in crate::vehicle) fn on_state(&mut self, m: &HIL_STATE_QUATERNION_DATA) {
+        let faulty = self.faults.position(m);
+        let m = match &faulty {
+            None => m,
+            Some(Some(f)) => f,
+            Some(None) => return,
+        };
         if !hil::on_earth(m) {
             self.counters.states_refused = self.counters.states_refused.wrapping_add(1);
             return;
@@ -176,6 +200,12 @@ impl MavShared {
         self.reported_ned_m = Some(home.ned_m(m.lat, m.lon, m.alt));
         let period_us = u64::from(self.lp.settings().fix_period_ms) * 1000;
         if self.last_fix_us.is_some_and(|t| m.time_usec < t + period_us) {
+            return;
+        }
+        if !self.faults.position_usable(m) {
+            return;
+        }
+        if !self.judge_position() {
             return;
         }
         match hil::fix_from_hil_state(m, &home, &StateFixSigmas::MOCAP_LIKE) {

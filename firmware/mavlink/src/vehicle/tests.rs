@@ -9,7 +9,7 @@ use fc_core::model::VehicleParams;
 use hal_shim::CycleClock;
 
 /// A clock that does not count (cycles are not the subject here).
-struct Still;
+pub(super) struct Still;
 impl CycleClock for Still {
     fn now(&self) -> u32 {
         0
@@ -21,7 +21,7 @@ impl CycleClock for Still {
 
 /// Everything the vehicle sent, with whom to.
 #[derive(Default)]
-struct Sent(Vec<(Peer, MavMessage)>);
+pub(super) struct Sent(pub(super) Vec<(Peer, MavMessage)>);
 
 impl MavSink for Sent {
     type Error = Infallible;
@@ -35,7 +35,7 @@ impl Sent {
     fn count(&self, name: &str) -> usize {
         self.0.iter().filter(|(_, m)| message_name(m) == name).count()
     }
-    fn texts(&self) -> Vec<String> {
+    pub(super) fn texts(&self) -> Vec<String> {
         self.0
             .iter()
             .filter_map(|(_, m)| match m {
@@ -48,7 +48,7 @@ impl Sent {
             .collect()
     }
     /// Asserts that a STATUSTEXT saying exactly `text` was sent.
-    fn assert_text(&self, text: &str) {
+    pub(super) fn assert_text(&self, text: &str) {
         let texts = self.texts();
         assert!(texts.iter().any(|t| t == text), "{text:?} not among {texts:?}");
     }
@@ -56,13 +56,13 @@ impl Sent {
     fn pick<T>(&self, f: impl Fn(&MavMessage) -> Option<T>) -> Vec<T> {
         self.0.iter().filter_map(|(_, m)| f(m)).collect()
     }
-    fn acks(&self) -> Vec<MavResult> {
+    pub(super) fn acks(&self) -> Vec<MavResult> {
         self.pick(|m| match m {
             MavMessage::COMMAND_ACK(a) => Some(a.result),
             _ => None,
         })
     }
-    fn param(&self, id: &str) -> Option<f32> {
+    pub(super) fn param(&self, id: &str) -> Option<f32> {
         self.0.iter().rev().find_map(|(_, m)| match m {
             MavMessage::PARAM_VALUE(p) if p.param_id.to_str().ok()?.trim_end_matches('\0') == id => Some(p.param_value),
             _ => None,
@@ -76,7 +76,7 @@ fn message_name(m: &MavMessage) -> &'static str {
 }
 
 /// At rest on the ground at home, level, heading north.
-fn at_rest(t_us: u64) -> [MavMessage; 2] {
+pub(super) fn at_rest(t_us: u64) -> [MavMessage; 2] {
     let flags = hil::inertial_flags();
     [
         MavMessage::HIL_STATE_QUATERNION(HIL_STATE_QUATERNION_DATA {
@@ -97,7 +97,7 @@ fn at_rest(t_us: u64) -> [MavMessage; 2] {
 }
 
 /// Steps `v` at rest at 1 kHz from `from_us` for `n` samples.
-fn rest(v: &mut MavVehicle, out: &mut Sent, from_us: u64, n: u64) -> u64 {
+pub(super) fn rest(v: &mut MavVehicle, out: &mut Sent, from_us: u64, n: u64) -> u64 {
     for k in 0..n {
         for m in at_rest(from_us + k * 1000) {
             v.handle(&m, out, &Still, 0).unwrap();
@@ -106,7 +106,7 @@ fn rest(v: &mut MavVehicle, out: &mut Sent, from_us: u64, n: u64) -> u64 {
     from_us + n * 1000
 }
 
-fn command(arm: f32, force: f32) -> MavMessage {
+pub(super) fn command(arm: f32, force: f32) -> MavMessage {
     MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
         param1: arm,
         param2: force,
@@ -118,7 +118,7 @@ fn command(arm: f32, force: f32) -> MavMessage {
 }
 
 /// A `COMMAND_LONG` for this vehicle.
-fn command_of(command: MavCmd, p: [f32; 7]) -> MavMessage {
+pub(super) fn command_of(command: MavCmd, p: [f32; 7]) -> MavMessage {
     MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
         param1: p[0],
         param2: p[1],
@@ -144,7 +144,7 @@ fn set_mode(m: FlightMode) -> MavMessage {
     )
 }
 
-fn param_set(id: &str, value: f32) -> MavMessage {
+pub(super) fn param_set(id: &str, value: f32) -> MavMessage {
     MavMessage::PARAM_SET(PARAM_SET_DATA {
         param_value: value,
         target_system: 1,

@@ -1,0 +1,447 @@
+//! Faults in the simulator's sensors: PX4's failure injection
+//! (`MAV_CMD_INJECT_FAILURE`, obeyed only with `SYS_FAILURE_EN` 1, as
+//! MAVSDK's `Failure` plugin and PX4's `failure` command send it) applied
+//! where the vehicle takes the simulator's data, as PX4's simulator bridge
+//! applies it; and each source's health ([`fc_loop::health`]) told to the
+//! ground station as it changes.
+//!
+//! Modelled: the position fix (`HIL_STATE_QUATERNION`, PX4's "gps": off,
+//! stuck, wrong by [`WRONG_BY_M`] north, intermittent), the barometer (off,
+//! stuck) and the magnetometer (off, stuck, wrong by a quarter turn). The
+//! IMU's faults are answered `UNSUPPORTED`: this adapter steps on every
+//! `HIL_SENSOR` and has no supervisor of its own samples yet.
+
+#[cfg(feature = "sensor-faults")]
+pub(in crate::vehicle) use on::*;
+#[cfg(not(feature = "sensor-faults"))]
+pub(in crate::vehicle) use stand_in::*;
+
+#[cfg(feature = "sensor-faults")]
+mod on {
+    use super::super::{
+        hil, MavResult, MavSeverity, MavShared, MavSink, Vector3, HIL_STATE_QUATERNION_DATA, MAG_IMPLAUSIBLE_RAD,
+        MAG_SIGMA_RAD, POSITION_IMPLAUSIBLE_M,
+    };
+    use fc_loop::health::{fingerprint, Change, Watch};
+
+    /// How far north a "wrong" position fix is, m.
+    pub const WRONG_BY_M: f64 = 5.0;
+
+    /// An intermittent source reads for this long, then is silent as long, µs.
+    pub const INTERMITTENT_US: u64 = 300_000;
+
+    /// A fault as MAVLink's `FAILURE_TYPE` names it (those modelled here).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub enum Injected {
+        /// `FAILURE_TYPE_OK`: as the simulator sends it.
+        #[default]
+        Ok,
+        /// `FAILURE_TYPE_OFF`: nothing.
+        Off,
+        /// `FAILURE_TYPE_STUCK`: the reading at the injection, again and again.
+        Stuck,
+        /// `FAILURE_TYPE_WRONG`: plausible and wrong.
+        Wrong,
+        /// `FAILURE_TYPE_INTERMITTENT`: on and off in turns of [`INTERMITTENT_US`].
+        Intermittent,
+    }
+
+    impl Injected {
+        fn of(failure_type: f32) -> Option<Self> {
+            // MAVLink's FAILURE_TYPE, a whole number (`as` saturates, NaN to
+            // 0: a value that does not come back is not one).
+            let k = failure_type as u8;
+            if f32::from(k) != failure_type {
+                return None;
+            }
+            Some(match k {
+                0 => Injected::Ok,
+                1 => Injected::Off,
+                2 => Injected::Stuck,
+                4 => Injected::Wrong,
+                7 => Injected::Intermittent,
+                _ => return None,
+            })
+        }
+
+        fn name(self) -> &'static str {
+            match self {
+                Injected::Ok => "ok",
+                Injected::Off => "off",
+                Injected::Stuck => "stuck",
+                Injected::Wrong => "wrong",
+                Injected::Intermittent => "intermittent",
+            }
+        }
+    }
+
+    /// A source of the simulator's data.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub(in crate::vehicle) enum Source {
+        /// `HIL_STATE_QUATERNION`'s position and heading (PX4's "gps").
+        Position,
+        /// `HIL_SENSOR`'s pressure altitude.
+        Baro,
+        /// `HIL_SENSOR`'s magnetic field.
+        Mag,
+    }
+
+    impl Source {
+        const ALL: [Source; 3] = [Source::Position, Source::Baro, Source::Mag];
+
+        fn name(self) -> &'static str {
+            match self {
+                Source::Position => "position fix",
+                Source::Baro => "barometer",
+                Source::Mag => "magnetometer",
+            }
+        }
+
+        /// MAVLink's `FAILURE_UNIT` of this source.
+        fn of(unit: f32) -> Result<Self, &'static str> {
+            match unit {
+                4.0 => Ok(Source::Position),
+                3.0 => Ok(Source::Baro),
+                2.0 => Ok(Source::Mag),
+                0.0 | 1.0 => Err("IMU faults not modelled here"),
+                _ => Err("no such sensor here"),
+            }
+        }
+
+        /// The faults modelled for this source.
+        fn takes(self, f: Injected) -> bool {
+            match self {
+                Source::Position => true,
+                Source::Baro => matches!(f, Injected::Ok | Injected::Off | Injected::Stuck),
+                Source::Mag => f != Injected::Intermittent,
+            }
+        }
+    }
+
+    /// The faults injected and each source's health.
+    #[derive(Debug, Clone, Default)]
+    pub struct Faults {
+        injected: [Injected; 3],
+        held_state: Option<HIL_STATE_QUATERNION_DATA>,
+        held_baro: Option<f32>,
+        held_mag: Option<Vector3<f32>>,
+        watch: [Watch; 3],
+        /// Health changes since the last step's end, to be told.
+        changes: heapless::Vec<(Source, Change), 4>,
+        /// In the air at the last step ([`fc_loop::modes::ModeCommander::in_air`]).
+        airborne: bool,
+        /// Armed at the last step.
+        armed: bool,
+    }
+
+    impl Faults {
+        /// Nothing injected, every source not heard yet.
+        pub(in crate::vehicle) fn new() -> Self {
+            Self::default()
+        }
+
+        fn injected(&self, s: Source) -> Injected {
+            self.injected[s as usize]
+        }
+
+        fn note(&mut self, s: Source, c: Option<Change>) {
+            if let Some(c) = c {
+                let _ = self.changes.push((s, c));
+            }
+        }
+
+        /// Whether a reading of `s` (whose values hash to `print`) at `t_us` is
+        /// used ([`Watch::sample`]; `airborne`: the vehicle is in the air).
+        fn sample(&mut self, s: Source, t_us: u64, print: u32) -> bool {
+            let c = self.watch[s as usize].sample(t_us, print, self.airborne);
+            self.note(s, c);
+            self.watch[s as usize].feeds()
+        }
+
+        /// The position fix as the injected fault leaves it: `None` as it
+        /// is, `Some(None)` nothing, else what it reads.
+        pub(in crate::vehicle) fn position(
+            &mut self,
+            m: &HIL_STATE_QUATERNION_DATA,
+        ) -> Option<Option<HIL_STATE_QUATERNION_DATA>> {
+            Some(match self.injected(Source::Position) {
+                Injected::Ok => return None,
+                Injected::Off => None,
+                Injected::Stuck => {
+                    let held = self.held_state.get_or_insert_with(|| m.clone());
+                    Some(HIL_STATE_QUATERNION_DATA {
+                        time_usec: m.time_usec,
+                        ..held.clone()
+                    })
+                }
+                Injected::Wrong => {
+                    let dlat_e7 = (WRONG_BY_M / hil::EARTH_RADIUS_M).to_degrees() * 1e7;
+                    Some(HIL_STATE_QUATERNION_DATA {
+                        lat: m.lat.saturating_add(dlat_e7 as i32),
+                        ..m.clone()
+                    })
+                }
+                Injected::Intermittent => (m.time_usec / INTERMITTENT_US).is_multiple_of(2).then(|| m.clone()),
+            })
+        }
+
+        /// Whether the position fix `m` is used: its health
+        /// ([`Watch::sample`] on every value but its time).
+        pub(in crate::vehicle) fn position_usable(&mut self, m: &HIL_STATE_QUATERNION_DATA) -> bool {
+            let q = m.attitude_quaternion.map(f32::to_bits);
+            let print = fingerprint(&[
+                m.lat as u32,
+                m.lon as u32,
+                m.alt as u32,
+                q[0],
+                q[1],
+                q[2],
+                q[3],
+                m.rollspeed.to_bits(),
+                m.pitchspeed.to_bits(),
+                m.yawspeed.to_bits(),
+                u32::from(m.vx as u16) | u32::from(m.vy as u16) << 16,
+                u32::from(m.vz as u16) | u32::from(m.xacc as u16) << 16,
+                u32::from(m.yacc as u16) | u32::from(m.zacc as u16) << 16,
+            ]);
+            self.sample(Source::Position, m.time_usec, print)
+        }
+
+        /// A barometric altitude as the injected fault leaves it, and whether
+        /// it is used.
+        pub(in crate::vehicle) fn baro(&mut self, t_us: u64, alt_m: f32) -> Option<f32> {
+            let alt = match self.injected(Source::Baro) {
+                Injected::Off => return None,
+                Injected::Stuck => *self.held_baro.get_or_insert(alt_m),
+                _ => alt_m,
+            };
+            self.sample(Source::Baro, t_us, alt.to_bits()).then_some(alt)
+        }
+
+        /// A magnetic field (FRD, gauss) as the injected fault leaves it (wrong:
+        /// turned a quarter about the body's z axis), and whether it is used.
+        pub(in crate::vehicle) fn mag(&mut self, t_us: u64, mag: &Vector3<f32>) -> Option<Vector3<f32>> {
+            let m = match self.injected(Source::Mag) {
+                Injected::Off => return None,
+                Injected::Stuck => *self.held_mag.get_or_insert(*mag),
+                Injected::Wrong => Vector3::new(-mag[1], mag[0], mag[2]),
+                _ => *mag,
+            };
+            let print = fingerprint(&[m[0].to_bits(), m[1].to_bits(), m[2].to_bits()]);
+            self.sample(Source::Mag, t_us, print).then_some(m)
+        }
+
+        /// Whether a reading of `s` agrees with the estimate
+        /// ([`fc_loop::health::plausible`], [`Watch::judged`]).
+        fn judged(&mut self, s: Source, agrees: bool) {
+            let c = self.watch[s as usize].judged(agrees);
+            self.note(s, c);
+        }
+
+        /// After the estimator's step at `t_us`: every source's silence
+        /// ([`Watch::tick`]). Disarmed since the last step (`armed` false, it
+        /// was armed): a new flight's health ([`Faults::restart`]); a source
+        /// condemned on the ground stays so until it reads well, and refuses
+        /// an arming.
+        pub(in crate::vehicle) fn after_step(&mut self, t_us: u64, airborne: bool, armed: bool) {
+            if self.armed && !armed {
+                self.restart();
+            }
+            self.armed = armed;
+            self.airborne = airborne;
+            for w in &mut self.watch {
+                w.fly(armed);
+            }
+            for s in Source::ALL {
+                let c = self.watch[s as usize].tick(t_us);
+                self.note(s, c);
+            }
+        }
+
+        /// Whether position fixes are handed to the estimator ([`Watch::feeds`]).
+        pub(in crate::vehicle) fn position_feeds(&self) -> bool {
+            self.watch[Source::Position as usize].feeds()
+        }
+
+        /// The position is known: its fix is not condemned (stuck or wrong; a
+        /// silent one is the estimator's to judge, which dead-reckons for a
+        /// while).
+        pub(in crate::vehicle) fn position_known(&self) -> bool {
+            self.watch[Source::Position as usize].usable()
+                || self.watch[Source::Position as usize].fault() == Some(fc_loop::health::Fault::Silent)
+        }
+
+        /// The first source whose fault refuses an arming, and the fault.
+        pub(in crate::vehicle) fn arming_refusal(&self) -> Option<(&'static str, fc_loop::health::Fault)> {
+            Source::ALL
+                .iter()
+                .find_map(|&s| self.watch[s as usize].fault().map(|f| (s.name(), f)))
+        }
+
+        /// A new flight (disarmed, or a new time line): every source's health
+        /// forgotten; the injected faults stay.
+        pub(in crate::vehicle) fn restart(&mut self) {
+            self.watch = [Watch::new(); 3];
+            self.airborne = false;
+        }
+    }
+
+    impl MavShared {
+        /// The position fix just taken (`HIL_STATE_QUATERNION`, its NED
+        /// in `reported_ned_m`) against the estimate: judged
+        /// ([`fc_loop::health::plausible`]); whether it is handed to the
+        /// estimator.
+        pub(in crate::vehicle) fn judge_position(&mut self) -> bool {
+            let Some(est) = self.lp.navigator().estimate() else {
+                return true;
+            };
+            let off = (self.reported_ned_m.unwrap_or_default() - est.pos_ned_m.cast::<f64>()).norm() as f32;
+            let sigma = self.lp.navigator().estimator().position_sigma_m();
+            let agrees = fc_loop::health::plausible(off, sigma, POSITION_IMPLAUSIBLE_M);
+            self.faults.judged(Source::Position, agrees);
+            self.faults.position_feeds()
+        }
+
+        /// A magnetic heading `innovation` rad from the estimate: judged.
+        pub(in crate::vehicle) fn judge_mag(&mut self, innovation: f32) {
+            let agrees = fc_loop::health::plausible(innovation, MAG_SIGMA_RAD, MAG_IMPLAUSIBLE_RAD);
+            self.faults.judged(Source::Mag, agrees);
+        }
+
+        /// `MAV_CMD_INJECT_FAILURE` (`unit`, `failure_type`, `instance`: 0 all,
+        /// or the one there is): refused (`DENIED`) unless `SYS_FAILURE_EN` is
+        /// 1; `UNSUPPORTED` for what is not modelled; each answer said.
+        pub(in crate::vehicle) fn inject<S: MavSink>(
+            &mut self,
+            p: &[f32; 7],
+            out: &mut S,
+        ) -> Result<MavResult, S::Error> {
+            if !self.lp.settings().nav.failure_injection {
+                self.say(
+                    out,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    format_args!("failure injection off (SYS_FAILURE_EN 0)"),
+                )?;
+                return Ok(MavResult::MAV_RESULT_DENIED);
+            }
+            let what = Source::of(p[0]).and_then(|s| {
+                let f = Injected::of(p[1])
+                    .filter(|&f| s.takes(f))
+                    .ok_or("fault not modelled here")?;
+                if p[2] == 0.0 || p[2] == 1.0 {
+                    Ok((s, f))
+                } else {
+                    Err("one instance of each sensor here")
+                }
+            });
+            match what {
+                Ok((s, f)) => {
+                    self.faults.injected[s as usize] = f;
+                    match s {
+                        Source::Position => self.faults.held_state = None,
+                        Source::Baro => self.faults.held_baro = None,
+                        Source::Mag => self.faults.held_mag = None,
+                    }
+                    self.say(
+                        out,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        format_args!("failure injected: {} {}", s.name(), f.name()),
+                    )?;
+                    Ok(MavResult::MAV_RESULT_ACCEPTED)
+                }
+                Err(why) => {
+                    self.say(
+                        out,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        format_args!("failure refused: {why}"),
+                    )?;
+                    Ok(MavResult::MAV_RESULT_UNSUPPORTED)
+                }
+            }
+        }
+
+        /// Tells the ground station each source's health change since the
+        /// last step ("position fix stuck: 20 readings the same, not used").
+        pub(in crate::vehicle) fn tell_health<S: MavSink>(&mut self, out: &mut S) -> Result<(), S::Error> {
+            let changes = core::mem::take(&mut self.faults.changes);
+            for (s, c) in changes {
+                match c {
+                    Change::Lost(f) => self.say(
+                        out,
+                        MavSeverity::MAV_SEVERITY_CRITICAL,
+                        format_args!("{} {f}: not used", s.name()),
+                    )?,
+                    Change::Back => self.say(out, MavSeverity::MAV_SEVERITY_INFO, format_args!("{} back", s.name()))?,
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// The images' stand-in: nothing injected, every source taken as it is;
+/// `MAV_CMD_INJECT_FAILURE` is `UNSUPPORTED`.
+#[cfg(not(feature = "sensor-faults"))]
+mod stand_in {
+    use super::super::{MavResult, MavShared, MavSink, Vector3, HIL_STATE_QUATERNION_DATA};
+
+    /// Nothing (see the module).
+    #[derive(Debug, Clone)]
+    pub struct Faults;
+
+    impl Faults {
+        /// Nothing.
+        #[inline(always)]
+        pub(in crate::vehicle) const fn new() -> Self {
+            Faults
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn position(
+            &mut self,
+            _: &HIL_STATE_QUATERNION_DATA,
+        ) -> Option<Option<HIL_STATE_QUATERNION_DATA>> {
+            None
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn position_usable(&mut self, _: &HIL_STATE_QUATERNION_DATA) -> bool {
+            true
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn baro(&mut self, _: u64, alt_m: f32) -> Option<f32> {
+            Some(alt_m)
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn mag(&mut self, _: u64, mag: &Vector3<f32>) -> Option<Vector3<f32>> {
+            Some(*mag)
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn after_step(&mut self, _: u64, _: bool, _: bool) {}
+        #[inline(always)]
+        pub(in crate::vehicle) fn arming_refusal(&self) -> Option<(&'static str, fc_loop::health::Fault)> {
+            None
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn restart(&mut self) {}
+    }
+
+    impl MavShared {
+        #[inline(always)]
+        pub(in crate::vehicle) fn judge_position(&mut self) -> bool {
+            true
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn judge_mag(&mut self, _: f32) {}
+        #[inline(always)]
+        pub(in crate::vehicle) fn inject<S: MavSink>(
+            &mut self,
+            _: &[f32; 7],
+            _: &mut S,
+        ) -> Result<MavResult, S::Error> {
+            Ok(MavResult::MAV_RESULT_UNSUPPORTED)
+        }
+        #[inline(always)]
+        pub(in crate::vehicle) fn tell_health<S: MavSink>(&mut self, _: &mut S) -> Result<(), S::Error> {
+            Ok(())
+        }
+    }
+}
