@@ -380,6 +380,9 @@ stage "a pymavlink ground station (tools/mav_gcs.py) flies it against rotorpy"
 hil --gcs --duration 60 --json target/rotorpy-hil-gcs.json | grep "^gcs check:" | tee -a "$log"
 stage "MAVSDK (pinned), unmodified, flies it as a PX4, in process"
 hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsdk check:" | tee -a "$log"
+stage "the same MAVSDK script over a lossy link (10 % lost, 0.5 s bursts, duplicates, 200 ms reordering)"
+hil --mavsdk --duration 150 --lossy drop=0.1,burst=0.5@10,dup=0.02,delay=0.2,seed=1 --gcs-port 14570 \
+    --json target/rotorpy-hil-mavsdk-lossy.json | grep "^mavsdk check:" | tee -a "$log"
 stage "MAVSDK's Failure plugin injects sensor faults in flight (in process): it flies on, or lands by name"
 hil --mavsdk-failure target/faults.json --duration 120 --json target/rotorpy-hil-faults.json \
     | grep "^fault check:" | tee -a "$log"

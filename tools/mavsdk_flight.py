@@ -184,7 +184,11 @@ class Flight:
         await action.takeoff()
         await self.until(lambda: mode_is(FlightMode.HOLD), "takeoff, then Hold")
         await self.settle_at([0.0, 0.0, -1.5], 0.05, 1.0, "rotorpy within 5 cm of 1.5 m up (1 s)")
-        self.check(await tel.landed_state() == LandedState.IN_AIR, "landed state IN_AIR")
+        async def in_air():
+            return await tel.landed_state() == LandedState.IN_AIR
+
+        # Waited for: over a lossy link the last EXTENDED_SYS_STATE heard may be the take-off's.
+        await self.until(in_air, "landed state IN_AIR")
 
         # The joystick, streamed at 20 Hz as MAVSDK's examples do.
         manual = ManualControlAsync(system)

@@ -48,6 +48,7 @@ from scipy.spatial.transform import Rotation
 
 from children import EndsWithFlight
 from fctools.image_log import stack
+from fctools.lossy import LossyLink
 from fctools.pieces import Pieces, cflib_figure8, read_csv, write_csv
 from measure import budgets, record
 from reference import EIGHT_PERIOD_S, START_NED_M, Reference, window_figures
@@ -268,6 +269,9 @@ def main():
                          "vehicle's last signature timestamp; then the flight controller is killed (SIGKILL), "
                          "as a power cut would stop it. A --restart run after it checks the timestamps go on")
     ap.add_argument("--gcs-port", type=int, default=14550)
+    ap.add_argument("--lossy", metavar="SPEC",
+                    help="the ground station's link through tools/fctools/lossy.py (e.g. drop=0.1,burst=0.5@10,"
+                         "dup=0.02,delay=0.2,seed=1): the vehicle sends to --gcs-port + 1")
     ap.add_argument("--mavsdk", action="store_true",
                     help="like --gcs, with tools/mavsdk_flight.py (MAVSDK, PyPI) as the ground station; "
                          "rotorpy's position is sent to it on UDP --truth-port")
@@ -318,7 +322,12 @@ def main():
                 script += ["--after-restart" if a.restart else "--cut" if a.cut else "--keep",
                            a.storage + ".json"]
         gcs = subprocess.Popen([sys.executable] + script, stdout=subprocess.PIPE, text=True)
-        cmd += ["--gcs", f"127.0.0.1:{a.gcs_port}", "--gcs-only"]
+        vehicle_port = a.gcs_port
+        if a.lossy:
+            vehicle_port = a.gcs_port + 1
+            lossy = LossyLink(vehicle_port, ("127.0.0.1", a.gcs_port), a.lossy)
+            lossy.start()
+        cmd += ["--gcs", f"127.0.0.1:{vehicle_port}", "--gcs-only"]
     for w in a.waypoint or []:
         cmd += ["--waypoint", w]
     for p in a.param or []:
@@ -421,6 +430,10 @@ def main():
                   else "signing check:" if a.signing else "gcs check:")
         line = [ln for ln in gcs_out.splitlines() if ln.startswith(prefix)]
         res["gcs"] = line[-1] if line else f"{prefix} 0 passed, 1 failed (the ground station did not finish)"
+        if a.lossy:
+            lossy.stop()
+            res["lossy_link"] = {"spec": a.lossy, **lossy.counts}
+            print(f"lossy link ({a.lossy}): {lossy.counts}", file=sys.stderr)
         def also(ok, what):
             """One more check on the ground station's line (it counts)."""
             print(("ok   " if ok else "FAIL ") + what, file=sys.stderr)
