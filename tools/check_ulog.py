@@ -19,14 +19,25 @@ STATUSTEXTs in order, its largest armed estimate error is
 """
 import json
 import math
+import re
 import subprocess
 import sys
 import tempfile
+from pathlib import Path
 
 import numpy as np
 from pyulog import ULog
 
 from fctools.checks import Checks
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def table_length():
+    """How many parameters the one table has (`PARAMS: [Param; N]` in
+    firmware/loop/src/params.rs): what every ULog's header must list."""
+    text = (ROOT / "firmware/loop/src/params.rs").read_text()
+    return int(re.search(r"pub const PARAMS: \[Param; (\d+)\]", text).group(1))
 
 check = Checks("ulog")
 
@@ -66,7 +77,8 @@ def check_fly(sil):
     fe = math.sqrt(sum((float(gt[a][-1]) - float(sp[a][-1])) ** 2 for a in "xyz"))
     check(close(fe, res["final_error_m"], rel=1e-4), f"final error {fe:.6f} m = JSON {res['final_error_m']:.6f} m")
     p = log.initial_parameters
-    check(len(p) == 63, f"{len(p)} parameters (the table has 63)")
+    n = table_length()
+    check(len(p) == n, f"{len(p)} parameters (the table has {n})")
     check(close(p.get("VEH_MASS", 0), 0.7), f"VEH_MASS {p.get('VEH_MASS'):.4f} (the flight's vehicle file: 0.7)")
     check(p.get("CTL_ID") == 3.0, f"CTL_ID {p.get('CTL_ID')} (quaternion LQR)")
     est = topic(log, "vehicle_local_position")
@@ -115,7 +127,8 @@ def check_hil(ulg, js):
     check(len(out["timestamp"]) >= 0.9 * res["steps"] and np.all((m >= 0) & (m <= 1)),
           f"{len(out['timestamp'])} motor commands for {res['steps']} steps, all within [0, 1]")
     p = log.initial_parameters
-    check(len(p) == 63 and "MOT_FRAME" in p, f"{len(p)} parameters, MOT_FRAME = {p.get('MOT_FRAME')}")
+    n = table_length()
+    check(len(p) == n and "MOT_FRAME" in p, f"{len(p)} parameters of {n}, MOT_FRAME = {p.get('MOT_FRAME')}")
     sp = topic(log, "vehicle_local_position_setpoint")
     check(len(sp["timestamp"]) > 0, f"{len(sp['timestamp'])} set-points; the last ({sp['x'][-1]:.2f}, {sp['y'][-1]:.2f}, {sp['z'][-1]:.2f}) m")
 
