@@ -1,12 +1,13 @@
 //! A sensor's health, as PX4's data validator judges it: a source that
 //! goes silent, repeats itself (a stuck value: real sensors have noise,
 //! so the same reading many times in a row is a frozen driver or bus), or
-//! that the estimator keeps refusing (its innovation gate).
+//! that keeps disagreeing with the estimate ([`plausible`]).
 //!
 //! One [`Watch`] per source (a position fix, the barometer, the
 //! magnetometer). The front end that takes the source's data hands each
 //! reading's fingerprint to [`Watch::sample`] (a hash of its values,
-//! [`fingerprint`]), the estimator's verdict on it to [`Watch::judged`],
+//! [`fingerprint`]), whether it agrees with the estimate to
+//! [`Watch::judged`] ([`plausible`]),
 //! and calls [`Watch::tick`] every step. In flight ([`Watch::fly`]), a
 //! source found stuck or refused is not believed again
 //! ([`Watch::usable`] stays `false` until [`Watch::restart`], on the
@@ -15,7 +16,8 @@
 //! source reads well again (a new value, a fused reading). One that went
 //! silent is taken again when it comes back.
 
-/// Readings in a row that are bit for bit the same: stuck. PX4's data
+/// Readings in a row with the same values (the same [`fingerprint`]):
+/// stuck. PX4's data
 /// validator waits for 100 of its 200 Hz–1 kHz sensors' samples; the
 /// sources watched here come at 20–100 Hz.
 pub const STUCK_READINGS: u16 = 20;
@@ -41,6 +43,8 @@ pub fn plausible(innovation: f32, sigma: f32, floor: f32) -> bool {
 pub const SILENT_US: u64 = 500_000;
 
 const _: () = assert!(REFUSED_READINGS < fc_core::estimate::EskfConfig::BMI088.reset_after_rejections);
+// The silent fault's text says 0.5 s.
+const _: () = assert!(SILENT_US == 500_000);
 
 /// What is wrong with a source.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -56,11 +60,12 @@ pub enum Fault {
 
 impl core::fmt::Display for Fault {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
-            Fault::Silent => "silent 0.5 s",
-            Fault::Stuck => "stuck (20 the same)",
-            Fault::Refused => "wrong (10 in a row)",
-        })
+        match self {
+            // SILENT_US in seconds, as the ground station reads it.
+            Fault::Silent => f.write_str("silent 0.5 s"),
+            Fault::Stuck => write!(f, "stuck ({STUCK_READINGS} the same)"),
+            Fault::Refused => write!(f, "wrong ({REFUSED_READINGS} in a row)"),
+        }
     }
 }
 
