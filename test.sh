@@ -331,12 +331,12 @@ python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
 # Two lanes from here, each about one core (a flight in lockstep, or QEMU and
 # its client taking turns; MAVSDK on the image takes more): the MAVLink
 # flights (the image's step flight, the pymavlink ground station, MAVSDK in
-# process and on the image, MAVProxy), then cfclient and the Slurm sweep, in
-# this shell; beside them, in a subshell, the cflib sessions (ports 198xx),
-# then MAVLink signing (on ports of its own: 4562, 14552, 14562). The lane's
-# output goes to target/lane-beside.out and is shown when this shell's checks
-# are done; its check lines join the count, its stages the table (marked
-# "beside").
+# process and on the image, MAVProxy), cflib over the lossy radio (ports
+# 199xx), MAVLink signing (ports 4562, 14552, 14562), then cfclient and the
+# Slurm sweep, in this shell; beside them, in a subshell, the cflib sessions
+# (ports 198xx), the longer lane. The lane's output goes to
+# target/lane-beside.out and is shown when this shell's checks are done; its
+# check lines join the count, its stages the table (marked "beside").
 lane_beside() {
     TIMES=() STAGE=""
     log=target/lane-beside.log
@@ -350,23 +350,6 @@ lane_beside() {
     bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
     # The CRTP ports are free from here: cfclient may take 19850 (in this shell).
     touch target/lane-beside.crtp-done
-    stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage and a power cut in flight, then firmware-mavlink in QEMU"
-    # In process with --storage: the owner then sets a second key and a parameter; the vehicle,
-    # started again on the same file, must sign nothing until it hears the owner and keep both.
-    local ports=(--port 4562 --gcs-port 14552 --truth-port 14562)
-    rm -f target/px4-storage.bin target/px4-storage.bin.json
-    hil "${ports[@]}" --signing --storage target/px4-storage.bin --duration 120 \
-        --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
-    hil "${ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
-        --json target/rotorpy-hil-restart.json | grep "^signing check:" | tee -a "$log"
-    # A power cut in flight: killed while armed in the air (nothing stored on the way out), then
-    # started again on the file: its first signature must be above the last one seen in the air.
-    hil "${ports[@]}" --signing --cut --storage target/px4-storage.bin --duration 40 \
-        --json target/rotorpy-hil-cut.json | grep "^signing check:" | tee -a "$log"
-    hil "${ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
-        --json target/rotorpy-hil-after-cut.json | grep "^signing check:" | tee -a "$log"
-    hil "${ports[@]}" --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json \
-        | grep "^signing check:" | tee -a "$log"
     end_stage
     printf '%s\n' "${TIMES[@]}" >target/lane-beside.times
 }
@@ -391,6 +374,31 @@ hil --mavproxy --duration 90 --json target/rotorpy-hil-mavproxy.json | grep "^ma
 stage "the same MAVSDK script against firmware-mavlink in QEMU"
 hil --target qemu --mavsdk --duration 150 --json target/rotorpy-hil-mavsdk-qemu.json \
     | grep "^mavsdk check:" | tee -a "$log"
+stage "cflib over a radio that loses packets (tools/fctools/radio.py in the nRF51 bridge: retries, safelink): firmware-crtp 10 %, the Crazyflie image 30 %, 0.1 s shadows"
+# The radio's model against itself first (20 000 packets each way), then the
+# images on ports of their own (199xx: the lane beside has 198xx).
+python3 tools/nrf51_bridge.py --self-test | tee -a "$log"
+bounded 600 python3 tools/crtp_cflib.py target/release/sil-host --qemu --radio drop=0.1,burst=0.1@5,seed=1 \
+    | tee -a "$log"
+bounded 600 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie --radio drop=0.3,burst=0.1@5,seed=2 \
+    | tee -a "$log"
+stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage and a power cut in flight, then firmware-mavlink in QEMU"
+# In process with --storage: the owner then sets a second key and a parameter; the vehicle,
+# started again on the same file, must sign nothing until it hears the owner and keep both.
+signing_ports=(--port 4562 --gcs-port 14552 --truth-port 14562)
+rm -f target/px4-storage.bin target/px4-storage.bin.json
+hil "${signing_ports[@]}" --signing --storage target/px4-storage.bin --duration 120 \
+    --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
+hil "${signing_ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
+    --json target/rotorpy-hil-restart.json | grep "^signing check:" | tee -a "$log"
+# A power cut in flight: killed while armed in the air (nothing stored on the way out), then
+# started again on the file: its first signature must be above the last one seen in the air.
+hil "${signing_ports[@]}" --signing --cut --storage target/px4-storage.bin --duration 40 \
+    --json target/rotorpy-hil-cut.json | grep "^signing check:" | tee -a "$log"
+hil "${signing_ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
+    --json target/rotorpy-hil-after-cut.json | grep "^signing check:" | tee -a "$log"
+hil "${signing_ports[@]}" --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json \
+    | grep "^signing check:" | tee -a "$log"
 # cfclient takes cflib's port (19850): once the lane beside has done its CRTP sessions.
 end_stage
 while [ ! -f target/lane-beside.crtp-done ] && kill -0 "$LANE_BESIDE" 2>/dev/null; do sleep 2; done

@@ -55,6 +55,9 @@ TOLERANCES = [
     (r"_closed_loop_cost$", 0.005, 0.0, "a deterministic QEMU flight's cost; 0.5 % for a compiler release"),
     (r"^peer_.*_pct$", 0.0, 0.2, "a ratio of two deterministic costs, shown to a tenth"),
     (r"^peer_", 0.05, 0.0, "a ratio of two instruction counts, shown to whole units"),
+    (r"_radio_\d+_(lost_pct|duplicates_dropped)$", 0.2, 1.0,
+     ("the modelled radio sends on the wall clock (its polls, the image's pace in QEMU, where the shadows "
+      "fall): how many packets it sends, and so loses and doubles, moves from run to run")),
     (r"_pct", 0.0, 0.5, "a share of flights, shown to a tenth"),
     (r"_s$", 0.05, 0.01, "a flight's settling time; the last bit of the platform's libm moves it"),
     (r"_effort$", 0.10, 0.0005, "a flight's motor effort; the last bit of the platform's libm moves it"),

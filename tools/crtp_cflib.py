@@ -59,9 +59,18 @@ the image's USART6); the plant feeds its sensors on USART1. With
 qemu-crazyflie`: linked at 0x0800_4000, booted by QEMU's stand-in for the
 bootloader, its motors on TIM2/TIM4).
 
+With `--radio SPEC` (and `--qemu` or `--qemu-crazyflie`) one session only,
+R, over the bridge's modelled radio losing packets (`nrf51_bridge.py
+--radio`, `fctools.radio`), on ports of its own (19950, 19970, 19980):
+connected, a parameter set and read back, a log block at 100 Hz, the
+figure-8 uploaded, read back byte for byte from the trajectory memory and
+flown within session 5's bounds; the radio's counts checked (packets lost,
+the duplicates its retries made dropped by the nRF51, no link error).
+
 Prints `crtp check: N passed, M failed` (`crtp-qemu check: ...` with --qemu,
-`crtp-qemu-crazyflie check: ...` with --qemu-crazyflie); exits 1 on any failure.
-Usage: crtp_cflib.py SIL_HOST [--qemu | --qemu-crazyflie] [sil-host crtp options]
+`crtp-qemu-crazyflie check: ...` with --qemu-crazyflie, `-radio` added with
+--radio); exits 1 on any failure.
+Usage: crtp_cflib.py SIL_HOST [--qemu | --qemu-crazyflie] [--radio SPEC] [sil-host crtp options]
 """
 import importlib.metadata
 import importlib.util
@@ -90,8 +99,12 @@ from fctools.pieces import cflib_examples
 from fctools.truth import Truth, position_of
 from measure import budgets, record
 
-PORT = 19850
-TRUTH_PORT = 19870
+# --radio SPEC: the sessions of `session_radio` only, on the images, over
+# the bridge's modelled radio (tools/fctools/radio.py), on ports of their
+# own (another lane's cflib sessions may run beside them).
+RADIO = sys.argv[sys.argv.index('--radio') + 1] if '--radio' in sys.argv[2:-1] else None
+PORT = 19950 if RADIO else 19850
+TRUTH_PORT = 19970 if RADIO else 19870
 URI = f'udp://127.0.0.1:{PORT}'
 TOL_M = 0.05
 # The uploaded figure-8 flown (session 5): the truth's distance from the
@@ -107,11 +120,13 @@ DEAD_AT_S = 8.0
 DEAD_S = 0.03
 CRAZYFLIE = '--qemu-crazyflie' in sys.argv[2:]
 QEMU = '--qemu' in sys.argv[2:] or CRAZYFLIE
-CONTROLLER = [a for a in sys.argv[2:] if a not in ('--qemu', '--qemu-crazyflie')]
-SYSLINK = '127.0.0.1:19880'
+CONTROLLER = [a for a in sys.argv[2:] if a not in ('--qemu', '--qemu-crazyflie', '--radio', RADIO)]
+SYSLINK = '127.0.0.1:19980' if RADIO else '127.0.0.1:19880'
 BRIDGE = pathlib.Path(__file__).resolve().parent / 'nrf51_bridge.py'
 
-LABEL = '-qemu-crazyflie' if CRAZYFLIE else '-qemu' if QEMU else ''
+LABEL = ('-qemu-crazyflie' if CRAZYFLIE else '-qemu' if QEMU else '') + ('-radio' if RADIO else '')
+# Each --radio session's bridge counts (fctools.radio's).
+RADIOS = []
 check = Checks(f'crtp{LABEL}')
 # Each QEMU session's (worst data-ready -> answer instructions, late steps,
 # steps passed during a design).
@@ -136,7 +151,8 @@ class Sil:
         self.bridge = None
         if QEMU:
             self.bridge = subprocess.Popen([sys.executable, str(BRIDGE), '--syslink', SYSLINK, '--listen',
-                                            f'127.0.0.1:{PORT}'], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                            f'127.0.0.1:{PORT}', *(['--radio', RADIO] if RADIO else [])],
+                                           stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                            text=True)
             # The image is up once its parameters are written (sil-host says so).
             deadline = time.time() + 60
@@ -187,6 +203,20 @@ def report(sil, failed_before):
     out, bridge = sil.stop()
     if QEMU:
         print(f'  the bridge relayed: {bridge.strip()}')
+    if RADIO:
+        counts = json.loads(bridge.strip().splitlines()[-1]).get('radio', {}) if bridge.strip() else {}
+        RADIOS.append(counts)
+        air, lost = counts.get('on_air', 0), counts.get('lost_on_air', 0)
+        dups = counts.get('retransmits', 0) + counts.get('duplicates', 0)
+        want = radio_spec()['drop']
+        check(counts.get('safelink') and air > 0 and lost >= 0.5 * want * air and dups > 0
+              and counts.get('link_errors', 1) == 0,
+              f'the radio ({RADIO}) lost {lost} of {air} packets on the air ({100 * lost / max(air, 1):.1f} %); '
+              f'the dongle sent {counts.get("sends", 0)} times, {counts.get("not_acked", 0)} not acknowledged and '
+              f'sent again; the {dups} duplicates its retries made were dropped by the nRF51 (PID '
+              f'{counts.get("retransmits", 0)}, safelink {counts.get("duplicates", 0)}), '
+              f'{counts.get("resent_down", 0)} downlink packets carried again; '
+              f'{counts.get("link_errors")} link errors (cflib\'s "Too many packets lost")')
     if QEMU:
         # The image's tasks measure every step (fc_stm32f405::timing) and log
         # the figures every 1000 steps and at once when a deadline is missed.
@@ -304,6 +334,23 @@ def read_back(cf, name, want, within_s=None, ask=False):
         time.sleep(0.05)
 
 
+def log_estimate(scf, truth, n=100):
+    """A `SyncLogger` of stateEstimate.x/y/z at 100 Hz for `n` samples: their
+    timestamps (ms) and each estimate's distance from the truth (m)."""
+    lg = LogConfig('position', 10)
+    for v in 'xyz':
+        lg.add_variable(f'stateEstimate.{v}', 'float')
+    stamps, errs = [], []
+    with SyncLogger(scf, lg) as log:
+        for ts, data, _ in log:
+            stamps.append(ts)
+            est = (data['stateEstimate.x'], data['stateEstimate.y'], data['stateEstimate.z'])
+            errs.append(math.dist(est, truth.pos))
+            if len(stamps) == n:
+                break
+    return stamps, errs
+
+
 def estimator_settled(scf):
     """cflib's own recipe (its autonomous examples): kalman.varP* spread under 1e-3."""
     lg = LogConfig('kalman', 10)
@@ -384,17 +431,7 @@ def session_high_level(sil_host, truth):
                   f'without --storage, persistent_store and _clear fail ({ok}, {cleared}) and nothing is '
                   f'stored: {state}')
 
-        lg = LogConfig('position', 10)
-        for v in 'xyz':
-            lg.add_variable(f'stateEstimate.{v}', 'float')
-        stamps, errs = [], []
-        with SyncLogger(scf, lg) as log:
-            for ts, data, _ in log:
-                stamps.append(ts)
-                est = (data['stateEstimate.x'], data['stateEstimate.y'], data['stateEstimate.z'])
-                errs.append(math.dist(est, truth.pos))
-                if len(stamps) == 100:
-                    break
+        stamps, errs = log_estimate(scf, truth)
         # cflib starts a new block twice (after its creation, then start()); the
         # second start re-phases the block's timer, as the firmware's does. A
         # block is sampled and stamped when the link's task (lowest priority)
@@ -631,6 +668,17 @@ def tracking_error(flown, path, dt=0.01):
     return best
 
 
+def figure8_example(name):
+    """cflib's `autonomy/autonomous_sequence_high_level.py` from its source
+    distribution, loaded as module `name` (only its definitions: it flies
+    under `__main__`): its path and the module."""
+    script = cflib_examples() / 'autonomy' / 'autonomous_sequence_high_level.py'
+    spec = importlib.util.spec_from_file_location(name, script)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    return script, example
+
+
 def fly_figure8(cf, example, truth, during=None, relative_yaw=False):
     """`autonomous_sequence_high_level.py`'s upload (its `upload_trajectory`)
     and sequence on `cf`, its durations on the vehicle's clock: reset the
@@ -744,10 +792,7 @@ def session_flood(sil_host, truth):
     import numpy as np
     print('session 11: the uploaded figure-8 flown under a flood of parameter reads, TOC downloads and a log block')
     failed_before = check.failed
-    script = cflib_examples() / 'autonomy' / 'autonomous_sequence_high_level.py'
-    spec = importlib.util.spec_from_file_location('cflib_example_figure8_flood', script)
-    example = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(example)
+    _, example = figure8_example('cflib_example_figure8_flood')
     sil = Sil(sil_host, truth=truth)
     try:
         while truth.last is None:
@@ -798,10 +843,7 @@ def session_trajectory(sil_host, truth, relative_yaw=False):
     print(f'session 5{"b" if relative_yaw else ""}: cflib\'s autonomous_sequence_high_level.py{form}, unchanged '
           f'(an uploaded trajectory)')
     failed_before = check.failed
-    script = cflib_examples() / 'autonomy' / 'autonomous_sequence_high_level.py'
-    spec = importlib.util.spec_from_file_location('cflib_example_figure8', script)
-    example = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(example)  # only its definitions: it flies under __main__
+    script, example = figure8_example('cflib_example_figure8')  # only its definitions: it flies under __main__
     sil = Sil(sil_host, truth=truth)
     flown = []
     recording = threading.Event()
@@ -1120,6 +1162,101 @@ def session_swarm(sil_host, truth):
           f'{summary.get("late_steps")} steps late, real-time factor {summary.get("realtime_factor", 0):.2f}')
 
 
+def radio_spec():
+    """--radio's settings (fctools.radio.parse)."""
+    from fctools.radio import parse
+    return parse(RADIO)
+
+
+def read_memory(cf, mem, length):
+    """`length` bytes of `mem` from address 0, read with cflib's own
+    `Memory.read` (chunks of 24 bytes, each asked until answered); None if
+    it failed or took over 30 s."""
+    done, got = threading.Event(), []
+
+    def read(m, addr, data):
+        if m.id == mem.id:
+            got.append(bytes(data))
+            done.set()
+
+    def failed(m, addr, data):
+        if m.id == mem.id:
+            done.set()
+
+    cf.mem.mem_read_cb.add_callback(read)
+    cf.mem.mem_read_failed_cb.add_callback(failed)
+    try:
+        cf.mem.read(mem, 0, length)
+        done.wait(30)
+        return got[0] if got else None
+    finally:
+        cf.mem.mem_read_cb.remove_callback(read)
+        cf.mem.mem_read_failed_cb.remove_callback(failed)
+
+
+def session_radio(sil_host, truth):
+    """cflib over a radio that loses packets (`--radio`, the bridge's model
+    of the Crazyradio and the nRF51): connected (both TOCs whole, every
+    value read), a parameter set and read back, a log block at 100 Hz, the
+    example's figure-8 uploaded into the trajectory memory and read back
+    byte for byte, then flown within session 5's bounds and landed; the
+    radio's own counts checked in `report` (packets lost, the duplicates
+    its retries made dropped, no link error)."""
+    import numpy as np
+    from cflib.crazyflie.mem import MemoryElement
+    print(f'session R: over a radio that loses packets ({RADIO}): parameters, a log block, '
+          f'the figure-8 uploaded, read back and flown')
+    failed_before = check.failed
+    _, example = figure8_example('cflib_example_figure8_radio')
+    sil = Sil(sil_host, truth=truth)
+    try:
+        while truth.last is None:
+            time.sleep(0.05)
+        start, since = truth.pos, truth.t
+        scf = connect()
+        cf = scf.cf
+        check(cf.param.is_updated,
+              f'both TOCs whole and every value read: {sum(len(g) for g in cf.param.toc.toc.values())} params, '
+              f'{sum(len(g) for g in cf.log.toc.toc.values())} log variables')
+        before = float(cf.param.get_value('mpc.W_POS'))
+        cf.param.set_value('mpc.W_POS', before * 2)
+        after = read_back(cf, 'mpc.W_POS', before * 2, ask=True)
+        cf.param.set_value('mpc.W_POS', before)
+        restored = read_back(cf, 'mpc.W_POS', before, ask=True)
+        check(after == 2 * before and restored == before,
+              f'param mpc.W_POS set to {2 * before:g} reads back {after:g}, and back to {restored:g}')
+        stamps, errs = log_estimate(scf, truth)
+        gaps = sorted(b - a for a, b in itertools.pairwise(stamps))
+        check(gaps[1] >= 9 and gaps[-1] <= 11 and gaps[len(gaps) // 2] == 10 and max(errs) < 0.03,
+              f'SyncLogger at 100 Hz: 100 samples, timestamps 10 ms apart (gaps {gaps[0]}–{gaps[-1]} ms), '
+              f'stateEstimate within 3 cm of the truth (worst {100 * max(errs):.2f} cm)')
+        duration = fly_figure8(cf, example, truth)
+        mem = cf.mem.get_mems(MemoryElement.TYPE_TRAJ)[0]
+        sent = b''.join(bytes(p.pack()) for p in mem.trajectory)
+        got = read_memory(cf, mem, len(sent))
+        check(got == sent, f'the trajectory memory reads back the {len(sent)} bytes cflib wrote '
+                           f'({len(mem.trajectory)} pieces): '
+                           + ('the same' if got == sent else 'no answer' if got is None else
+                              f'{sum(a != b for a, b in zip(got, sent))} bytes differ'))
+        scf.close_link()
+        truth.sleep(0.5)
+        flown = np.array([(t, *p) for t, p in list(truth.tracks.get(0, [])) if t >= since])
+        path = poly4d_path(example.figure8, (start[0], start[1], 1.0))
+        high = flown[flown[:, 3] > 0.5] if len(flown) else np.zeros((0, 4))
+        worst, rms, _ = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
+        image = 'crazyflie_qemu_radio' if CRAZYFLIE else 'crtp_qemu_radio'
+        source = f'tools/crtp_cflib.py --qemu{"-crazyflie" if CRAZYFLIE else ""} --radio {RADIO}'
+        record(f'{image}_figure8_worst_cm', round(100 * worst, 1), 'cm', source)
+        record(f'{image}_figure8_rms_cm', round(100 * rms, 1), 'cm', source)
+        check(worst <= TRAJ_TOL_M and rms <= TRAJ_RMS_TOL_M,
+              f'the figure-8 ({duration:.1f} s) over the radio: worst {100 * worst:.1f} cm, RMS {100 * rms:.1f} cm '
+              f'(bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm, as session 5)')
+        check(truth.last['z'] < TOL_M and not truth.last['flying'],
+              f'landed after it: z {truth.last["z"]:.3f} m, motors off')
+    finally:
+        report(sil, failed_before)
+
+
 def persistent(cf, call, name):
     """cflib's `param.persistent_*` `call` on `name`, waited for: its result."""
     done = threading.Event()
@@ -1198,6 +1335,21 @@ def main():
     cflib.crtp.init_drivers()
     truth = Truth(TRUTH_PORT)
     truth.follow()
+    if RADIO:
+        if not QEMU:
+            sys.exit('crtp_cflib.py: --radio models the nRF51 bridge\'s radio: with --qemu or --qemu-crazyflie')
+        session_radio(sil_host, truth)
+        truth.close()
+        image = 'crazyflie' if CRAZYFLIE else 'crtp'
+        counts = RADIOS[-1] if RADIOS else {}
+        source = f'tools/crtp_cflib.py --qemu{"-crazyflie" if CRAZYFLIE else ""} --radio {RADIO}'
+        tag = f'{image}_radio_{round(100 * radio_spec()["drop"])}'
+        if counts:
+            record(f'{tag}_lost_pct', round(100 * counts['lost_on_air'] / max(counts['on_air'], 1), 1), '%', source)
+            record(f'{tag}_duplicates_dropped', counts['retransmits'] + counts['duplicates'], 'packets', source)
+            record(f'{tag}_link_errors', counts['link_errors'], 'errors', source)
+        print(check.summary())
+        sys.exit(check.exit_code())
     session_high_level(sil_host, truth)
     session_extpos(sil_host, truth)
     session_dead_imu(sil_host, truth)
