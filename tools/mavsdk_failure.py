@@ -7,14 +7,16 @@ from rotorpy's truth (--truth-port: north, east, down about the start, m).
 
 1. connect, as tools/mavsdk_flight.py does; injection off
    (`SYS_FAILURE_EN` 0): `Failure.inject` is denied; set to 1 (the
-   vehicle's parameters are REAL32: `set_param_float`); the IMU's faults
-   are unsupported;
+   vehicle's parameters are REAL32: `set_param_float`); a fault not
+   modelled (a wrong gyro) is unsupported;
 2. arm, take off to 1.5 m, Hold;
 3. each fault the vehicle should fly through, injected for a few simulated
    seconds in Hold and then cleared (`FailureType.OK`): the vehicle stays in
    Hold, and rotorpy's worst distance from where it held is measured;
-4. a fault it must not fly on (the position fix wrong by metres, or stuck):
-   the vehicle says which sensor and why, lands where it is and disarms;
+4. a fault it must not fly on (the position fix wrong by metres, or stuck;
+   the gyro off, the accelerometer stuck): the vehicle says which sensor
+   and why, lands where it is (without the IMU, on its last good sample)
+   and disarms;
    the landing's distance from where it held is measured.
    Then the fault is cleared, it arms again for the next.
 
@@ -48,9 +50,16 @@ FLY_THROUGH = [
     (FailureUnit.SENSOR_GPS, FailureType.INTERMITTENT, 4.0, 0.05),
     (FailureUnit.SENSOR_GPS, FailureType.OFF, 1.5, 0.10),
 ]
+# and what it must say, in order (a landing ends "landed: disarmed"; without
+# the gyro the motors stop: a quadrotor cannot fly without its rates).
+NO_POSITION = "no position: landing"
+NO_IMU = "IMU lost: landing on its recent mean"
+LANDED = "landed: disarmed"
 LAND_ON = [
-    (FailureUnit.SENSOR_GPS, FailureType.WRONG, "position fix wrong (10 in a row): not used"),
-    (FailureUnit.SENSOR_GPS, FailureType.STUCK, "position fix stuck (20 the same): not used"),
+    (FailureUnit.SENSOR_GPS, FailureType.WRONG, ["position fix wrong (10 in a row): not used", NO_POSITION, LANDED]),
+    (FailureUnit.SENSOR_GPS, FailureType.STUCK, ["position fix stuck (20 the same): not used", NO_POSITION, LANDED]),
+    (FailureUnit.SENSOR_ACCEL, FailureType.STUCK, ["accelerometer stuck (20 the same): not used", NO_IMU, LANDED]),
+    (FailureUnit.SENSOR_GYRO, FailureType.OFF, [NO_IMU, "no gyro: motors off"]),
 ]
 
 
@@ -129,7 +138,7 @@ class Faults(Flight):
         await self.inject(failure, FailureUnit.SENSOR_GPS, FailureType.OFF, FailureResult.DENIED)
         await param.set_param_float("SYS_FAILURE_EN", 1.0)
         self.check(await param.get_param_float("SYS_FAILURE_EN") == 1.0, "SYS_FAILURE_EN set to 1")
-        await self.inject(failure, FailureUnit.SENSOR_GYRO, FailureType.OFF, FailureResult.UNSUPPORTED)
+        await self.inject(failure, FailureUnit.SENSOR_GYRO, FailureType.WRONG, FailureResult.UNSUPPORTED)
         await action.set_takeoff_altitude(1.5)
         hold = await self.take_off(action, tel)
 
@@ -151,7 +160,7 @@ class Faults(Flight):
             record(f"fault_{name(unit, kind).replace(' ', '_')}_worst_m", worst, "m", SOURCE)
             await self.settle_at(hold, 0.05, 0.5, "back within 5 cm of where it held")
 
-        for k, (unit, kind, text) in enumerate(LAND_ON):
+        for k, (unit, kind, texts) in enumerate(LAND_ON):
             self.truth.poll()
             t0 = self.truth.t
             await self.inject(failure, unit, kind)
@@ -160,9 +169,16 @@ class Faults(Flight):
                 return await tel.landed_state() == LandedState.ON_GROUND and not await tel.armed()
 
             ok = await self.until(down, f"{name(unit, kind)}: landed and disarmed", timeout=3 * self.timeout)
+            # Motors stopped in the air, it falls: up to 2 s to the ground.
+            for _ in range(20):
+                self.truth.poll()
+                if abs(self.truth.pos[2]) < 0.05:
+                    break
+                await self.sim_sleep(0.1)
             self.truth.poll()
             said = self.said_since(t0)
-            self.check(text in said and "no position: landing" in said and "landed: disarmed" in said,
+            heard = [t for t in said if t in texts]
+            self.check(heard[:len(texts)] == texts,
                        f"{name(unit, kind)}: said which sensor and why, and landed: {said}")
             landed_at = list(self.truth.pos)
             off = math.dist(landed_at[:2], hold[:2])

@@ -182,6 +182,13 @@ pub enum ModeEvent {
     /// estimator's failsafe) while armed: Land (PX4's failsafe without a
     /// position: descend).
     PositionLost,
+    /// A part of the IMU stopped answering, or answered the same, while
+    /// armed in the air: Land on its readings' recent mean (host builds:
+    /// `sensor-faults`).
+    ImuLost,
+    /// The gyro stayed silent in the air: the motors stopped (PX4's flight
+    /// termination; host builds: `sensor-faults`).
+    GyroDead,
     /// Mission item `seq` is done; item `next` is current now (as the
     /// mission store has it: never past its end).
     ItemReached {
@@ -206,7 +213,12 @@ impl ModeEvent {
     pub fn is_failsafe(self) -> bool {
         matches!(
             self,
-            ModeEvent::JoystickLost | ModeEvent::GroundStationLost | ModeEvent::PositionLost | ModeEvent::Lockdown
+            ModeEvent::JoystickLost
+                | ModeEvent::GroundStationLost
+                | ModeEvent::PositionLost
+                | ModeEvent::ImuLost
+                | ModeEvent::GyroDead
+                | ModeEvent::Lockdown
         )
     }
 }
@@ -220,6 +232,8 @@ impl core::fmt::Display for ModeEvent {
             ModeEvent::JoystickLost => f.write_str("joystick lost: landing"),
             ModeEvent::GroundStationLost => f.write_str("ground station lost: landing"),
             ModeEvent::PositionLost => f.write_str("no position: landing"),
+            ModeEvent::ImuLost => f.write_str("IMU lost: landing on its recent mean"),
+            ModeEvent::GyroDead => f.write_str("no gyro: motors off"),
             ModeEvent::ItemReached { seq, .. } => write!(f, "mission item {seq} reached"),
             ModeEvent::MissionDone => f.write_str("mission done: hold"),
             ModeEvent::ItemNotFlyable(seq) => write!(f, "mission item {seq} cannot be flown: hold"),
@@ -665,19 +679,51 @@ impl ModeCommander {
         lp: &mut Loop,
         mission: &mut M,
     ) -> Option<ModeEvent> {
-        if known || !self.armed() || self.mode == FlightMode::Land || self.takeoff_us.is_none() {
+        if known {
             return None;
+        }
+        self.land_blind(t_us, lp, mission).then_some(ModeEvent::PositionLost)
+    }
+
+    /// The failsafe without the IMU: armed, in the air, and `silent` (a
+    /// part without a good reading for [`crate::supervisor::IMU_TIMEOUT_US`]:
+    /// the vehicle steps on its recent mean) → Land, as [`Self::watch_position`]
+    /// lands (ending by time too: a held sample dead-reckons the height).
+    /// Host builds only (`sensor-faults`).
+    #[cfg(feature = "sensor-faults")]
+    pub fn watch_imu<M: MissionItems + ?Sized>(
+        &mut self,
+        t_us: u64,
+        silent: bool,
+        lp: &mut Loop,
+        mission: &mut M,
+    ) -> Option<ModeEvent> {
+        if !silent {
+            return None;
+        }
+        self.land_blind(t_us, lp, mission).then_some(ModeEvent::ImuLost)
+    }
+
+    /// Land from where the estimate says the vehicle is, ending by time
+    /// too ([`Self::watch_position`]); `false` when not armed in the air,
+    /// or landing already.
+    #[cfg(feature = "sensor-faults")]
+    fn land_blind<M: MissionItems + ?Sized>(&mut self, t_us: u64, lp: &mut Loop, mission: &mut M) -> bool {
+        if !self.armed() || self.mode == FlightMode::Land || self.takeoff_us.is_none() {
+            return false;
         }
         let up_m = lp
             .navigator()
             .estimate()
             .map_or(0.0, |e| (self.home_ned_m[2] - e.pos_ned_m[2]).max(0.0));
         let speed = lp.settings().nav.land_mps.min(lp.navigator().config().descent_mps);
-        self.set_mode(FlightMode::Land, t_us, f32::NAN, lp, mission).ok()?;
+        if self.set_mode(FlightMode::Land, t_us, f32::NAN, lp, mission).is_err() {
+            return false;
+        }
         // At most a minute: a height the estimate got wrong is not flown for ever.
         let descent_us = (up_m / speed * 1e6).min(60e6) as u64;
         self.blind_until_us = Some(t_us + descent_us + BLIND_LANDING_MARGIN_US);
-        Some(ModeEvent::PositionLost)
+        true
     }
 
     /// Each step (at `t_us`, `dt_s` after the last): what the mode flies

@@ -7,9 +7,12 @@
 //!
 //! Modelled: the position fix (`HIL_STATE_QUATERNION`, PX4's "gps": off,
 //! stuck, wrong by [`WRONG_BY_M`] north, intermittent), the barometer (off,
-//! stuck) and the magnetometer (off, stuck, wrong by a quarter turn). The
-//! IMU's faults are answered `UNSUPPORTED`: this adapter steps on every
-//! `HIL_SENSOR` and has no supervisor of its own samples yet.
+//! stuck), the magnetometer (off, stuck, wrong by a quarter turn), and the
+//! IMU's gyro and accelerometer (off, stuck). A step without a good
+//! reading of a part flies that part's recent mean; past
+//! [`IMU_TIMEOUT_US`](fc_loop::supervisor::IMU_TIMEOUT_US) in the air the
+//! vehicle lands ([`fc_loop::modes::ModeCommander::watch_imu`]), and
+//! without the gyro for [`GYRO_DEAD_US`] it stops its motors.
 
 #[cfg(feature = "sensor-faults")]
 pub(in crate::vehicle) use on::*;
@@ -22,10 +25,23 @@ mod on {
         hil, MavResult, MavSeverity, MavShared, MavSink, Vector3, HIL_STATE_QUATERNION_DATA, MAG_IMPLAUSIBLE_RAD,
         MAG_SIGMA_RAD, POSITION_IMPLAUSIBLE_M,
     };
+    use fc_core::estimate::ImuSample;
     use fc_loop::health::{fingerprint, Change, Watch};
+    use fc_loop::supervisor::IMU_TIMEOUT_US;
 
     /// How far north a "wrong" position fix is, m.
     pub const WRONG_BY_M: f64 = 5.0;
+
+    /// Each good IMU sample's weight in the running mean a step without one
+    /// flies on (at 1 kHz, a time constant of 50 ms: the rates' noise and
+    /// the last instant's motion averaged out, not the hover's).
+    pub const IMU_MEAN_GAIN: f32 = 0.02;
+
+    /// Without a good gyro reading for this long in the air, the vehicle
+    /// stops its motors (PX4's flight termination): a quadrotor has no
+    /// attitude to fly without its rates, and a landing on their mean flies
+    /// away (metres, against rotorpy), µs.
+    pub const GYRO_DEAD_US: u64 = 500_000;
 
     /// An intermittent source reads for this long, then is silent as long, µs.
     pub const INTERMITTENT_US: u64 = 300_000;
@@ -84,16 +100,25 @@ mod on {
         Baro,
         /// `HIL_SENSOR`'s magnetic field.
         Mag,
+        /// `HIL_SENSOR`'s angular rates.
+        Gyro,
+        /// `HIL_SENSOR`'s specific force.
+        Accel,
     }
 
+    /// How many sources there are.
+    const SOURCES: usize = 5;
+
     impl Source {
-        const ALL: [Source; 3] = [Source::Position, Source::Baro, Source::Mag];
+        const ALL: [Source; SOURCES] = [Source::Position, Source::Baro, Source::Mag, Source::Gyro, Source::Accel];
 
         fn name(self) -> &'static str {
             match self {
                 Source::Position => "position fix",
                 Source::Baro => "barometer",
                 Source::Mag => "magnetometer",
+                Source::Gyro => "gyro",
+                Source::Accel => "accelerometer",
             }
         }
 
@@ -103,7 +128,8 @@ mod on {
                 4.0 => Ok(Source::Position),
                 3.0 => Ok(Source::Baro),
                 2.0 => Ok(Source::Mag),
-                0.0 | 1.0 => Err("IMU faults not modelled here"),
+                1.0 => Ok(Source::Accel),
+                0.0 => Ok(Source::Gyro),
                 _ => Err("no such sensor here"),
             }
         }
@@ -112,7 +138,9 @@ mod on {
         fn takes(self, f: Injected) -> bool {
             match self {
                 Source::Position => true,
-                Source::Baro => matches!(f, Injected::Ok | Injected::Off | Injected::Stuck),
+                Source::Baro | Source::Gyro | Source::Accel => {
+                    matches!(f, Injected::Ok | Injected::Off | Injected::Stuck)
+                }
                 Source::Mag => f != Injected::Intermittent,
             }
         }
@@ -121,13 +149,20 @@ mod on {
     /// The faults injected and each source's health.
     #[derive(Debug, Clone, Default)]
     pub struct Faults {
-        injected: [Injected; 3],
+        injected: [Injected; SOURCES],
         held_state: Option<HIL_STATE_QUATERNION_DATA>,
         held_baro: Option<f32>,
         held_mag: Option<Vector3<f32>>,
-        watch: [Watch; 3],
+        /// The gyro's and the accelerometer's readings when they stuck.
+        held_imu: [Option<Vector3<f32>>; 2],
+        watch: [Watch; SOURCES],
+        /// The good readings' running mean ([`IMU_MEAN_GAIN`]): what a step
+        /// flies on for a part without one.
+        imu_mean: Option<ImuSample>,
+        /// Since when the gyro and the accelerometer have had no good reading, µs.
+        imu_lost_us: [Option<u64>; 2],
         /// Health changes since the last step's end, to be told.
-        changes: heapless::Vec<(Source, Change), 4>,
+        changes: heapless::Vec<(Source, Change), SOURCES>,
         /// In the air at the last step ([`fc_loop::modes::ModeCommander::in_air`]).
         airborne: bool,
         /// Armed at the last step.
@@ -231,6 +266,68 @@ mod on {
             self.sample(Source::Mag, t_us, print).then_some(m)
         }
 
+        /// The IMU's sample `s` at `t_us` as the injected faults leave it,
+        /// and the sample to step on: each part (gyro, accelerometer) as it
+        /// reads if it is used (not off, not condemned), else the running
+        /// mean of its good readings ([`IMU_MEAN_GAIN`]); `None` before the
+        /// first good sample.
+        pub(in crate::vehicle) fn imu(&mut self, t_us: u64, s: &ImuSample) -> Option<ImuSample> {
+            let gyro = self.imu_part(Source::Gyro, t_us, &s.gyro_frd_radps);
+            let accel = self.imu_part(Source::Accel, t_us, &s.accel_frd_mps2);
+            for (k, good) in [gyro.is_some(), accel.is_some()].into_iter().enumerate() {
+                if good {
+                    self.imu_lost_us[k] = None;
+                } else {
+                    self.imu_lost_us[k].get_or_insert(t_us);
+                }
+            }
+            if let (None, Some(g), Some(a)) = (self.imu_mean, gyro, accel) {
+                self.imu_mean = Some(ImuSample {
+                    gyro_frd_radps: g,
+                    accel_frd_mps2: a,
+                });
+            }
+            let m = self.imu_mean.as_mut()?;
+            if let Some(g) = gyro {
+                m.gyro_frd_radps += (g - m.gyro_frd_radps) * IMU_MEAN_GAIN;
+            }
+            if let Some(a) = accel {
+                m.accel_frd_mps2 += (a - m.accel_frd_mps2) * IMU_MEAN_GAIN;
+            }
+            Some(ImuSample {
+                gyro_frd_radps: gyro.unwrap_or(m.gyro_frd_radps),
+                accel_frd_mps2: accel.unwrap_or(m.accel_frd_mps2),
+            })
+        }
+
+        /// One part of the IMU's sample (`s`: [`Source::Gyro`] or
+        /// [`Source::Accel`]) as its fault leaves it, if it is used.
+        fn imu_part(&mut self, s: Source, t_us: u64, v: &Vector3<f32>) -> Option<Vector3<f32>> {
+            let k = usize::from(s == Source::Accel);
+            let v = match self.injected(s) {
+                Injected::Off => return None,
+                Injected::Stuck => *self.held_imu[k].get_or_insert(*v),
+                _ => *v,
+            };
+            let print = fingerprint(&[v[0].to_bits(), v[1].to_bits(), v[2].to_bits()]);
+            self.sample(s, t_us, print).then_some(v)
+        }
+
+        /// A part of the IMU without a good reading for longer than
+        /// [`IMU_TIMEOUT_US`] at `t_us`: the steps fly its mean.
+        pub(in crate::vehicle) fn imu_silent(&self, t_us: u64) -> bool {
+            self.imu_lost_us
+                .iter()
+                .flatten()
+                .any(|&since| t_us.saturating_sub(since) > IMU_TIMEOUT_US)
+        }
+
+        /// The gyro without a good reading for longer than [`GYRO_DEAD_US`]
+        /// at `t_us`: no rate to damp the attitude with.
+        pub(in crate::vehicle) fn gyro_dead(&self, t_us: u64) -> bool {
+            self.imu_lost_us[0].is_some_and(|since| t_us.saturating_sub(since) > GYRO_DEAD_US)
+        }
+
         /// Whether a reading of `s` agrees with the estimate
         /// ([`fc_loop::health::plausible`], [`Watch::judged`]).
         fn judged(&mut self, s: Source, agrees: bool) {
@@ -279,10 +376,19 @@ mod on {
         }
 
         /// A new flight (disarmed, or a new time line): every source's health
-        /// forgotten; the injected faults stay.
+        /// forgotten; the injected faults stay (and the IMU's last good
+        /// sample: a disarmed vehicle still steps on it).
         pub(in crate::vehicle) fn restart(&mut self) {
-            self.watch = [Watch::new(); 3];
+            self.watch = [Watch::new(); SOURCES];
             self.airborne = false;
+        }
+
+        /// A new time line (a simulator that started again): a new flight,
+        /// and the IMU's last good sample forgotten.
+        pub(in crate::vehicle) fn new_time_line(&mut self) {
+            self.restart();
+            self.imu_mean = None;
+            self.imu_lost_us = [None; 2];
         }
     }
 
@@ -341,6 +447,8 @@ mod on {
                         Source::Position => self.faults.held_state = None,
                         Source::Baro => self.faults.held_baro = None,
                         Source::Mag => self.faults.held_mag = None,
+                        Source::Gyro => self.faults.held_imu[0] = None,
+                        Source::Accel => self.faults.held_imu[1] = None,
                     }
                     self.say(
                         out,
@@ -384,6 +492,7 @@ mod on {
 #[cfg(not(feature = "sensor-faults"))]
 mod stand_in {
     use super::super::{MavResult, MavShared, MavSink, Vector3, HIL_STATE_QUATERNION_DATA};
+    use fc_core::estimate::ImuSample;
 
     /// Nothing (see the module).
     #[derive(Debug, Clone)]
@@ -415,13 +524,17 @@ mod stand_in {
             Some(*mag)
         }
         #[inline(always)]
+        pub(in crate::vehicle) fn imu(&mut self, _: u64, s: &ImuSample) -> Option<ImuSample> {
+            Some(*s)
+        }
+        #[inline(always)]
         pub(in crate::vehicle) fn after_step(&mut self, _: u64, _: bool, _: bool) {}
         #[inline(always)]
         pub(in crate::vehicle) fn arming_refusal(&self) -> Option<(&'static str, fc_loop::health::Fault)> {
             None
         }
         #[inline(always)]
-        pub(in crate::vehicle) fn restart(&mut self) {}
+        pub(in crate::vehicle) fn new_time_line(&mut self) {}
     }
 
     impl MavShared {

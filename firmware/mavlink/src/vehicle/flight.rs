@@ -121,6 +121,14 @@ impl MavShared {
         }
         #[cfg(feature = "sensor-faults")]
         {
+            if self.modes.armed() && self.modes.in_air(&self.lp) && self.faults.gyro_dead(t_us) {
+                self.modes.disarm();
+                let _ = keep(fc_loop::modes::ModeEvent::GyroDead);
+            }
+            let silent = self.faults.imu_silent(t_us);
+            if let Some(e) = self.modes.watch_imu(t_us, silent, &mut self.lp, &mut flown) {
+                let _ = keep(e);
+            }
             let known = self.faults.position_known() && self.lp.navigator().mode() != NavMode::Failsafe;
             if let Some(e) = self.modes.watch_position(t_us, known, &mut self.lp, &mut flown) {
                 let _ = keep(e);

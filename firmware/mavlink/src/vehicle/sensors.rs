@@ -75,7 +75,7 @@ impl MavShared {
             self.last_fix_us = None;
             self.mag_ref_rad = None;
             self.mag_due.reset();
-            self.faults.restart();
+            self.faults.new_time_line();
             for (k, st) in self.streams.iter_mut().enumerate() {
                 *st = (STREAMS[k].interval_us, s.time_us);
             }
@@ -84,6 +84,12 @@ impl MavShared {
             .last_sensor_us
             .map_or(0.0, |t| s.time_us.saturating_sub(t) as f32 * 1e-6);
         self.last_sensor_us = Some(s.time_us);
+        // The sample to step on: this one, or the last good one (the IMU's
+        // faults, `faults::Faults::imu`); none yet, nothing to step.
+        let Some(imu) = self.faults.imu(s.time_us, &s.imu) else {
+            self.counters.sensors_refused = self.counters.sensors_refused.wrapping_add(1);
+            return None;
+        };
         if let Some(alt) = s.baro_alt_m.and_then(|a| self.faults.baro(s.time_us, a)) {
             self.on_baro(s.time_us, alt);
         }
@@ -92,7 +98,7 @@ impl MavShared {
         }
         self.command(s.time_us, dt_s);
         self.seq = self.seq.wrapping_add(1);
-        let job = self.lp.imu_job(self.seq, s.time_us, &s.imu, clock, now_us);
+        let job = self.lp.imu_job(self.seq, s.time_us, &imu, clock, now_us);
         let (airborne, armed) = (self.modes.in_air(&self.lp), self.modes.armed());
         self.faults.after_step(s.time_us, airborne, armed);
         if let Some(step) = job.as_ref() {

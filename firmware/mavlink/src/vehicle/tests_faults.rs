@@ -16,6 +16,7 @@ fn inject(unit: f32, failure_type: f32, instance: f32) -> MavMessage {
 
 // MAVLink's FAILURE_UNIT and FAILURE_TYPE.
 const GYRO: f32 = 0.0;
+const ACCEL: f32 = 1.0;
 const MAG: f32 = 2.0;
 const BARO: f32 = 3.0;
 const GPS: f32 = 4.0;
@@ -37,7 +38,7 @@ fn enabled() -> (MavVehicle, u64) {
 }
 
 /// Off by default, as PX4's: every injection DENIED and said; on, each
-/// modelled one ACCEPTED and said, and what is not modelled (the IMU's, a
+/// modelled one ACCEPTED and said, and what is not modelled (a wrong gyro, a
 /// garbage barometer, a second GPS, a type that is no whole number)
 /// UNSUPPORTED with its reason.
 #[test]
@@ -60,9 +61,9 @@ fn failure_injection_obeys_only_sys_failure_en_and_refuses_what_is_not_modelled(
     assert_eq!(out.param("SYS_FAILURE_EN"), Some(1.0));
     let cases = [
         (
-            inject(GYRO, OFF, 0.0),
+            inject(GYRO, WRONG, 0.0),
             MavResult::MAV_RESULT_UNSUPPORTED,
-            "failure refused: IMU faults not modelled here",
+            "failure refused: fault not modelled here",
         ),
         (
             inject(BARO, GARBAGE, 0.0),
@@ -108,6 +109,11 @@ fn failure_injection_obeys_only_sys_failure_en_and_refuses_what_is_not_modelled(
             inject(BARO, STUCK, 0.0),
             MavResult::MAV_RESULT_ACCEPTED,
             "failure injected: barometer stuck",
+        ),
+        (
+            inject(ACCEL, STUCK, 0.0),
+            MavResult::MAV_RESULT_ACCEPTED,
+            "failure injected: accelerometer stuck",
         ),
         (
             inject(GPS, OK, 0.0),
@@ -238,4 +244,31 @@ fn a_wrong_magnetometer_and_a_silent_barometer_are_said_by_name() {
     let psi = v.flight_loop().navigator().estimate().unwrap().euler()[2];
     assert!(psi.abs() < 0.01, "the heading turned to {psi} rad");
     assert_eq!(v.counters().baro_fixes, baros);
+}
+
+/// A gyro that stops (`off`) on the ground: every sample is still answered,
+/// flown on the last good one; silent after 0.5 s, said by name, and no
+/// arming on it; back, and armed, once it reads again.
+#[test]
+fn a_silent_gyro_is_flown_on_its_last_sample_said_and_refuses_an_arming() {
+    let (mut v, t) = enabled();
+    let mut out = Sent::default();
+    v.handle(&inject(GYRO, OFF, 0.0), &mut out, &Still, 0).unwrap();
+    let steps = v.counters().steps;
+    let t = rest(&mut v, &mut out, t, 1_000);
+    assert_eq!(v.counters().steps - steps, 1_000, "every sample answered");
+    assert_eq!(
+        out.texts(),
+        ["failure injected: gyro off", "gyro silent 0.5 s: not used"]
+    );
+    let mut out = Sent::default();
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(!v.armed());
+    assert_eq!(out.texts(), ["arming refused: gyro silent 0.5 s"]);
+    let mut out = Sent::default();
+    v.handle(&inject(GYRO, OK, 0.0), &mut out, &Still, 0).unwrap();
+    rest(&mut v, &mut out, t, 10);
+    assert_eq!(out.texts(), ["failure injected: gyro ok", "gyro back"]);
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(v.armed());
 }
