@@ -1213,8 +1213,12 @@ def session_radio(sil_host, truth):
         while truth.last is None:
             time.sleep(0.05)
         start, since = truth.pos, truth.t
+        # Each transfer: completed exactly, failed cleanly (cflib said so),
+        # or corrupted (completed, and not what was sent).
+        transfers = {'completed': 0, 'failed': 0, 'corrupted': 0}
         scf = connect()
         cf = scf.cf
+        transfers['completed' if cf.param.is_updated else 'failed'] += 1
         check(cf.param.is_updated,
               f'both TOCs whole and every value read: {sum(len(g) for g in cf.param.toc.toc.values())} params, '
               f'{sum(len(g) for g in cf.log.toc.toc.values())} log variables')
@@ -1223,10 +1227,13 @@ def session_radio(sil_host, truth):
         after = read_back(cf, 'mpc.W_POS', before * 2, ask=True)
         cf.param.set_value('mpc.W_POS', before)
         restored = read_back(cf, 'mpc.W_POS', before, ask=True)
+        for got, want in ((after, 2 * before), (restored, before)):
+            transfers['completed' if got == want else 'corrupted'] += 1
         check(after == 2 * before and restored == before,
               f'param mpc.W_POS set to {2 * before:g} reads back {after:g}, and back to {restored:g}')
         stamps, errs = log_estimate(scf, truth)
         gaps = sorted(b - a for a, b in itertools.pairwise(stamps))
+        transfers['completed' if len(stamps) == 100 else 'failed'] += 1
         check(gaps[1] >= 9 and gaps[-1] <= 11 and gaps[len(gaps) // 2] == 10 and max(errs) < 0.03,
               f'SyncLogger at 100 Hz: 100 samples, timestamps 10 ms apart (gaps {gaps[0]}–{gaps[-1]} ms), '
               f'stateEstimate within 3 cm of the truth (worst {100 * max(errs):.2f} cm)')
@@ -1234,6 +1241,10 @@ def session_radio(sil_host, truth):
         mem = cf.mem.get_mems(MemoryElement.TYPE_TRAJ)[0]
         sent = b''.join(bytes(p.pack()) for p in mem.trajectory)
         got = read_memory(cf, mem, len(sent))
+        # The upload (cflib's write_data_sync, inside the example: it exits
+        # on a failed write) and the read back.
+        transfers['completed'] += 1
+        transfers['failed' if got is None else 'completed' if got == sent else 'corrupted'] += 1
         check(got == sent, f'the trajectory memory reads back the {len(sent)} bytes cflib wrote '
                            f'({len(mem.trajectory)} pieces): '
                            + ('the same' if got == sent else 'no answer' if got is None else
@@ -1253,6 +1264,13 @@ def session_radio(sil_host, truth):
               f'(bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm, as session 5)')
         check(truth.last['z'] < TOL_M and not truth.last['flying'],
               f'landed after it: z {truth.last["z"]:.3f} m, motors off')
+        check(transfers['corrupted'] == 0 and transfers['failed'] == 0,
+              f'transfers: {transfers["completed"]} completed exactly (the TOCs and values, two parameter writes '
+              f'read back, the log block, the trajectory\'s upload and read back), {transfers["failed"]} failed, '
+              f'{transfers["corrupted"]} corrupted')
+        tag = f'{"crazyflie" if CRAZYFLIE else "crtp"}_radio_{round(100 * radio_spec()["drop"])}'
+        for k, n in transfers.items():
+            record(f'{tag}_transfers_{k}', n, 'transfers', source)
     finally:
         report(sil, failed_before)
 
