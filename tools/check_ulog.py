@@ -19,25 +19,15 @@ STATUSTEXTs in order, its largest armed estimate error is
 """
 import json
 import math
-import re
 import subprocess
 import sys
 import tempfile
-from pathlib import Path
 
 import numpy as np
 from pyulog import ULog
 
 from fctools.checks import Checks
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def table_length():
-    """How many parameters the one table has (`PARAMS: [Param; N]` in
-    firmware/loop/src/params.rs): what every ULog's header must list."""
-    text = (ROOT / "firmware/loop/src/params.rs").read_text()
-    return int(re.search(r"pub const PARAMS: \[Param; (\d+)\]", text).group(1))
+from fctools.params import table_length
 
 check = Checks("ulog")
 

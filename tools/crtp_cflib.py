@@ -827,6 +827,14 @@ def session_flood(sil_host, truth):
               f'(bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm, as session 5)')
     finally:
         report(sil, failed_before)
+    if QEMU and TIMINGS and HOLDS:
+        # This session's own figures (report's last): its worst step, late
+        # steps and longest hold under the flood.
+        image = 'crazyflie' if CRAZYFLIE else 'crtp'
+        source = f'tools/crtp_cflib.py --qemu{"-crazyflie" if CRAZYFLIE else ""} (session 11)'
+        record(f'{image}_qemu_flood_answer_worst_icount', TIMINGS[-1][0], 'instructions', source)
+        record(f'{image}_qemu_flood_late_steps', TIMINGS[-1][1], 'steps', source)
+        record(f'{image}_qemu_flood_link_hold_worst_icount', HOLDS[-1], 'instructions', source)
 
 
 def session_trajectory(sil_host, truth, relative_yaw=False):

@@ -49,6 +49,7 @@ from scipy.spatial.transform import Rotation
 from children import EndsWithFlight
 from fctools.image_log import stack
 from fctools.lossy import LossyLink
+from fctools.lossy import parse as lossy_parse
 from fctools.pieces import Pieces, cflib_figure8, read_csv, write_csv
 from measure import budgets, record
 from reference import EIGHT_PERIOD_S, START_NED_M, Reference, window_figures
@@ -311,6 +312,9 @@ def main():
             script = [os.path.join(here, name), "--url", url, "--truth-port", str(a.truth_port)]
             if a.mavsdk_failure:
                 script += ["--table", a.mavsdk_failure]
+            if a.mavsdk and a.lossy:
+                # The lossy link's transfers, counted as mavsdk_lossy_<drop %>_transfers_*.
+                script += ["--transfers", f"mavsdk_lossy_{round(100 * lossy_parse(a.lossy)['drop'])}"]
             if a.target == "qemu":
                 # The image in QEMU flies about 5x slower than real time.
                 script += ["--timeout", "180"]
