@@ -25,6 +25,9 @@ the firmware says of itself:
    (`sil-host crtp --imu-dead`): the vehicle flies the last good sample for
    10 ms, then says "failsafe descent" on the console and lands straight
    down; the samples are counted (sil-host's summary, the image's log).
+7b. (SIL only) the motion capture silent for 1.5 s in a 1 m hover, then one
+   fix 5 m off (`sil-host crtp --fix-outage`, `--fix-outlier-at`): the truth
+   within 5 cm of the hover throughout; the estimator's counts printed.
 8. cflib's `autonomy/autonomous_sequence_high_level.py`, unchanged: it
    uploads its figure-8 (ten Poly4D pieces) into the trajectory memory
    (port mem), defines it, arms, takes off and flies it relative to where
@@ -118,6 +121,11 @@ MOTION_SETTLE_S = 3.0
 # Session 4's dead IMU: when (plant time, s) and for how long.
 DEAD_AT_S = 8.0
 DEAD_S = 0.03
+# Session 3b's motion capture: silent from (plant time, s) for how long, then
+# one fix 5 m off at.
+FIX_OUT_AT_S = 8.0
+FIX_OUT_S = 1.5
+FIX_OUTLIER_AT_S = 11.0
 CRAZYFLIE = '--qemu-crazyflie' in sys.argv[2:]
 QEMU = '--qemu' in sys.argv[2:] or CRAZYFLIE
 CONTROLLER = [a for a in sys.argv[2:] if a not in ('--qemu', '--qemu-crazyflie', '--radio', RADIO)]
@@ -574,6 +582,52 @@ def session_dead_imu(sil_host, truth):
         got = tuple(int(x) for x in m.groups()) if m else None
     check(got is not None and got[0] == 0 and abs(got[1] - n) <= 1 and got[2] == got[1] and got[3] == 1,
           f'IMU samples (missing, bad, flown on the last good one, silences): {got}, {n} NaN samples sent')
+
+
+def session_fix_faults(sil_host, truth):
+    """The motion capture fails from the simulator's side in a 1 m hover
+    (`sil-host crtp --fix-outage`, `--fix-outlier-at`): no fix for
+    FIX_OUT_S, then one fix 5 m off. The estimator dead-reckons on the IMU
+    through the outage and its gate refuses the outlier; the truth's worst
+    distance from the hover over the whole window is checked and recorded."""
+    print(f'session 3b: the motion capture stops for {FIX_OUT_S} s, then lies by 5 m once, in a hover '
+          f'(sil-host --fix-outage, --fix-outlier-at)')
+    failed_before = check.failed
+    sil = Sil(sil_host, '--fix-outage', f'{FIX_OUT_AT_S},{FIX_OUT_S}', '--fix-outlier-at', f'{FIX_OUTLIER_AT_S}',
+              truth=truth)
+    try:
+        scf = connect()
+        cf = scf.cf
+        check(estimator_settled(scf), 'estimator converged')
+        cf.supervisor.send_arming_request(True)
+        time.sleep(0.3)
+        cf.high_level_commander.takeoff(1.0, 2.0)
+        truth.sleep(3.0)
+        hover = truth.pos
+        check(truth.t < FIX_OUT_AT_S - 0.5 and abs(hover[2] - 1.0) < 0.1,
+              f'hovering at {hover[2]:.2f} m before the fixes stop at {FIX_OUT_AT_S} s (plant time {truth.t:.1f} s)')
+        truth.sleep(FIX_OUTLIER_AT_S + 2.0 - truth.t)
+        window = [p for t, p in truth.tracks.get(0, []) if FIX_OUT_AT_S <= t <= FIX_OUTLIER_AT_S + 2.0]
+        worst = max((math.dist(p, hover) for p in window), default=math.inf)
+        check(len(window) > 100 and worst <= TOL_M,
+              f'through the outage and the outlier the truth stayed within {100 * worst:.1f} cm of the hover '
+              f'over {FIX_OUT_AT_S}-{FIX_OUTLIER_AT_S + 2.0} s (bound {100 * TOL_M:.0f} cm)')
+        record('crtp_sil_fix_faults_worst_m', worst, 'm', 'tools/crtp_cflib.py session 3b')
+        cf.high_level_commander.land(0.0, 2.0)
+        truth.sleep(3.5)
+        check(truth.last['z'] < TOL_M and not truth.last['flying'], 'landed: motors off')
+        scf.close_link()
+    finally:
+        out = report(sil, failed_before)
+    # The estimator's own count (sil-host's summary), the flight's whole:
+    # the outlier is among the refused (that it was not believed is the
+    # truth's window above), with the lift-off's (the estimator refuses
+    # centimetres at a lift-off, and resets to them after 20).
+    m = re.search(r'"fixes": \[\s*(\d+),\s*(\d+),\s*(\d+)\s*\]', out)
+    fused, refused, resets = (int(x) for x in m.groups()) if m else (0, 0, -1)
+    check(fused > 0 and refused >= 1,
+          f'position fixes over the flight: {fused} fused, {refused} refused by the estimator\'s gate, '
+          f'{resets} resets to a fix (information)')
 
 
 def run_example(script, timeout_s, args=()):
@@ -1379,6 +1433,8 @@ def main():
     session_high_level(sil_host, truth)
     session_extpos(sil_host, truth)
     session_dead_imu(sil_host, truth)
+    if not QEMU:
+        session_fix_faults(sil_host, truth)
     session_examples(sil_host)
     session_trajectory(sil_host, truth)
     session_trajectory(sil_host, truth, relative_yaw=True)

@@ -147,6 +147,14 @@ pub(crate) struct CrtpArgs {
     /// the last good one for 10 ms, then descends (its failsafe).
     #[arg(long, value_name = "START,LENGTH", value_parser = parse_window)]
     pub(crate) imu_dead: Option<(f64, f64)>,
+    /// Fault: no motion-capture fix (nor its heading) in START,LENGTH (s of the plant's time); the
+    /// estimator dead-reckons on the IMU.
+    #[arg(long, value_name = "START,LENGTH", value_parser = parse_window)]
+    pub(crate) fix_outage: Option<(f64, f64)>,
+    /// Fault: the first motion-capture fix at or after S seconds (the plant's time) is 5 m off
+    /// (north); the estimator's gate refuses it.
+    #[arg(long, value_name = "S")]
+    pub(crate) fix_outlier_at: Option<f64>,
     /// Keep persistent parameters in this file, as the vehicle's flash (made if missing; in
     /// process only): cflib's `param.persistent_store` writes the value in force there,
     /// `persistent_clear` forgets it, and the next start flies with what is stored.

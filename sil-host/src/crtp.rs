@@ -94,6 +94,10 @@ pub struct CrtpConfig {
     pub seed: u64,
     /// Every IMU sample in `(start, length)`, s of the plant's time, is NaN.
     pub imu_dead: Option<(f64, f64)>,
+    /// No motion-capture fix in `(start, length)`, s of the plant's time.
+    pub fix_outage: Option<(f64, f64)>,
+    /// The first motion-capture fix at or after this time (s) is 5 m off.
+    pub fix_outlier_at_s: Option<f64>,
     /// Where the vehicle runs.
     pub target: CrtpTarget,
     /// Set from elsewhere (a signal handler) to end the flight at the next
@@ -143,6 +147,10 @@ pub struct CrtpSummary {
     /// IMU samples not good (in-process): missing, bad, steps flown on a
     /// held sample, silences past 10 ms (the image logs its own).
     pub imu: Option<[u32; 4]>,
+    /// Position fixes (in-process): fused, refused by the estimator's gate,
+    /// resets to them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fixes: Option<[u32; 3]>,
     /// The image's log (QEMU).
     pub firmware_log: Vec<String>,
     /// `--storage`: what the store was at boot, and the stored values
@@ -552,6 +560,8 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
         plant.contact_ground(0.0);
         let mut sensor_cfg = SensorConfig::new(FixProfile::Mocap, cfg.seed.wrapping_add(i as u64));
         sensor_cfg.faults.imu_dead = cfg.imu_dead;
+        sensor_cfg.faults.outage = cfg.fix_outage;
+        sensor_cfg.faults.outlier_at_s = cfg.fix_outlier_at_s;
         let sensors = Sensors::new(sensor_cfg, IMU_PERIOD_S)?;
         crafts.push(Craft {
             fc,
@@ -670,6 +680,10 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
                     packets: Some(vehicle.counters().into()),
                     sent: Some(out.sent),
                     imu: Some(imu),
+                    fixes: Some({
+                        let k = vehicle.flight_loop().navigator().counters();
+                        [k.pos_fused, k.pos_rejected, k.pos_resets]
+                    }),
                     firmware_log: Vec::new(),
                     storage: stored.clone(),
                     final_position_m,
@@ -688,6 +702,7 @@ pub fn run(cfg: &CrtpConfig) -> Result<CrtpSummary> {
                     packets: None,
                     sent: None,
                     imu: None,
+                    fixes: None,
                     firmware_log: qemu.finish()?,
                     storage: None,
                     final_position_m,
@@ -784,6 +799,8 @@ mod tests {
             duration_s: Some(0.01),
             seed: 1,
             imu_dead: None,
+            fix_outage: None,
+            fix_outlier_at_s: None,
             target: CrtpTarget::InProcess,
             stop: Arc::new(AtomicBool::new(false)),
             storage: None,

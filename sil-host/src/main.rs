@@ -485,6 +485,8 @@ fn crtp_cmd(a: &CrtpArgs) -> Result<()> {
         duration_s: a.duration,
         seed: a.seed,
         imu_dead: a.imu_dead,
+        fix_outage: a.fix_outage,
+        fix_outlier_at_s: a.fix_outlier_at,
         storage: a.storage.clone(),
         target: match a.target.as_str() {
             "qemu" | "qemu-crazyflie" => sil_host::crtp::CrtpTarget::Qemu {
