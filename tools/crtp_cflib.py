@@ -538,6 +538,21 @@ def session_extpos(sil_host, truth):
         report(sil, failed_before)
 
 
+def hover_at_1m(scf, truth, fault_at_s, what):
+    """Estimator converged, armed, `takeoff(1.0, 2)` and 3 s (plant time):
+    checked hovering at 1 m at least 0.5 s before `fault_at_s`; where."""
+    cf = scf.cf
+    check(estimator_settled(scf), 'estimator converged')
+    cf.supervisor.send_arming_request(True)
+    time.sleep(0.3)
+    cf.high_level_commander.takeoff(1.0, 2.0)
+    truth.sleep(3.0)
+    hover = truth.pos
+    check(truth.t < fault_at_s - 0.5 and abs(hover[2] - 1.0) < 0.1,
+          f'hovering at {hover[2]:.2f} m before {what} at {fault_at_s} s (plant time {truth.t:.1f} s)')
+    return hover
+
+
 def session_dead_imu(sil_host, truth):
     print(f'session 3: the IMU answers NaN for {1000 * DEAD_S:.0f} ms in a hover (sil-host --imu-dead)')
     failed_before = check.failed
@@ -547,14 +562,7 @@ def session_dead_imu(sil_host, truth):
         scf = connect()
         cf = scf.cf
         cf.console.receivedChar.add_callback(said.append)
-        check(estimator_settled(scf), 'estimator converged')
-        cf.supervisor.send_arming_request(True)
-        time.sleep(0.3)
-        cf.high_level_commander.takeoff(1.0, 2.0)
-        truth.sleep(3.0)
-        hover = truth.pos
-        check(truth.t < DEAD_AT_S - 0.5 and abs(hover[2] - 1.0) < 0.1,
-              f'hovering at {hover[2]:.2f} m before the IMU dies at {DEAD_AT_S} s (plant time {truth.t:.1f} s)')
+        hover = hover_at_1m(scf, truth, DEAD_AT_S, 'the IMU dies')
         truth.sleep(DEAD_AT_S + 0.5 - truth.t)
         text = ''.join(said)
         check('IMU silent for more than 10 ms: failsafe descent' in text,
@@ -598,14 +606,7 @@ def session_fix_faults(sil_host, truth):
     try:
         scf = connect()
         cf = scf.cf
-        check(estimator_settled(scf), 'estimator converged')
-        cf.supervisor.send_arming_request(True)
-        time.sleep(0.3)
-        cf.high_level_commander.takeoff(1.0, 2.0)
-        truth.sleep(3.0)
-        hover = truth.pos
-        check(truth.t < FIX_OUT_AT_S - 0.5 and abs(hover[2] - 1.0) < 0.1,
-              f'hovering at {hover[2]:.2f} m before the fixes stop at {FIX_OUT_AT_S} s (plant time {truth.t:.1f} s)')
+        hover = hover_at_1m(scf, truth, FIX_OUT_AT_S, 'the fixes stop')
         truth.sleep(FIX_OUTLIER_AT_S + 2.0 - truth.t)
         window = [p for t, p in truth.tracks.get(0, []) if FIX_OUT_AT_S <= t <= FIX_OUTLIER_AT_S + 2.0]
         worst = max((math.dist(p, hover) for p in window), default=math.inf)
