@@ -67,6 +67,20 @@ class Flight:
         self.transfers["completed" if exact else "corrupted"] += 1
         return exact
 
+    async def again(self, make, what, tries=3):
+        """`await make()`, made again when MAVSDK gives up on it (its own
+        retries timed out: a clean failure, counted), up to `tries` times,
+        as a ground station does over a lossy link; the last failure is
+        raised."""
+        for k in range(tries):
+            try:
+                return await make()
+            except Exception as e:  # MAVSDK's errors share no base class, only their text
+                if k + 1 == tries or "TIMEOUT" not in str(e):
+                    raise
+                self.transfers["failed"] += 1
+                print(f"     {what}: {type(e).__name__} {str(e).split(';')[0]}: made again", flush=True)
+
     async def until(self, cond, what, timeout=None):
         """Waits (wall time) until `cond()` holds; checks it."""
         end = time.time() + (timeout or self.timeout)
@@ -125,9 +139,11 @@ class Flight:
         # machine 12x slower than real time would ask for more than a
         # minute of FS_GCS_MS.
         for name, digits, most in (("FS_GCS_MS", 0, 60000.0), ("COM_RC_LOSS_T", 1, 60.0), ("COM_OF_LOSS_T", 1, 60.0)):
-            value = min(float(round(await param.get_param_float(name) * slow, digits)), most)
-            await param.set_param_float(name, value)
-            self.check(self.transfer(abs(await param.get_param_float(name) - value) < 1e-3),
+            value = min(float(round(await self.again(lambda n=name: param.get_param_float(n), name) * slow,
+                                    digits)), most)
+            await self.again(lambda n=name, v=value: param.set_param_float(n, v), name)
+            got = await self.again(lambda n=name: param.get_param_float(n), name)
+            self.check(self.transfer(abs(got - value) < 1e-3),
                        f"{name} lengthened to {value}")
 
     async def run(self, url):
@@ -180,21 +196,23 @@ class Flight:
         self.check(landed == LandedState.ON_GROUND and not await tel.armed(),
                    f"landed state {landed}, disarmed")
 
-        mass = await param.get_param_float("VEH_MASS")
+        mass = await self.again(lambda: param.get_param_float("VEH_MASS"), "VEH_MASS")
         self.check(mass > 0, f"param VEH_MASS = {mass}")
-        await param.set_param_float("MPC_XY_CRUISE", 1.0)
-        self.check(self.transfer(await param.get_param_float("MPC_XY_CRUISE") == 1.0),
+        await self.again(lambda: param.set_param_float("MPC_XY_CRUISE", 1.0), "MPC_XY_CRUISE")
+        cruise = await self.again(lambda: param.get_param_float("MPC_XY_CRUISE"), "MPC_XY_CRUISE")
+        self.check(self.transfer(cruise == 1.0),
                    "param MPC_XY_CRUISE set and read back")
         # The whole list (PARAM_REQUEST_LIST): every parameter of the table,
         # once, the one just set with its new value.
-        every = await param.get_all_params()
+        every = await self.again(param.get_all_params, "the parameter list")
         names = [p.name for p in every.float_params] + [p.name for p in every.int_params]
         cruise = [p.value for p in every.float_params if p.name == "MPC_XY_CRUISE"]
         self.check(self.transfer(len(names) == len(set(names)) == table_length() and cruise == [1.0]),
                    f"the parameter list downloaded whole: {len(names)} of {table_length()}, "
                    f"MPC_XY_CRUISE {cruise}")
-        await action.set_takeoff_altitude(1.5)
-        self.check(self.transfer(await action.get_takeoff_altitude() == 1.5), "takeoff altitude 1.5 m (MIS_TAKEOFF_ALT)")
+        await self.again(lambda: action.set_takeoff_altitude(1.5), "the take-off height")
+        height = await self.again(action.get_takeoff_altitude, "the take-off height")
+        self.check(self.transfer(height == 1.5), "takeoff altitude 1.5 m (MIS_TAKEOFF_ALT)")
 
         await action.arm()
         await self.until(tel.armed, "armed")
@@ -274,8 +292,8 @@ class Flight:
                              longitude_deg=lon0 + math.degrees(e / (r * math.cos(math.radians(lat0)))),
                              relative_altitude_m=1.5, loiter_time_s=1.0, acceptance_radius_m=0.05)
                  for n, e in corners]
-        await mission.upload_mission(MissionPlan(items))
-        back = await mission.download_mission()
+        await self.again(lambda: mission.upload_mission(MissionPlan(items)), "the mission's upload")
+        back = await self.again(mission.download_mission, "the mission's download")
         self.check(self.transfer(len(back.mission_items) == 4 and all(
             abs(a.latitude_deg - b.latitude_deg) < 1e-7 and abs(a.relative_altitude_m - 1.5) < 1e-3
             for a, b in zip(back.mission_items, items))), "mission uploaded, downloaded back the same")
