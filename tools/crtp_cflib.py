@@ -148,13 +148,13 @@ HOLDS = []
 class Sil:
     """`sil-host crtp`, and with --qemu the nRF51 bridge in front of the image."""
 
-    def __init__(self, sil_host, *extra, truth=None, duration_s=120):
+    def __init__(self, sil_host, *extra, truth=None):
         if truth:
             truth.reset()  # the previous session's clock is not this one's
         image = 'qemu-crazyflie' if CRAZYFLIE else 'qemu'
         target = ['--target', image, '--syslink', SYSLINK] if QEMU else []
         self.sil = subprocess.Popen([sil_host, 'crtp', *CONTROLLER, *target, '--listen', f'127.0.0.1:{PORT}',
-                                     '--truth-to', f'127.0.0.1:{TRUTH_PORT}', '--duration', str(duration_s), *extra],
+                                     '--truth-to', f'127.0.0.1:{TRUTH_PORT}', '--duration', '120', *extra],
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.bridge = None
         if QEMU:
@@ -1094,10 +1094,7 @@ def session_motion_examples(sil_host, truth):
 
     for script, checks in (('motion_commander_demo.py', demo), ('autonomous_sequence.py', sequence)):
         failed_before = check.failed
-        # The examples sleep on the wall clock (the SIL keeps it): on a
-        # loaded machine their connect takes longer than the 120 s a session
-        # usually has; the example's own timeout stays 120 s.
-        sil = Sil(sil_host, truth=truth, duration_s=240)
+        sil = Sil(sil_host, truth=truth)
         try:
             while truth.last is None:
                 time.sleep(0.05)
