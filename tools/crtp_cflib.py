@@ -734,6 +734,25 @@ def figure8_example(name):
     return script, example
 
 
+def figure8_flown(truth, example, start, since):
+    """The truth's track (vehicle 0's) since plant time `since`, above
+    0.5 m, against the example's figure-8 started 1 m above `start`: its
+    worst and RMS distance (`tracking_error`), m; ∞ without a track."""
+    import numpy as np
+    flown = np.array([(t, *p) for t, p in list(truth.tracks.get(0, [])) if t >= since])
+    path = poly4d_path(example.figure8, (start[0], start[1], 1.0))
+    high = flown[flown[:, 3] > 0.5] if len(flown) else np.zeros((0, 4))
+    worst, rms, _ = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
+    return worst, rms
+
+
+def radio_tag():
+    """The measurements' prefix of a --radio session, and their source."""
+    image = 'crazyflie' if CRAZYFLIE else 'crtp'
+    source = f'tools/crtp_cflib.py --qemu{"-crazyflie" if CRAZYFLIE else ""} --radio {RADIO}'
+    return f'{image}_radio_{round(100 * radio_spec()["drop"])}', source
+
+
 def fly_figure8(cf, example, truth, during=None, relative_yaw=False):
     """`autonomous_sequence_high_level.py`'s upload (its `upload_trajectory`)
     and sequence on `cf`, its durations on the vehicle's clock: reset the
@@ -873,10 +892,7 @@ def session_flood(sil_host, truth):
               f'cannot take, by design)')
         scf.close_link()
         truth.sleep(0.5)
-        flown = np.array([(t, *p) for t, p in list(truth.tracks.get(0, [])) if t >= since])
-        path = poly4d_path(example.figure8, (start[0], start[1], 1.0))
-        high = flown[flown[:, 3] > 0.5] if len(flown) else np.zeros((0, 4))
-        worst, rms, _ = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
+        worst, rms = figure8_flown(truth, example, start, since)
         check(worst <= TRAJ_TOL_M and rms <= TRAJ_RMS_TOL_M,
               f'the figure-8 ({duration:.1f} s) under the flood: worst {100 * worst:.1f} cm, RMS {100 * rms:.1f} cm '
               f'(bounds {100 * TRAJ_TOL_M:.0f} and {100 * TRAJ_RMS_TOL_M:.0f} cm, as session 5)')
@@ -1265,7 +1281,6 @@ def session_radio(sil_host, truth):
     byte for byte, then flown within session 5's bounds and landed; the
     radio's own counts checked in `report` (packets lost, the duplicates
     its retries made dropped, no link error)."""
-    import numpy as np
     from cflib.crazyflie.mem import MemoryElement
     print(f'session R: over a radio that loses packets ({RADIO}): parameters, a log block, '
           f'the figure-8 uploaded, read back and flown')
@@ -1314,12 +1329,9 @@ def session_radio(sil_host, truth):
                               f'{sum(a != b for a, b in zip(got, sent))} bytes differ'))
         scf.close_link()
         truth.sleep(0.5)
-        flown = np.array([(t, *p) for t, p in list(truth.tracks.get(0, [])) if t >= since])
-        path = poly4d_path(example.figure8, (start[0], start[1], 1.0))
-        high = flown[flown[:, 3] > 0.5] if len(flown) else np.zeros((0, 4))
-        worst, rms, _ = tracking_error(high, path) if len(high) > len(path) else (math.inf, math.inf, None)
+        worst, rms = figure8_flown(truth, example, start, since)
         image = 'crazyflie_qemu_radio' if CRAZYFLIE else 'crtp_qemu_radio'
-        source = f'tools/crtp_cflib.py --qemu{"-crazyflie" if CRAZYFLIE else ""} --radio {RADIO}'
+        tag, source = radio_tag()
         record(f'{image}_figure8_worst_cm', round(100 * worst, 1), 'cm', source)
         record(f'{image}_figure8_rms_cm', round(100 * rms, 1), 'cm', source)
         check(worst <= TRAJ_TOL_M and rms <= TRAJ_RMS_TOL_M,
@@ -1331,7 +1343,6 @@ def session_radio(sil_host, truth):
               f'transfers: {transfers["completed"]} completed exactly (the TOCs and values, two parameter writes '
               f'read back, the log block, the trajectory\'s upload and read back), {transfers["failed"]} failed, '
               f'{transfers["corrupted"]} corrupted')
-        tag = f'{"crazyflie" if CRAZYFLIE else "crtp"}_radio_{round(100 * radio_spec()["drop"])}'
         for k, n in transfers.items():
             record(f'{tag}_transfers_{k}', n, 'transfers', source)
     finally:
@@ -1421,10 +1432,8 @@ def main():
             sys.exit('crtp_cflib.py: --radio models the nRF51 bridge\'s radio: with --qemu or --qemu-crazyflie')
         session_radio(sil_host, truth)
         truth.close()
-        image = 'crazyflie' if CRAZYFLIE else 'crtp'
         counts = RADIOS[-1] if RADIOS else {}
-        source = f'tools/crtp_cflib.py --qemu{"-crazyflie" if CRAZYFLIE else ""} --radio {RADIO}'
-        tag = f'{image}_radio_{round(100 * radio_spec()["drop"])}'
+        tag, source = radio_tag()
         if counts:
             record(f'{tag}_lost_pct', round(100 * counts['lost_on_air'] / max(counts['on_air'], 1), 1), '%', source)
             record(f'{tag}_duplicates_dropped', counts['retransmits'] + counts['duplicates'], 'packets', source)
