@@ -37,9 +37,10 @@ TOLERANCES = [
     (r"^budget_", 0.0, 0.0, "a budget (firmware/stm32f405/src/budgets.rs) is stated exactly"),
     (r"^fault_.*_s$", 0.10, 0.5,
      "MAVSDK injects a fault on the wall clock: where in the simulated flight it lands moves by tenths of a second"),
-    (r"^fault_gyro_.*_m$", 0.0, 0.3,
-     ("MAVSDK injects a fault on the wall clock; a fall with the motors stopped lands where its tilt at "
-      "the stop takes it (16.3 and 28.4 cm from the hold in two runs; the check's own bound is 50 cm)")),
+    (r"^fault_gyro_off_landed_off_m$", 0.0, 0.0,
+     ("a stated bound, the fault flight's own (tools/mavsdk_failure.py): a fall with the motors stopped "
+      "lands where its tilt at the stop takes it (2.6, 16.3, 28.4 and 37.4 cm from the hold in four runs), "
+      "so the page states the bound and the measurement must not exceed it")),
     (r"^fault_", 0.0, 0.15,
      ("MAVSDK injects a fault on the wall clock: where in the flight (and its noise) it lands moves the "
       "distance from run to run (the same landing 0.6, 5.7, 9.7 and 12.4 cm from the hold in four runs; "
@@ -83,6 +84,15 @@ TOLERANCES = [
 ]
 
 
+# Keys whose marked figure is a bound the page states, not a measurement:
+# the measurement must be at or under it, and `write` leaves it alone.
+BOUNDS = re.compile(r"diff|^fault_gyro_off_landed_off_m$")
+
+
+def is_bound(key):
+    return BOUNDS.search(key) is not None
+
+
 def tolerance(key):
     for pat, rel, abs_, why in TOLERANCES:
         if re.search(pat, key):
@@ -124,7 +134,7 @@ def load(path):
 
 def within(key, stated, measured):
     rel, abs_, _ = tolerance(key)
-    if "diff" in key:
+    if is_bound(key):
         # A stated bound: the measurement must be at or under it.
         return measured <= stated + abs_
     return abs(stated - measured) <= max(rel * abs(measured), abs_)
@@ -209,7 +219,7 @@ def write(measured, files):
             if key not in measured:
                 return m.group(0)
             value = measured[key]
-            if "diff" in key:
+            if is_bound(key):
                 return m.group(0)  # a stated bound is the author's, not a measurement
             return f"<!--m:{key}-->{fmt(value, shown)}<!--/m-->"
 
@@ -234,7 +244,7 @@ def main():
             text = copy.read_text()
             # The first marked figure that is a measurement (a stated bound
             # may be raised without being wrong).
-            m = next(m for m in MARK.finditer(text) if "diff" not in m.group(1))
+            m = next(m for m in MARK.finditer(text) if not is_bound(m.group(1)))
             key, shown = m.group(1), m.group(2)
             drifted = fmt(parse(shown) * 1.1 + 1, shown)
             copy.write_text(text[: m.start(2)] + drifted + text[m.end(2):])
