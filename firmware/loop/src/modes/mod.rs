@@ -183,7 +183,8 @@ pub enum ModeEvent {
     /// position: descend).
     PositionLost,
     /// A part of the IMU stopped answering, or answered the same, while
-    /// armed in the air: Land on its readings' recent mean (host builds:
+    /// armed in the air: Land on what stands in for it (the gyro's recent
+    /// mean, the commanded thrust's specific force; host builds:
     /// `sensor-faults`).
     ImuLost,
     /// The gyro stayed silent in the air: the motors stopped (PX4's flight
@@ -232,7 +233,7 @@ impl core::fmt::Display for ModeEvent {
             ModeEvent::JoystickLost => f.write_str("joystick lost: landing"),
             ModeEvent::GroundStationLost => f.write_str("ground station lost: landing"),
             ModeEvent::PositionLost => f.write_str("no position: landing"),
-            ModeEvent::ImuLost => f.write_str("IMU lost: landing on its recent mean"),
+            ModeEvent::ImuLost => f.write_str("IMU lost: landing"),
             ModeEvent::GyroDead => f.write_str("no gyro: motors off"),
             ModeEvent::ItemReached { seq, .. } => write!(f, "mission item {seq} reached"),
             ModeEvent::MissionDone => f.write_str("mission done: hold"),
@@ -687,7 +688,7 @@ impl ModeCommander {
 
     /// The failsafe without the IMU: armed, in the air, and `silent` (a
     /// part without a good reading for [`crate::supervisor::IMU_TIMEOUT_US`]:
-    /// the vehicle steps on its recent mean) → Land, as [`Self::watch_position`]
+    /// the vehicle steps on what stands in for it) → Land, as [`Self::watch_position`]
     /// lands (ending by time too: a held sample dead-reckons the height).
     /// Host builds only (`sensor-faults`).
     #[cfg(feature = "sensor-faults")]

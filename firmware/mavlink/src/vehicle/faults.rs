@@ -9,7 +9,9 @@
 //! stuck, wrong by [`WRONG_BY_M`] north, intermittent), the barometer (off,
 //! stuck), the magnetometer (off, stuck, wrong by a quarter turn), and the
 //! IMU's gyro and accelerometer (off, stuck). A step without a good
-//! reading of a part flies that part's recent mean; past
+//! gyro reading flies the gyro's recent mean; one without a good
+//! accelerometer reading, in the air, the specific force its commanded
+//! thrust gives (on the ground, the accelerometer's mean); past
 //! [`IMU_TIMEOUT_US`](fc_loop::supervisor::IMU_TIMEOUT_US) in the air the
 //! vehicle lands ([`fc_loop::modes::ModeCommander::watch_imu`]), and
 //! without the gyro for [`GYRO_DEAD_US`] it stops its motors.
@@ -41,7 +43,7 @@ mod on {
     /// stops its motors (PX4's flight termination): a quadrotor has no
     /// attitude to fly without its rates, and a landing on their mean flies
     /// away (metres, against rotorpy), µs.
-    pub const GYRO_DEAD_US: u64 = 500_000;
+    pub const GYRO_DEAD_US: u64 = 100_000;
 
     /// An intermittent source reads for this long, then is silent as long, µs.
     pub const INTERMITTENT_US: u64 = 300_000;
@@ -270,8 +272,17 @@ mod on {
         /// and the sample to step on: each part (gyro, accelerometer) as it
         /// reads if it is used (not off, not condemned), else the running
         /// mean of its good readings ([`IMU_MEAN_GAIN`]); `None` before the
-        /// first good sample.
-        pub(in crate::vehicle) fn imu(&mut self, t_us: u64, s: &ImuSample) -> Option<ImuSample> {
+        /// first good sample. An accelerometer without a good reading is
+        /// replaced by what `thrust_frd_mps2` gives instead, if anything: in
+        /// the air, the specific force the commanded thrust gives (FRD,
+        /// m/s²: `(0, 0, −U1/m)`). On a mean the estimator sees no climb or
+        /// sink the height loop commands, and the loop oscillates on it.
+        pub(in crate::vehicle) fn imu(
+            &mut self,
+            t_us: u64,
+            s: &ImuSample,
+            thrust_frd_mps2: impl FnOnce() -> Option<Vector3<f32>>,
+        ) -> Option<ImuSample> {
             let gyro = self.imu_part(Source::Gyro, t_us, &s.gyro_frd_radps);
             let accel = self.imu_part(Source::Accel, t_us, &s.accel_frd_mps2);
             for (k, good) in [gyro.is_some(), accel.is_some()].into_iter().enumerate() {
@@ -296,7 +307,7 @@ mod on {
             }
             Some(ImuSample {
                 gyro_frd_radps: gyro.unwrap_or(m.gyro_frd_radps),
-                accel_frd_mps2: accel.unwrap_or(m.accel_frd_mps2),
+                accel_frd_mps2: accel.or_else(thrust_frd_mps2).unwrap_or(m.accel_frd_mps2),
             })
         }
 
@@ -524,7 +535,12 @@ mod stand_in {
             Some(*mag)
         }
         #[inline(always)]
-        pub(in crate::vehicle) fn imu(&mut self, _: u64, s: &ImuSample) -> Option<ImuSample> {
+        pub(in crate::vehicle) fn imu(
+            &mut self,
+            _: u64,
+            s: &ImuSample,
+            _: impl FnOnce() -> Option<Vector3<f32>>,
+        ) -> Option<ImuSample> {
             Some(*s)
         }
         #[inline(always)]

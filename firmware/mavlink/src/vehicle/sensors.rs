@@ -86,7 +86,15 @@ impl MavShared {
         self.last_sensor_us = Some(s.time_us);
         // The sample to step on: this one, or the last good one (the IMU's
         // faults, `faults::Faults::imu`); none yet, nothing to step.
-        let Some(imu) = self.faults.imu(s.time_us, &s.imu) else {
+        // In the air, the specific force the last commanded thrust gives
+        // (FRD, m/s²): what stands in for an accelerometer without a reading.
+        let (modes, lp) = (&self.modes, &self.lp);
+        let thrust = || {
+            modes
+                .in_air(lp)
+                .then(|| Vector3::new(0.0, 0.0, -lp.output()[0] / lp.vehicle().mass_kg))
+        };
+        let Some(imu) = self.faults.imu(s.time_us, &s.imu, thrust) else {
             self.counters.sensors_refused = self.counters.sensors_refused.wrapping_add(1);
             return None;
         };

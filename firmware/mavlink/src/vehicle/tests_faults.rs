@@ -5,6 +5,7 @@
 use super::tests::{at_rest, command, command_of, param_set, rest, Sent, Still};
 
 use super::*;
+use fc_core::estimate::ImuSample;
 
 /// `MAV_CMD_INJECT_FAILURE` as MAVSDK's `Failure::inject` sends it.
 fn inject(unit: f32, failure_type: f32, instance: f32) -> MavMessage {
@@ -271,4 +272,31 @@ fn a_silent_gyro_is_flown_on_its_last_sample_said_and_refuses_an_arming() {
     assert_eq!(out.texts(), ["failure injected: gyro ok", "gyro back"]);
     v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
     assert!(v.armed());
+}
+
+/// An accelerometer that stops (`off`): a step in the air flies the
+/// specific force the commanded thrust gives in its place (what the
+/// caller hands over; `sensors.rs` hands `(0, 0, −U1/m)` in the air and
+/// nothing on the ground), one on the ground the mean of its good
+/// readings (the rest's −9.81 m/s² on z); the gyro is untouched.
+#[test]
+fn a_silent_accelerometer_is_replaced_by_the_thrust_in_the_air_and_its_mean_on_the_ground() {
+    let (mut v, t) = enabled();
+    let mut out = Sent::default();
+    v.handle(&inject(ACCEL, OFF, 0.0), &mut out, &Still, 0).unwrap();
+    let read = ImuSample {
+        gyro_frd_radps: Vector3::new(0.01, -0.02, 0.03),
+        accel_frd_mps2: Vector3::new(1.0, 2.0, 3.0),
+    };
+    let thrust = Vector3::new(0.0, 0.0, -12.5);
+    let air = v.shared.faults.imu(t, &read, || Some(thrust)).unwrap();
+    assert_eq!(air.accel_frd_mps2, thrust);
+    assert_eq!(air.gyro_frd_radps, read.gyro_frd_radps);
+    let ground = v.shared.faults.imu(t + 1_000, &read, || None).unwrap();
+    let want = Vector3::new(0.0, 0.0, -9.81);
+    assert!(
+        (ground.accel_frd_mps2 - want).norm() < 1e-3,
+        "{:?}",
+        ground.accel_frd_mps2
+    );
 }
