@@ -366,6 +366,9 @@ hil --mavsdk --duration 120 --json target/rotorpy-hil-mavsdk.json | grep "^mavsd
 stage "the same MAVSDK script over a lossy link (10 % lost, 0.5 s bursts, duplicates, 200 ms reordering)"
 hil --mavsdk --duration 150 --lossy drop=0.1,burst=0.5@10,dup=0.02,delay=0.2,seed=1 --gcs-port 14570 \
     --json target/rotorpy-hil-mavsdk-lossy.json | grep "^mavsdk check:" | tee -a "$log"
+stage "and over one losing 30 % (the same bursts, duplicates and reordering)"
+hil --mavsdk --duration 150 --lossy drop=0.3,burst=0.5@10,dup=0.02,delay=0.2,seed=2 --gcs-port 14570 \
+    --json target/rotorpy-hil-mavsdk-lossy30.json | grep "^mavsdk check:" | tee -a "$log"
 stage "MAVSDK's Failure plugin injects sensor faults in flight (in process): it flies on, or lands by name"
 hil --mavsdk-failure target/faults.json --duration 120 --json target/rotorpy-hil-faults.json \
     | grep "^fault check:" | tee -a "$log"

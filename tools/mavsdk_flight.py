@@ -53,9 +53,12 @@ from measure import record
 
 
 class Flight:
-    def __init__(self, truth, timeout):
+    def __init__(self, truth, timeout, lossy=False):
         self.truth = truth
         self.timeout = timeout
+        # The link loses datagrams (--lossy): the vehicle's heartbeat is
+        # asked for every 0.5 s of wall time whatever the pace (`pace`).
+        self.lossy = lossy
         self.check = Checks("mavsdk", flush=True)
         # Each transfer (a parameter set and read back, a mission up and
         # back): completed exactly, failed (MAVSDK raised), or corrupted
@@ -67,9 +70,10 @@ class Flight:
         self.transfers["completed" if exact else "corrupted"] += 1
         return exact
 
-    async def again(self, make, what, tries=3):
+    async def again(self, make, what, tries=5):
         """`await make()`, made again when MAVSDK gives up on it (its own
-        retries timed out: a clean failure, counted), up to `tries` times,
+        retries timed out: a clean failure, counted), up to `tries` times
+        (at 30 % lost each way MAVSDK gives up on one download in three),
         as a ground station does over a lossy link; the last failure is
         raised."""
         for k in range(tries):
@@ -79,6 +83,23 @@ class Flight:
                 if k + 1 == tries or "TIMEOUT" not in str(e):
                     raise
                 self.transfers["failed"] += 1
+                print(f"     {what}: {type(e).__name__} {str(e).split(';')[0]}: made again", flush=True)
+
+    async def command(self, make, what, done):
+        """`await make()`, a command, made again when MAVSDK gives up on it
+        (no COMMAND_ACK within its retries: a clean failure) unless
+        `await done()` says the vehicle did it (the command heard, its
+        acknowledgement lost), up to five times, as a ground station does
+        over a lossy link; the last failure is raised."""
+        for k in range(5):
+            try:
+                return await make()
+            except Exception as e:  # MAVSDK's errors share no base class, only their text
+                if k == 4 or "TIMEOUT" not in str(e):
+                    raise
+                if await done():
+                    print(f"     {what}: {type(e).__name__} {str(e).split(';')[0]}, but done", flush=True)
+                    return None
                 print(f"     {what}: {type(e).__name__} {str(e).split(';')[0]}: made again", flush=True)
 
     async def until(self, cond, what, timeout=None):
@@ -117,20 +138,28 @@ class Flight:
         and sends its own heartbeat at 1 Hz, its joystick input and offboard
         set-points at 20 Hz. The vehicle keeps simulated time. So, through
         MAVSDK's public API, when a simulated second takes more than three of
-        wall time: the vehicle's heartbeat is asked for every 0.5 s of wall
+        wall time, or over a link that loses datagrams (`--lossy`) at any pace: the vehicle's heartbeat is asked for every 0.5 s of wall
         time (MAV_CMD_SET_MESSAGE_INTERVAL, through mavlink_direct), and the
         timeouts on the ground station's streams (FS_GCS_MS, COM_RC_LOSS_T,
         COM_OF_LOSS_T) are lengthened by the slowdown."""
         slow = await self.truth.slowdown()
         print(f"     {slow:.1f} wall seconds per simulated second", flush=True)
-        if slow <= 3.0:
+        if slow <= 3.0 and not self.lossy:
             return
+        # A link that loses datagrams, slower than real time: two heartbeats
+        # lost in a row (one in ten at 30 %) are MAVSDK's 3 s of silence.
+        slow = max(slow, 1.0)
         direct = MavlinkDirectAsync(system)
-        ack = await direct.send_command(MavlinkMessage(
+
+        async def never():
+            return False
+
+        ack = await self.command(lambda: direct.send_command(MavlinkMessage(
             message_name="COMMAND_LONG", target_system_id=1, target_component_id=1,
             fields_json=json.dumps({"target_system": 1, "target_component": 1, "command": 511,
                                     "confirmation": 0, "param1": 0, "param2": 0.5e6 / slow, "param3": 0,
-                                    "param4": 0, "param5": 0, "param6": 0, "param7": 0})))
+                                    "param4": 0, "param5": 0, "param6": 0, "param7": 0}))),
+                                 "the heartbeat's interval", never)
         self.check(json.loads(ack.fields_json).get("result") == 0,
                    f"heartbeat every {0.5 / slow:.3f} simulated s (SET_MESSAGE_INTERVAL): {ack.fields_json}")
         # The vehicle's own values, scaled: FS_GCS_MS takes whole
@@ -214,13 +243,13 @@ class Flight:
         height = await self.again(action.get_takeoff_altitude, "the take-off height")
         self.check(self.transfer(height == 1.5), "takeoff altitude 1.5 m (MIS_TAKEOFF_ALT)")
 
-        await action.arm()
+        async def mode_is(*m):
+            return await tel.flight_mode() in m
+
+        await self.command(action.arm, "arm", tel.armed)
         await self.until(tel.armed, "armed")
 
-        async def mode_is(m):
-            return await tel.flight_mode() == m
-
-        await action.takeoff()
+        await self.command(action.takeoff, "take-off", lambda: mode_is(FlightMode.TAKEOFF, FlightMode.HOLD))
         await self.until(lambda: mode_is(FlightMode.HOLD), "takeoff, then Hold")
         await self.settle_at([0.0, 0.0, -1.5], 0.05, 1.0, "rotorpy within 5 cm of 1.5 m up (1 s)")
         async def in_air():
@@ -241,7 +270,7 @@ class Flight:
 
         task = asyncio.create_task(stream())
         await asyncio.sleep(0.5)
-        await manual.start_position_control()
+        await self.command(manual.start_position_control, "Position mode", lambda: mode_is(FlightMode.POSCTL))
         await self.until(lambda: mode_is(FlightMode.POSCTL), "joystick: Position mode")
         self.truth.poll()
         start = list(self.truth.pos)
@@ -270,7 +299,7 @@ class Flight:
         # the vehicle has heard one (as PX4's): a second of the stream first,
         # so that a lossy link's burst does not swallow all it has sent.
         await asyncio.sleep(1.0)
-        await offboard.start()
+        await self.command(offboard.start, "Offboard", lambda: mode_is(FlightMode.OFFBOARD))
         await self.until(lambda: mode_is(FlightMode.OFFBOARD), "offboard started")
         # The joystick goes quiet only once Offboard flies (its loss in
         # Position mode would land).
@@ -278,7 +307,7 @@ class Flight:
         await task
         await offboard.set_position_ned(PositionNedYaw(2.0, 0.0, -1.5, 0.0))
         await self.settle_at([2.0, 0.0, -1.5], 0.05, 1.0, "offboard: rotorpy within 5 cm of 2 m north (1 s)")
-        await offboard.stop()
+        await self.command(offboard.stop, "Offboard's end", lambda: mode_is(FlightMode.HOLD))
         await self.until(lambda: mode_is(FlightMode.HOLD), "offboard stopped: Hold")
 
         # The mission: a 2 m square's corners and its centre, 1.5 m up,
@@ -298,7 +327,7 @@ class Flight:
             abs(a.latitude_deg - b.latitude_deg) < 1e-7 and abs(a.relative_altitude_m - 1.5) < 1e-3
             for a, b in zip(back.mission_items, items))), "mission uploaded, downloaded back the same")
         since = len(self.truth.track)
-        await mission.start_mission()
+        await self.command(mission.start_mission, "the mission's start", lambda: mode_is(FlightMode.MISSION))
         await self.until(lambda: mode_is(FlightMode.MISSION), "mission started")
         seen = set()
 
@@ -322,7 +351,8 @@ class Flight:
             d = self.truth.closest([n, e, -1.5], since)
             self.check(d <= 0.05, f"waypoint {k + 1} ({n}, {e}, 1.5 m up): rotorpy within {100 * d:.1f} cm (5 cm)")
 
-        await action.return_to_launch()
+        await self.command(action.return_to_launch, "return to launch",
+                           lambda: mode_is(FlightMode.RETURN_TO_LAUNCH, FlightMode.LAND))
         await self.until(lambda: mode_is(FlightMode.RETURN_TO_LAUNCH), "return to launch")
 
         async def down():
@@ -338,10 +368,12 @@ def main():
     ap.add_argument("--url", default="udpin://127.0.0.1:14550")
     ap.add_argument("--truth-port", type=int, default=14560)
     ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per step")
+    ap.add_argument("--lossy", action="store_true",
+                    help="the link loses datagrams: the vehicle's heartbeat asked for every 0.5 s of wall time")
     ap.add_argument("--transfers", metavar="NAME",
                     help="record the transfers' counts as NAME_transfers_{completed,failed,corrupted}")
     a = ap.parse_args()
-    f = Flight(Truth(a.truth_port), a.timeout)
+    f = Flight(Truth(a.truth_port), a.timeout, lossy=a.lossy)
     try:
         asyncio.run(f.run(a.url))
     except Exception as e:  # noqa: BLE001 -- a MAVSDK error is a failed check, with its reason

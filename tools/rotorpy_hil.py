@@ -314,7 +314,7 @@ def main():
                 script += ["--table", a.mavsdk_failure]
             if a.mavsdk and a.lossy:
                 # The lossy link's transfers, counted as mavsdk_lossy_<drop %>_transfers_*.
-                script += ["--transfers", f"mavsdk_lossy_{round(100 * lossy_parse(a.lossy)['drop'])}"]
+                script += ["--lossy", "--transfers", f"mavsdk_lossy_{round(100 * lossy_parse(a.lossy)['drop'])}"]
             if a.target == "qemu":
                 # The image in QEMU flies about 5x slower than real time.
                 script += ["--timeout", "180"]

@@ -29,10 +29,14 @@ use nalgebra::Vector3;
 
 /// Items the store holds.
 pub const MISSION_CAPACITY: usize = 16;
-/// A request unanswered this long (simulated µs) is sent again.
-pub const REQUEST_RETRY_US: u64 = 500_000;
-/// Requests sent again before an upload is cancelled.
-pub const REQUEST_RETRIES: u8 = 5;
+/// A request unanswered this long (simulated µs) is sent again: PX4's
+/// `MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT`.
+pub const REQUEST_RETRY_US: u64 = 250_000;
+/// Requests sent again before an upload is cancelled: 5 s of silence,
+/// PX4's `MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT`. Over a link that
+/// loses 30 % each way, a request and its answer pass together about one
+/// time in two; a few retries 0.5 s apart lost whole uploads.
+pub const REQUEST_RETRIES: u8 = 20;
 /// Farthest a mission item may be from the origin, m (the planner's reach).
 pub const MAX_DISTANCE_M: f32 = 1000.0;
 

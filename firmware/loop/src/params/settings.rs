@@ -57,7 +57,9 @@ pub struct Settings {
     /// Failsafe thrust as a fraction of hover thrust (below 1: descend).
     pub failsafe_descent: f32,
     /// No ground-station `HEARTBEAT` for this long while armed (once one
-    /// has been seen) → land where it is, ms; 0: off.
+    /// has been seen) → land where it is, ms; 0: off. Default 10 s, PX4's
+    /// `COM_DL_LOSS_T`: a ground station that beats at 1 Hz over a link
+    /// losing 30 % of its datagrams misses 5 in a row too often for 5 s.
     pub gcs_loss_ms: u32,
     /// Period of the position fixes taken from `HIL_STATE_QUATERNION`, ms.
     pub fix_period_ms: u32,
@@ -81,7 +83,7 @@ impl Settings {
             tuning: Tuning::project(),
             failsafe_timeout_ms: 50,
             failsafe_descent: 0.85,
-            gcs_loss_ms: 5_000,
+            gcs_loss_ms: 10_000,
             fix_period_ms: 10,
             nav: NavSettings::default(),
         }

@@ -493,13 +493,13 @@ fn losing_the_ground_station_lands_and_disarms() {
         0,
     )
     .unwrap();
-    // Heard 4.9 s ago: still fine (FS_GCS_MS 5000).
+    // Heard 9.9 s ago: still fine (FS_GCS_MS 10 000, PX4's COM_DL_LOSS_T).
     let mut out = Sent::default();
-    let t = rest(&mut v, &mut out, t, 4_900);
+    let t = rest(&mut v, &mut out, t, 9_900);
     assert!(v.armed() && out.texts().is_empty(), "{:?}", out.texts());
     assert!(v.flight_loop().setpoint().pos_ned_m[2] < -0.5, "climbing");
     assert_eq!(v.mode(), FlightMode::Takeoff);
-    // Silent past 5 s: land where it is, then disarm on the ground.
+    // Silent past 10 s: land where it is, then disarm on the ground.
     rest(&mut v, &mut out, t, 200);
     let texts = out.texts();
     assert_eq!(texts, ["ground station lost: landing", "landed: disarmed"], "{texts:?}");
@@ -1241,11 +1241,12 @@ fn missions_upload_download_and_fly_item_by_item() {
             MavMissionResult::MAV_MISSION_UNSUPPORTED_FRAME, // 5 km away: out of the planner's reach
         ]
     );
-    // A ground station that stops answering: asked 5 more times, 0.5 s apart, then cancelled.
+    // A ground station that stops answering: asked 20 more times, 0.25 s
+    // apart (PX4's), then cancelled.
     let mut o = Sent::default();
     other.handle(&mission_count(3), &mut o, &Still, 0).unwrap();
-    rest(&mut other, &mut o, 1_010_000, 3500);
-    assert_eq!(o.requests(), [0, 0, 0, 0, 0, 0]);
+    rest(&mut other, &mut o, 1_010_000, 5_500);
+    assert_eq!(o.requests(), [0; 21]);
     assert_eq!(o.mission_acks(), [MavMissionResult::MAV_MISSION_OPERATION_CANCELLED]);
 
     // Flown: Mission needs the vehicle armed.
