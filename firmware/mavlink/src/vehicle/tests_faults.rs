@@ -300,3 +300,60 @@ fn a_silent_accelerometer_is_replaced_by_the_thrust_in_the_air_and_its_mean_on_t
         ground.accel_frd_mps2
     );
 }
+
+/// Steps `v` on the ground at 1 kHz from `from_us` for `n` samples whose
+/// accelerometer reads with noise (±1 mg on z, as an IMU at rest does).
+fn rest_noisy(v: &mut MavVehicle, out: &mut Sent, from_us: u64, n: u64) -> u64 {
+    for k in 0..n {
+        let t_us = from_us + k * 1000;
+        for mut m in at_rest(t_us) {
+            if let MavMessage::HIL_SENSOR(s) = &mut m {
+                // By time: no two samples in a row alike, across calls too.
+                s.zacc += [0.0, 0.01, -0.01][(t_us / 1000 % 3) as usize];
+            }
+            v.handle(&m, out, &Still, 0).unwrap();
+        }
+    }
+    from_us + n * 1000
+}
+
+/// An accelerometer stuck on the ground: one that read with noise at rest
+/// is condemned after 20 readings the same, said by name, and no arming
+/// on it; back once it reads with noise again. One that never read with
+/// noise (a noiseless simulator at rest, `at_rest`) cannot be told from a
+/// stuck one, and is not condemned.
+#[test]
+fn a_stuck_accelerometer_on_the_ground_is_found_once_it_had_read_with_noise() {
+    let (mut v, t) = enabled();
+    let mut out = Sent::default();
+    v.handle(&inject(ACCEL, STUCK, 0.0), &mut out, &Still, 0).unwrap();
+    let t = rest(&mut v, &mut out, t, 100);
+    assert_eq!(out.texts(), ["failure injected: accelerometer stuck"]);
+    v.handle(&inject(ACCEL, OK, 0.0), &mut out, &Still, 0).unwrap();
+    let t = rest_noisy(&mut v, &mut out, t, 100);
+    let mut out = Sent::default();
+    v.handle(&inject(ACCEL, STUCK, 0.0), &mut out, &Still, 0).unwrap();
+    let t = rest_noisy(&mut v, &mut out, t, 19);
+    assert_eq!(out.texts(), ["failure injected: accelerometer stuck"]);
+    let t = rest_noisy(&mut v, &mut out, t, 1);
+    assert_eq!(
+        out.texts(),
+        [
+            "failure injected: accelerometer stuck",
+            "accelerometer stuck (20 the same): not used"
+        ]
+    );
+    let mut out = Sent::default();
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(!v.armed());
+    assert_eq!(out.texts(), ["arming refused: accelerometer stuck (20 the same)"]);
+    let mut out = Sent::default();
+    v.handle(&inject(ACCEL, OK, 0.0), &mut out, &Still, 0).unwrap();
+    rest_noisy(&mut v, &mut out, t, 10);
+    assert_eq!(
+        out.texts(),
+        ["failure injected: accelerometer ok", "accelerometer back"]
+    );
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(v.armed());
+}
