@@ -112,9 +112,7 @@ impl Watch {
     /// makes, if any. Use the reading only if [`Watch::usable`] after it.
     /// Only `airborne` readings count towards stuck: at rest on the ground
     /// a simulator's truth (and a quiet barometer's reading) may well be the
-    /// same, bit for bit, for seconds. (A caller that knows its source
-    /// reads with noise at rest passes `true` on the ground too: the
-    /// MAVLink faults' IMU parts.)
+    /// same, bit for bit, for seconds.
     pub fn sample(&mut self, t_us: u64, print: u32, airborne: bool) -> Option<Change> {
         self.last_us = Some(t_us);
         self.same = if self.last_print == Some(print) && airborne {

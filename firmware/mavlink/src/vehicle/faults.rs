@@ -163,11 +163,6 @@ mod on {
         imu_mean: Option<ImuSample>,
         /// Since when the gyro and the accelerometer have had no good reading, µs.
         imu_lost_us: [Option<u64>; 2],
-        /// The gyro's and the accelerometer's last readings' fingerprints,
-        /// and whether each has read differently from one sample to the
-        /// next, disarmed on the ground (its noise, [`Faults::imu_part`]).
-        imu_print: [Option<u32>; 2],
-        imu_noisy: [bool; 2],
         /// Health changes since the last step's end, to be told.
         changes: heapless::Vec<(Source, Change), SOURCES>,
         /// In the air at the last step ([`fc_loop::modes::ModeCommander::in_air`]).
@@ -326,18 +321,7 @@ mod on {
                 _ => *v,
             };
             let print = fingerprint(&[v[0].to_bits(), v[1].to_bits(), v[2].to_bits()]);
-            // A part seen to read with noise at rest (disarmed: a take-off's
-            // climb is no noise) counts as stuck on the ground too (20 the
-            // same: no IMU's noise repeats so); one that never did (a
-            // noiseless simulator at rest) only in the air.
-            if !self.armed && !self.airborne && self.imu_print[k].is_some_and(|p| p != print) {
-                self.imu_noisy[k] = true;
-            }
-            self.imu_print[k] = Some(print);
-            let counts = self.airborne || self.imu_noisy[k];
-            let c = self.watch[s as usize].sample(t_us, print, counts);
-            self.note(s, c);
-            self.watch[s as usize].feeds().then_some(v)
+            self.sample(s, t_us, print).then_some(v)
         }
 
         /// A part of the IMU without a good reading for longer than
@@ -416,8 +400,6 @@ mod on {
             self.restart();
             self.imu_mean = None;
             self.imu_lost_us = [None; 2];
-            self.imu_print = [None; 2];
-            self.imu_noisy = [false; 2];
         }
     }
 
