@@ -43,6 +43,10 @@ TOLERANCES = [
       "the check's own bound is 50 cm)")),
     (r"_mean_icount$", 0.01, 0.0,
      "a lockstep QEMU flight's mean step: the host's timing moves where its samples pre-empt a step"),
+    (r"_link_hold_worst_icount$", 0.50, 0.0,
+     ("the longest of a flood's link holds in QEMU: which hold the host's frames pre-empt moves it "
+      "(3 166 to 3 273 in most runs, 4 666 in two of the Crazyflie's); the check holds it to the "
+      "budget of 6 000")),
     (r"_worst_icount$", 0.10, 0.0,
      "a lockstep QEMU flight's worst step: one host-timed pre-emption moves it by up to ~5 %"),
     (r"instructions", 0.005, 0.0,
