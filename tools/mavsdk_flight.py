@@ -76,14 +76,11 @@ class Flight:
         (at 30 % lost each way MAVSDK gives up on one download in three),
         as a ground station does over a lossy link; the last failure is
         raised."""
-        for k in range(tries):
-            try:
-                return await make()
-            except Exception as e:  # MAVSDK's errors share no base class, only their text
-                if k + 1 == tries or "TIMEOUT" not in str(e):
-                    raise
-                self.transfers["failed"] += 1
-                print(f"     {what}: {type(e).__name__} {str(e).split(';')[0]}: made again", flush=True)
+        async def failed():
+            self.transfers["failed"] += 1
+            return False
+
+        return await self.retry(make, what, tries, failed)
 
     async def command(self, make, what, done):
         """`await make()`, a command, made again when MAVSDK gives up on it
@@ -91,16 +88,24 @@ class Flight:
         `await done()` says the vehicle did it (the command heard, its
         acknowledgement lost), up to five times, as a ground station does
         over a lossy link; the last failure is raised."""
-        for k in range(5):
+        return await self.retry(make, what, 5, done)
+
+    async def retry(self, make, what, tries, timed_out):
+        """`await make()` up to `tries` times while MAVSDK's error is a
+        TIMEOUT; after each, `await timed_out()` says whether it is done
+        after all (then None is returned). Any other error, or the last
+        TIMEOUT, is raised."""
+        for k in range(tries):
             try:
                 return await make()
             except Exception as e:  # MAVSDK's errors share no base class, only their text
-                if k == 4 or "TIMEOUT" not in str(e):
+                if k + 1 == tries or "TIMEOUT" not in str(e):
                     raise
-                if await done():
-                    print(f"     {what}: {type(e).__name__} {str(e).split(';')[0]}, but done", flush=True)
+                why = f"     {what}: {type(e).__name__} {str(e).split(';')[0]}"
+                if await timed_out():
+                    print(f"{why}, but done", flush=True)
                     return None
-                print(f"     {what}: {type(e).__name__} {str(e).split(';')[0]}: made again", flush=True)
+                print(f"{why}: made again", flush=True)
 
     async def until(self, cond, what, timeout=None):
         """Waits (wall time) until `cond()` holds; checks it."""
@@ -138,7 +143,8 @@ class Flight:
         and sends its own heartbeat at 1 Hz, its joystick input and offboard
         set-points at 20 Hz. The vehicle keeps simulated time. So, through
         MAVSDK's public API, when a simulated second takes more than three of
-        wall time, or over a link that loses datagrams (`--lossy`) at any pace: the vehicle's heartbeat is asked for every 0.5 s of wall
+        wall time, or over a link that loses datagrams (`--lossy`) at any
+        pace: the vehicle's heartbeat is asked for every 0.5 s of wall
         time (MAV_CMD_SET_MESSAGE_INTERVAL, through mavlink_direct), and the
         timeouts on the ground station's streams (FS_GCS_MS, COM_RC_LOSS_T,
         COM_OF_LOSS_T) are lengthened by the slowdown."""
