@@ -59,9 +59,10 @@ TOLERANCES = [
     (r"_closed_loop_cost$", 0.005, 0.0, "a deterministic QEMU flight's cost; 0.5 % for a compiler release"),
     (r"^peer_.*_pct$", 0.0, 0.2, "a ratio of two deterministic costs, shown to a tenth"),
     (r"^peer_", 0.05, 0.0, "a ratio of two instruction counts, shown to whole units"),
-    (r"_radio_\d+_(lost_pct|duplicates_dropped)$", 0.2, 1.0,
+    (r"_radio_\d+_(lost|duplicates_dropped)_pct$", 0.2, 1.0,
      ("the modelled radio sends on the wall clock (its polls, the image's pace in QEMU, where the shadows "
-      "fall): how many packets it sends, and so loses and doubles, moves from run to run")),
+      "fall): which of its packets a shadow takes, and so what share it loses and doubles, moves from run "
+      "to run")),
     (r"^crtp_sil_fix_faults_", 0.0, 0.01,
      ("cflib's live hover, in real time: where its commands and the faults land in the plant's time moves "
       "the hover's worst distance by millimetres from run to run")),

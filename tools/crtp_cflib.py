@@ -1436,7 +1436,8 @@ def main():
         tag, source = radio_tag()
         if counts:
             record(f'{tag}_lost_pct', round(100 * counts['lost_on_air'] / max(counts['on_air'], 1), 1), '%', source)
-            record(f'{tag}_duplicates_dropped', counts['retransmits'] + counts['duplicates'], 'packets', source)
+            dups = counts['retransmits'] + counts['duplicates']
+            record(f'{tag}_duplicates_dropped_pct', round(100 * dups / max(counts['on_air'], 1), 1), '%', source)
             record(f'{tag}_link_errors', counts['link_errors'], 'errors', source)
         print(check.summary())
         sys.exit(check.exit_code())
