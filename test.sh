@@ -377,6 +377,11 @@ hil --mavproxy --duration 90 --json target/rotorpy-hil-mavproxy.json | grep "^ma
 stage "the same MAVSDK script against firmware-mavlink in QEMU"
 hil --target qemu --mavsdk --duration 150 --json target/rotorpy-hil-mavsdk-qemu.json \
     | grep "^mavsdk check:" | tee -a "$log"
+stage "MAVSDK's Failure plugin against firmware-mavlink in QEMU: the fix off (flies on), stuck (lands), the accelerometer stuck (lands)"
+# Three of the in-process flight's faults (the image flies at a fifth of
+# real time): one it flies through, one for each landing, the fix's and the IMU's.
+hil --target qemu --mavsdk-failure target/faults-qemu.json --faults gps_off,gps_stuck,accel_stuck --duration 60 \
+    --json target/rotorpy-hil-faults-qemu.json | grep "^fault check:" | tee -a "$log"
 stage "cflib over a radio that loses packets (tools/fctools/radio.py in the nRF51 bridge: retries, safelink): firmware-crtp 10 %, the Crazyflie image 30 %, 0.1 s shadows"
 # The radio's model against itself first (20 000 packets each way), then the
 # images on ports of their own (199xx: the lane beside has 198xx).

@@ -23,7 +23,9 @@ from rotorpy's truth (--truth-port: north, east, down about the start, m).
 
 Prints `fault check: P passed, F failed`; `--table FILE` writes each fault's
 row (JSON): what was injected, what the vehicle said and did, the worst
-distance from where it held, how long it took.
+distance from where it held, how long it took. `--only` flies some of the
+faults (the image in QEMU, at a fifth of real time, flies three);
+`--tag` names their figures (`fault_…` by default).
 """
 import argparse
 import asyncio
@@ -68,10 +70,18 @@ def name(unit, kind):
     return f"{unit.name.lower().replace('sensor_', '')} {kind.name.lower()}"
 
 
+def key(unit, kind):
+    """A fault's name as its figures and `--only` spell it: `gps_stuck`."""
+    return name(unit, kind).replace(" ", "_")
+
+
 class Faults(Flight):
-    def __init__(self, truth, timeout):
+    def __init__(self, truth, timeout, only=None, tag="fault"):
         super().__init__(truth, timeout)
         self.check = Checks("fault", flush=True)
+        self.fly_through = [f for f in FLY_THROUGH if only is None or key(*f[:2]) in only]
+        self.land_on = [f for f in LAND_ON if only is None or key(*f[:2]) in only]
+        self.tag = tag
         self.texts = []  # (simulated s, text)
         self.rows = []
 
@@ -143,7 +153,7 @@ class Faults(Flight):
         await action.set_takeoff_altitude(1.5)
         hold = await self.take_off(action, tel)
 
-        for unit, kind, secs, bound in FLY_THROUGH:
+        for unit, kind, secs, bound in self.fly_through:
             self.truth.poll()
             t0 = self.truth.t
             await self.inject(failure, unit, kind)
@@ -158,10 +168,10 @@ class Faults(Flight):
                        f"{100 * worst:.1f} cm from where it held ({100 * bound:.0f} cm); said {said}")
             self.rows.append({"fault": name(unit, kind), "injected_s": secs, "did": f"flew on in {mode.name}",
                               "said": said, "worst_m": worst, "landed": False})
-            record(f"fault_{name(unit, kind).replace(' ', '_')}_worst_m", worst, "m", SOURCE)
+            record(f"{self.tag}_{key(unit, kind)}_worst_m", worst, "m", SOURCE)
             await self.settle_at(hold, 0.05, 0.5, "back within 5 cm of where it held")
 
-        for k, (unit, kind, texts) in enumerate(LAND_ON):
+        for k, (unit, kind, texts) in enumerate(self.land_on):
             self.truth.poll()
             t0 = self.truth.t
             await self.inject(failure, unit, kind)
@@ -190,13 +200,13 @@ class Faults(Flight):
             self.rows.append({"fault": name(unit, kind), "injected_s": None, "did": "landed and disarmed",
                               "said": said, "worst_m": drift, "landed_off_m": off,
                               "landed_after_s": self.truth.t - t0, "landed": ok})
-            key = f"fault_{name(unit, kind).replace(' ', '_')}"
+            fig = f"{self.tag}_{key(unit, kind)}"
             if ok:
-                record(f"{key}_drift_m", drift, "m", SOURCE)
-                record(f"{key}_landed_off_m", off, "m", SOURCE)
-                record(f"{key}_landed_after_s", self.truth.t - t0, "s", SOURCE)
+                record(f"{fig}_drift_m", drift, "m", SOURCE)
+                record(f"{fig}_landed_off_m", off, "m", SOURCE)
+                record(f"{fig}_landed_after_s", self.truth.t - t0, "s", SOURCE)
             await self.inject(failure, unit, FailureType.OK)
-            if k + 1 < len(LAND_ON):
+            if k + 1 < len(self.land_on):
                 await self.sim_sleep(1.0)
                 hold = await self.take_off(action, tel)
         listener.cancel()
@@ -208,9 +218,17 @@ def main():
     ap.add_argument("--truth-port", type=int, default=14560)
     ap.add_argument("--timeout", type=float, default=60.0, help="wall seconds per step")
     ap.add_argument("--table", help="write the faults' rows here (JSON)")
+    every = [key(*f[:2]) for f in FLY_THROUGH + LAND_ON]
+    ap.add_argument("--only", metavar="FAULT,...", help=f"fly these faults only (of {', '.join(every)})")
+    ap.add_argument("--tag", default="fault", help="the figures' prefix (TAG_gps_stuck_landed_off_m)")
     a = ap.parse_args()
+    only = None
+    if a.only:
+        only = set(a.only.split(","))
+        if not only <= set(every):
+            ap.error(f"--only: no fault {', '.join(sorted(only - set(every)))} (of {', '.join(every)})")
     truth = Truth(a.truth_port)
-    f = Faults(truth, a.timeout)
+    f = Faults(truth, a.timeout, only, a.tag)
     try:
         asyncio.run(f.run(a.url))
     except Exception as e:  # noqa: BLE001 -- a MAVSDK error is a failed check, with its reason

@@ -279,6 +279,8 @@ def main():
     ap.add_argument("--mavsdk-failure", metavar="TABLE",
                     help="like --mavsdk, with tools/mavsdk_failure.py (MAVSDK's Failure plugin) injecting sensor "
                          "faults in flight; the faults' rows to TABLE (JSON)")
+    ap.add_argument("--faults", metavar="FAULT,...",
+                    help="with --mavsdk-failure: these faults only (tools/mavsdk_failure.py --only)")
     ap.add_argument("--mavproxy", action="store_true",
                     help="like --mavsdk, with tools/mavproxy_session.py (MAVProxy, PyPI) as the ground station")
     ap.add_argument("--truth-port", type=int, default=14560)
@@ -312,9 +314,15 @@ def main():
             script = [os.path.join(here, name), "--url", url, "--truth-port", str(a.truth_port)]
             if a.mavsdk_failure:
                 script += ["--table", a.mavsdk_failure]
+                if a.faults:
+                    script += ["--only", a.faults]
+                if a.target == "qemu":
+                    script += ["--tag", "fault_qemu"]  # the image's figures beside the SIL's
             if a.mavsdk and a.lossy:
-                # The lossy link's transfers, counted as mavsdk_lossy_<drop %>_transfers_*.
-                script += ["--lossy", "--transfers", f"mavsdk_lossy_{round(100 * lossy_parse(a.lossy)['drop'])}"]
+                # The lossy link's transfers, counted as mavsdk[_qemu]_lossy_<drop %>_transfers_*.
+                where = "_qemu" if a.target == "qemu" else ""
+                script += ["--lossy", "--transfers",
+                           f"mavsdk{where}_lossy_{round(100 * lossy_parse(a.lossy)['drop'])}"]
             if a.target == "qemu":
                 # The image in QEMU flies about 5x slower than real time.
                 script += ["--timeout", "180"]

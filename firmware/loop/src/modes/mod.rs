@@ -184,11 +184,11 @@ pub enum ModeEvent {
     PositionLost,
     /// A part of the IMU stopped answering, or answered the same, while
     /// armed in the air: Land on what stands in for it (the gyro's recent
-    /// mean, the commanded thrust's specific force; host builds:
+    /// mean, the commanded thrust's specific force; with
     /// `sensor-faults`).
     ImuLost,
     /// The gyro stayed silent in the air: the motors stopped (PX4's flight
-    /// termination; host builds: `sensor-faults`).
+    /// termination; with `sensor-faults`).
     GyroDead,
     /// Mission item `seq` is done; item `next` is current now (as the
     /// mission store has it: never past its end).
@@ -671,7 +671,7 @@ impl ModeCommander {
     /// Crazyflie's failsafe descent does, once the height the estimate had
     /// above home when the position was lost has been descended at the
     /// slower of the two descents (Land's, the estimator's failsafe's) and
-    /// [`BLIND_LANDING_MARGIN_US`] more. Host builds only (`sensor-faults`).
+    /// [`BLIND_LANDING_MARGIN_US`] more. With `sensor-faults` only.
     #[cfg(feature = "sensor-faults")]
     pub fn watch_position<M: MissionItems + ?Sized>(
         &mut self,
@@ -690,7 +690,7 @@ impl ModeCommander {
     /// part without a good reading for [`crate::supervisor::IMU_TIMEOUT_US`]:
     /// the vehicle steps on what stands in for it) → Land, as [`Self::watch_position`]
     /// lands (ending by time too: a held sample dead-reckons the height).
-    /// Host builds only (`sensor-faults`).
+    /// With `sensor-faults` only.
     #[cfg(feature = "sensor-faults")]
     pub fn watch_imu<M: MissionItems + ?Sized>(
         &mut self,
@@ -804,8 +804,8 @@ impl ModeCommander {
 
     /// A landing that has pressed on the ground long enough
     /// ([`crate::land::GroundContact`]) or, without a position, has had
-    /// its time ([`ModeCommander::watch_position`]). Host builds only
-    /// (`sensor-faults`): otherwise never.
+    /// its time ([`ModeCommander::watch_position`]). With
+    /// `sensor-faults` only: otherwise never.
     fn blind_landed(&mut self, t_us: u64, lp: &Loop) -> bool {
         #[cfg(feature = "sensor-faults")]
         {

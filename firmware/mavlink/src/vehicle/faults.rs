@@ -498,8 +498,8 @@ mod on {
     }
 }
 
-/// The images' stand-in: nothing injected, every source taken as it is;
-/// `MAV_CMD_INJECT_FAILURE` is `UNSUPPORTED`.
+/// The stand-in without `sensor-faults`: nothing injected, every source
+/// taken as it is; `MAV_CMD_INJECT_FAILURE` is `UNSUPPORTED`.
 #[cfg(not(feature = "sensor-faults"))]
 mod stand_in {
     use super::super::{MavResult, MavShared, MavSink, Vector3, HIL_STATE_QUATERNION_DATA};

@@ -296,8 +296,8 @@ pub struct MavShared {
     /// extrapolates each step's set-point; [`MavShared::set_exact_preview`]).
     exact_preview: bool,
     /// The faults injected into the simulator's data, and each source's
-    /// health (`faults`; host builds only, `sensor-faults`: the images
-    /// hold a stand-in that does nothing).
+    /// health (`faults`; with `sensor-faults`, as the SIL and
+    /// `firmware-mavlink` build it: without, a stand-in that does nothing).
     faults: faults::Faults,
 }
 

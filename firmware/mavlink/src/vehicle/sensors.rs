@@ -197,7 +197,7 @@ impl MavShared {
 
     /// A `HIL_STATE_QUATERNION`: the position fix as an injected fault
     /// leaves it, taken while its source is healthy
-    /// (`faults::Faults::position_usable`, host builds) at most every
+    /// (`faults::Faults::position_usable`, with `sensor-faults`) at most every
     /// `HIL_FIX_MS`; the first one is home.
     pub(in crate::vehicle) fn on_state(&mut self, m: &HIL_STATE_QUATERNION_DATA) {
         let faulty = self.faults.position(m);
