@@ -8,7 +8,8 @@ from rotorpy's truth (--truth-port: north, east, down about the start, m).
 1. connect, as tools/mavsdk_flight.py does; injection off
    (`SYS_FAILURE_EN` 0): `Failure.inject` is denied; set to 1 (the
    vehicle's parameters are REAL32: `set_param_float`); a fault not
-   modelled (a wrong gyro) is unsupported;
+   modelled (a wrong gyro) is unsupported; the accelerometer stuck on the
+   ground refuses an arming by name, then is cleared;
 2. arm, take off to 1.5 m, Hold;
 3. each fault the vehicle should fly through, injected for a few simulated
    seconds in Hold and then cleared (`FailureType.OK`): the vehicle stays in
@@ -58,6 +59,7 @@ FLY_THROUGH = [
 NO_POSITION = "no position: landing"
 NO_IMU = "IMU lost: landing"
 LANDED = "landed: disarmed"
+GROUND_STUCK = "arming refused: accelerometer stuck (20 the same)"
 LAND_ON = [
     (FailureUnit.SENSOR_GPS, FailureType.WRONG, ["position fix wrong (10 in a row): not used", NO_POSITION, LANDED]),
     (FailureUnit.SENSOR_GPS, FailureType.STUCK, ["position fix stuck (20 the same): not used", NO_POSITION, LANDED]),
@@ -113,6 +115,26 @@ class Faults(Flight):
             result = e.result
         return self.check(result == expect, f"inject {name(unit, kind)}: {result.name} (expected {expect.name})")
 
+    async def stuck_on_the_ground(self, failure, action, tel):
+        """The accelerometer stuck before take-off: the arming is refused by
+        name (rotorpy's IMU reads with noise, so 20 readings the same are a
+        stuck part); cleared, the flight goes on."""
+        await self.inject(failure, FailureUnit.SENSOR_ACCEL, FailureType.STUCK)
+        await self.sim_sleep(0.2)
+        self.truth.poll()
+        t0 = self.truth.t
+        try:
+            await action.arm()
+            refused = None
+        except Exception as e:  # noqa: BLE001 -- MAVSDK's ActionError: its result is in its text
+            refused = str(e).split(";")[0]
+        await self.sim_sleep(0.2)
+        said = self.said_since(t0)
+        self.check(refused is not None and not await tel.armed() and GROUND_STUCK in said,
+                   f"accel stuck on the ground: the arming refused ({refused}), said {said}")
+        await self.inject(failure, FailureUnit.SENSOR_ACCEL, FailureType.OK)
+        await self.sim_sleep(0.2)
+
     async def take_off(self, action, tel):
         async def mode_is(m):
             return await tel.flight_mode() == m
@@ -150,6 +172,7 @@ class Faults(Flight):
         await param.set_param_float("SYS_FAILURE_EN", 1.0)
         self.check(await param.get_param_float("SYS_FAILURE_EN") == 1.0, "SYS_FAILURE_EN set to 1")
         await self.inject(failure, FailureUnit.SENSOR_GYRO, FailureType.WRONG, FailureResult.UNSUPPORTED)
+        await self.stuck_on_the_ground(failure, action, tel)
         await action.set_takeoff_altitude(1.5)
         hold = await self.take_off(action, tel)
 

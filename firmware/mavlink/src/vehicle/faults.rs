@@ -14,7 +14,9 @@
 //! thrust gives (on the ground, the accelerometer's mean); past
 //! [`IMU_TIMEOUT_US`](fc_loop::supervisor::IMU_TIMEOUT_US) in the air the
 //! vehicle lands ([`fc_loop::modes::ModeCommander::watch_imu`]), and
-//! without the gyro for [`GYRO_DEAD_US`] it stops its motors.
+//! without the gyro for [`GYRO_DEAD_US`] it stops its motors. On the ground
+//! a part that has read with noise and then reads the same, bit for bit,
+//! refuses an arming.
 
 #[cfg(feature = "sensor-faults")]
 pub(in crate::vehicle) use on::*;
@@ -47,6 +49,78 @@ mod on {
 
     /// An intermittent source reads for this long, then is silent as long, µs.
     pub const INTERMITTENT_US: u64 = 300_000;
+
+    /// Readings of an IMU part, disarmed, over which its noise is judged.
+    pub const NOISE_WINDOW: u8 = 20;
+
+    /// Sign changes of the differences between a part's readings in a row,
+    /// on one axis, over [`NOISE_WINDOW`] readings disarmed, from which the
+    /// part reads with noise. White noise changes sign about two times in
+    /// three (≈ 13 of 19); a noiseless simulator's motion changes it only
+    /// where the motion turns (a roll's end, a settling's swings).
+    pub const NOISE_FLIPS: u8 = 8;
+
+    /// One IMU part's readings while disarmed: whether it has read with
+    /// noise, and how many readings in a row are the same. A part that has
+    /// read with noise and then reads [`STUCK_READINGS`](fc_loop::health::STUCK_READINGS) the same, bit for
+    /// bit, is stuck: no arming on it (PX4's preflight "stale" sensor). A
+    /// noiseless simulator's IMU at rest reads the same for seconds, and has
+    /// never read with noise: it arms.
+    #[derive(Debug, Clone, Copy, Default)]
+    struct Quiet {
+        last: Option<Vector3<f32>>,
+        sign: [i8; 3],
+        flips: [u8; 3],
+        window: u8,
+        noisy: bool,
+        same: u16,
+    }
+
+    impl Quiet {
+        fn read(&mut self, v: &Vector3<f32>) {
+            let Some(last) = self.last.replace(*v) else {
+                return;
+            };
+            let d = v - last;
+            self.same = if d == Vector3::zeros() {
+                self.same.saturating_add(1)
+            } else {
+                0
+            };
+            for (i, &di) in d.iter().enumerate() {
+                let sign = if di > 0.0 {
+                    1
+                } else if di < 0.0 {
+                    -1
+                } else {
+                    continue;
+                };
+                if self.sign[i] == -sign {
+                    self.flips[i] = self.flips[i].saturating_add(1);
+                }
+                self.sign[i] = sign;
+            }
+            self.window += 1;
+            if self.window >= NOISE_WINDOW {
+                self.noisy |= self.flips.iter().any(|&f| f >= NOISE_FLIPS);
+                self.window = 0;
+                self.flips = [0; 3];
+            }
+        }
+
+        /// Armed: the readings in the air are [`Watch`]'s; the next disarmed
+        /// ones start again (whether the part is noisy is kept).
+        fn armed(&mut self) {
+            *self = Quiet {
+                noisy: self.noisy,
+                ..Quiet::default()
+            };
+        }
+
+        fn stuck(&self) -> bool {
+            self.noisy && self.same >= fc_loop::health::STUCK_READINGS
+        }
+    }
 
     /// A fault as MAVLink's `FAILURE_TYPE` names it (those modelled here).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -163,6 +237,8 @@ mod on {
         imu_mean: Option<ImuSample>,
         /// Since when the gyro and the accelerometer have had no good reading, µs.
         imu_lost_us: [Option<u64>; 2],
+        /// The gyro's and the accelerometer's readings while disarmed.
+        quiet: [Quiet; 2],
         /// Health changes since the last step's end, to be told.
         changes: heapless::Vec<(Source, Change), SOURCES>,
         /// In the air at the last step ([`fc_loop::modes::ModeCommander::in_air`]).
@@ -320,6 +396,11 @@ mod on {
                 Injected::Stuck => *self.held_imu[k].get_or_insert(*v),
                 _ => *v,
             };
+            if self.armed {
+                self.quiet[k].armed();
+            } else {
+                self.quiet[k].read(&v);
+            }
             let print = fingerprint(&[v[0].to_bits(), v[1].to_bits(), v[2].to_bits()]);
             self.sample(s, t_us, print).then_some(v)
         }
@@ -379,11 +460,18 @@ mod on {
                 || self.watch[Source::Position as usize].fault() == Some(fc_loop::health::Fault::Silent)
         }
 
-        /// The first source whose fault refuses an arming, and the fault.
+        /// The first source whose fault refuses an arming, and the fault: a
+        /// source's health, or an IMU part stuck while disarmed ([`Quiet`]).
         pub(in crate::vehicle) fn arming_refusal(&self) -> Option<(&'static str, fc_loop::health::Fault)> {
             Source::ALL
                 .iter()
                 .find_map(|&s| self.watch[s as usize].fault().map(|f| (s.name(), f)))
+                .or_else(|| {
+                    [Source::Gyro, Source::Accel]
+                        .into_iter()
+                        .zip(self.quiet)
+                        .find_map(|(s, q)| q.stuck().then_some((s.name(), fc_loop::health::Fault::Stuck)))
+                })
         }
 
         /// A new flight (disarmed, or a new time line): every source's health
@@ -400,6 +488,7 @@ mod on {
             self.restart();
             self.imu_mean = None;
             self.imu_lost_us = [None; 2];
+            self.quiet = [Quiet::default(); 2];
         }
     }
 

@@ -300,3 +300,65 @@ fn a_silent_accelerometer_is_replaced_by_the_thrust_in_the_air_and_its_mean_on_t
         ground.accel_frd_mps2
     );
 }
+
+/// Steps `v` at rest at 1 kHz from `from_us` for `n` samples whose IMU
+/// reads with noise: a BMI088's at rest (its datasheet's 0.014 °/s and
+/// 175 µg, 1σ), uniform from a seeded generator (`seed`).
+fn noisy_rest(v: &mut MavVehicle, out: &mut Sent, from_us: u64, n: u64, seed: u64) -> u64 {
+    let mut x = seed;
+    let mut noise = |sigma: f32| {
+        x = x
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        // Uniform on ±√3σ: its 1σ is σ.
+        ((x >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 2.0 * 3f32.sqrt() * sigma
+    };
+    let (gyro, accel) = (0.014f32.to_radians(), 175e-6 * 9.81);
+    for k in 0..n {
+        for mut m in at_rest(from_us + k * 1000) {
+            if let MavMessage::HIL_SENSOR(s) = &mut m {
+                s.xgyro += noise(gyro);
+                s.ygyro += noise(gyro);
+                s.zgyro += noise(gyro);
+                s.xacc += noise(accel);
+                s.yacc += noise(accel);
+                s.zacc += noise(accel);
+            }
+            v.handle(&m, out, &Still, 0).unwrap();
+        }
+    }
+    from_us + n * 1000
+}
+
+/// An IMU part stuck on the ground: one that has read with noise and then
+/// reads 20 the same, bit for bit, refuses an arming by name (PX4's
+/// preflight "stale" sensor), the accelerometer's and the gyro's; cleared,
+/// it reads with noise again and the vehicle arms. A noiseless IMU at rest
+/// (a simulator's) reads the same for seconds and has never read with
+/// noise: stuck or not, it arms, so this is found only on a noisy IMU.
+#[test]
+fn an_imu_stuck_on_the_ground_refuses_an_arming_once_it_had_read_with_noise() {
+    for (unit, name) in [(ACCEL, "accelerometer"), (GYRO, "gyro")] {
+        let (mut v, t) = enabled();
+        let mut out = Sent::default();
+        let t = noisy_rest(&mut v, &mut out, t, 100, 7);
+        v.handle(&inject(unit, STUCK, 0.0), &mut out, &Still, 0).unwrap();
+        let t = noisy_rest(&mut v, &mut out, t, 100, 8);
+        let mut out = Sent::default();
+        v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+        assert!(!v.armed(), "{name}");
+        assert_eq!(out.texts(), [format!("arming refused: {name} stuck (20 the same)")]);
+        let mut out = Sent::default();
+        v.handle(&inject(unit, OK, 0.0), &mut out, &Still, 0).unwrap();
+        noisy_rest(&mut v, &mut out, t, 10, 9);
+        v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+        assert!(v.armed(), "{name}: {:?}", out.texts());
+    }
+    // Noiseless: the same injection, and it arms.
+    let (mut v, t) = enabled();
+    let mut out = Sent::default();
+    v.handle(&inject(ACCEL, STUCK, 0.0), &mut out, &Still, 0).unwrap();
+    rest(&mut v, &mut out, t, 100);
+    v.handle(&command(1.0, 0.0), &mut out, &Still, 0).unwrap();
+    assert!(v.armed(), "{:?}", out.texts());
+}
