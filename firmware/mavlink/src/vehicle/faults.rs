@@ -15,7 +15,7 @@
 //! [`IMU_TIMEOUT_US`](fc_loop::supervisor::IMU_TIMEOUT_US) in the air the
 //! vehicle lands ([`fc_loop::modes::ModeCommander::watch_imu`]), and
 //! without the gyro for [`GYRO_DEAD_US`] it stops its motors. On the ground
-//! a part that has read with noise and then reads the same, bit for bit,
+//! a part that has read with noise and then reads the same values in a row
 //! refuses an arming.
 
 #[cfg(feature = "sensor-faults")]
@@ -62,8 +62,8 @@ mod on {
 
     /// One IMU part's readings while disarmed: whether it has read with
     /// noise, and how many readings in a row are the same. A part that has
-    /// read with noise and then reads [`STUCK_READINGS`](fc_loop::health::STUCK_READINGS) the same, bit for
-    /// bit, is stuck: no arming on it (PX4's preflight "stale" sensor). A
+    /// read with noise and then reads [`STUCK_READINGS`](fc_loop::health::STUCK_READINGS) equal in a row
+    /// (by value), is stuck: no arming on it (PX4's preflight "stale" sensor). A
     /// noiseless simulator's IMU at rest reads the same for seconds, and has
     /// never read with noise: it arms.
     #[derive(Debug, Clone, Copy, Default)]

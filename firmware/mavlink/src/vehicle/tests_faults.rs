@@ -331,7 +331,7 @@ fn noisy_rest(v: &mut MavVehicle, out: &mut Sent, from_us: u64, n: u64, seed: u6
 }
 
 /// An IMU part stuck on the ground: one that has read with noise and then
-/// reads 20 the same, bit for bit, refuses an arming by name (PX4's
+/// reads 20 equal in a row refuses an arming by name (PX4's
 /// preflight "stale" sensor), the accelerometer's and the gyro's; cleared,
 /// it reads with noise again and the vehicle arms. A noiseless IMU at rest
 /// (a simulator's) reads the same for seconds and has never read with
