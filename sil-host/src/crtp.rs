@@ -414,7 +414,7 @@ fn local<'a>(cfg: &CrtpConfig, socket: &'a UdpSocket, stored: &mut Option<(Strin
     let (mut settings, mut store) = (cfg.settings, None);
     if let Some(path) = &cfg.storage {
         let (mut st, boot) = crate::storage::open(path, "crtp")?;
-        let l = fc_storage::load_settings(&mut st, settings)
+        let l = fc_loop::params::load(settings, |i| st.param(i))
             .map_err(|e| anyhow::anyhow!("--storage {}: {e}", path.display()))?;
         eprintln!(
             "crtp: storage: {} persistent parameter(s) taken, {} refused",

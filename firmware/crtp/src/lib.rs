@@ -5,11 +5,12 @@
 
 pub mod frames;
 pub mod log;
-/// The high-level commander's planner (it lives with the flight loop, which both protocols drive).
 pub mod persist;
+/// The high-level commander's planner (it lives with the flight loop, which both protocols drive).
 pub use fc_loop::planner;
 pub mod syslink;
 pub mod toc;
+pub mod value;
 pub mod vehicle;
 
 /// Largest CRTP payload, bytes (`CRTP_MAX_DATA_SIZE`).
@@ -20,6 +21,22 @@ pub const MAX_PACKET: usize = MAX_PAYLOAD + 1;
 /// channel): 12 is the Crazyflie firmware's, from which cflib uses the
 /// supervisor port, the V2 TOCs (≥ 4) and `GO_TO_2` (≥ 8).
 pub const PROTOCOL_VERSION: i32 = 12;
+
+/// Where [`CrtpVehicle`](vehicle::CrtpVehicle)'s packets go (a UDP socket on the host, syslink
+/// on a board).
+pub trait CrtpSink {
+    /// What sending can fail with.
+    type Error;
+    /// Sends `p`.
+    fn send(&mut self, p: &Packet) -> Result<(), Self::Error>;
+    /// Where persistent parameters are kept, if anywhere (cflib's
+    /// `param.persistent_store`, answered by [`PersistRequest::answer`](persist::PersistRequest::answer));
+    /// `None`: nothing persists, and a request to store is answered with
+    /// an error.
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        None
+    }
+}
 
 /// The CRTP ports, as `cflib.crtp.crtpstack.CRTPPort` numbers them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,12 +1,12 @@
 //! cflib's persistent parameters (`MISC_PERSISTENT_STORE`, `_GET_STATE`,
 //! `_CLEAR` on the param port's misc channel): the vehicle takes the
-//! request and notes what it needs ([`PersistRequest`](crate::persist::PersistRequest)); the link's owner
+//! request and notes what it needs ([`PersistRequest`]); the link's owner
 //! answers it with its storage, outside the vehicle's lock (a flash write
 //! must not hold up the estimator's task).
 
 use crate::log::EIO;
-use crate::vehicle::{put_typed, CrtpSink};
-use crate::{Packet, Port};
+use crate::value::put_typed;
+use crate::{CrtpSink, Packet, Port};
 
 /// The param port's misc channel's commands (cflib's `param.py`
 /// `MISC_*`; the firmware's `param_logic.c`).

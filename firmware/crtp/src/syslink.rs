@@ -15,7 +15,8 @@
 //! STM32 says `RADIO_READY` at boot; the nRF51 echoes it and reports the
 //! battery (`PM_BATTERY_STATE`: flags, V, A).
 
-use crate::vehicle::{CrtpShared, CrtpSink};
+use crate::vehicle::CrtpShared;
+use crate::CrtpSink;
 use crate::{f32_at, CrtpError, Packet, MAX_PACKET};
 use core::borrow::BorrowMut;
 use fc_loop::Mutex;

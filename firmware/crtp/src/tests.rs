@@ -1124,7 +1124,6 @@ impl Kept {
 /// `_GET_STATE`, `_CLEAR`), and a value stored surviving a reboot.
 #[test]
 fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
-    use fc_storage::load_settings;
     let mut kept = kept();
     let mut v = at_rest(3000);
     let w_pos = (0..PARAM_COUNT)
@@ -1169,7 +1168,7 @@ fn persistent_parameters_as_cflib_stores_them_survive_a_reboot() {
     assert_eq!(r.payload()[3..], [5]);
     let (mut st, boot) = after_power_off(kept);
     assert_eq!(boot, fc_storage::Boot::Found);
-    let loaded = load_settings(&mut st, Settings::os4()).unwrap();
+    let loaded = fc_loop::params::load(Settings::os4(), |i| st.param(i)).unwrap();
     let mut v = CrtpVehicle::new(loaded.settings).unwrap();
     v.set_defaults(Settings::os4());
     let mut kept = Kept {

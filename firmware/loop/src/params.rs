@@ -26,11 +26,13 @@ use fc_core::model::airframe::{Mixer, MotorUnit};
 
 mod refusal;
 mod settings;
+mod stored;
 
 pub use crate::modes::NavSettings;
 pub use refusal::{Num, Refusal};
 use settings::within;
 pub use settings::{Airframe, Settings};
+pub use stored::{load, Loaded};
 
 /// One parameter: its MAVLink name, what it is, and where it lives.
 #[derive(Clone, Copy)]

@@ -25,6 +25,36 @@ const CRC_LEN: usize = 2;
 /// Largest MAVLink 2 frame: header, 255 bytes of payload, CRC, 13 bytes of signature.
 pub const MAX_FRAME: usize = HEADER_LEN + 255 + CRC_LEN + 13;
 
+/// Who a message is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Peer {
+    /// The simulator (HIL_ACTUATOR_CONTROLS).
+    Simulator,
+    /// The ground station (telemetry, acknowledgements, parameters).
+    GroundStation,
+}
+
+/// Where [`MavVehicle`](vehicle::MavVehicle)'s messages go (one link for both peers on the
+/// image; a TCP and a UDP socket on the host).
+pub trait MavSink {
+    /// What sending can fail with.
+    type Error;
+    /// Sends `msg` to `to`.
+    fn send(&mut self, to: Peer, msg: &MavMessage) -> Result<(), Self::Error>;
+    /// The ground station link's signing state, if this link signs (a
+    /// `SETUP_SIGNING` changes it; `None`: the request is ignored).
+    fn signing(&mut self) -> Option<&mut signing::Signing> {
+        None
+    }
+    /// Where settings persist across a reboot, if anywhere: a parameter a
+    /// ground station sets is stored there at once (as PX4 saves its
+    /// parameters), and a signing key when `SETUP_SIGNING` sets it.
+    /// `None`: they live until power-off.
+    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
+        None
+    }
+}
+
 /// Why a frame was not delivered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MavError {

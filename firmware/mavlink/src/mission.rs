@@ -22,8 +22,8 @@
 #![allow(deprecated)]
 
 use crate::hil::Home;
-use crate::vehicle::{MavSink, Peer};
 use crate::MavMessage;
+use crate::{MavSink, Peer};
 use mavlink::dialects::common::*;
 use nalgebra::Vector3;
 

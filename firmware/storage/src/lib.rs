@@ -257,47 +257,6 @@ impl<F: NorFlash> Persist for Store<F> {
     }
 }
 
-/// What [`load_settings`] did.
-#[derive(Debug, Clone, Copy)]
-pub struct Loaded {
-    /// The settings to boot with: `base` with every stored value that
-    /// passed its parameter's checks.
-    pub settings: fc_loop::params::Settings,
-    /// Stored values taken.
-    pub taken: u16,
-    /// Stored values refused (out of range now, or the settings as a whole
-    /// refuse them): left out, their defaults kept; the first refused index.
-    pub refused: (u16, Option<u16>),
-}
-
-/// `base` with the parameter values stored in `p` ([`fc_loop::params::PARAMS`],
-/// by index), each through the same check as a write from a ground station
-/// (a stored value the settings refuse is left out and counted). Err only if
-/// the store cannot be read.
-pub fn load_settings(p: &mut dyn Persist, base: fc_loop::params::Settings) -> Result<Loaded, StoreError> {
-    let mut out = Loaded {
-        settings: base,
-        taken: 0,
-        refused: (0, None),
-    };
-    for i in 0..fc_loop::params::PARAMS.len() {
-        let Some(v) = p.param(i as u16)? else {
-            continue;
-        };
-        match fc_loop::params::write(&out.settings, i, v) {
-            Ok(next) => {
-                out.settings = next;
-                out.taken += 1;
-            }
-            Err(_) => {
-                out.refused.0 += 1;
-                out.refused.1 = out.refused.1.or(Some(i as u16));
-            }
-        }
-    }
-    Ok(out)
-}
-
 /// Whether every byte of `range` reads erased (0xFF).
 fn is_blank<F: NorFlash>(flash: &mut F, range: Range<u32>) -> Result<bool, StoreError> {
     let mut chunk = [0u8; 64];

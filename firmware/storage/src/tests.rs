@@ -596,23 +596,6 @@ fn a_removed_parameter_reads_none_and_its_neighbours_stay() {
 }
 
 #[test]
-fn stored_parameters_load_through_their_checks() {
-    use fc_loop::params::{index_of, Settings, PARAMS};
-    let mut s = store(CutFlash::blank());
-    let gain = index_of(b"PD_ROLL_P").unwrap();
-    let id = index_of(b"CTL_ID").unwrap();
-    let base = Settings::os4();
-    let v = (PARAMS[gain].get)(&base) * 2.0;
-    s.set_param(gain as u16, v).unwrap();
-    // An id no controller has: refused as a write would be, the default kept.
-    s.set_param(id as u16, 99.0).unwrap();
-    let l = load_settings(&mut s, base).unwrap();
-    assert_eq!((l.taken, l.refused), (1, (1, Some(id as u16))));
-    assert_eq!((PARAMS[gain].get)(&l.settings), v);
-    assert_eq!((PARAMS[id].get)(&l.settings), (PARAMS[id].get)(&base));
-}
-
-#[test]
 fn the_ram_stand_in_keeps_nor_rules_and_a_store() {
     let mut f = RamFlash::<2048>::blank();
     let b = |f: &mut RamFlash<2048>, at: u32, n: usize| {

@@ -426,7 +426,7 @@ pub fn run(cfg: &HilConfig) -> Result<HilResult> {
             let (mut store, mut settings) = (None, cfg.settings);
             if let Some(path) = &cfg.storage {
                 let (mut st, boot) = crate::storage::open(path, "px4-hil")?;
-                let loaded = fc_storage::load_settings(&mut st, settings)
+                let loaded = fc_loop::params::load(settings, |i| st.param(i))
                     .map_err(|e| anyhow::anyhow!("--storage {}: {e}", path.display()))?;
                 settings = loaded.settings;
                 let mut sum = StorageSummary {

@@ -51,6 +51,7 @@ use crate::log::{self, LogBlocks};
 use crate::persist::PersistRequest;
 use crate::planner::{Reference, Segment};
 use crate::toc::{self, Name};
+pub use crate::CrtpSink;
 use crate::{f32_at, frames, u16_at, u32_at, CrtpCounters, CrtpError, Packet, Port};
 use core::borrow::BorrowMut;
 use core::fmt::Write as _;
@@ -74,9 +75,9 @@ mod ports;
 mod split;
 mod step;
 
+pub use crate::value::param_types;
 pub use ports::logging::{LogSample, LogVar, LOG_VARS};
-pub(crate) use ports::param::put_typed;
-pub use ports::param::{param_entry, param_named, param_types, Extra, DECK_NAMES, EXTRA_PARAMS, PARAM_COUNT};
+pub use ports::param::{param_entry, param_named, Extra, DECK_NAMES, EXTRA_PARAMS, PARAM_COUNT};
 pub use split::{fly_step, pass_step, run_work};
 
 /// A generic set-point older than this is held level where it is, ms.
@@ -104,22 +105,6 @@ pub const CONSOLE_QUEUE: usize = 8;
 /// Sampled log blocks waiting for the link, at most (one per block: a
 /// full queue drops the oldest, as a radio that cannot keep up would).
 pub const LOG_QUEUE: usize = crate::log::MAX_BLOCKS;
-
-/// Where [`CrtpVehicle`]'s packets go (a UDP socket on the host, syslink
-/// on a board).
-pub trait CrtpSink {
-    /// What sending can fail with.
-    type Error;
-    /// Sends `p`.
-    fn send(&mut self, p: &Packet) -> Result<(), Self::Error>;
-    /// Where persistent parameters are kept, if anywhere (cflib's
-    /// `param.persistent_store`, answered by [`PersistRequest::answer`]);
-    /// `None`: nothing persists, and a request to store is answered with
-    /// an error.
-    fn storage(&mut self) -> Option<&mut dyn fc_storage::Persist> {
-        None
-    }
-}
 
 /// Console text, cut into packets of up to 30 bytes as the Crazyflie's
 /// console sends it (cflib joins them): each full packet is queued, the
@@ -289,7 +274,7 @@ impl CrtpVehicle {
     /// the flight stack's (`ring.effect`) from `store`, each through the
     /// check a write from cflib passes (a value it refuses is left out and
     /// counted: the default stands); the flight parameters are the
-    /// settings' ([`fc_storage::load_settings`]). How many were taken and
+    /// settings' ([`fc_loop::params::load`]). How many were taken and
     /// refused; Err only if the store cannot be read.
     pub fn load_stored(&mut self, store: &mut dyn fc_storage::Persist) -> Result<(u16, u16), fc_storage::StoreError> {
         let (mut taken, mut refused) = (0, 0);

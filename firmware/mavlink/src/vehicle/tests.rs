@@ -1616,7 +1616,7 @@ impl MavSink for KeptSink {
 
 #[test]
 fn parameters_and_the_signing_key_are_stored_and_boot_again() {
-    use fc_storage::{load_settings, Persist, RamFlash, Store};
+    use fc_storage::{Persist, RamFlash, Store};
     let (store, _) = Store::open(RamFlash::blank(), 0..4096).unwrap();
     let mut sink = KeptSink {
         signed: SignedSink::default(),
@@ -1656,7 +1656,7 @@ fn parameters_and_the_signing_key_are_stored_and_boot_again() {
     let bytes = *sink.store.into_flash().bytes();
     let (mut st, boot) = Store::open(RamFlash::<4096>::holding(&bytes), 0..4096).unwrap();
     assert_eq!(boot, fc_storage::Boot::Found);
-    let loaded = load_settings(&mut st, Settings::os4()).unwrap();
+    let loaded = fc_loop::params::load(Settings::os4(), |i| st.param(i)).unwrap();
     assert_eq!((loaded.taken, loaded.refused.0), (2, 0));
     let mut v = MavVehicle::new(loaded.settings, 1).unwrap();
     assert_eq!(v.nav_settings().takeoff_alt_m, nav_value);
