@@ -333,10 +333,10 @@ python3 tools/check_ulog.py fly target/release/sil-host | tee -a "$log"
 # Two lanes from here, each about one core (a flight in lockstep, or QEMU and
 # its client taking turns; MAVSDK on the image takes more): the MAVLink
 # flights (the image's step flight, the pymavlink ground station, MAVSDK in
-# process and on the image, MAVProxy), cflib over the lossy radio (ports
-# 199xx), MAVLink signing (ports 4562, 14552, 14562), then cfclient and the
-# Slurm sweep, in this shell; beside them, in a subshell, the cflib sessions
-# (ports 198xx), the longer lane. The lane's output goes to
+# process and on the image, its Failure plugin on both, MAVProxy), cflib over
+# the lossy radio (ports 199xx), then cfclient and the Slurm sweep, in this
+# shell; beside them, in a subshell, the cflib sessions (ports 198xx), then
+# MAVLink signing (ports 4562, 14552, 14562), the longer lane. The lane's output goes to
 # target/lane-beside.out and is shown when this shell's checks are done; its
 # check lines join the count, its stages the table (marked "beside").
 lane_beside() {
@@ -352,6 +352,23 @@ lane_beside() {
     bounded 1200 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie | tee -a "$log"
     # The CRTP ports are free from here: cfclient may take 19850 (in this shell).
     touch target/lane-beside.crtp-done
+    stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage and a power cut in flight, then firmware-mavlink in QEMU"
+    # In process with --storage: the owner then sets a second key and a parameter; the vehicle,
+    # started again on the same file, must sign nothing until it hears the owner and keep both.
+    signing_ports=(--port 4562 --gcs-port 14552 --truth-port 14562)
+    rm -f target/px4-storage.bin target/px4-storage.bin.json
+    hil "${signing_ports[@]}" --signing --storage target/px4-storage.bin --duration 120 \
+        --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
+    hil "${signing_ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
+        --json target/rotorpy-hil-restart.json | grep "^signing check:" | tee -a "$log"
+    # A power cut in flight: killed while armed in the air (nothing stored on the way out), then
+    # started again on the file: its first signature must be above the last one seen in the air.
+    hil "${signing_ports[@]}" --signing --cut --storage target/px4-storage.bin --duration 40 \
+        --json target/rotorpy-hil-cut.json | grep "^signing check:" | tee -a "$log"
+    hil "${signing_ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
+        --json target/rotorpy-hil-after-cut.json | grep "^signing check:" | tee -a "$log"
+    hil "${signing_ports[@]}" --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json \
+        | grep "^signing check:" | tee -a "$log"
     end_stage
     printf '%s\n' "${TIMES[@]}" >target/lane-beside.times
 }
@@ -381,10 +398,9 @@ stage "the same MAVSDK script against firmware-mavlink in QEMU, over the lossy l
 # and this one's checks are the same, so the image pays no minutes for it.
 hil --target qemu --mavsdk --duration 150 --lossy drop=0.1,burst=0.5@10,dup=0.02,delay=0.2,seed=1 --gcs-port 14570 \
     --json target/rotorpy-hil-mavsdk-qemu.json | grep "^mavsdk check:" | tee -a "$log"
-stage "MAVSDK's Failure plugin against firmware-mavlink in QEMU: the fix off (flies on), stuck (lands), the accelerometer stuck (lands)"
-# Three of the in-process flight's faults (the image flies at a fifth of
-# real time): one it flies through, one for each landing, the fix's and the IMU's.
-hil --target qemu --mavsdk-failure target/faults-qemu.json --faults gps_off,gps_stuck,accel_stuck --duration 60 \
+stage "MAVSDK's Failure plugin against firmware-mavlink in QEMU: the fix intermittent and off (flies on), wrong and stuck (lands), the accelerometer stuck (lands), the gyro off (motors off)"
+# Every fault of the in-process flight, on the image (at a fifth of real time).
+hil --target qemu --mavsdk-failure target/faults-qemu.json --duration 120 \
     --json target/rotorpy-hil-faults-qemu.json | grep "^fault check:" | tee -a "$log"
 stage "cflib over a radio that loses packets (tools/fctools/radio.py in the nRF51 bridge: retries, safelink): firmware-crtp 10 %, the Crazyflie image 30 %, 0.1 s shadows"
 # The radio's model against itself first (20 000 packets each way), then the
@@ -394,23 +410,6 @@ bounded 600 python3 tools/crtp_cflib.py target/release/sil-host --qemu --radio d
     | tee -a "$log"
 bounded 600 python3 tools/crtp_cflib.py target/release/sil-host --qemu-crazyflie --radio drop=0.3,burst=0.1@5,seed=2 \
     | tee -a "$log"
-stage "MAVLink signing (tools/mav_signing.py): a pymavlink owner signs, an intruder is ignored; in process, a restart on --storage and a power cut in flight, then firmware-mavlink in QEMU"
-# In process with --storage: the owner then sets a second key and a parameter; the vehicle,
-# started again on the same file, must sign nothing until it hears the owner and keep both.
-signing_ports=(--port 4562 --gcs-port 14552 --truth-port 14562)
-rm -f target/px4-storage.bin target/px4-storage.bin.json
-hil "${signing_ports[@]}" --signing --storage target/px4-storage.bin --duration 120 \
-    --json target/rotorpy-hil-signing.json | grep "^signing check:" | tee -a "$log"
-hil "${signing_ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
-    --json target/rotorpy-hil-restart.json | grep "^signing check:" | tee -a "$log"
-# A power cut in flight: killed while armed in the air (nothing stored on the way out), then
-# started again on the file: its first signature must be above the last one seen in the air.
-hil "${signing_ports[@]}" --signing --cut --storage target/px4-storage.bin --duration 40 \
-    --json target/rotorpy-hil-cut.json | grep "^signing check:" | tee -a "$log"
-hil "${signing_ports[@]}" --signing --restart --storage target/px4-storage.bin --duration 30 \
-    --json target/rotorpy-hil-after-cut.json | grep "^signing check:" | tee -a "$log"
-hil "${signing_ports[@]}" --target qemu --signing --duration 150 --json target/rotorpy-hil-signing-qemu.json \
-    | grep "^signing check:" | tee -a "$log"
 # cfclient takes cflib's port (19850): once the lane beside has done its CRTP sessions.
 end_stage
 while [ ! -f target/lane-beside.crtp-done ] && kill -0 "$LANE_BESIDE" 2>/dev/null; do sleep 2; done

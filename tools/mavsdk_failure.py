@@ -25,7 +25,7 @@ from rotorpy's truth (--truth-port: north, east, down about the start, m).
 Prints `fault check: P passed, F failed`; `--table FILE` writes each fault's
 row (JSON): what was injected, what the vehicle said and did, the worst
 distance from where it held, how long it took. `--only` flies some of the
-faults (the image in QEMU, at a fifth of real time, flies three);
+faults;
 `--tag` names their figures (`fault_…` by default).
 """
 import argparse
