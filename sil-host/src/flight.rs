@@ -10,7 +10,7 @@ pub use crate::endpoint::{Endpoint, InProcess, StepReport};
 use crate::metrics::{FlightMetrics, MetricsAccumulator, Trace};
 use crate::plant::{Plant, PlantConfig};
 use crate::record::{state_row, RowSink, RECORD_DT_S};
-use crate::scenario::{Reference, Scenario};
+use crate::scenario::{FlatOutput, Scenario};
 use crate::sensors::IMU_PERIOD_S;
 use fc_core::control::{wrap_pi, AnyController, Controller, ControllerSpec, Family, MpcConfig, Setpoint, Tuning};
 use fc_core::{hover_quat_state, AttitudeForm, QuatState, VehicleParams};
@@ -249,7 +249,7 @@ pub fn build_for(cfg: &FlightConfig) -> anyhow::Result<AnyController<f32>> {
         .map_err(|e| anyhow::anyhow!("designing {} failed: {e}", cfg.spec))
 }
 
-fn setpoint(r: &Reference) -> Setpoint<f32> {
+fn setpoint(r: &FlatOutput) -> Setpoint<f32> {
     Setpoint {
         pos_ned_m: r.pos.cast(),
         vel_ned_mps: r.vel.cast(),

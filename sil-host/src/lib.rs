@@ -36,4 +36,4 @@ pub mod ulog_plot;
 pub use disturbance::DisturbanceSet;
 pub use fc_core::AttitudeForm;
 pub use plant::{Plant, PlantConfig};
-pub use scenario::{Reference, Scenario, ScenarioKind};
+pub use scenario::{FlatOutput, Scenario, ScenarioKind};

@@ -57,9 +57,11 @@ pub struct Scenario {
     pub duration_s: f64,
 }
 
-/// The reference at one instant: position, its first two derivatives, heading.
+/// The reference at one instant, as a flat output (rotorpy's `flat_output`:
+/// position and its derivatives up to jerk, heading and its rate); the
+/// flight loop's own is [`fc_loop::planner::Reference`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Reference {
+pub struct FlatOutput {
     /// NED position, m.
     pub pos: Vector3<f64>,
     /// NED velocity, m/s.
@@ -132,10 +134,10 @@ impl Scenario {
     }
 
     /// Reference at time `t` (s).
-    pub fn reference(&self, t: f64) -> Reference {
+    pub fn reference(&self, t: f64) -> FlatOutput {
         let s0 = Vector3::from(self.start_ned_m);
         match self.kind {
-            ScenarioKind::Setpoint => Reference {
+            ScenarioKind::Setpoint => FlatOutput {
                 pos: Vector3::from(self.target_ned_m),
                 vel: Vector3::zeros(),
                 acc: Vector3::zeros(),
@@ -152,7 +154,7 @@ impl Scenario {
                     0.0
                 };
                 let (s, c) = (w * t).sin_cos();
-                Reference {
+                FlatOutput {
                     pos: s0 + Vector3::new(r * s, r * (1.0 - c), -v * t),
                     vel: Vector3::new(r * w * c, r * w * s, -v),
                     acc: Vector3::new(-r * w * w * s, r * w * w * c, 0.0),
@@ -167,7 +169,7 @@ impl Scenario {
                 let w = 2.0 * std::f64::consts::PI / self.period_s;
                 let (s1, c1) = (w * t).sin_cos();
                 let (s2, c2) = (2.0 * w * t).sin_cos();
-                Reference {
+                FlatOutput {
                     pos: s0 + Vector3::new(a * s1, 0.5 * a * s2, 0.0),
                     vel: Vector3::new(a * w * c1, a * w * c2, 0.0),
                     acc: Vector3::new(-a * w * w * s1, -2.0 * a * w * w * s2, 0.0),

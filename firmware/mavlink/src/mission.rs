@@ -58,7 +58,7 @@ pub struct Item {
 }
 
 /// What an item flies, in the local frame: the flight stack's mission step.
-pub use fc_loop::modes::Step;
+pub use fc_loop::modes::MissionAction;
 
 impl Item {
     /// From the message.
@@ -116,11 +116,11 @@ impl Item {
     }
 
     /// What the item flies, or why this vehicle cannot fly it.
-    pub fn step(&self, origin: &Home, home_down_m: f32) -> Result<Step, MavMissionResult> {
+    pub fn action(&self, origin: &Home, home_down_m: f32) -> Result<MissionAction, MavMissionResult> {
         use MavCmd as C;
         let finite_or_0 = |v: f32| if v.is_finite() { v.max(0.0) } else { 0.0 };
         Ok(match self.command {
-            C::MAV_CMD_NAV_WAYPOINT => Step::Goto {
+            C::MAV_CMD_NAV_WAYPOINT => MissionAction::Goto {
                 ned: self
                     .ned(origin, home_down_m)
                     .ok_or(MavMissionResult::MAV_MISSION_UNSUPPORTED_FRAME)?,
@@ -139,23 +139,23 @@ impl Item {
                 if !(up.is_finite() && up > 0.0 && up <= MAX_DISTANCE_M) {
                     return Err(MavMissionResult::MAV_MISSION_INVALID_PARAM7);
                 }
-                Step::Takeoff { up_m: up }
+                MissionAction::Takeoff { up_m: up }
             }
-            C::MAV_CMD_NAV_LAND => Step::Land,
-            C::MAV_CMD_NAV_RETURN_TO_LAUNCH => Step::Return,
+            C::MAV_CMD_NAV_LAND => MissionAction::Land,
+            C::MAV_CMD_NAV_RETURN_TO_LAUNCH => MissionAction::Return,
             C::MAV_CMD_NAV_DELAY | C::MAV_CMD_NAV_LOITER_TIME => {
                 let s = self.params[0];
                 if !(s.is_finite() && (0.0..=3600.0).contains(&s)) {
                     return Err(MavMissionResult::MAV_MISSION_INVALID_PARAM1);
                 }
-                Step::Delay { s }
+                MissionAction::Delay { s }
             }
             C::MAV_CMD_DO_CHANGE_SPEED => {
                 let v = self.params[1];
                 if !(v.is_finite() && v > 0.0 && v <= 20.0) {
                     return Err(MavMissionResult::MAV_MISSION_INVALID_PARAM2);
                 }
-                Step::Speed { mps: v }
+                MissionAction::Speed { mps: v }
             }
             _ => return Err(MavMissionResult::MAV_MISSION_UNSUPPORTED),
         })
@@ -272,11 +272,11 @@ impl Mission {
                 }
                 let item = Item::from_int(m);
                 let checked = match origin {
-                    Some(o) => item.step(o, home_down_m).map(|_| ()),
+                    Some(o) => item.action(o, home_down_m).map(|_| ()),
                     None if item.frame == MavFrame::MAV_FRAME_LOCAL_NED
                         || item.frame == MavFrame::MAV_FRAME_MISSION =>
                     {
-                        item.step(&Home::default(), home_down_m).map(|_| ())
+                        item.action(&Home::default(), home_down_m).map(|_| ())
                     }
                     None => Err(MavMissionResult::MAV_MISSION_DENIED),
                 };

@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 
 /// What a mission item flies, in the local frame (NED about the origin, m).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Step {
+pub enum MissionAction {
     /// Fly to `ned`, hold `hold_s`, reached within `accept_m` (0: the
     /// vehicle's `NAV_ACC_RAD`).
     Goto {
@@ -55,7 +55,7 @@ pub trait MissionItems {
     /// What item `seq` flies, home being `home_down_m` down the local
     /// frame: `None` past the last item, `Some(Err(()))` if this vehicle
     /// cannot fly it.
-    fn step(&self, seq: u16, home_down_m: f32) -> Option<Result<Step, ()>>;
+    fn action(&self, seq: u16, home_down_m: f32) -> Option<Result<MissionAction, ()>>;
 }
 
 /// The mission item flown.
@@ -89,38 +89,38 @@ impl ModeCommander {
             match self.phase {
                 None => {
                     let seq = mission.current();
-                    let Some(step) = mission.step(seq, self.home_ned_m[2]) else {
+                    let Some(step) = mission.action(seq, self.home_ned_m[2]) else {
                         let _ = self.set_mode(FlightMode::Hold, t_us, f32::NAN, lp, mission);
                         return say(ModeEvent::MissionDone);
                     };
                     let sp = self.setpoint(t_us, lp);
                     let mut legs = Legs::new();
                     let (goal, accept_m, hold_s) = match step {
-                        Ok(Step::Goto { ned, hold_s, accept_m }) => {
+                        Ok(MissionAction::Goto { ned, hold_s, accept_m }) => {
                             let cruise = self.mission_cruise_mps.unwrap_or(nav.cruise_mps);
                             let _ = legs.push_back((ned, cruise));
                             (ned, accept_m, hold_s)
                         }
-                        Ok(Step::Takeoff { up_m }) => {
+                        Ok(MissionAction::Takeoff { up_m }) => {
                             let goal = Vector3::new(sp.pos_ned_m[0], sp.pos_ned_m[1], self.home_ned_m[2] - up_m);
                             let _ = legs.push_back((goal, nav.climb_mps));
                             (goal, 0.0, 0.0)
                         }
-                        Ok(Step::Delay { s }) => {
+                        Ok(MissionAction::Delay { s }) => {
                             self.phase = Some(MissionPhase::Holding {
                                 seq,
                                 until_us: t_us.saturating_add((s * 1e6) as u64),
                             });
                             return Ok(());
                         }
-                        Ok(Step::Speed { mps }) => {
+                        Ok(MissionAction::Speed { mps }) => {
                             self.mission_cruise_mps = Some(mps);
                             self.reached(seq, mission, say)?;
                             continue;
                         }
-                        Ok(next @ (Step::Land | Step::Return)) => {
+                        Ok(next @ (MissionAction::Land | MissionAction::Return)) => {
                             self.reached(seq, mission, say)?;
-                            let next = if next == Step::Land {
+                            let next = if next == MissionAction::Land {
                                 FlightMode::Land
                             } else {
                                 FlightMode::Return

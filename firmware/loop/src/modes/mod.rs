@@ -54,7 +54,7 @@ mod settings;
 mod tests;
 
 use mission::MissionPhase;
-pub use mission::{MissionItems, Step};
+pub use mission::{MissionAction, MissionItems};
 pub use settings::{joystick_velocity, NavSettings};
 
 /// Height above the arming point from which the vehicle is in the air, m.

@@ -41,8 +41,8 @@ impl MissionItems for Delays {
     fn set_current(&mut self, seq: u16) {
         self.current = seq;
     }
-    fn step(&self, seq: u16, _: f32) -> Option<Result<Step, ()>> {
-        (usize::from(seq) < self.n).then_some(Ok(Step::Delay { s: 1.0 }))
+    fn action(&self, seq: u16, _: f32) -> Option<Result<MissionAction, ()>> {
+        (usize::from(seq) < self.n).then_some(Ok(MissionAction::Delay { s: 1.0 }))
     }
 }
 

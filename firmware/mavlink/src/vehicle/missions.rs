@@ -5,7 +5,7 @@
 use super::{
     say, Home, MavMessage, MavSeverity, MavSink, Mission, Peer, MISSION_CURRENT_DATA, MISSION_ITEM_REACHED_DATA,
 };
-use crate::mission::Step;
+use crate::mission::MissionAction;
 use fc_loop::modes::{MissionItems, ModeEvent};
 
 /// The store's items as the flight stack flies them, about `origin` (the
@@ -28,9 +28,9 @@ impl MissionItems for Flown<'_> {
         self.mission.set_current(seq);
     }
 
-    fn step(&self, seq: u16, home_down_m: f32) -> Option<Result<Step, ()>> {
+    fn action(&self, seq: u16, home_down_m: f32) -> Option<Result<MissionAction, ()>> {
         let item = self.mission.items().get(usize::from(seq))?;
-        Some(item.step(&self.origin, home_down_m).map_err(|_| ()))
+        Some(item.action(&self.origin, home_down_m).map_err(|_| ()))
     }
 }
 
