@@ -97,7 +97,8 @@ from cflib.crazyflie.syncLogger import SyncLogger
 
 from children import EndsWithFlight
 from fctools.checks import Checks
-from fctools.image_log import link_hold, stack
+from fctools.image_log import TIMING_FIELDS, link_hold, stack
+from fctools.image_log import timing as image_timing
 from fctools.pieces import cflib_examples
 from fctools.truth import Truth, position_of
 from measure import budgets, record
@@ -228,12 +229,9 @@ def report(sil, failed_before):
     if QEMU:
         # The image's tasks measure every step (fc_stm32f405::timing) and log
         # the figures every 1000 steps and at once when a deadline is missed.
-        t = re.findall(r'timing: (\d+) steps, worst data-ready->estimate (\d+) instructions, '
-                       r'worst data-ready->answer (\d+) instructions, deadline (\d+): (\d+) missed '
-                       r'\((\d+) jobs, (\d+) answers dropped, (\d+) tx timeouts\); (\d+) IMU deadlines missed; '
-                       r'(\d+) steps passed during a design', out)
+        t = image_timing(out)
         steps, est, ans, deadline, late, jobs, answers, tx, imu, lent = \
-            (int(x) for x in t[-1]) if t else (0,) * 8 + (-1, 0)
+            (t[k] for k in TIMING_FIELDS) if t else (0,) * 8 + (-1, 0)
         check(steps >= 1000 and imu == 0 and jobs + answers + tx == 0,
               f'the image met every IMU deadline at 1 kHz: {imu} of {steps} samples estimated late (worst data-ready '
               f'-> estimate {est} instructions, deadline {deadline}: 168 000 cycles at CPI 1.5 x 1.5), no step dropped')

@@ -47,7 +47,7 @@ from rotorpy.wind.default_winds import ConstantWind
 from scipy.spatial.transform import Rotation
 
 from children import EndsWithFlight
-from fctools.image_log import stack
+from fctools.image_log import stack, timing
 from fctools.lossy import LossyLink
 from fctools.lossy import parse as lossy_parse
 from fctools.pieces import Pieces, cflib_figure8, read_csv, write_csv
@@ -473,10 +473,28 @@ def main():
             line = line if also(0 < boot <= budget and 0 < tasks <= budget,
                                 f"the image's stack reached {boot} B at boot and {tasks} B in its tasks, "
                                 f"of the {capacity} B it may grow to (budget {budget} B)") else []
+            # Every step, data-ready (its HIL_SENSOR frame whole) to its end
+            # (the motors, the simulator's answer and the telemetry due
+            # written), within the image step's budget: one 1 kHz period at
+            # CPI 1.5 with a 1.5 margin (fc_stm32f405::timing, logged every
+            # 1000 steps and at once when one is late).
+            t = timing(res.get("firmware_log", []))
+            step_budget = budgets()["budget_image_step_instructions"]
+            ok = (t is not None and t["steps"] >= 1000 and t["missed"] == 0 and t["imu"] == 0
+                  and t["answer"] <= step_budget)
+            line = line if also(ok, (f"the image answered every step within the 1 kHz budget: {t['missed']} late "
+                                     f"of {t['steps']}, worst data-ready -> step's end {t['answer']} instructions "
+                                     f"(estimate {t['estimate']}; budget {step_budget}: 168 000 cycles at CPI "
+                                     f"1.5 x 1.5)") if t else "the image logged its steps' timing") else []
             if a.mavsdk:
                 src = "tools/rotorpy_hil.py --target qemu --mavsdk"
                 record("mavlink_qemu_stack_boot_bytes", boot, "bytes", src)
                 record("mavlink_qemu_stack_tasks_bytes", tasks, "bytes", src)
+            if t and (a.mavsdk or a.mavsdk_failure):
+                tag = "mavlink_qemu" if a.mavsdk else "mavlink_qemu_faults"
+                src = f"tools/rotorpy_hil.py --target qemu --{'mavsdk' if a.mavsdk else 'mavsdk-failure'}"
+                record(f"{tag}_step_worst_icount", t["answer"], "instructions", src)
+                record(f"{tag}_late_steps", t["missed"], "steps", src)
         text = json.dumps(res, indent=2)
         print(text)
         if a.json:

@@ -9,12 +9,21 @@ the mark has grown), in bytes.
 `link_hold(text)`: the longest the CRTP images' link task held the vehicle
 (fc_stm32f405::timing::Holds: the last `link: held the vehicle up to N
 instructions` line, logged with the timing line when it has grown).
+
+`timing(text)`: the images' step figures (fc_stm32f405::timing: the last
+`timing: N steps, …` line, logged every 1000 steps and at once when a step
+is late), as a dict, or None if the image logged none.
 """
 import re
 
 BOOT_LINE = re.compile(r"stack: boot reached (\d+) bytes")
 TASKS_LINE = re.compile(r"stack: high-water (\d+) bytes of (\d+)")
 HOLD_LINE = re.compile(r"link: held the vehicle up to (\d+) instructions")
+TIMING_LINE = re.compile(r"timing: (\d+) steps, worst data-ready->estimate (\d+) instructions, "
+                         r"worst data-ready->answer (\d+) instructions, deadline (\d+): (\d+) missed "
+                         r"\((\d+) jobs, (\d+) answers dropped, (\d+) tx timeouts\); (\d+) IMU deadlines missed; "
+                         r"(\d+) steps passed during a design")
+TIMING_FIELDS = ("steps", "estimate", "answer", "deadline", "missed", "jobs", "answers", "tx", "imu", "passed")
 
 
 def stack(text):
@@ -37,3 +46,13 @@ def link_hold(text):
         text = "\n".join(text)
     held = HOLD_LINE.findall(text)
     return int(held[-1]) if held else 0
+
+
+def timing(text):
+    """The last timing line the image logged in `text` (a string or a list
+    of lines): {steps, estimate, answer, deadline, missed, jobs, answers, tx,
+    imu, passed} (the worst estimate and answer in instructions), or None."""
+    if not isinstance(text, str):
+        text = "\n".join(text)
+    found = TIMING_LINE.findall(text)
+    return dict(zip(TIMING_FIELDS, (int(x) for x in found[-1]))) if found else None

@@ -10,8 +10,10 @@
 //! a ground station sets and the signing key are kept
 //! (`fc_stm32f405::flash::open_settings`: a RAM stand-in in QEMU, the
 //! flash on a board) and taken again at boot. Logs through defmt: boot,
-//! what the store held, arming, refusals, and the stack's high-water mark
-//! as it grows (checked every 1 000 samples).
+//! what the store held, arming, refusals, the stack's high-water mark
+//! as it grows (checked every 1 000 samples), and what its steps took
+//! ([`fc_stm32f405::timing`]: from a `HIL_SENSOR` frame whole to the
+//! step's end, every 1 000 steps and at once when one is late).
 //!
 //! An RTIC 2 application, its tasks ordered as the other images' are (the
 //! sample and the estimator first, then the controller, then the link):
@@ -58,8 +60,9 @@ mod app {
     use fc_mavlink::{encode_signed, MavCounters, MavHeader, MavMessage, MavReader, MAX_FRAME};
     use fc_stm32f405::board;
     use fc_stm32f405::flash::Kept;
+    use fc_stm32f405::timing::{StepTiming, Timing, DEADLINE_TICKS};
     use fc_storage::Persist;
-    use hal_shim::stm32f405::{read_queued, rx_waiting, usart_isr, Port, SysTickClock, TxTimeout, Usart};
+    use hal_shim::stm32f405::{read_queued, rx_waiting, ticks_now, usart_isr, Port, SysTickClock, TxTimeout, Usart};
     use hal_shim::ByteLink;
     use stm32f4::stm32f405::Interrupt;
 
@@ -123,10 +126,14 @@ mod app {
         ctrl: &'static mut AnyController<f32>,
         /// The link: its transmitter, signing, the store.
         link: Link,
-        /// A `HIL_SENSOR` for the estimator's task.
-        sample: Option<HIL_SENSOR_DATA>,
-        /// A step for the controller's task.
-        step: Option<SensorStep>,
+        /// A `HIL_SENSOR` for the estimator's task, with its data-ready:
+        /// the SysTick ticks when its frame was whole.
+        sample: Option<(HIL_SENSOR_DATA, u64)>,
+        /// A step for the controller's task, with its sample's data-ready.
+        step: Option<(SensorStep, u64)>,
+        /// What every step took ([`fc_stm32f405::timing`]), logged by the
+        /// link's task.
+        timing: Timing,
     }
 
     #[local]
@@ -138,6 +145,8 @@ mod app {
         link_clock: SysTickClock,
         signing_us: u64,
         last: (bool, VehicleCounters, u32, fc_stm32f405::stack::Watch),
+        /// The timing figures last logged.
+        logged: StepTiming,
     }
 
     #[init]
@@ -179,6 +188,7 @@ mod app {
                 },
                 sample: None,
                 step: None,
+                timing: Timing::new(DEADLINE_TICKS),
             },
             Local {
                 reader: MavReader::new(SYSTEM_ID),
@@ -187,6 +197,7 @@ mod app {
                 link_clock: clock,
                 signing_us,
                 last: (false, VehicleCounters::default(), 0, fc_stm32f405::stack::Watch::new()),
+                logged: StepTiming::default(),
             },
         )
     }
@@ -205,17 +216,20 @@ mod app {
 
     /// The estimator's half of the sample the link's task handed up; its
     /// step goes to the controller's task.
-    #[task(binds = CAN2_SCE, priority = 3, shared = [v, sample, step], local = [estimator_clock])]
+    #[task(binds = CAN2_SCE, priority = 3, shared = [v, sample, step, timing], local = [estimator_clock])]
     fn estimator(cx: estimator::Context) {
         let clock = &*cx.local.estimator_clock;
-        let (mut v, mut sample, mut slot) = (cx.shared.v, cx.shared.sample, cx.shared.step);
-        let Some(m) = sample.lock(Option::take) else {
+        let (mut v, mut sample, mut slot, mut timing) =
+            (cx.shared.v, cx.shared.sample, cx.shared.step, cx.shared.timing);
+        let Some((m, entry)) = sample.lock(Option::take) else {
             return;
         };
         let now_us = board::now_us(clock);
         if let Some(step) = v.lock(|v| v.sensor_begin(&m, clock, now_us)) {
-            if slot.lock(|s| s.replace(step)).is_some() {
+            timing.lock(|t| t.estimated(entry, ticks_now()));
+            if slot.lock(|s| s.replace((step, entry))).is_some() {
                 count_dropped("step");
+                timing.lock(Timing::job_dropped);
             }
             rtic::pend(Interrupt::CAN2_RX0);
         }
@@ -223,18 +237,31 @@ mod app {
 
     /// The controller's step, then the step's end: the motors, the
     /// simulator's answer, the modes, the telemetry.
-    #[task(binds = CAN2_RX0, priority = 2, shared = [v, ctrl, link, step], local = [controller_clock])]
+    #[task(binds = CAN2_RX0, priority = 2, shared = [v, ctrl, link, step, timing], local = [controller_clock])]
     fn controller(cx: controller::Context) {
         let clock = &*cx.local.controller_clock;
-        let (mut v, mut ctrl, mut link, mut slot) = (cx.shared.v, cx.shared.ctrl, cx.shared.link, cx.shared.step);
-        let Some(step) = slot.lock(Option::take) else {
+        let (mut v, mut ctrl, mut link, mut slot, mut timing) = (
+            cx.shared.v,
+            cx.shared.ctrl,
+            cx.shared.link,
+            cx.shared.step,
+            cx.shared.timing,
+        );
+        let Some((step, entry)) = slot.lock(Option::take) else {
             return;
         };
         let flown = ctrl.lock(|c| fly_sensor_step(&mut v, c, &step, clock));
-        if (&mut v, &mut link)
-            .lock(|v, link| v.sensor_end(&step, flown, clock, link))
-            .is_err()
-        {
+        let sent = (&mut v, &mut link).lock(|v, link| v.sensor_end(&step, flown, clock, link));
+        // Data-ready to the step's end: the motors, the simulator's answer
+        // and the telemetry due written to USART1.
+        let done = ticks_now();
+        timing.lock(|t| {
+            t.flown(entry, done);
+            if sent.is_err() {
+                t.tx_timeout();
+            }
+        });
+        if sent.is_err() {
             count_tx_error();
         }
     }
@@ -244,16 +271,23 @@ mod app {
     /// station's message handled); then the signing timestamp kept on
     /// landing, so that after a reset the vehicle's signatures go on from
     /// there, and what changed logged.
-    #[task(binds = CAN2_RX1, priority = 1, shared = [v, ctrl, link, sample], local = [reader, link_clock, signing_us, last])]
+    #[task(binds = CAN2_RX1, priority = 1, shared = [v, ctrl, link, sample, timing], local = [reader, link_clock, signing_us, last, logged])]
     fn link(cx: link::Context) {
         let link::LocalResources {
             reader,
             link_clock: clock,
             signing_us,
             last,
+            logged,
             ..
         } = cx.local;
-        let (mut v, mut ctrl, mut link, mut sample) = (cx.shared.v, cx.shared.ctrl, cx.shared.link, cx.shared.sample);
+        let (mut v, mut ctrl, mut link, mut sample, mut timing) = (
+            cx.shared.v,
+            cx.shared.ctrl,
+            cx.shared.link,
+            cx.shared.sample,
+            cx.shared.timing,
+        );
         let now_us = board::now_us(clock);
         link.lock(|l| l.signing.advance_us(now_us.saturating_sub(*signing_us)));
         *signing_us = now_us;
@@ -270,8 +304,10 @@ mod app {
                     continue;
                 };
                 if let MavMessage::HIL_SENSOR(m) = msg {
-                    if sample.lock(|s| s.replace(m)).is_some() {
+                    // Its data-ready: the frame is whole (decoded, checked).
+                    if sample.lock(|s| s.replace((m, ticks_now()))).is_some() {
                         count_dropped("sample");
+                        timing.lock(Timing::job_dropped);
                     }
                     rtic::pend(Interrupt::CAN2_SCE);
                 } else if (&mut v, &mut ctrl, &mut link)
@@ -303,6 +339,7 @@ mod app {
             });
         }
         log_changes(armed, &counters, &frames, last);
+        timing.lock(|t| t.snapshot()).log_if_due(logged);
     }
 
     /// Counts a transmit that timed out, and says so.
