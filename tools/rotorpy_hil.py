@@ -490,9 +490,11 @@ def main():
                 src = "tools/rotorpy_hil.py --target qemu --mavsdk"
                 record("mavlink_qemu_stack_boot_bytes", boot, "bytes", src)
                 record("mavlink_qemu_stack_tasks_bytes", tasks, "bytes", src)
-            if t and (a.mavsdk or a.mavsdk_failure):
-                tag = "mavlink_qemu" if a.mavsdk else "mavlink_qemu_faults"
-                src = f"tools/rotorpy_hil.py --target qemu --{'mavsdk' if a.mavsdk else 'mavsdk-failure'}"
+            flight = "mavsdk" if a.mavsdk else "mavsdk-failure" if a.mavsdk_failure else "signing" if a.signing else None
+            if t and flight:
+                tag = {"mavsdk": "mavlink_qemu", "mavsdk-failure": "mavlink_qemu_faults",
+                       "signing": "mavlink_qemu_signing"}[flight]
+                src = f"tools/rotorpy_hil.py --target qemu --{flight}"
                 record(f"{tag}_step_worst_icount", t["answer"], "instructions", src)
                 record(f"{tag}_late_steps", t["missed"], "steps", src)
         text = json.dumps(res, indent=2)

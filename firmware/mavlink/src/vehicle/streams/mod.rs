@@ -49,21 +49,42 @@ pub const STREAMS: [Stream; 10] = [
 /// The shortest interval a stream may be set to, µs (the IMU's step).
 pub const MIN_INTERVAL_US: u64 = 1_000;
 
+/// Stream messages one step sends at most; the others due wait for the
+/// next steps, in [`STREAMS`]' order. Streams whose intervals divide a
+/// second all fall due on the same step once a second, and with signing
+/// on each message is a SHA-256 in the step's end: ten at once ran that
+/// step past the image step's budget on `firmware-mavlink`. Two a step
+/// carry the default rates (about 130 messages a second) from a sensor
+/// rate of 100 Hz up.
+pub const STREAM_MESSAGES_PER_STEP: usize = 2;
+
 impl MavShared {
     /// Sends the telemetry due at simulated time `t_us` ([`STREAMS`], at
-    /// their intervals).
+    /// their intervals), at most [`STREAM_MESSAGES_PER_STEP`] messages. A
+    /// stream sent late keeps its phase (its next time is one interval
+    /// after the time it was due), unless it fell a whole interval behind.
     pub(in crate::vehicle) fn telemetry<S: MavSink>(&mut self, t_us: u64, out: &mut S) -> Result<(), S::Error> {
+        let mut sent = 0;
         for (k, stream) in STREAMS.iter().enumerate() {
+            if sent == STREAM_MESSAGES_PER_STEP {
+                break;
+            }
             let (interval, next) = self.streams[k];
             if interval == 0 || t_us < next {
                 continue;
             }
-            self.streams[k].1 = t_us.saturating_add(interval);
+            let on_phase = next.saturating_add(interval);
+            self.streams[k].1 = if on_phase > t_us {
+                on_phase
+            } else {
+                t_us.saturating_add(interval)
+            };
             if let Some(m) = (stream.build)(self, t_us) {
                 if stream.id == heartbeat::STREAM.id {
                     out.send(Peer::Simulator, &m)?;
                 }
                 out.send(Peer::GroundStation, &m)?;
+                sent += 1;
             }
         }
         Ok(())
