@@ -75,12 +75,14 @@ class Flight:
         retries timed out: a clean failure, counted), up to `tries` times
         (at 30 % lost each way MAVSDK gives up on one download in three),
         as a ground station does over a lossy link; the last failure is
-        raised."""
+        raised. A transfer MAVSDK refuses as BUSY (the one it gave up on is
+        still winding down its own retries: nothing was transferred) is
+        made again too, after a second, and counted as failed."""
         async def failed():
             self.transfers["failed"] += 1
             return False
 
-        return await self.retry(make, what, tries, failed)
+        return await self.retry(make, what, tries, failed, busy_wait_s=1.0)
 
     async def command(self, make, what, done):
         """`await make()`, a command, made again when MAVSDK gives up on it
@@ -90,22 +92,26 @@ class Flight:
         over a lossy link; the last failure is raised."""
         return await self.retry(make, what, 5, done)
 
-    async def retry(self, make, what, tries, timed_out):
+    async def retry(self, make, what, tries, timed_out, busy_wait_s=None):
         """`await make()` up to `tries` times while MAVSDK's error is a
-        TIMEOUT; after each, `await timed_out()` says whether it is done
-        after all (then None is returned). Any other error, or the last
-        TIMEOUT, is raised."""
+        TIMEOUT (or, with `busy_wait_s`, a BUSY, made again after that many
+        wall seconds); after each, `await timed_out()` says whether it is
+        done after all (then None is returned). Any other error, or the
+        last one, is raised."""
         for k in range(tries):
             try:
                 return await make()
             except Exception as e:  # MAVSDK's errors share no base class, only their text
-                if k + 1 == tries or "TIMEOUT" not in str(e):
+                busy = busy_wait_s is not None and "BUSY" in str(e).split(";")[0]
+                if k + 1 == tries or not ("TIMEOUT" in str(e) or busy):
                     raise
                 why = f"     {what}: {type(e).__name__} {str(e).split(';')[0]}"
                 if await timed_out():
                     print(f"{why}, but done", flush=True)
                     return None
                 print(f"{why}: made again", flush=True)
+                if busy:
+                    await asyncio.sleep(busy_wait_s)
 
     async def until(self, cond, what, timeout=None):
         """Waits (wall time) until `cond()` holds; checks it."""
