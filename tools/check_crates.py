@@ -35,10 +35,10 @@ def packages():
     return json.loads(out)["packages"]
 
 
-def libraries():
+def libraries(packages_):
     """{crate: its library's source folder}, for the crates with a `lib.rs`."""
     out = {}
-    for p in packages():
+    for p in packages_:
         for t in p["targets"]:
             if "lib" in t["kind"] and os.path.basename(t["src_path"]) == "lib.rs":
                 out[p["name"]] = os.path.dirname(t["src_path"])
@@ -69,9 +69,8 @@ def selftest():
     return check.exit_code()
 
 
-def graph():
+def graph(packages_):
     """{crate: (normal deps, dev deps)}, workspace crates only, features apart."""
-    packages_ = packages()
     names = {p["name"] for p in packages_}
     g = {}
     for p in packages_:
@@ -116,7 +115,8 @@ def main():
     a = ap.parse_args()
     if a.selftest:
         return selftest()
-    g = graph()
+    packages_ = packages()
+    g = graph(packages_)
     if a.table or not a.page:
         print(table(g))
         return 0
@@ -129,7 +129,7 @@ def main():
             have, said = g.get(c), page.get(c)
             check(have == said, f"{c}: cargo has {have and tuple(map(sorted, have))}, the page says "
                                 f"{said and tuple(map(sorted, said))}")
-    for c, src in sorted(libraries().items()):
+    for c, src in sorted(libraries(packages_).items()):
         found = circles(edges(src))
         check(not found, f"{c}: no two top-level modules depend on each other"
                          + (f" (circles: {'; '.join(' <-> '.join(x) for x in found)})" if found else ""))
